@@ -1,0 +1,21 @@
+//! `ltm-codec`: the leaf crate of ltm. It owns the wavelet filter bank, the
+//! cubemap convention, the raw transport store and the `.ltm` container.
+//!
+//! The codec follows Cheslack-Postava et al. 2007, "4D Compression and
+//! Relighting with High-Resolution Light Transport Matrices": rows are
+//! wavelet-transformed over each cube face (Ng et al. 2003), columns are
+//! transformed as images to an adaptively chosen depth.
+
+#![deny(unsafe_code)]
+
+mod bytes;
+pub mod cubemap;
+mod error;
+mod mmap;
+pub mod raw;
+pub mod wavelet;
+
+pub use bytes::MAX_ALLOC_BYTES;
+pub use error::{Error, Result};
+pub use raw::{Dims, RawHeader, RawStore, RawWriter};
+pub use wavelet::Filter;

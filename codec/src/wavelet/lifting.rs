@@ -1,0 +1,210 @@
+//! Biorthogonal filters by lifting (Daubechies & Sweldens 1998), with the
+//! whole-sample symmetric extension of JPEG 2000 (ISO/IEC 15444-1 Annex F):
+//! `x[-1] = x[1]`, `x[n] = x[n-2]`.
+//!
+//! A scheme is a list of predict steps (`high[i] += c·(low[i] + low[i+1])`)
+//! and update steps (`low[i] += c·(high[i-1] + high[i])`), then a scaling of
+//! each band. Low band = even samples, high band = odd samples.
+
+use super::dwt2::{for_each_row, Rows};
+
+#[derive(Clone, Copy)]
+pub(crate) enum Step {
+    Predict(f32),
+    Update(f32),
+}
+
+pub(crate) struct Scheme {
+    pub steps: &'static [Step],
+    pub low_scale: f32,
+    pub high_scale: f32,
+}
+
+/// LeGall 5/3: DC gain 1, Nyquist gain 2.
+pub(crate) static LEGALL53: Scheme = Scheme {
+    steps: &[Step::Predict(-0.5), Step::Update(0.25)],
+    low_scale: 1.0,
+    high_scale: 1.0,
+};
+
+const CDF97_K: f64 = 1.230_174_104_914_001;
+
+/// CDF 9/7 with JPEG 2000's lifting constants; scaled by `1/K` (low) and `K`
+/// (high), which gives DC gain 1 and Nyquist gain 2 like the 5/3.
+pub(crate) static CDF97: Scheme = Scheme {
+    steps: &[
+        Step::Predict(-1.586_134_342_059_924),
+        Step::Update(-0.052_980_118_572_961),
+        Step::Predict(0.882_911_075_530_934),
+        Step::Update(0.443_506_852_043_971),
+    ],
+    low_scale: (1.0 / CDF97_K) as f32,
+    high_scale: CDF97_K as f32,
+};
+
+// ---- 1D, one sample per element: the scalar reference path ----
+
+fn predict(low: &[f32], high: &mut [f32], c: f32) {
+    let ns = low.len();
+    for (i, h) in high.iter_mut().enumerate() {
+        *h += c * (low[i] + low[(i + 1).min(ns - 1)]);
+    }
+}
+
+fn update(low: &mut [f32], high: &[f32], c: f32) {
+    let nd = high.len();
+    for (i, l) in low.iter_mut().enumerate() {
+        *l += c * (high[i.saturating_sub(1)] + high[i.min(nd - 1)]);
+    }
+}
+
+fn scale(x: &mut [f32], s: f32) {
+    if s != 1.0 {
+        x.iter_mut().for_each(|v| *v *= s);
+    }
+}
+
+/// One analysis step of `x` (length >= 2) into `out` as `[low | high]`.
+pub(crate) fn forward_1d(scheme: &Scheme, x: &[f32], out: &mut [f32]) {
+    let n = x.len();
+    let ns = n.div_ceil(2);
+    let (low, high) = out[..n].split_at_mut(ns);
+    for (i, l) in low.iter_mut().enumerate() {
+        *l = x[2 * i];
+    }
+    for (i, h) in high.iter_mut().enumerate() {
+        *h = x[2 * i + 1];
+    }
+    for step in scheme.steps {
+        match *step {
+            Step::Predict(c) => predict(low, high, c),
+            Step::Update(c) => update(low, high, c),
+        }
+    }
+    scale(low, scheme.low_scale);
+    scale(high, scheme.high_scale);
+}
+
+/// One synthesis step from `bands` (`[low | high]`) into the signal `out`.
+/// The lifting is undone in place on the interleaved signal.
+pub(crate) fn inverse_1d(scheme: &Scheme, bands: &[f32], out: &mut [f32]) {
+    let n = bands.len();
+    let ns = n.div_ceil(2);
+    let (low, high) = bands.split_at(ns);
+    for (i, l) in low.iter().enumerate() {
+        out[2 * i] = *l / scheme.low_scale;
+    }
+    for (i, h) in high.iter().enumerate() {
+        out[2 * i + 1] = *h / scheme.high_scale;
+    }
+    let last_even = 2 * (ns - 1);
+    let last_odd = 2 * (n / 2) - 1;
+    for step in scheme.steps.iter().rev() {
+        match *step {
+            Step::Predict(c) => {
+                for k in (1..n).step_by(2) {
+                    out[k] -= c * (out[k - 1] + out[(k + 1).min(last_even)]);
+                }
+            }
+            Step::Update(c) => {
+                for k in (0..n).step_by(2) {
+                    let left = if k == 0 { 1 } else { k - 1 };
+                    out[k] -= c * (out[left] + out[(k + 1).min(last_odd)]);
+                }
+            }
+        }
+    }
+}
+
+// ---- Vertical: one sample per image row, applied to whole rows ----
+
+fn axpy2(dst: &mut [f32], c: f32, a: &[f32], b: &[f32]) {
+    for ((d, a), b) in dst.iter_mut().zip(a).zip(b) {
+        *d += c * (a + b);
+    }
+}
+
+fn lift_rows(low: &mut Rows, high: &mut Rows, step: Step, parallel: bool) {
+    let (ns, nd) = (low.rows, high.rows);
+    match step {
+        Step::Predict(c) => {
+            let src = low.view();
+            for_each_row(high, parallel, |i, row| {
+                axpy2(row, c, src.row(i), src.row((i + 1).min(ns - 1)))
+            });
+        }
+        Step::Update(c) => {
+            let src = high.view();
+            for_each_row(low, parallel, |i, row| {
+                axpy2(row, c, src.row(i.saturating_sub(1)), src.row(i.min(nd - 1)))
+            });
+        }
+    }
+}
+
+fn scale_rows(rows: &mut Rows, s: f32, parallel: bool) {
+    if s != 1.0 {
+        for_each_row(rows, parallel, |_, row| {
+            row.iter_mut().for_each(|v| *v *= s)
+        });
+    }
+}
+
+/// Vertical analysis: `src` holds `h` compact rows of `w`; the bands are
+/// written to `dst` (rows of `stride`), low rows first.
+pub(crate) fn forward_rows(
+    scheme: &Scheme,
+    src: &[f32],
+    dst: &mut [f32],
+    stride: usize,
+    w: usize,
+    h: usize,
+    parallel: bool,
+) {
+    let ns = h.div_ceil(2);
+    let (low, high) = dst.split_at_mut(ns * stride);
+    let mut low = Rows::new(low, stride, w, ns);
+    let mut high = Rows::new(high, stride, w, h - ns);
+    for_each_row(&mut low, parallel, |i, row| {
+        row.copy_from_slice(&src[2 * i * w..][..w])
+    });
+    for_each_row(&mut high, parallel, |i, row| {
+        row.copy_from_slice(&src[(2 * i + 1) * w..][..w])
+    });
+    for step in scheme.steps {
+        lift_rows(&mut low, &mut high, *step, parallel);
+    }
+    scale_rows(&mut low, scheme.low_scale, parallel);
+    scale_rows(&mut high, scheme.high_scale, parallel);
+}
+
+/// Vertical synthesis: `src` holds the bands in rows of `stride` (low rows
+/// first); the `h` reconstructed rows of `w` are written compactly to `work`.
+pub(crate) fn inverse_rows(
+    scheme: &Scheme,
+    src: &[f32],
+    stride: usize,
+    work: &mut [f32],
+    w: usize,
+    h: usize,
+    parallel: bool,
+) {
+    let ns = h.div_ceil(2);
+    // Bands into `work` (compact), lifting undone there, then interleaved by
+    // the caller's horizontal pass through `interleaved_row`.
+    for (i, row) in work[..h * w].chunks_mut(w).enumerate() {
+        row.copy_from_slice(&src[i * stride..][..w]);
+    }
+    let (low, high) = work[..h * w].split_at_mut(ns * w);
+    let mut low = Rows::new(low, w, w, ns);
+    let mut high = Rows::new(high, w, w, h - ns);
+    scale_rows(&mut low, 1.0 / scheme.low_scale, parallel);
+    scale_rows(&mut high, 1.0 / scheme.high_scale, parallel);
+    for step in scheme.steps.iter().rev() {
+        let inverse = match *step {
+            Step::Predict(c) => Step::Predict(-c),
+            Step::Update(c) => Step::Update(-c),
+        };
+        lift_rows(&mut low, &mut high, inverse, parallel);
+    }
+}

@@ -9,13 +9,21 @@
 #![deny(unsafe_code)]
 
 mod bytes;
+pub mod compress;
+pub mod container;
 pub mod cubemap;
+mod decode;
 mod error;
 mod mmap;
+pub mod npy;
+pub mod quant;
 pub mod raw;
 pub mod wavelet;
 
 pub use bytes::MAX_ALLOC_BYTES;
+pub use compress::{compress, CompressOptions, CompressStats, Stage, Target};
+pub use container::{LtmFile, LtmWriter, Meta, Mode, SparseColumn};
+pub use decode::ColumnDecoder;
 pub use error::{Error, Result};
 pub use raw::{Dims, RawHeader, RawStore, RawWriter};
 pub use wavelet::Filter;

@@ -28,15 +28,19 @@ pub(crate) static LEGALL53: Scheme = Scheme {
 };
 
 const CDF97_K: f64 = 1.230_174_104_914_001;
+const CDF97_ALPHA: f64 = -1.586_134_342_059_924;
+const CDF97_BETA: f64 = -0.052_980_118_572_961;
+const CDF97_GAMMA: f64 = 0.882_911_075_530_934;
+const CDF97_DELTA: f64 = 0.443_506_852_043_971;
 
 /// CDF 9/7 with JPEG 2000's lifting constants; scaled by `1/K` (low) and `K`
 /// (high), which gives DC gain 1 and Nyquist gain 2 like the 5/3.
 pub(crate) static CDF97: Scheme = Scheme {
     steps: &[
-        Step::Predict(-1.586_134_342_059_924),
-        Step::Update(-0.052_980_118_572_961),
-        Step::Predict(0.882_911_075_530_934),
-        Step::Update(0.443_506_852_043_971),
+        Step::Predict(CDF97_ALPHA as f32),
+        Step::Update(CDF97_BETA as f32),
+        Step::Predict(CDF97_GAMMA as f32),
+        Step::Update(CDF97_DELTA as f32),
     ],
     low_scale: (1.0 / CDF97_K) as f32,
     high_scale: CDF97_K as f32,

@@ -72,7 +72,7 @@ impl Taps {
     #[inline]
     fn band(&self, k: usize, j: usize, m: usize) -> Option<usize> {
         let t = (k + j + m * self.len - self.len / 2) % m;
-        (t % 2 == 0).then_some(t / 2)
+        t.is_multiple_of(2).then_some(t / 2)
     }
 }
 
@@ -145,8 +145,7 @@ pub(crate) fn forward_rows(
             return;
         };
         row.fill(0.0);
-        for j in 0..taps.len {
-            let c = t[j];
+        for (j, &c) in t.iter().enumerate().take(taps.len) {
             for (d, s) in row.iter_mut().zip(src_row(taps.src(o, j, m))) {
                 *d += c * s;
             }

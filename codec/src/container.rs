@@ -1,0 +1,878 @@
+//! The `.ltm` container: everything a relighter needs, with each column
+//! reachable without decoding the others. Layout in docs/FORMAT.md.
+//!
+//! ```text
+//! header (24 bytes) | chunk directory (32 bytes × count) | directory CRC
+//! META | ALBD (optional) | COLS (column table) | DATA (column payloads)
+//! ```
+//!
+//! Every chunk has a CRC-32 in the directory, except DATA whose columns
+//! each have their own CRC in the column table. The directory is validated
+//! (tags known and unique, offsets in range, sorted, non-overlapping) before
+//! any chunk is read, and no allocation is sized by a field that has not
+//! been checked against the dimensions.
+
+use crate::bytes::{checked_alloc, Reader, Writer};
+use crate::error::{Error, Result};
+use crate::mmap;
+use crate::raw::Dims;
+use crate::wavelet::{max_levels, Filter};
+use memmap2::Mmap;
+use std::fs::File;
+use std::io::{BufWriter, Seek, SeekFrom, Write};
+use std::path::{Path, PathBuf};
+
+/// File magic: `\x89LTM\r\n\x1a\n`.
+pub const MAGIC: [u8; 8] = *b"\x89LTM\r\n\x1a\n";
+/// Format version this build writes and reads.
+pub const VERSION: u32 = 1;
+/// Feature flag: an RGB albedo image is stored (chunk ALBD).
+pub const FEATURE_ALBEDO: u32 = 1;
+const KNOWN_FEATURES: u32 = FEATURE_ALBEDO;
+const HEADER_LEN: usize = 24;
+const DIR_ENTRY_LEN: usize = 32;
+const META_LEN: usize = 64;
+
+/// How columns were transformed.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Mode {
+    /// Rows only (Ng et al. 2003): every column at depth 0.
+    TwoD,
+    /// Every column to full depth.
+    FourD,
+    /// Each column to the depth that codes it best (Cheslack-Postava et al. 2007).
+    Adaptive,
+}
+
+impl Mode {
+    pub fn name(self) -> &'static str {
+        match self {
+            Mode::TwoD => "2d",
+            Mode::FourD => "4d",
+            Mode::Adaptive => "adaptive",
+        }
+    }
+    fn code(self) -> u8 {
+        match self {
+            Mode::TwoD => 0,
+            Mode::FourD => 1,
+            Mode::Adaptive => 2,
+        }
+    }
+    fn from_code(c: u8) -> Option<Mode> {
+        [Mode::TwoD, Mode::FourD, Mode::Adaptive]
+            .into_iter()
+            .find(|m| m.code() == c)
+    }
+}
+
+impl std::str::FromStr for Mode {
+    type Err = String;
+    fn from_str(s: &str) -> std::result::Result<Mode, String> {
+        match s {
+            "2d" => Ok(Mode::TwoD),
+            "4d" => Ok(Mode::FourD),
+            "adaptive" => Ok(Mode::Adaptive),
+            _ => Err(format!("unknown mode '{s}' (expected 2d, 4d or adaptive)")),
+        }
+    }
+}
+
+/// Everything about a file except its columns.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Meta {
+    pub dims: Dims,
+    pub mode: Mode,
+    pub row_filter: Filter,
+    pub col_filter: Filter,
+    /// Quantization bits (2..=16).
+    pub bits: u32,
+    /// Dither seed.
+    pub seed: u64,
+    /// Requested relative L2 error of the decoded matrix (0 when the file was
+    /// made with a term count).
+    pub target_error: f32,
+    /// Measured relative L2 error of the decoded matrix.
+    pub achieved_error: f32,
+    /// Terms per column requested (0 when made with a target error).
+    pub terms: u32,
+    /// Frobenius norm of the original matrix.
+    pub norm: f64,
+}
+
+impl Meta {
+    /// Deepest column transform possible for the image size.
+    pub fn max_depth(&self) -> u32 {
+        max_levels(self.dims.width as usize, self.dims.height as usize)
+    }
+
+    fn encode(&self) -> Vec<u8> {
+        let mut w = Writer::default();
+        for v in [
+            self.dims.width,
+            self.dims.height,
+            self.dims.face_res,
+            self.dims.channels,
+        ] {
+            w.u32(v);
+        }
+        w.u8(self.mode.code());
+        w.u8(self.row_filter.code());
+        w.u8(self.col_filter.code());
+        w.u8(self.bits as u8);
+        w.u64(self.seed);
+        w.f32(self.target_error);
+        w.f32(self.achieved_error);
+        w.u32(self.terms);
+        w.bytes.extend_from_slice(&self.norm.to_le_bytes());
+        w.pad_to(META_LEN);
+        w.bytes
+    }
+
+    fn decode(bytes: &[u8]) -> Result<Meta> {
+        let mut r = Reader::new(bytes, "META chunk");
+        let dims = Dims {
+            width: r.u32()?,
+            height: r.u32()?,
+            face_res: r.u32()?,
+            channels: r.u32()?,
+        };
+        dims.validate()?;
+        let mode = r.u8()?;
+        let mode = Mode::from_code(mode)
+            .ok_or_else(|| Error::range("mode", mode, "0 (2d), 1 (4d) or 2 (adaptive)"))?;
+        let filter =
+            |c: u8| Filter::from_code(c).ok_or_else(|| Error::range("filter code", c, "0..=5"));
+        let row_filter = filter(r.u8()?)?;
+        let col_filter = filter(r.u8()?)?;
+        if !row_filter.is_orthonormal() {
+            return Err(Error::range(
+                "row filter",
+                row_filter,
+                "an orthonormal filter (haar, d4, d6, d8)",
+            ));
+        }
+        let bits = r.u8()? as u32;
+        if !(2..=16).contains(&bits) {
+            return Err(Error::range("bits", bits, "2..=16"));
+        }
+        let seed = r.u64()?;
+        let target_error = r.f32()?;
+        let achieved_error = r.f32()?;
+        let terms = r.u32()?;
+        let norm = f64::from_le_bytes(r.take(8)?.try_into().expect("8 bytes"));
+        if !norm.is_finite() || norm < 0.0 {
+            return Err(Error::range("matrix norm", norm, "finite and >= 0"));
+        }
+        Ok(Meta {
+            dims,
+            mode,
+            row_filter,
+            col_filter,
+            bits,
+            seed,
+            target_error,
+            achieved_error,
+            terms,
+            norm,
+        })
+    }
+}
+
+/// How a column payload is stored.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Encoding {
+    /// No nonzero coefficient: no payload.
+    Empty = 0,
+    /// Payload bytes as they are.
+    Plain = 1,
+    /// Payload compressed with zstd.
+    Zstd = 2,
+}
+
+/// One column's entry in the column table.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct ColumnEntry {
+    /// Offset of the payload from the start of the DATA chunk.
+    pub offset: u64,
+    /// Stored payload bytes.
+    pub stored_len: u32,
+    /// Payload bytes after decompression.
+    pub raw_len: u32,
+    /// Nonzero coefficients.
+    pub nnz: u32,
+    /// CRC-32 of the stored payload.
+    pub crc: u32,
+    /// Column transform depth.
+    pub depth: u8,
+    pub encoding: Encoding,
+    /// Per channel: largest weighted magnitude (the quantizer's scale).
+    pub scales: [f32; 3],
+}
+
+/// Bytes of one column-table entry for `channels` channels.
+pub fn column_entry_len(channels: u32) -> usize {
+    28 + 4 * channels as usize
+}
+
+/// A column as stored: sorted coefficient positions in the Mallat layout of
+/// its depth, and quantized values (`channels` per position).
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct SparseColumn {
+    pub depth: u32,
+    pub scales: [f32; 3],
+    pub indices: Vec<u32>,
+    pub values: Vec<i32>,
+}
+
+fn put_varint(out: &mut Vec<u8>, mut v: u64) {
+    while v >= 0x80 {
+        out.push((v as u8) | 0x80);
+        v >>= 7;
+    }
+    out.push(v as u8);
+}
+
+fn get_varint(r: &mut Reader) -> Result<u64> {
+    let mut v = 0u64;
+    for shift in (0..64).step_by(7) {
+        let b = r.u8()?;
+        v |= ((b & 0x7f) as u64) << shift;
+        if b & 0x80 == 0 {
+            return Ok(v);
+        }
+    }
+    Err(Error::corrupt(
+        "column payload",
+        "varint longer than 10 bytes",
+    ))
+}
+
+impl SparseColumn {
+    /// Payload bytes: positions as varint gaps, then values as zigzag
+    /// varints, channel-interleaved.
+    pub fn to_payload(&self, channels: usize) -> Vec<u8> {
+        let mut out = Vec::with_capacity(self.indices.len() * (2 + channels));
+        let mut prev: i64 = -1;
+        for &i in &self.indices {
+            put_varint(&mut out, (i as i64 - prev - 1) as u64);
+            prev = i as i64;
+        }
+        for &v in &self.values[..self.indices.len() * channels] {
+            put_varint(&mut out, ((v << 1) ^ (v >> 31)) as u32 as u64);
+        }
+        out
+    }
+
+    /// Parses a payload, checking every position against `pixels` and every
+    /// value against the quantizer's range.
+    pub fn from_payload(
+        bytes: &[u8],
+        nnz: usize,
+        channels: usize,
+        pixels: usize,
+        bits: u32,
+    ) -> Result<SparseColumn> {
+        let mut r = Reader::new(bytes, "column payload");
+        let mut col = SparseColumn {
+            indices: Vec::with_capacity(nnz),
+            values: Vec::with_capacity(nnz * channels),
+            ..Default::default()
+        };
+        let mut next = 0u64;
+        for _ in 0..nnz {
+            let i = next + get_varint(&mut r)?;
+            if i >= pixels as u64 {
+                return Err(Error::corrupt(
+                    "column payload",
+                    format!("position {i} outside the {pixels}-pixel image"),
+                ));
+            }
+            col.indices.push(i as u32);
+            next = i + 1;
+        }
+        let max = (1i64 << (bits - 1)) - 1;
+        for _ in 0..nnz * channels {
+            let z = get_varint(&mut r)?;
+            if z > u32::MAX as u64 {
+                return Err(Error::corrupt(
+                    "column payload",
+                    "value out of 32-bit range",
+                ));
+            }
+            let v = ((z >> 1) as i64) ^ -((z & 1) as i64);
+            if v.abs() > max {
+                return Err(Error::corrupt(
+                    "column payload",
+                    format!("quantized value {v} outside ±{max} for {bits} bits"),
+                ));
+            }
+            col.values.push(v as i32);
+        }
+        if r.remaining() != 0 {
+            return Err(Error::corrupt(
+                "column payload",
+                format!("{} trailing bytes", r.remaining()),
+            ));
+        }
+        Ok(col)
+    }
+}
+
+#[derive(Clone, Copy, Debug)]
+struct DirEntry {
+    tag: [u8; 4],
+    offset: u64,
+    len: u64,
+    crc: u32,
+}
+
+/// Streams a `.ltm` file to `PATH.tmp`, then renames it into place.
+pub struct LtmWriter {
+    file: BufWriter<File>,
+    path: PathBuf,
+    tmp: PathBuf,
+    meta: Meta,
+    albedo: Option<Vec<u8>>,
+    entries: Vec<ColumnEntry>,
+    data_start: u64,
+    data_len: u64,
+}
+
+fn tmp_path(path: &Path) -> PathBuf {
+    let mut s = path.as_os_str().to_owned();
+    s.push(".tmp");
+    PathBuf::from(s)
+}
+
+impl LtmWriter {
+    /// Starts a file for `meta`, with an optional albedo image (3 values per
+    /// pixel).
+    pub fn create(path: &Path, meta: Meta, albedo: Option<&[f32]>) -> Result<LtmWriter> {
+        meta.dims.validate()?;
+        let albedo = match albedo {
+            Some(a) if a.len() == 3 * meta.dims.pixels() => {
+                Some(bytemuck::cast_slice::<f32, u8>(a).to_vec())
+            }
+            Some(a) => {
+                return Err(Error::BufferTooSmall {
+                    what: "albedo image",
+                    len: a.len(),
+                    need: 3 * meta.dims.pixels(),
+                })
+            }
+            None => None,
+        };
+        let tmp = tmp_path(path);
+        let file = File::create(&tmp).map_err(|e| Error::io(&tmp, e))?;
+        let chunks = 3 + albedo.is_some() as u64;
+        let head_len = HEADER_LEN as u64 + DIR_ENTRY_LEN as u64 * chunks + 4;
+        let cols_len = (column_entry_len(meta.dims.channels) * meta.dims.lights()) as u64;
+        let data_start =
+            head_len + META_LEN as u64 + albedo.as_ref().map_or(0, |a| a.len() as u64) + cols_len;
+        let mut w = LtmWriter {
+            file: BufWriter::with_capacity(1 << 20, file),
+            path: path.into(),
+            tmp,
+            meta,
+            albedo,
+            entries: Vec::new(),
+            data_start,
+            data_len: 0,
+        };
+        w.file
+            .seek(SeekFrom::Start(data_start))
+            .map_err(|e| Error::io(&w.tmp, e))?;
+        Ok(w)
+    }
+
+    /// Appends the next column (columns are written in order `0..M`).
+    pub fn push_column(&mut self, col: &SparseColumn, zstd_level: i32) -> Result<()> {
+        let channels = self.meta.dims.channels as usize;
+        let nnz = col.indices.len();
+        let mut entry = ColumnEntry {
+            offset: self.data_len,
+            stored_len: 0,
+            raw_len: 0,
+            nnz: nnz as u32,
+            crc: 0,
+            depth: col.depth as u8,
+            encoding: Encoding::Empty,
+            scales: col.scales,
+        };
+        if nnz > 0 {
+            let payload = col.to_payload(channels);
+            let packed =
+                zstd::bulk::compress(&payload, zstd_level).map_err(|e| Error::io(&self.tmp, e))?;
+            let (bytes, enc) = if packed.len() < payload.len() {
+                (packed, Encoding::Zstd)
+            } else {
+                (payload.clone(), Encoding::Plain)
+            };
+            entry.raw_len = payload.len() as u32;
+            entry.stored_len = bytes.len() as u32;
+            entry.encoding = enc;
+            entry.crc = crc32fast::hash(&bytes);
+            self.file
+                .write_all(&bytes)
+                .map_err(|e| Error::io(&self.tmp, e))?;
+            self.data_len += bytes.len() as u64;
+        }
+        self.entries.push(entry);
+        Ok(())
+    }
+
+    /// Drops the partial file.
+    pub fn abandon(self) {
+        let tmp = self.tmp.clone();
+        drop(self);
+        let _ = std::fs::remove_file(tmp);
+    }
+
+    /// Writes the tables, syncs and renames the file into place. Returns the
+    /// file size.
+    pub fn finish(mut self, achieved_error: f32) -> Result<u64> {
+        let lights = self.meta.dims.lights();
+        if self.entries.len() != lights {
+            return Err(Error::Invalid(format!(
+                "{} columns written, the matrix has {lights}",
+                self.entries.len()
+            )));
+        }
+        self.meta.achieved_error = achieved_error;
+        let channels = self.meta.dims.channels as usize;
+        let mut cols = Writer::default();
+        for e in &self.entries {
+            cols.u64(e.offset);
+            cols.u32(e.stored_len);
+            cols.u32(e.raw_len);
+            cols.u32(e.nnz);
+            cols.u32(e.crc);
+            cols.u8(e.depth);
+            cols.u8(e.encoding as u8);
+            cols.u16(0);
+            for c in 0..channels {
+                cols.f32(e.scales[c]);
+            }
+        }
+        let meta = self.meta.encode();
+        let mut chunks: Vec<(&[u8; 4], Vec<u8>)> = vec![(b"META", meta)];
+        if let Some(a) = self.albedo.take() {
+            chunks.push((b"ALBD", a));
+        }
+        chunks.push((b"COLS", cols.bytes));
+        let head_len = HEADER_LEN + DIR_ENTRY_LEN * (chunks.len() + 1) + 4;
+        let mut dir = Vec::new();
+        let mut offset = head_len as u64;
+        for (tag, bytes) in &chunks {
+            dir.push(DirEntry {
+                tag: **tag,
+                offset,
+                len: bytes.len() as u64,
+                crc: crc32fast::hash(bytes),
+            });
+            offset += bytes.len() as u64;
+        }
+        debug_assert_eq!(offset, self.data_start);
+        dir.push(DirEntry {
+            tag: *b"DATA",
+            offset,
+            len: self.data_len,
+            crc: 0,
+        });
+        let mut head = Writer::default();
+        head.bytes.extend_from_slice(&MAGIC);
+        head.u32(VERSION);
+        head.u32(if chunks.iter().any(|(t, _)| *t == b"ALBD") {
+            FEATURE_ALBEDO
+        } else {
+            0
+        });
+        head.u32(dir.len() as u32);
+        head.u32(0);
+        for d in &dir {
+            head.bytes.extend_from_slice(&d.tag);
+            head.u32(0);
+            head.u64(d.offset);
+            head.u64(d.len);
+            head.u32(d.crc);
+            head.u32(0);
+        }
+        let crc = crc32fast::hash(&head.bytes);
+        head.u32(crc);
+        let io = |e| Error::io(&self.tmp, e);
+        self.file.seek(SeekFrom::Start(0)).map_err(io)?;
+        self.file.write_all(&head.bytes).map_err(io)?;
+        for (_, bytes) in &chunks {
+            self.file.write_all(bytes).map_err(io)?;
+        }
+        let file = self
+            .file
+            .into_inner()
+            .map_err(|e| Error::io(&self.tmp, e.into_error()))?;
+        file.sync_all().map_err(io)?;
+        let size = self.data_start + self.data_len;
+        std::fs::rename(&self.tmp, &self.path).map_err(|e| Error::io(&self.path, e))?;
+        Ok(size)
+    }
+}
+
+/// An opened, validated `.ltm` file (memory-mapped).
+pub struct LtmFile {
+    map: Mmap,
+    meta: Meta,
+    columns: Vec<ColumnEntry>,
+    albedo: Option<Vec<f32>>,
+    data: std::ops::Range<usize>,
+}
+
+impl LtmFile {
+    /// Opens a file and validates its header, directory, chunk CRCs, metadata
+    /// and column table. Column payloads are checked when read.
+    pub fn open(path: &Path) -> Result<LtmFile> {
+        let file = File::open(path).map_err(|e| Error::io(path, e))?;
+        let map = mmap::map_read(&file).map_err(|e| Error::io(path, e))?;
+        if map.len() < 8 || map[..8] != MAGIC {
+            return Err(Error::BadMagic {
+                path: path.into(),
+                expected: "an .ltm file",
+                found: map[..map.len().min(8)].to_vec(),
+            });
+        }
+        let parsed = Self::parse(&map)?;
+        Ok(LtmFile {
+            map,
+            meta: parsed.0,
+            columns: parsed.1,
+            albedo: parsed.2,
+            data: parsed.3,
+        })
+    }
+
+    /// Parses and validates a whole file held in memory (also used by the
+    /// fuzz target and tests).
+    #[allow(clippy::type_complexity)]
+    pub fn parse(
+        bytes: &[u8],
+    ) -> Result<(
+        Meta,
+        Vec<ColumnEntry>,
+        Option<Vec<f32>>,
+        std::ops::Range<usize>,
+    )> {
+        let mut r = Reader::new(bytes, ".ltm header");
+        if r.take(8)? != MAGIC {
+            return Err(Error::corrupt(".ltm header", "bad magic bytes"));
+        }
+        let version = r.u32()?;
+        if version != VERSION {
+            return Err(Error::Version {
+                what: ".ltm",
+                found: version,
+                supported: VERSION,
+            });
+        }
+        let features = r.u32()?;
+        if features & !KNOWN_FEATURES != 0 {
+            return Err(Error::range(
+                "feature flags",
+                format!("{features:#x}"),
+                format!("a subset of {KNOWN_FEATURES:#x}"),
+            ));
+        }
+        let count = r.u32()? as usize;
+        if !(3..=4).contains(&count) {
+            return Err(Error::range("chunk count", count, "3..=4"));
+        }
+        r.u32()?;
+        let mut dir = Vec::with_capacity(count);
+        for _ in 0..count {
+            let tag: [u8; 4] = r.take(4)?.try_into().expect("4 bytes");
+            r.u32()?;
+            let (offset, len, crc) = (r.u64()?, r.u64()?, r.u32()?);
+            r.u32()?;
+            dir.push(DirEntry {
+                tag,
+                offset,
+                len,
+                crc,
+            });
+        }
+        let dir_end = r.pos();
+        let stored = r.u32()?;
+        let computed = crc32fast::hash(&bytes[..dir_end]);
+        if stored != computed {
+            return Err(Error::Crc {
+                chunk: "chunk directory".into(),
+                stored,
+                computed,
+            });
+        }
+        // Directory: known unique tags, in range, sorted, non-overlapping.
+        let mut end = r.pos() as u64;
+        for d in &dir {
+            if !matches!(&d.tag, b"META" | b"ALBD" | b"COLS" | b"DATA") {
+                return Err(Error::corrupt(
+                    "chunk directory",
+                    format!("unknown chunk tag {:?}", String::from_utf8_lossy(&d.tag)),
+                ));
+            }
+            if dir.iter().filter(|o| o.tag == d.tag).count() != 1 {
+                return Err(Error::corrupt(
+                    "chunk directory",
+                    format!(
+                        "chunk {} appears more than once",
+                        String::from_utf8_lossy(&d.tag)
+                    ),
+                ));
+            }
+            let stop = d
+                .offset
+                .checked_add(d.len)
+                .filter(|&s| s <= bytes.len() as u64);
+            match stop {
+                Some(stop) if d.offset >= end => end = stop,
+                _ => {
+                    return Err(Error::corrupt("chunk directory", format!(
+                        "chunk {} at {}+{} is out of order, overlapping or past the end of the {}-byte file",
+                        String::from_utf8_lossy(&d.tag), d.offset, d.len, bytes.len())))
+                }
+            }
+        }
+        let chunk = |tag: &[u8; 4]| -> Result<Option<&[u8]>> {
+            let Some(d) = dir.iter().find(|d| &d.tag == tag) else {
+                return Ok(None);
+            };
+            let s = &bytes[d.offset as usize..(d.offset + d.len) as usize];
+            if tag != b"DATA" {
+                let computed = crc32fast::hash(s);
+                if computed != d.crc {
+                    return Err(Error::Crc {
+                        chunk: String::from_utf8_lossy(tag).into_owned(),
+                        stored: d.crc,
+                        computed,
+                    });
+                }
+            }
+            Ok(Some(s))
+        };
+        let missing =
+            |t: &str| Error::corrupt("chunk directory", format!("required chunk {t} is missing"));
+        let meta = Meta::decode(chunk(b"META")?.ok_or_else(|| missing("META"))?)?;
+        let dims = meta.dims;
+        let albedo = match (chunk(b"ALBD")?, features & FEATURE_ALBEDO != 0) {
+            (Some(a), true) => {
+                if dims.channels != 1 || a.len() != 12 * dims.pixels() {
+                    return Err(Error::corrupt("ALBD chunk", format!("{} bytes for {} pixels and {} channels (needs 12 per pixel, 1 channel)", a.len(), dims.pixels(), dims.channels)));
+                }
+                let v: Vec<f32> = a
+                    .chunks_exact(4)
+                    .map(|c| f32::from_le_bytes(c.try_into().expect("4 bytes")))
+                    .collect();
+                if v.iter().any(|x| !x.is_finite()) {
+                    return Err(Error::corrupt(
+                        "ALBD chunk",
+                        "albedo holds NaN or infinite values",
+                    ));
+                }
+                Some(v)
+            }
+            (None, false) => None,
+            _ => {
+                return Err(Error::corrupt(
+                    "chunk directory",
+                    "ALBD chunk and albedo feature flag disagree",
+                ))
+            }
+        };
+        let cols = chunk(b"COLS")?.ok_or_else(|| missing("COLS"))?;
+        let data_dir = dir
+            .iter()
+            .find(|d| &d.tag == b"DATA")
+            .ok_or_else(|| missing("DATA"))?;
+        let data = data_dir.offset as usize..(data_dir.offset + data_dir.len) as usize;
+        let entry_len = column_entry_len(dims.channels);
+        if cols.len() != entry_len * dims.lights() {
+            return Err(Error::corrupt(
+                "COLS chunk",
+                format!(
+                    "{} bytes, expected {} columns × {entry_len}",
+                    cols.len(),
+                    dims.lights()
+                ),
+            ));
+        }
+        let max_depth = meta.max_depth();
+        let pixels = dims.pixels() as u64;
+        let channels = dims.channels as usize;
+        checked_alloc(
+            "column table",
+            dims.lights() as u64,
+            std::mem::size_of::<ColumnEntry>() as u64,
+        )?;
+        let mut columns = Vec::with_capacity(dims.lights());
+        let mut r = Reader::new(cols, "COLS chunk");
+        for j in 0..dims.lights() {
+            let (offset, stored_len, raw_len, nnz, crc, depth, enc) = (
+                r.u64()?,
+                r.u32()?,
+                r.u32()?,
+                r.u32()?,
+                r.u32()?,
+                r.u8()?,
+                r.u8()?,
+            );
+            r.u16()?;
+            let mut scales = [0.0f32; 3];
+            for s in scales.iter_mut().take(channels) {
+                *s = r.f32()?;
+            }
+            let bad = |detail: String| {
+                Err(Error::corrupt(
+                    "COLS chunk",
+                    format!("column {j}: {detail}"),
+                ))
+            };
+            let encoding = match enc {
+                0 => Encoding::Empty,
+                1 => Encoding::Plain,
+                2 => Encoding::Zstd,
+                _ => return bad(format!("encoding {enc} (valid: 0 empty, 1 plain, 2 zstd)")),
+            };
+            if depth as u32 > max_depth {
+                return bad(format!("depth {depth} (valid: 0..={max_depth})"));
+            }
+            if meta.mode == Mode::TwoD && depth != 0
+                || meta.mode == Mode::FourD && depth as u32 != max_depth
+            {
+                return bad(format!("depth {depth} in a {} file", meta.mode.name()));
+            }
+            if nnz as u64 > pixels {
+                return bad(format!("{nnz} nonzeros (valid: 0..={pixels})"));
+            }
+            // A payload needs at least 1 byte per position and per value, and at most 5.
+            let (min_raw, max_raw) = (
+                nnz as u64 * (1 + channels as u64),
+                nnz as u64 * 5 * (1 + channels as u64),
+            );
+            if (encoding == Encoding::Empty) != (nnz == 0)
+                || (nnz > 0 && !(min_raw..=max_raw).contains(&(raw_len as u64)))
+            {
+                return bad(format!("{nnz} nonzeros with encoding {enc} and {raw_len} payload bytes (valid: {min_raw}..={max_raw})"));
+            }
+            if encoding == Encoding::Plain && stored_len != raw_len
+                || encoding == Encoding::Empty && stored_len != 0
+            {
+                return bad(format!(
+                    "stored length {stored_len} for encoding {enc} and payload length {raw_len}"
+                ));
+            }
+            if offset
+                .checked_add(stored_len as u64)
+                .is_none_or(|e| e > data.len() as u64)
+            {
+                return bad(format!(
+                    "payload {offset}+{stored_len} outside the {}-byte DATA chunk",
+                    data.len()
+                ));
+            }
+            if scales.iter().any(|s| !s.is_finite() || *s < 0.0) {
+                return bad(format!("scales {scales:?} (valid: finite, >= 0)"));
+            }
+            columns.push(ColumnEntry {
+                offset,
+                stored_len,
+                raw_len,
+                nnz,
+                crc,
+                depth,
+                encoding,
+                scales,
+            });
+        }
+        Ok((meta, columns, albedo, data))
+    }
+
+    pub fn meta(&self) -> &Meta {
+        &self.meta
+    }
+
+    /// The column table.
+    pub fn columns(&self) -> &[ColumnEntry] {
+        &self.columns
+    }
+
+    /// The albedo image (3 values per pixel), if stored.
+    pub fn albedo(&self) -> Option<&[f32]> {
+        self.albedo.as_deref()
+    }
+
+    /// File size in bytes.
+    pub fn file_bytes(&self) -> u64 {
+        self.map.len() as u64
+    }
+
+    /// Column `j` as stored (checked: CRC, positions, value range).
+    pub fn column(&self, j: usize) -> Result<SparseColumn> {
+        let Some(e) = self.columns.get(j) else {
+            return Err(Error::range(
+                "column",
+                j,
+                format!("0..{}", self.columns.len()),
+            ));
+        };
+        read_column(&self.map[self.data.clone()], &self.meta, j, e)
+    }
+}
+
+/// Reads and checks one column payload from the DATA chunk.
+pub(crate) fn read_column(
+    data: &[u8],
+    meta: &Meta,
+    j: usize,
+    e: &ColumnEntry,
+) -> Result<SparseColumn> {
+    let mut col = match e.encoding {
+        Encoding::Empty => SparseColumn::default(),
+        _ => {
+            let stored = &data[e.offset as usize..(e.offset + e.stored_len as u64) as usize];
+            let crc = crc32fast::hash(stored);
+            if crc != e.crc {
+                return Err(Error::Crc {
+                    chunk: format!("column {j}"),
+                    stored: e.crc,
+                    computed: crc,
+                });
+            }
+            let payload;
+            let bytes = if e.encoding == Encoding::Zstd {
+                payload = zstd::bulk::decompress(stored, e.raw_len as usize).map_err(|err| {
+                    Error::corrupt("column payload", format!("column {j}: zstd: {err}"))
+                })?;
+                if payload.len() != e.raw_len as usize {
+                    return Err(Error::corrupt(
+                        "column payload",
+                        format!(
+                            "column {j}: {} bytes after decompression, table says {}",
+                            payload.len(),
+                            e.raw_len
+                        ),
+                    ));
+                }
+                &payload[..]
+            } else {
+                stored
+            };
+            SparseColumn::from_payload(
+                bytes,
+                e.nnz as usize,
+                meta.dims.channels as usize,
+                meta.dims.pixels(),
+                meta.bits,
+            )?
+        }
+    };
+    col.depth = e.depth as u32;
+    col.scales = e.scales;
+    Ok(col)
+}

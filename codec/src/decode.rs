@@ -1,0 +1,76 @@
+//! Column decoding, shared by the encoder's error measurements, export and
+//! relighting: dequantize into a column image in the Mallat layout of the
+//! column's depth, undo the band weights, then inverse steps.
+
+use crate::container::{Meta, SparseColumn};
+use crate::error::Result;
+use crate::quant::{levels, BandWeights};
+use crate::wavelet::{self, band_size};
+
+/// Decoding state for one file's column filter and image size.
+pub struct ColumnDecoder {
+    meta: Meta,
+    /// `1 / weight` per position, per depth.
+    inv_weights: Vec<Vec<f32>>,
+}
+
+impl ColumnDecoder {
+    pub fn new(meta: &Meta) -> ColumnDecoder {
+        let (w, h) = (meta.dims.width as usize, meta.dims.height as usize);
+        let weights = BandWeights::new(meta.col_filter, w, h, meta.max_depth());
+        let inv_weights = (0..=meta.max_depth())
+            .map(|d| weights.map(d).iter().map(|x| 1.0 / x).collect())
+            .collect();
+        ColumnDecoder {
+            meta: meta.clone(),
+            inv_weights,
+        }
+    }
+
+    /// Adds `gain ×` channel `channel` of `col`, dequantized (still weighted),
+    /// into `plane` (one column image of `width·height` values).
+    #[inline]
+    pub fn accumulate(&self, col: &SparseColumn, channel: usize, gain: f32, plane: &mut [f32]) {
+        let channels = self.meta.dims.channels as usize;
+        let step = gain * col.scales[channel] / levels(self.meta.bits);
+        for (k, &i) in col.indices.iter().enumerate() {
+            plane[i as usize] += step * col.values[k * channels + channel] as f32;
+        }
+    }
+
+    /// Undoes the band weights of depth `depth` on a plane of weighted
+    /// coefficients.
+    pub fn unweight(&self, depth: u32, plane: &mut [f32]) {
+        for (v, w) in plane.iter_mut().zip(&self.inv_weights[depth as usize]) {
+            *v *= w;
+        }
+    }
+
+    /// One inverse column step from depth `level` to `level − 1`.
+    pub fn inverse_step(&self, level: u32, plane: &mut [f32], work: &mut [f32]) -> Result<()> {
+        let (w, h) = (
+            self.meta.dims.width as usize,
+            self.meta.dims.height as usize,
+        );
+        let (bw, bh) = band_size(w, h, level - 1);
+        wavelet::inverse_step(self.meta.col_filter, plane, w, bw, bh, work)
+    }
+
+    /// Decodes channel `channel` of a column into `plane` (overwritten), in
+    /// the row-wavelet lighting basis. `work` needs `width·height` values.
+    pub fn decode(
+        &self,
+        col: &SparseColumn,
+        channel: usize,
+        plane: &mut [f32],
+        work: &mut [f32],
+    ) -> Result<()> {
+        plane.fill(0.0);
+        self.accumulate(col, channel, 1.0, plane);
+        self.unweight(col.depth, plane);
+        for level in (1..=col.depth).rev() {
+            self.inverse_step(level, plane, work)?;
+        }
+        Ok(())
+    }
+}

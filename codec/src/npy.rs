@@ -1,0 +1,268 @@
+//! NumPy `.npy` import into the raw store, and dense export of a decoded
+//! `.ltm` file, so that anyone can check the codec with numpy.
+
+use crate::compress::row_inverse;
+use crate::container::LtmFile;
+use crate::decode::ColumnDecoder;
+use crate::error::{Error, Result};
+use crate::raw::{Dims, RawHeader, RawWriter};
+use std::fs::File;
+use std::io::{BufReader, BufWriter, Read, Write};
+use std::path::Path;
+
+const NPY_MAGIC: &[u8; 6] = b"\x93NUMPY";
+
+/// Element type of an `.npy` array.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum NpyDtype {
+    F32,
+    F64,
+}
+
+/// The header of an `.npy` file.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct NpyHeader {
+    pub dtype: NpyDtype,
+    pub shape: Vec<usize>,
+    /// Bytes before the data.
+    pub data_offset: usize,
+}
+
+fn field<'a>(dict: &'a str, key: &str) -> Result<&'a str> {
+    let pat = format!("'{key}':");
+    let at = dict
+        .find(&pat)
+        .ok_or_else(|| Error::Invalid(format!(".npy header has no '{key}' field: {dict}")))?;
+    Ok(dict[at + pat.len()..].trim_start())
+}
+
+/// Parses an `.npy` header (format versions 1–3).
+pub fn read_npy_header(r: &mut impl Read) -> Result<NpyHeader> {
+    let bad = |d: String| Error::Invalid(format!("not a readable .npy file: {d}"));
+    let mut pre = [0u8; 8];
+    r.read_exact(&mut pre).map_err(|e| bad(e.to_string()))?;
+    if &pre[..6] != NPY_MAGIC {
+        return Err(bad("missing \\x93NUMPY magic".into()));
+    }
+    let (len, prefix) = match pre[6] {
+        1 => {
+            let mut b = [0u8; 2];
+            r.read_exact(&mut b).map_err(|e| bad(e.to_string()))?;
+            (u16::from_le_bytes(b) as usize, 10)
+        }
+        2 | 3 => {
+            let mut b = [0u8; 4];
+            r.read_exact(&mut b).map_err(|e| bad(e.to_string()))?;
+            (u32::from_le_bytes(b) as usize, 12)
+        }
+        v => return Err(bad(format!("format version {v} (supported: 1, 2, 3)"))),
+    };
+    if len > 1 << 16 {
+        return Err(bad(format!("header length {len} (valid: at most 65536)")));
+    }
+    let mut text = vec![0u8; len];
+    r.read_exact(&mut text).map_err(|e| bad(e.to_string()))?;
+    let dict = String::from_utf8_lossy(&text).into_owned();
+    let descr = field(&dict, "descr")?;
+    let dtype = if descr.starts_with("'<f4'") {
+        NpyDtype::F32
+    } else if descr.starts_with("'<f8'") {
+        NpyDtype::F64
+    } else {
+        return Err(Error::Invalid(format!(
+            "unsupported .npy dtype {} (supported: float32 '<f4', float64 '<f8')",
+            descr.split(',').next().unwrap_or(descr)
+        )));
+    };
+    if !field(&dict, "fortran_order")?.starts_with("False") {
+        return Err(Error::Invalid(
+            "Fortran-ordered .npy arrays are not supported: save with C order".into(),
+        ));
+    }
+    let shape_text = field(&dict, "shape")?;
+    let close = shape_text
+        .find(')')
+        .ok_or_else(|| bad("malformed shape".into()))?;
+    let shape = shape_text[1..close]
+        .split(',')
+        .map(str::trim)
+        .filter(|s| !s.is_empty())
+        .map(|s| {
+            s.parse::<usize>()
+                .map_err(|_| bad(format!("malformed shape {}", &shape_text[..=close])))
+        })
+        .collect::<Result<Vec<_>>>()?;
+    Ok(NpyHeader {
+        dtype,
+        shape,
+        data_offset: prefix + len,
+    })
+}
+
+/// Imports a `(P, M)` or `(P, M, C)` `.npy` matrix as a raw store.
+pub fn import_npy(
+    npy: &Path,
+    width: u32,
+    height: u32,
+    out: &Path,
+    progress: &dyn Fn(u64, u64),
+) -> Result<Dims> {
+    let file = File::open(npy).map_err(|e| Error::io(npy, e))?;
+    let file_len = file.metadata().map_err(|e| Error::io(npy, e))?.len();
+    let mut r = BufReader::with_capacity(1 << 20, file);
+    let header = read_npy_header(&mut r)?;
+    let (rows, cols, channels) = match header.shape[..] {
+        [p, m] => (p, m, 1),
+        [p, m, c] => (p, m, c),
+        _ => {
+            return Err(Error::Invalid(format!(
+                "array shape {:?}: expected (P, M) or (P, M, C)",
+                header.shape
+            )))
+        }
+    };
+    if rows as u64 != width as u64 * height as u64 {
+        return Err(Error::Invalid(format!(
+            "array has {rows} rows but --width {width} × --height {height} = {}",
+            width as u64 * height as u64
+        )));
+    }
+    let n = ((cols / 6) as f64).sqrt().round() as u32;
+    if cols == 0 || 6 * (n as usize) * (n as usize) != cols {
+        return Err(Error::Invalid(format!(
+            "array has {cols} columns: expected 6·n² cubemap texels (n a power of two)"
+        )));
+    }
+    let dims = Dims {
+        width,
+        height,
+        face_res: n,
+        channels: channels as u32,
+    };
+    dims.validate()?;
+    let item = if header.dtype == NpyDtype::F32 { 4 } else { 8 };
+    let need = header.data_offset as u64 + dims.raw_bytes() / 4 * item;
+    if file_len != need {
+        return Err(Error::Invalid(format!(
+            "{}: file is {file_len} bytes, shape {:?} needs {need}",
+            npy.display(),
+            header.shape
+        )));
+    }
+    let raw = RawHeader::new(dims, false, 16 << 20);
+    let mut writer = RawWriter::create(out, raw)?;
+    let row_len = dims.row_len();
+    let mut bytes = Vec::new();
+    let blocks = raw.block_count();
+    for b in 0..blocks {
+        let range = raw.block_range(b);
+        bytes.resize(range.len() * row_len * item as usize, 0);
+        r.read_exact(&mut bytes).map_err(|e| Error::io(npy, e))?;
+        let values: Vec<f32> = if item == 4 {
+            bytes
+                .chunks_exact(4)
+                .map(|c| f32::from_le_bytes(c.try_into().expect("4 bytes")))
+                .collect()
+        } else {
+            bytes
+                .chunks_exact(8)
+                .map(|c| f64::from_le_bytes(c.try_into().expect("8 bytes")) as f32)
+                .collect()
+        };
+        if let Some(k) = values.iter().position(|v| !v.is_finite()) {
+            let e = range.start * row_len + k;
+            return Err(Error::Invalid(format!(
+                "{}: element ({}, {}, {}) is {} (NaN, infinite, or beyond float32)",
+                npy.display(),
+                e / row_len,
+                e % row_len / channels,
+                e % channels,
+                values[k]
+            )));
+        }
+        writer.write_block(b, &values, None)?;
+        progress((b + 1) as u64, blocks as u64);
+    }
+    writer.finish()?;
+    Ok(dims)
+}
+
+/// Largest dense matrix `export_npy` builds in memory.
+pub const MAX_EXPORT_BYTES: u64 = 8 << 30;
+
+/// Decodes a whole `.ltm` file to the pixel lighting basis: `P × M × C`
+/// values, C order.
+pub fn decode_matrix(file: &LtmFile) -> Result<Vec<f32>> {
+    let meta = file.meta();
+    let dims = meta.dims;
+    if dims.raw_bytes() > MAX_EXPORT_BYTES {
+        return Err(Error::range(
+            "decoded matrix bytes",
+            dims.raw_bytes(),
+            format!("at most {MAX_EXPORT_BYTES} for a dense export"),
+        ));
+    }
+    let (p, m, c) = (dims.pixels(), dims.lights(), dims.channels as usize);
+    let n = dims.face_res as usize;
+    let decoder = ColumnDecoder::new(meta);
+    let mut dense = vec![0.0f32; p * m * c];
+    let mut plane = vec![0.0f32; p];
+    let mut work = vec![0.0f32; p.max(n * n)];
+    for j in 0..m {
+        let col = file.column(j)?;
+        for ch in 0..c {
+            decoder.decode(&col, ch, &mut plane, &mut work)?;
+            for (pi, v) in plane.iter().enumerate() {
+                dense[(pi * m + j) * c + ch] = *v;
+            }
+        }
+    }
+    let mut row = vec![0.0f32; m];
+    for pi in 0..p {
+        for ch in 0..c {
+            for j in 0..m {
+                row[j] = dense[(pi * m + j) * c + ch];
+            }
+            row_inverse(meta.row_filter, n, &mut row, &mut work)?;
+            for j in 0..m {
+                dense[(pi * m + j) * c + ch] = row[j];
+            }
+        }
+    }
+    Ok(dense)
+}
+
+/// Writes the decoded matrix as a float32 `.npy` of shape `(P, M)` or
+/// `(P, M, C)`, atomically.
+pub fn export_npy(file: &LtmFile, out: &Path) -> Result<()> {
+    let dims = file.meta().dims;
+    let dense = decode_matrix(file)?;
+    let shape = if dims.channels == 1 {
+        format!("({}, {})", dims.pixels(), dims.lights())
+    } else {
+        format!("({}, {}, {})", dims.pixels(), dims.lights(), dims.channels)
+    };
+    let mut dict = format!("{{'descr': '<f4', 'fortran_order': False, 'shape': {shape}, }}");
+    while (10 + dict.len() + 1) % 64 != 0 {
+        dict.push(' ');
+    }
+    dict.push('\n');
+    let tmp = {
+        let mut s = out.as_os_str().to_owned();
+        s.push(".tmp");
+        std::path::PathBuf::from(s)
+    };
+    let io = |e| Error::io(&tmp, e);
+    let mut w = BufWriter::new(File::create(&tmp).map_err(io)?);
+    w.write_all(NPY_MAGIC).map_err(io)?;
+    w.write_all(&[1, 0]).map_err(io)?;
+    w.write_all(&(dict.len() as u16).to_le_bytes())
+        .map_err(io)?;
+    w.write_all(dict.as_bytes()).map_err(io)?;
+    w.write_all(bytemuck::cast_slice(&dense)).map_err(io)?;
+    w.into_inner()
+        .map_err(|e| Error::io(&tmp, e.into_error()))?
+        .sync_all()
+        .map_err(io)?;
+    std::fs::rename(&tmp, out).map_err(|e| Error::io(out, e))
+}

@@ -1,0 +1,95 @@
+//! Per-band weighting and dithered scalar quantization of column
+//! coefficients (Cheslack-Postava et al. 2007 §4.3).
+//!
+//! Each coefficient is multiplied by the pixel-domain L2 norm of its band's
+//! synthesis function before it is thresholded and quantized, so that one
+//! quantization step costs the same pixel-domain error in every band. For the
+//! lifting filters this weight grows as `2^level` — the paper's non-linear
+//! per-level scaling — and for the orthonormal filters it is 1.
+//!
+//! Quantization to `bits` maps a weighted value `u` of a column whose largest
+//! kept weighted magnitude is `s` to `q = floor(u/s·Q + d)` with
+//! `Q = 2^(bits−1) − 1` and a dither `d ∈ [0, 1)` drawn from a hash of
+//! (seed, column, index, channel). The dither makes the quantizer unbiased
+//! (`E[q] = u/s·Q`), so small kept coefficients survive on average instead of
+//! all rounding the same way; zero stays zero. Decoding is `u = q·s/Q`.
+
+use crate::wavelet::{self, band_size, Filter};
+
+/// Quantization levels on each side of zero for `bits` (2..=16).
+pub fn levels(bits: u32) -> f32 {
+    ((1u32 << (bits - 1)) - 1) as f32
+}
+
+/// A deterministic dither value in `[0, 1)`.
+#[inline]
+pub fn dither(seed: u64, column: u32, index: u32, channel: u32) -> f32 {
+    let mut z = seed
+        ^ ((column as u64) << 32 | index as u64).wrapping_mul(0x9E37_79B9_7F4A_7C15)
+        ^ ((channel as u64) << 61);
+    z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
+    z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
+    z ^= z >> 31;
+    (z >> 40) as f32 / (1u64 << 24) as f32
+}
+
+/// Synthesis-norm weight of every coefficient position of a `width` ×
+/// `height` column image, for each transform depth `0..=max_depth`.
+pub struct BandWeights {
+    maps: Vec<Vec<f32>>,
+}
+
+impl BandWeights {
+    /// Computes the weights by inverse-transforming one impulse per band.
+    pub fn new(filter: Filter, width: usize, height: usize, max_depth: u32) -> BandWeights {
+        let n = width * height;
+        let mut probe = vec![0.0f32; n];
+        let mut work = vec![0.0f32; n];
+        // norm of an impulse at (x, y) after inverse-transforming `depth` levels.
+        let mut norm = |x: usize, y: usize, depth: u32| -> f32 {
+            probe.fill(0.0);
+            probe[y * width + x] = 1.0;
+            if wavelet::inverse(filter, &mut probe, width, height, depth, &mut work).is_err() {
+                return 1.0;
+            }
+            probe.iter().map(|v| v * v).sum::<f32>().sqrt().max(1e-6)
+        };
+        let mut maps = Vec::with_capacity(max_depth as usize + 1);
+        for depth in 0..=max_depth {
+            let mut map = vec![1.0f32; n];
+            if depth > 0 {
+                // Detail bands of each level k, then the low band of `depth`.
+                for k in 1..=depth {
+                    let (pw, ph) = band_size(width, height, k - 1);
+                    let (lw, lh) = band_size(width, height, k);
+                    for (x0, x1, y0, y1) in [(lw, pw, 0, lh), (0, lw, lh, ph), (lw, pw, lh, ph)] {
+                        if x0 >= x1 || y0 >= y1 {
+                            continue;
+                        }
+                        let w = norm((x0 + x1) / 2, (y0 + y1) / 2, depth);
+                        for y in y0..y1 {
+                            map[y * width + x0..y * width + x1].fill(w);
+                        }
+                    }
+                }
+                let (lw, lh) = band_size(width, height, depth);
+                let w = norm(lw / 2, lh / 2, depth);
+                for y in 0..lh {
+                    map[y * width..y * width + lw].fill(w);
+                }
+            }
+            maps.push(map);
+        }
+        BandWeights { maps }
+    }
+
+    /// The weight map for columns transformed to `depth`.
+    pub fn map(&self, depth: u32) -> &[f32] {
+        &self.maps[depth as usize]
+    }
+
+    /// Deepest depth covered.
+    pub fn max_depth(&self) -> u32 {
+        self.maps.len() as u32 - 1
+    }
+}

@@ -825,6 +825,18 @@ impl LtmFile {
     }
 }
 
+/// Parses a whole file held in memory and reads every column: the decoder's
+/// full validation, as the fuzz target runs it. Returns the nonzero count.
+pub fn validate_bytes(bytes: &[u8]) -> Result<u64> {
+    let (meta, columns, _, data) = LtmFile::parse(bytes)?;
+    let data = &bytes[data];
+    let mut nnz = 0;
+    for (j, e) in columns.iter().enumerate() {
+        nnz += read_column(data, &meta, j, e)?.indices.len() as u64;
+    }
+    Ok(nnz)
+}
+
 /// Reads and checks one column payload from the DATA chunk.
 pub(crate) fn read_column(
     data: &[u8],

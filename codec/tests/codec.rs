@@ -348,9 +348,7 @@ fn hostile_files_error_and_never_panic() {
     let (out, _) = run(dir.path(), &raw, &CompressOptions::default(), "x.ltm");
     let good = std::fs::read(&out).unwrap();
     let check = |bytes: &[u8]| {
-        if let Ok((meta, cols, _, data)) = LtmFile::parse(bytes) {
-            let _ = (meta, cols.len(), data);
-        }
+        let _ = ltm_codec::container::validate_bytes(bytes);
         let path = dir.path().join("mut.ltm");
         std::fs::write(&path, bytes).unwrap();
         if let Ok(f) = LtmFile::open(&path) {
@@ -403,4 +401,21 @@ fn hostile_raw_stores_error() {
     std::fs::write(&path, &flipped).unwrap();
     let store = RawStore::open(&path).unwrap();
     assert!((0..store.header().block_count()).any(|b| store.verify_block(b).is_err()));
+}
+
+/// Inputs the fuzzer once found, kept as regression tests.
+#[test]
+fn fuzz_regressions_are_errors() {
+    let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("../fuzz/regressions");
+    for entry in std::fs::read_dir(dir).unwrap() {
+        let path = entry.unwrap().path();
+        if path.extension().is_some_and(|e| e == "ltm") {
+            let bytes = std::fs::read(&path).unwrap();
+            assert!(
+                ltm_codec::container::validate_bytes(&bytes).is_err(),
+                "{}",
+                path.display()
+            );
+        }
+    }
 }

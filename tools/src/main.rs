@@ -1,6 +1,7 @@
 //! `ltm`: bake, compress, inspect and relight light-transport matrices.
 
 mod bake;
+mod codec_cmds;
 mod progress;
 
 use clap::{Parser, Subcommand};
@@ -22,12 +23,24 @@ struct Cli {
 enum Command {
     /// Ray-trace a scene's transport matrix into a raw store.
     Bake(bake::BakeArgs),
+    /// Convert a NumPy matrix into a raw store.
+    Import(codec_cmds::ImportArgs),
+    /// Compress a raw store into an .ltm file.
+    Compress(codec_cmds::CompressArgs),
+    /// Show an .ltm file's dimensions, size, error and depth statistics.
+    Inspect(codec_cmds::InspectArgs),
+    /// Decode an .ltm file to a dense NumPy matrix.
+    Export(codec_cmds::ExportArgs),
 }
 
 fn main() -> ExitCode {
     let cli = Cli::parse();
     let result = match cli.command {
         Command::Bake(args) => bake::run(args),
+        Command::Import(args) => codec_cmds::import(args),
+        Command::Compress(args) => codec_cmds::compress_cmd(args),
+        Command::Inspect(args) => codec_cmds::inspect_cmd(args),
+        Command::Export(args) => codec_cmds::export(args),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,

@@ -1,0 +1,9 @@
+//! Any byte string given to the `.ltm` decoder must give a value or an
+//! error, never a panic, a hang or an unbounded allocation.
+#![no_main]
+
+use libfuzzer_sys::fuzz_target;
+
+fuzz_target!(|data: &[u8]| {
+    let _ = ltm_codec::container::validate_bytes(data);
+});

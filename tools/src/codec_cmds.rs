@@ -1,0 +1,318 @@
+//! `ltm import`, `ltm compress`, `ltm inspect`, `ltm export`.
+
+use crate::progress;
+use anyhow::{bail, Context, Result};
+use clap::Args;
+use ltm_codec::compress::{compress, row_level, CompressOptions, Stage, Target, DEFAULT_MAX_ERROR};
+use ltm_codec::container::{LtmFile, Mode};
+use ltm_codec::npy::{export_npy, import_npy};
+use ltm_codec::{Filter, RawStore};
+use serde::Serialize;
+use std::path::PathBuf;
+use std::sync::Mutex;
+
+/// Arguments of `ltm import`.
+#[derive(Args)]
+pub struct ImportArgs {
+    /// NumPy matrix: float32 or float64, C order, shape (P, M) or (P, M, C),
+    /// with P = width·height pixels (row-major) and M = 6·n² cubemap texels
+    /// in the column order of docs/FORMAT.md.
+    pub npy: PathBuf,
+    /// Image width in pixels.
+    #[arg(long)]
+    pub width: u32,
+    /// Image height in pixels.
+    #[arg(long)]
+    pub height: u32,
+    /// Output raw store.
+    #[arg(short, long)]
+    pub output: PathBuf,
+}
+
+pub fn import(a: ImportArgs) -> Result<()> {
+    let bar = progress::bar(0, "import");
+    let dims = import_npy(&a.npy, a.width, a.height, &a.output, &|done, total| {
+        bar.set_length(total);
+        bar.set_position(done);
+    })
+    .with_context(|| format!("importing {}", a.npy.display()))?;
+    bar.finish_and_clear();
+    eprintln!(
+        "wrote {}: {}x{} pixels, n = {} ({} lights), {} channel(s)",
+        a.output.display(),
+        dims.width,
+        dims.height,
+        dims.face_res,
+        dims.lights(),
+        dims.channels
+    );
+    Ok(())
+}
+
+/// Arguments of `ltm compress`.
+#[derive(Args)]
+pub struct CompressArgs {
+    /// Raw transport store (from `ltm bake` or `ltm import`).
+    pub raw: PathBuf,
+    /// Output .ltm file (written atomically).
+    #[arg(short, long)]
+    pub output: PathBuf,
+    /// 2d: rows only (Ng et al. 2003); 4d: every column image to full depth;
+    /// adaptive: each column to the depth that codes it best.
+    #[arg(long, default_value = "adaptive")]
+    pub mode: Mode,
+    /// Row filter over each cube face: haar, d4, d6 or d8.
+    #[arg(long, default_value = "haar")]
+    pub row_filter: Filter,
+    /// Column image filter: legall53, cdf97, haar, d4, d6 or d8.
+    #[arg(long, default_value = "legall53")]
+    pub col_filter: Filter,
+    /// Quantization bits per coefficient (2..=16).
+    #[arg(long, default_value_t = 9)]
+    pub bits: u32,
+    /// Keep the N largest coefficients of each column (the paper's rule).
+    #[arg(long, conflicts_with = "max_error")]
+    pub terms: Option<usize>,
+    /// Target relative L2 error of the whole decoded matrix [default: 0.01].
+    #[arg(long)]
+    pub max_error: Option<f64>,
+    /// Memory for the transpose, e.g. 512M or 4G [default: a quarter of RAM, at most 8G].
+    #[arg(long)]
+    pub mem_budget: Option<String>,
+    /// Dither seed.
+    #[arg(long, default_value_t = 0x6c74_6d00)]
+    pub seed: u64,
+}
+
+/// Parses `512M`, `4G`, `100000`…
+pub fn parse_size(s: &str) -> Result<u64> {
+    let s = s.trim();
+    let (num, mult) = match s.char_indices().last() {
+        Some((i, 'k' | 'K')) => (&s[..i], 1u64 << 10),
+        Some((i, 'm' | 'M')) => (&s[..i], 1 << 20),
+        Some((i, 'g' | 'G')) => (&s[..i], 1 << 30),
+        Some((i, 't' | 'T')) => (&s[..i], 1 << 40),
+        _ => (s, 1),
+    };
+    let v: f64 = num.parse().with_context(|| {
+        format!("size '{s}' is not a number with an optional K, M, G or T suffix")
+    })?;
+    if !(v.is_finite() && v > 0.0) {
+        bail!("size '{s}' must be positive");
+    }
+    Ok((v * mult as f64) as u64)
+}
+
+fn default_mem_budget() -> u64 {
+    let total = std::fs::read_to_string("/proc/meminfo")
+        .ok()
+        .and_then(|m| {
+            m.lines()
+                .find(|l| l.starts_with("MemTotal:"))
+                .and_then(|l| l.split_whitespace().nth(1)?.parse::<u64>().ok())
+        })
+        .map_or(4 << 30, |kb| kb * 1024);
+    (total / 4).min(8 << 30)
+}
+
+pub fn compress_cmd(a: CompressArgs) -> Result<()> {
+    let raw = RawStore::open(&a.raw).with_context(|| format!("opening {}", a.raw.display()))?;
+    let target = match (a.terms, a.max_error) {
+        (Some(n), _) => Target::Terms(n),
+        (None, Some(e)) => Target::MaxError(e),
+        (None, None) => Target::MaxError(DEFAULT_MAX_ERROR),
+    };
+    let mem_budget = a
+        .mem_budget
+        .as_deref()
+        .map(parse_size)
+        .transpose()?
+        .unwrap_or_else(default_mem_budget);
+    let opts = CompressOptions {
+        mode: a.mode,
+        row_filter: a.row_filter,
+        col_filter: a.col_filter,
+        bits: a.bits,
+        target,
+        mem_budget,
+        seed: a.seed,
+        ..Default::default()
+    };
+    let bar = Mutex::new((progress::bar(0, "rows"), None::<Stage>));
+    let start = std::time::Instant::now();
+    let stats = compress(&raw, &a.output, &opts, &|stage, done, total| {
+        let mut g = bar.lock().expect("progress lock");
+        if g.1 != Some(stage) {
+            g.0.reset();
+            g.0.set_message(format!("{stage:?}").to_lowercase());
+            g.1 = Some(stage);
+        }
+        g.0.set_length(total);
+        g.0.set_position(done);
+    })
+    .with_context(|| format!("compressing {}", a.raw.display()))?;
+    bar.lock().expect("progress lock").0.finish_and_clear();
+    let secs = start.elapsed().as_secs_f64();
+    eprintln!(
+        "wrote {}: {} bytes ({:.1}x smaller than {} raw), {} nonzeros, relative L2 error {:.5}, {:.1} s ({:.1} MB/s of raw matrix){}",
+        a.output.display(),
+        stats.file_bytes,
+        stats.raw_bytes as f64 / stats.file_bytes as f64,
+        stats.raw_bytes,
+        stats.nonzeros,
+        stats.achieved_error,
+        secs,
+        stats.raw_bytes as f64 / 1e6 / secs,
+        if stats.out_of_core { ", out of core" } else { "" }
+    );
+    if !stats.target_met {
+        eprintln!("warning: the target error was not reached: {} bits quantize too coarsely for it; try more --bits", a.bits);
+    }
+    Ok(())
+}
+
+/// Arguments of `ltm inspect`.
+#[derive(Args)]
+pub struct InspectArgs {
+    /// An .ltm file.
+    pub file: PathBuf,
+    /// Print JSON instead of text.
+    #[arg(long)]
+    pub json: bool,
+}
+
+/// What `ltm inspect` reports.
+#[derive(Serialize)]
+pub struct Inspection {
+    pub width: u32,
+    pub height: u32,
+    pub face_res: u32,
+    pub channels: u32,
+    pub mode: String,
+    pub row_filter: String,
+    pub col_filter: String,
+    pub bits: u32,
+    pub file_bytes: u64,
+    pub raw_bytes: u64,
+    pub compression_ratio: f64,
+    pub bits_per_element: f64,
+    pub nonzeros: u64,
+    pub target_error: f32,
+    pub terms: u32,
+    pub achieved_error: f32,
+    pub has_albedo: bool,
+    /// Columns per transform depth (index = depth).
+    pub depth_histogram: Vec<u64>,
+    /// Average column depth per row-wavelet level (index = level, 0 = scaling
+    /// functions): the paper's Fig. 8.
+    pub average_depth_by_row_level: Vec<f64>,
+}
+
+pub fn inspect(file: &LtmFile) -> Inspection {
+    let meta = file.meta();
+    let dims = meta.dims;
+    let n = dims.face_res as usize;
+    let mut hist = vec![0u64; meta.max_depth() as usize + 1];
+    let levels = row_level(n, n * n - 1) as usize + 1;
+    let mut by_level = vec![(0.0f64, 0u64); levels];
+    let mut nnz = 0;
+    for (j, c) in file.columns().iter().enumerate() {
+        hist[c.depth as usize] += 1;
+        let l = &mut by_level[row_level(n, j) as usize];
+        l.0 += c.depth as f64;
+        l.1 += 1;
+        nnz += c.nnz as u64;
+    }
+    let raw_bytes = dims.raw_bytes();
+    let elements = raw_bytes / 4;
+    Inspection {
+        width: dims.width,
+        height: dims.height,
+        face_res: dims.face_res,
+        channels: dims.channels,
+        mode: meta.mode.name().into(),
+        row_filter: meta.row_filter.name().into(),
+        col_filter: meta.col_filter.name().into(),
+        bits: meta.bits,
+        file_bytes: file.file_bytes(),
+        raw_bytes,
+        compression_ratio: raw_bytes as f64 / file.file_bytes() as f64,
+        bits_per_element: file.file_bytes() as f64 * 8.0 / elements as f64,
+        nonzeros: nnz,
+        target_error: meta.target_error,
+        terms: meta.terms,
+        achieved_error: meta.achieved_error,
+        has_albedo: file.albedo().is_some(),
+        depth_histogram: hist,
+        average_depth_by_row_level: by_level
+            .iter()
+            .map(|(s, c)| if *c > 0 { s / *c as f64 } else { 0.0 })
+            .collect(),
+    }
+}
+
+pub fn inspect_cmd(a: InspectArgs) -> Result<()> {
+    let file = LtmFile::open(&a.file).with_context(|| format!("opening {}", a.file.display()))?;
+    let i = inspect(&file);
+    if a.json {
+        println!("{}", serde_json::to_string_pretty(&i)?);
+        return Ok(());
+    }
+    println!("{}", a.file.display());
+    println!(
+        "  image          {} x {} pixels, {} channel(s){}",
+        i.width,
+        i.height,
+        i.channels,
+        if i.has_albedo { " + albedo" } else { "" }
+    );
+    println!(
+        "  lighting       6 x {} x {} cubemap ({} lights)",
+        i.face_res,
+        i.face_res,
+        6 * i.face_res * i.face_res
+    );
+    println!(
+        "  mode           {} (rows {}, columns {}), {} bits",
+        i.mode, i.row_filter, i.col_filter, i.bits
+    );
+    println!(
+        "  size           {} bytes, raw {} bytes, ratio {:.1}x, {:.3} bits/element",
+        i.file_bytes, i.raw_bytes, i.compression_ratio, i.bits_per_element
+    );
+    println!("  nonzeros       {}", i.nonzeros);
+    if i.terms > 0 {
+        println!("  target         {} terms per column", i.terms);
+    } else {
+        println!("  target error   {}", i.target_error);
+    }
+    println!(
+        "  measured error {:.6} (relative L2 of the decoded matrix)",
+        i.achieved_error
+    );
+    println!("  columns by depth {:?}", i.depth_histogram);
+    let avg: Vec<String> = i
+        .average_depth_by_row_level
+        .iter()
+        .map(|d| format!("{d:.2}"))
+        .collect();
+    println!("  average depth by row-wavelet level [{}]", avg.join(", "));
+    Ok(())
+}
+
+/// Arguments of `ltm export`.
+#[derive(Args)]
+pub struct ExportArgs {
+    /// An .ltm file.
+    pub file: PathBuf,
+    /// Output .npy: float32, shape (P, M) or (P, M, C), pixel lighting basis.
+    #[arg(short, long)]
+    pub output: PathBuf,
+}
+
+pub fn export(a: ExportArgs) -> Result<()> {
+    let file = LtmFile::open(&a.file).with_context(|| format!("opening {}", a.file.display()))?;
+    export_npy(&file, &a.output).with_context(|| format!("exporting to {}", a.output.display()))?;
+    eprintln!("wrote {}", a.output.display());
+    Ok(())
+}

@@ -76,6 +76,15 @@ impl Taps {
     }
 }
 
+/// Outputs `o` whose taps `2o + F/2 − j` (j in 0..F) all lie in `0..m`:
+/// they need no wrap-around.
+fn interior(taps: &Taps, m: usize) -> std::ops::Range<usize> {
+    let half = taps.len / 2;
+    let start = (taps.len - 1).saturating_sub(half).div_ceil(2);
+    let end = if m > half { (m - half).div_ceil(2) } else { 0 };
+    start..end.max(start)
+}
+
 /// One analysis step of `x` (length >= 2) into `out` as `[low | high]`.
 pub(crate) fn forward_1d(dec_lo: &[f64], x: &[f32], out: &mut [f32]) {
     let taps = Taps::new(dec_lo);
@@ -83,12 +92,23 @@ pub(crate) fn forward_1d(dec_lo: &[f64], x: &[f32], out: &mut [f32]) {
     let m = n & !1;
     let q = m / 2;
     let ns = n.div_ceil(2);
+    let inner = interior(&taps, m);
+    let half = taps.len / 2;
     for o in 0..q {
         let (mut a, mut d) = (0.0f32, 0.0f32);
-        for j in 0..taps.len {
-            let v = x[taps.src(o, j, m)];
-            a += taps.lo[j] * v;
-            d += taps.hi[j] * v;
+        if inner.contains(&o) {
+            let base = 2 * o + half;
+            for j in 0..taps.len {
+                let v = x[base - j];
+                a += taps.lo[j] * v;
+                d += taps.hi[j] * v;
+            }
+        } else {
+            for j in 0..taps.len {
+                let v = x[taps.src(o, j, m)];
+                a += taps.lo[j] * v;
+                d += taps.hi[j] * v;
+            }
         }
         out[o] = a;
         out[ns + o] = d;
@@ -98,20 +118,28 @@ pub(crate) fn forward_1d(dec_lo: &[f64], x: &[f32], out: &mut [f32]) {
     }
 }
 
-/// One synthesis step from `bands` (`[low | high]`) into the signal `out`.
+/// One synthesis step from `bands` (`[low | high]`) into the signal `out`:
+/// the transpose of the analysis, scattered.
 pub(crate) fn inverse_1d(dec_lo: &[f64], bands: &[f32], out: &mut [f32]) {
     let taps = Taps::new(dec_lo);
     let n = bands.len();
     let m = n & !1;
     let ns = n.div_ceil(2);
-    for (k, x) in out[..m].iter_mut().enumerate() {
-        let mut acc = 0.0f32;
-        for j in 0..taps.len {
-            if let Some(o) = taps.band(k, j, m) {
-                acc += taps.lo[j] * bands[o] + taps.hi[j] * bands[ns + o];
+    let inner = interior(&taps, m);
+    let half = taps.len / 2;
+    out[..m].fill(0.0);
+    for o in 0..m / 2 {
+        let (a, d) = (bands[o], bands[ns + o]);
+        if inner.contains(&o) {
+            let base = 2 * o + half;
+            for j in 0..taps.len {
+                out[base - j] += taps.lo[j] * a + taps.hi[j] * d;
+            }
+        } else {
+            for j in 0..taps.len {
+                out[taps.src(o, j, m)] += taps.lo[j] * a + taps.hi[j] * d;
             }
         }
-        *x = acc;
     }
     if n % 2 == 1 {
         out[n - 1] = bands[m / 2];

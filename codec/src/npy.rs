@@ -100,7 +100,24 @@ pub fn read_npy_header(r: &mut impl Read) -> Result<NpyHeader> {
 }
 
 /// Imports a `(P, M)` or `(P, M, C)` `.npy` matrix as a raw store.
+/// On failure nothing is left behind.
 pub fn import_npy(
+    npy: &Path,
+    width: u32,
+    height: u32,
+    out: &Path,
+    progress: &dyn Fn(u64, u64),
+) -> Result<Dims> {
+    let result = import_npy_inner(npy, width, height, out, progress);
+    if result.is_err() {
+        let mut partial = out.as_os_str().to_owned();
+        partial.push(".partial");
+        let _ = std::fs::remove_file(partial);
+    }
+    result
+}
+
+fn import_npy_inner(
     npy: &Path,
     width: u32,
     height: u32,

@@ -1,0 +1,137 @@
+//! `.npy` import and export: round trip through the raw store and the codec,
+//! and the bad inputs that must be refused with a clear message.
+
+use ltm_codec::compress::{compress, CompressOptions, Target};
+use ltm_codec::container::LtmFile;
+use ltm_codec::npy::{decode_matrix, export_npy, import_npy, read_npy_header, NpyDtype};
+use ltm_codec::RawStore;
+use std::path::Path;
+
+fn write_npy(path: &Path, descr: &str, shape: &str, data: &[u8]) {
+    let mut dict = format!("{{'descr': '{descr}', 'fortran_order': False, 'shape': {shape}, }}");
+    while (10 + dict.len() + 1) % 64 != 0 {
+        dict.push(' ');
+    }
+    dict.push('\n');
+    let mut bytes = b"\x93NUMPY\x01\x00".to_vec();
+    bytes.extend_from_slice(&(dict.len() as u16).to_le_bytes());
+    bytes.extend_from_slice(dict.as_bytes());
+    bytes.extend_from_slice(data);
+    std::fs::write(path, bytes).unwrap();
+}
+
+fn f32_bytes(v: &[f32]) -> Vec<u8> {
+    v.iter().flat_map(|x| x.to_le_bytes()).collect()
+}
+
+#[test]
+fn import_compress_export_round_trip() {
+    let dir = tempfile::tempdir().unwrap();
+    let (p, m) = (12usize, 24usize);
+    let t: Vec<f32> = (0..p * m)
+        .map(|i| ((i * 37 % 101) as f32 / 100.0).powi(2))
+        .collect();
+    let npy = dir.path().join("t.npy");
+    write_npy(&npy, "<f4", &format!("({p}, {m})"), &f32_bytes(&t));
+    let raw = dir.path().join("t.raw");
+    let dims = import_npy(&npy, 4, 3, &raw, &|_, _| {}).unwrap();
+    assert_eq!((dims.face_res, dims.channels), (2, 1));
+    let store = RawStore::open(&raw).unwrap();
+    assert_eq!(store.rows(0..p), &t[..]);
+    let ltm = dir.path().join("t.ltm");
+    let opts = CompressOptions {
+        bits: 16,
+        target: Target::MaxError(0.0005),
+        ..Default::default()
+    };
+    compress(&store, &ltm, &opts, &|_, _, _| {}).unwrap();
+    let out = dir.path().join("d.npy");
+    let file = LtmFile::open(&ltm).unwrap();
+    export_npy(&file, &out).unwrap();
+    let mut r = std::io::BufReader::new(std::fs::File::open(&out).unwrap());
+    let header = read_npy_header(&mut r).unwrap();
+    assert_eq!(
+        (header.dtype, header.shape.clone()),
+        (NpyDtype::F32, vec![p, m])
+    );
+    let bytes = std::fs::read(&out).unwrap();
+    let d: Vec<f32> = bytes[header.data_offset..]
+        .chunks_exact(4)
+        .map(|c| f32::from_le_bytes(c.try_into().unwrap()))
+        .collect();
+    assert_eq!(d, decode_matrix(&file).unwrap());
+    let err: f64 = d
+        .iter()
+        .zip(&t)
+        .map(|(a, b)| ((a - b) as f64).powi(2))
+        .sum::<f64>()
+        .sqrt()
+        / t.iter().map(|v| (*v as f64).powi(2)).sum::<f64>().sqrt();
+    assert!(err < 0.0005, "{err}");
+}
+
+#[test]
+fn float64_and_three_channels_import() {
+    let dir = tempfile::tempdir().unwrap();
+    let v: Vec<f64> = (0..2 * 6 * 3).map(|i| i as f64 * 0.5).collect();
+    let npy = dir.path().join("t.npy");
+    write_npy(
+        &npy,
+        "<f8",
+        "(2, 6, 3)",
+        &v.iter().flat_map(|x| x.to_le_bytes()).collect::<Vec<_>>(),
+    );
+    let raw = dir.path().join("t.raw");
+    let dims = import_npy(&npy, 2, 1, &raw, &|_, _| {}).unwrap();
+    assert_eq!((dims.face_res, dims.channels), (1, 3));
+    let store = RawStore::open(&raw).unwrap();
+    assert_eq!(store.row(1)[0], 9.0);
+}
+
+#[test]
+fn bad_npy_files_are_refused_and_leave_nothing() {
+    let dir = tempfile::tempdir().unwrap();
+    let raw = dir.path().join("x.raw");
+    let good = f32_bytes(&vec![0.5; 4 * 6]);
+    let cases: Vec<(&str, String, Vec<u8>, u32, &str)> = vec![
+        ("<i4", "(4, 6)".into(), good.clone(), 4, "dtype"),
+        (
+            "<f4",
+            "(4, 7)".into(),
+            f32_bytes(&vec![0.5; 28]),
+            4,
+            "columns",
+        ),
+        ("<f4", "(4, 6)".into(), good.clone(), 5, "rows"),
+        ("<f4", "(4, 6)".into(), good[..20].to_vec(), 4, "bytes"),
+        ("<f4", "(4,)".into(), f32_bytes(&[1.0; 4]), 4, "shape"),
+        (
+            "<f4",
+            "(4, 6)".into(),
+            f32_bytes(&[0.5, f32::NAN].repeat(12)),
+            4,
+            "NaN",
+        ),
+        (
+            "<f4",
+            "(4, 6)".into(),
+            f32_bytes(&[f32::INFINITY; 24]),
+            4,
+            "inf",
+        ),
+        ("<f4", "(4, 54)".into(), f32_bytes(&[1.0; 216]), 4, "6·n²"),
+    ];
+    for (descr, shape, data, width, what) in cases {
+        let npy = dir.path().join("bad.npy");
+        write_npy(&npy, descr, &shape, &data);
+        let err = import_npy(&npy, width, 1, &raw, &|_, _| {}).expect_err(what);
+        assert!(!err.to_string().is_empty());
+        assert!(
+            !raw.exists() && !dir.path().join("x.raw.partial").exists(),
+            "{what}: output left behind ({err})"
+        );
+    }
+    std::fs::write(dir.path().join("junk.npy"), b"not numpy at all").unwrap();
+    assert!(import_npy(&dir.path().join("junk.npy"), 1, 1, &raw, &|_, _| {}).is_err());
+    assert!(import_npy(&dir.path().join("missing.npy"), 1, 1, &raw, &|_, _| {}).is_err());
+}

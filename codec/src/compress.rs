@@ -20,9 +20,9 @@
 use crate::container::{LtmWriter, Meta, Mode, SparseColumn};
 use crate::decode::ColumnDecoder;
 use crate::error::{Error, Result};
-use crate::quant::{dither, levels, BandWeights};
+use crate::quant::{dither, levels, scale_group, BandWeights};
 use crate::raw::{Dims, RawStore};
-use crate::wavelet::{self, max_levels, Filter};
+use crate::wavelet::{self, band_size, max_levels, Filter};
 use rayon::prelude::*;
 use std::fs::File;
 use std::os::unix::fs::FileExt;
@@ -218,8 +218,9 @@ struct Analysis {
     /// Per column, per depth: (count, energy) per bin; bin 0 also holds
     /// everything below the window, bin BINS-1 everything above.
     hist: Vec<Histogram>,
-    /// Per column, per depth: largest weighted magnitude.
-    peak: Vec<f32>,
+    /// Per column, per depth: largest weighted magnitude in the low band
+    /// and in the detail bands.
+    peak: Vec<[f32; 2]>,
 }
 
 fn bin_of(e: f64, tau0_sq: f64) -> usize {
@@ -299,11 +300,15 @@ impl Ctx<'_> {
             }
         };
         kept.sort_unstable();
-        let mut scales = [0.0f32; 3];
-        for (c, s) in scales.iter_mut().enumerate().take(self.channels) {
-            *s = kept
-                .iter()
-                .fold(0.0f32, |m, &i| m.max(coefs[c * p + i as usize].abs()));
+        let (w, h) = (self.dims.width as usize, self.dims.height as usize);
+        let low = band_size(w, h, depth);
+        let mut scales = [[0.0f32; 3]; 2];
+        for &i in &kept {
+            let group = scale_group(w, low, i as usize);
+            for c in 0..self.channels {
+                let s = &mut scales[group][c];
+                *s = s.max(coefs[c * p + i as usize].abs());
+            }
         }
         let q = levels(self.opts.bits);
         let mut col = SparseColumn {
@@ -313,9 +318,10 @@ impl Ctx<'_> {
         };
         let mut vals = [0i32; 3];
         for &i in &kept {
+            let group = scale_group(w, low, i as usize);
             let mut any = false;
             for (c, v) in vals.iter_mut().enumerate().take(self.channels) {
-                let s = scales[c];
+                let s = scales[group][c];
                 *v = if s > 0.0 {
                     let x = coefs[c * p + i as usize] / s * q;
                     ((x + dither(self.opts.seed, j as u32, i, c as u32)).floor()).clamp(-q, q)
@@ -515,7 +521,7 @@ pub fn compress(
         let nd = depths.len();
         let mut an = Analysis {
             hist: vec![[(0, 0.0); BINS]; m * nd],
-            peak: vec![0.0; m * nd],
+            peak: vec![[0.0; 2]; m * nd],
         };
         for g in 0..groups {
             let data = read_group(g)?;
@@ -524,21 +530,23 @@ pub fn compress(
                 .into_par_iter()
                 .map_init(
                     || (vec![0.0f32; channels * p], vec![0.0f32; p]),
-                    |(coefs, work), l| -> Result<(Vec<Histogram>, Vec<f32>)> {
+                    |(coefs, work), l| -> Result<(Vec<Histogram>, Vec<[f32; 2]>)> {
                         let planes = &data[l * channels * p..(l + 1) * channels * p];
                         let mut hs = Vec::with_capacity(nd);
                         let mut peaks = Vec::with_capacity(nd);
                         for &d in &depths {
                             ctx.weighted(planes, d, coefs, work)?;
+                            let low = band_size(w, h, d);
                             let mut hist = [(0u32, 0.0f32); BINS];
-                            let mut peak = 0.0f32;
+                            let mut peak = [0.0f32; 2];
                             for i in 0..p {
                                 let e = ctx.energy(coefs, i);
                                 if e > 0.0 {
                                     let bin = &mut hist[bin_of(e, tau0_sq)];
                                     bin.0 += 1;
                                     bin.1 += e as f32;
-                                    peak = peak.max(e.sqrt() as f32);
+                                    let g = scale_group(w, low, i);
+                                    peak[g] = peak[g].max(e.sqrt() as f32);
                                 }
                             }
                             hs.push(hist);
@@ -567,8 +575,14 @@ pub fn compress(
             let hist = &an.hist[j * nd + di];
             let kept: f64 = hist[b..].iter().map(|x| x.0 as f64).sum();
             let dropped: f64 = hist[..b].iter().map(|x| x.1 as f64).sum();
-            let step = an.peak[j * nd + di] as f64 / q;
-            (kept, dropped + kept * channels as f64 * step * step / 6.0)
+            // Dithered quantization costs about step²/6 per kept value; the
+            // low band has its own, larger step but few coefficients.
+            let [low_peak, detail_peak] = an.peak[j * nd + di].map(|s| s as f64 / q);
+            let (lw, lh) = band_size(w, h, depths[di]);
+            let low_kept = ((lw * lh) as f64).min(kept);
+            let qerr = channels as f64 / 6.0
+                * (low_kept * low_peak * low_peak + (kept - low_kept) * detail_peak * detail_peak);
+            (kept, dropped + qerr)
         };
         let choose = |b: usize| -> (f64, Vec<[u32; 2]>) {
             let tau_sq = bin_threshold(b, tau0_sq);

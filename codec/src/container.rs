@@ -206,13 +206,14 @@ pub struct ColumnEntry {
     /// Column transform depth.
     pub depth: u8,
     pub encoding: Encoding,
-    /// Per channel: largest weighted magnitude (the quantizer's scale).
-    pub scales: [f32; 3],
+    /// Quantizer scales, `[group][channel]`: the largest kept weighted
+    /// magnitude of the low band (group 0) and of the detail bands (group 1).
+    pub scales: [[f32; 3]; 2],
 }
 
 /// Bytes of one column-table entry for `channels` channels.
 pub fn column_entry_len(channels: u32) -> usize {
-    28 + 4 * channels as usize
+    28 + 8 * channels as usize
 }
 
 /// A column as stored: sorted coefficient positions in the Mallat layout of
@@ -220,7 +221,8 @@ pub fn column_entry_len(channels: u32) -> usize {
 #[derive(Clone, Debug, Default, PartialEq)]
 pub struct SparseColumn {
     pub depth: u32,
-    pub scales: [f32; 3],
+    /// Quantizer scales, `[group][channel]` (see [`ColumnEntry::scales`]).
+    pub scales: [[f32; 3]; 2],
     pub indices: Vec<u32>,
     pub values: Vec<i32>,
 }
@@ -451,8 +453,10 @@ impl LtmWriter {
             cols.u8(e.depth);
             cols.u8(e.encoding as u8);
             cols.u16(0);
-            for c in 0..channels {
-                cols.f32(e.scales[c]);
+            for group in &e.scales {
+                for s in &group[..channels] {
+                    cols.f32(*s);
+                }
             }
         }
         let meta = self.meta.encode();
@@ -723,9 +727,11 @@ impl LtmFile {
                 r.u8()?,
             );
             r.u16()?;
-            let mut scales = [0.0f32; 3];
-            for s in scales.iter_mut().take(channels) {
-                *s = r.f32()?;
+            let mut scales = [[0.0f32; 3]; 2];
+            for group in scales.iter_mut() {
+                for s in group.iter_mut().take(channels) {
+                    *s = r.f32()?;
+                }
             }
             let bad = |detail: String| {
                 Err(Error::corrupt(
@@ -776,7 +782,7 @@ impl LtmFile {
                     data.len()
                 ));
             }
-            if scales.iter().any(|s| !s.is_finite() || *s < 0.0) {
+            if scales.iter().flatten().any(|s| !s.is_finite() || *s < 0.0) {
                 return bad(format!("scales {scales:?} (valid: finite, >= 0)"));
             }
             columns.push(ColumnEntry {

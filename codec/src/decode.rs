@@ -4,7 +4,7 @@
 
 use crate::container::{Meta, SparseColumn};
 use crate::error::Result;
-use crate::quant::{levels, BandWeights};
+use crate::quant::{levels, scale_group, BandWeights};
 use crate::wavelet::{self, band_size};
 
 /// Decoding state for one file's column filter and image size.
@@ -29,13 +29,36 @@ impl ColumnDecoder {
 
     /// Adds `gain ×` channel `channel` of `col`, dequantized (still weighted),
     /// into `plane` (one column image of `width·height` values).
-    #[inline]
     pub fn accumulate(&self, col: &SparseColumn, channel: usize, gain: f32, plane: &mut [f32]) {
-        let channels = self.meta.dims.channels as usize;
-        let step = gain * col.scales[channel] / levels(self.meta.bits);
+        let low = self.low_band(col.depth);
         for (k, &i) in col.indices.iter().enumerate() {
-            plane[i as usize] += step * col.values[k * channels + channel] as f32;
+            plane[i as usize] += gain * self.dequantize(col, k, channel, low);
         }
+    }
+
+    /// Size of the low band at `depth` (its scale group is 0).
+    pub fn low_band(&self, depth: u32) -> (usize, usize) {
+        band_size(
+            self.meta.dims.width as usize,
+            self.meta.dims.height as usize,
+            depth,
+        )
+    }
+
+    /// The weighted value of coefficient `k` of `col`, channel `channel`;
+    /// `low` is [`ColumnDecoder::low_band`] of the column's depth.
+    #[inline]
+    pub fn dequantize(
+        &self,
+        col: &SparseColumn,
+        k: usize,
+        channel: usize,
+        low: (usize, usize),
+    ) -> f32 {
+        let dims = self.meta.dims;
+        let group = scale_group(dims.width as usize, low, col.indices[k] as usize);
+        col.values[k * dims.channels as usize + channel] as f32 * col.scales[group][channel]
+            / levels(self.meta.bits)
     }
 
     /// Undoes the band weights of depth `depth` on a plane of weighted

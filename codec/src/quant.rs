@@ -7,8 +7,8 @@
 //! lifting filters this weight grows as `2^level` — the paper's non-linear
 //! per-level scaling — and for the orthonormal filters it is 1.
 //!
-//! Quantization to `bits` maps a weighted value `u` of a column whose largest
-//! kept weighted magnitude is `s` to `q = floor(u/s·Q + d)` with
+//! Quantization to `bits` maps a weighted value `u` whose column's largest
+//! kept weighted magnitude in its scale group ([`scale_group`]) is `s` to `q = floor(u/s·Q + d)` with
 //! `Q = 2^(bits−1) − 1` and a dither `d ∈ [0, 1)` drawn from a hash of
 //! (seed, column, index, channel). The dither makes the quantizer unbiased
 //! (`E[q] = u/s·Q`), so small kept coefficients survive on average instead of
@@ -31,6 +31,15 @@ pub fn dither(seed: u64, column: u32, index: u32, channel: u32) -> f32 {
     z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
     z ^= z >> 31;
     (z >> 40) as f32 / (1u64 << 24) as f32
+}
+
+/// Scale group of position `i` of a `width`-wide column image at `depth`:
+/// 0 in the low band (the whole image at depth 0), 1 in a detail band. Each
+/// group has its own quantizer scale, so the few large low-band coefficients
+/// do not coarsen the steps of the many small detail coefficients.
+#[inline]
+pub fn scale_group(width: usize, low: (usize, usize), i: usize) -> usize {
+    usize::from(i % width >= low.0 || i / width >= low.1)
 }
 
 /// Synthesis-norm weight of every coefficient position of a `width` ×

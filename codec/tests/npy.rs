@@ -92,13 +92,13 @@ fn float64_and_three_channels_import() {
 fn bad_npy_files_are_refused_and_leave_nothing() {
     let dir = tempfile::tempdir().unwrap();
     let raw = dir.path().join("x.raw");
-    let good = f32_bytes(&vec![0.5; 4 * 6]);
+    let good = f32_bytes(&[0.5; 4 * 6]);
     let cases: Vec<(&str, String, Vec<u8>, u32, &str)> = vec![
         ("<i4", "(4, 6)".into(), good.clone(), 4, "dtype"),
         (
             "<f4",
             "(4, 7)".into(),
-            f32_bytes(&vec![0.5; 28]),
+            f32_bytes(&[0.5; 28]),
             4,
             "columns",
         ),

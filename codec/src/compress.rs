@@ -17,7 +17,7 @@
 //!    [`ColumnDecoder`] — the relighter's code — and the one with the lower
 //!    measured cost is kept; the measured errors give the file's error.
 
-use crate::container::{LtmWriter, Meta, Mode, SparseColumn};
+use crate::container::{EncodedColumn, LtmWriter, Meta, Mode, SparseColumn};
 use crate::decode::ColumnDecoder;
 use crate::error::{Error, Result};
 use crate::quant::{dither, levels, scale_group, BandWeights};
@@ -201,8 +201,13 @@ fn is_monochrome(raw: &RawStore) -> bool {
         return false;
     }
     (0..raw.header().block_count()).into_par_iter().all(|b| {
-        let rows = raw.rows(raw.header().block_range(b));
-        rows.chunks_exact(3).all(|c| c[0] == c[1] && c[1] == c[2])
+        let range = raw.header().block_range(b);
+        let mono = raw
+            .rows(range.clone())
+            .chunks_exact(3)
+            .all(|c| c[0] == c[1] && c[1] == c[2]);
+        raw.release_rows(range);
+        mono
     })
 }
 
@@ -411,12 +416,18 @@ pub fn compress(
     let hist0_bin =
         |e: f64| ((e.log2() * BINS_PER_OCTAVE).floor() as i64 + 320).clamp(0, 511) as usize;
     let mut tbuf = vec![0.0f32; block * m * channels];
-    for b in 0..raw.header().block_count() {
-        raw.verify_block(b)?;
-    }
+    let mut verified = 0;
     let mut p0 = 0;
     while p0 < p {
         let rows = block.min(p - p0);
+        // Check the CRC of every raw block these rows touch, once.
+        while verified < raw.header().block_count()
+            && raw.header().block_range(verified).start < p0 + rows
+        {
+            raw.verify_block(verified)?;
+            raw.release_rows(raw.header().block_range(verified));
+            verified += 1;
+        }
         let src_rows = raw.rows(p0..p0 + rows);
         // Transformed rows, channel-planar: rbuf[(r·C + c)·M + j].
         let mut rbuf = vec![0.0f32; rows * channels * m];
@@ -437,13 +448,30 @@ pub fn compress(
                     Ok(())
                 },
             )?;
-        for v in &rbuf {
-            let e = (*v as f64).powi(2);
-            norm_sq += e;
-            if e > 0.0 {
-                let bin = &mut hist0[hist0_bin(e)];
-                bin.0 += 1;
-                bin.1 += e;
+        // Per row, then summed in row order: the same sums whatever the thread
+        // count and block size.
+        let partial: Vec<(f64, Vec<(u64, f64)>)> = rbuf
+            .par_chunks(channels * m)
+            .map(|chunk| {
+                let mut norm = 0.0f64;
+                let mut hist = vec![(0u64, 0.0f64); 512];
+                for v in chunk {
+                    let e = (*v as f64).powi(2);
+                    norm += e;
+                    if e > 0.0 {
+                        let bin = &mut hist[hist0_bin(e)];
+                        bin.0 += 1;
+                        bin.1 += e;
+                    }
+                }
+                (norm, hist)
+            })
+            .collect();
+        for (norm, hist) in partial {
+            norm_sq += norm;
+            for (a, b) in hist0.iter_mut().zip(hist) {
+                a.0 += b.0;
+                a.1 += b.1;
             }
         }
         // Transpose the block: tbuf[(j·C + c)·rows + r].
@@ -640,11 +668,11 @@ pub fn compress(
         for g in 0..groups {
             let data = read_group(g)?;
             let cols = data.len() / (channels * p);
-            let coded: Vec<(SparseColumn, f64)> = (0..cols)
+            let coded: Vec<(EncodedColumn, f64)> = (0..cols)
                 .into_par_iter()
                 .map_init(
                     || (vec![0.0f32; channels * p], vec![0.0f32; p], vec![0.0f32; p]),
-                    |(coefs, plane, work), l| -> Result<(SparseColumn, f64)> {
+                    |(coefs, plane, work), l| -> Result<(EncodedColumn, f64)> {
                         let j = g * group + l;
                         let planes = &data[l * channels * p..(l + 1) * channels * p];
                         let (keep, tries, tau_sq) = match (&plan, opts.target) {
@@ -688,15 +716,15 @@ pub fn compress(
                             }
                         }
                         let (col, err, _) = best.expect("at least one candidate depth");
-                        Ok((col, err))
+                        Ok((EncodedColumn::new(&col, channels, opts.zstd_level), err))
                     },
                 )
                 .collect::<Result<_>>()?;
             for (col, err) in coded {
-                stats.nonzeros += col.indices.len() as u64;
-                stats.depth_histogram[col.depth as usize] += 1;
+                stats.nonzeros += col.entry.nnz as u64;
+                stats.depth_histogram[col.entry.depth as usize] += 1;
                 err_total += err;
-                writer.push_column(&col, opts.zstd_level)?;
+                writer.push_column(col)?;
             }
             progress(Stage::Coding, ((g + 1) * group).min(m) as u64, m as u64);
         }

@@ -329,6 +329,51 @@ struct DirEntry {
     crc: u32,
 }
 
+/// A column ready to append: its stored bytes and table entry (offset not
+/// yet set). Encoding is independent per column, so it runs in parallel.
+pub struct EncodedColumn {
+    pub bytes: Vec<u8>,
+    pub entry: ColumnEntry,
+}
+
+impl EncodedColumn {
+    /// Serializes and compresses a column (zstd when that is smaller).
+    pub fn new(col: &SparseColumn, channels: usize, zstd_level: i32) -> EncodedColumn {
+        let nnz = col.indices.len();
+        let mut entry = ColumnEntry {
+            offset: 0,
+            stored_len: 0,
+            raw_len: 0,
+            nnz: nnz as u32,
+            crc: 0,
+            depth: col.depth as u8,
+            encoding: Encoding::Empty,
+            scales: col.scales,
+        };
+        if nnz == 0 {
+            return EncodedColumn {
+                bytes: Vec::new(),
+                entry,
+            };
+        }
+        let payload = col.to_payload(channels);
+        let bytes = match zstd::bulk::compress(&payload, zstd_level) {
+            Ok(packed) if packed.len() < payload.len() => {
+                entry.encoding = Encoding::Zstd;
+                packed
+            }
+            _ => {
+                entry.encoding = Encoding::Plain;
+                payload.clone()
+            }
+        };
+        entry.raw_len = payload.len() as u32;
+        entry.stored_len = bytes.len() as u32;
+        entry.crc = crc32fast::hash(&bytes);
+        EncodedColumn { bytes, entry }
+    }
+}
+
 /// Streams a `.ltm` file to `PATH.tmp`, then renames it into place.
 pub struct LtmWriter {
     file: BufWriter<File>,
@@ -389,37 +434,13 @@ impl LtmWriter {
     }
 
     /// Appends the next column (columns are written in order `0..M`).
-    pub fn push_column(&mut self, col: &SparseColumn, zstd_level: i32) -> Result<()> {
-        let channels = self.meta.dims.channels as usize;
-        let nnz = col.indices.len();
-        let mut entry = ColumnEntry {
-            offset: self.data_len,
-            stored_len: 0,
-            raw_len: 0,
-            nnz: nnz as u32,
-            crc: 0,
-            depth: col.depth as u8,
-            encoding: Encoding::Empty,
-            scales: col.scales,
-        };
-        if nnz > 0 {
-            let payload = col.to_payload(channels);
-            let packed =
-                zstd::bulk::compress(&payload, zstd_level).map_err(|e| Error::io(&self.tmp, e))?;
-            let (bytes, enc) = if packed.len() < payload.len() {
-                (packed, Encoding::Zstd)
-            } else {
-                (payload.clone(), Encoding::Plain)
-            };
-            entry.raw_len = payload.len() as u32;
-            entry.stored_len = bytes.len() as u32;
-            entry.encoding = enc;
-            entry.crc = crc32fast::hash(&bytes);
-            self.file
-                .write_all(&bytes)
-                .map_err(|e| Error::io(&self.tmp, e))?;
-            self.data_len += bytes.len() as u64;
-        }
+    pub fn push_column(&mut self, col: EncodedColumn) -> Result<()> {
+        let mut entry = col.entry;
+        entry.offset = self.data_len;
+        self.file
+            .write_all(&col.bytes)
+            .map_err(|e| Error::io(&self.tmp, e))?;
+        self.data_len += col.bytes.len() as u64;
         self.entries.push(entry);
         Ok(())
     }

@@ -95,13 +95,7 @@ fn bad_npy_files_are_refused_and_leave_nothing() {
     let good = f32_bytes(&[0.5; 4 * 6]);
     let cases: Vec<(&str, String, Vec<u8>, u32, &str)> = vec![
         ("<i4", "(4, 6)".into(), good.clone(), 4, "dtype"),
-        (
-            "<f4",
-            "(4, 7)".into(),
-            f32_bytes(&[0.5; 28]),
-            4,
-            "columns",
-        ),
+        ("<f4", "(4, 7)".into(), f32_bytes(&[0.5; 28]), 4, "columns"),
         ("<f4", "(4, 6)".into(), good.clone(), 5, "rows"),
         ("<f4", "(4, 6)".into(), good[..20].to_vec(), 4, "bytes"),
         ("<f4", "(4,)".into(), f32_bytes(&[1.0; 4]), 4, "shape"),

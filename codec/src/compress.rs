@@ -20,9 +20,9 @@
 use crate::container::{EncodedColumn, LtmWriter, Meta, Mode, SparseColumn};
 use crate::decode::ColumnDecoder;
 use crate::error::{Error, Result};
-use crate::quant::{dither, levels, scale_group, BandWeights};
+use crate::quant::{decode_scale, dither, encode_scale, levels, scale_groups, BandWeights};
 use crate::raw::{Dims, RawStore};
-use crate::wavelet::{self, band_size, max_levels, Filter};
+use crate::wavelet::{self, max_levels, Filter};
 use rayon::prelude::*;
 use std::fs::File;
 use std::os::unix::fs::FileExt;
@@ -223,9 +223,9 @@ struct Analysis {
     /// Per column, per depth: (count, energy) per bin; bin 0 also holds
     /// everything below the window, bin BINS-1 everything above.
     hist: Vec<Histogram>,
-    /// Per column, per depth: largest weighted magnitude in the low band
-    /// and in the detail bands.
-    peak: Vec<[f32; 2]>,
+    /// Per column, per depth: (Σ over nonzero positions of their scale
+    /// group's squared peak, nonzero count) — for the quantization error.
+    peak: Vec<(f32, u32)>,
 }
 
 fn bin_of(e: f64, tau0_sq: f64) -> usize {
@@ -253,6 +253,8 @@ struct Ctx<'a> {
     opts: &'a CompressOptions,
     weights: &'a BandWeights,
     decoder: &'a ColumnDecoder,
+    /// Scale group of every position, per depth.
+    groups: &'a [Vec<u8>],
 }
 
 impl Ctx<'_> {
@@ -305,28 +307,29 @@ impl Ctx<'_> {
             }
         };
         kept.sort_unstable();
-        let (w, h) = (self.dims.width as usize, self.dims.height as usize);
-        let low = band_size(w, h, depth);
-        let mut scales = [[0.0f32; 3]; 2];
+        let groups = &self.groups[depth as usize];
+        let c_n = self.channels;
+        let mut peak = vec![0.0f32; (depth as usize + 1) * c_n];
         for &i in &kept {
-            let group = scale_group(w, low, i as usize);
-            for c in 0..self.channels {
-                let s = &mut scales[group][c];
-                *s = s.max(coefs[c * p + i as usize].abs());
+            let g = groups[i as usize] as usize;
+            for c in 0..c_n {
+                peak[g * c_n + c] = peak[g * c_n + c].max(coefs[c * p + i as usize].abs());
             }
         }
+        let scale_codes: Vec<u16> = peak.iter().map(|&s| encode_scale(s)).collect();
+        let scales: Vec<f32> = scale_codes.iter().map(|&e| decode_scale(e)).collect();
         let q = levels(self.opts.bits);
         let mut col = SparseColumn {
             depth,
-            scales,
+            scale_codes,
             ..Default::default()
         };
         let mut vals = [0i32; 3];
         for &i in &kept {
-            let group = scale_group(w, low, i as usize);
+            let g = groups[i as usize] as usize;
             let mut any = false;
-            for (c, v) in vals.iter_mut().enumerate().take(self.channels) {
-                let s = scales[group][c];
+            for (c, v) in vals.iter_mut().enumerate().take(c_n) {
+                let s = scales[g * c_n + c];
                 *v = if s > 0.0 {
                     let x = coefs[c * p + i as usize] / s * q;
                     ((x + dither(self.opts.seed, j as u32, i, c as u32)).floor()).clamp(-q, q)
@@ -338,7 +341,7 @@ impl Ctx<'_> {
             }
             if any {
                 col.indices.push(i);
-                col.values.extend_from_slice(&vals[..self.channels]);
+                col.values.extend_from_slice(&vals[..c_n]);
             }
         }
         col
@@ -511,12 +514,14 @@ pub fn compress(
         norm,
     };
     let decoder = ColumnDecoder::new(&meta);
+    let scale_group_maps: Vec<Vec<u8>> = (0..=max_depth).map(|d| scale_groups(w, h, d)).collect();
     let ctx = Ctx {
         dims,
         channels,
         opts,
         weights: &weights,
         decoder: &decoder,
+        groups: &scale_group_maps,
     };
     let depths = candidate_depths(opts.mode, max_depth);
     let q = levels(opts.bits) as f64;
@@ -549,7 +554,7 @@ pub fn compress(
         let nd = depths.len();
         let mut an = Analysis {
             hist: vec![[(0, 0.0); BINS]; m * nd],
-            peak: vec![[0.0; 2]; m * nd],
+            peak: vec![(0.0, 0); m * nd],
         };
         for g in 0..groups {
             let data = read_group(g)?;
@@ -558,25 +563,29 @@ pub fn compress(
                 .into_par_iter()
                 .map_init(
                     || (vec![0.0f32; channels * p], vec![0.0f32; p]),
-                    |(coefs, work), l| -> Result<(Vec<Histogram>, Vec<[f32; 2]>)> {
+                    |(coefs, work), l| -> Result<(Vec<Histogram>, Vec<(f32, u32)>)> {
                         let planes = &data[l * channels * p..(l + 1) * channels * p];
                         let mut hs = Vec::with_capacity(nd);
                         let mut peaks = Vec::with_capacity(nd);
                         for &d in &depths {
                             ctx.weighted(planes, d, coefs, work)?;
-                            let low = band_size(w, h, d);
+                            let groups = &ctx.groups[d as usize];
                             let mut hist = [(0u32, 0.0f32); BINS];
-                            let mut peak = [0.0f32; 2];
+                            let mut peak = vec![(0.0f32, 0u32); d as usize + 1];
                             for i in 0..p {
                                 let e = ctx.energy(coefs, i);
                                 if e > 0.0 {
                                     let bin = &mut hist[bin_of(e, tau0_sq)];
                                     bin.0 += 1;
                                     bin.1 += e as f32;
-                                    let g = scale_group(w, low, i);
-                                    peak[g] = peak[g].max(e.sqrt() as f32);
+                                    let g = &mut peak[groups[i] as usize];
+                                    g.0 = g.0.max(e.sqrt() as f32);
+                                    g.1 += 1;
                                 }
                             }
+                            let qsum = peak.iter().map(|(s, n)| s * s * *n as f32).sum::<f32>();
+                            let nonzero = peak.iter().map(|(_, n)| n).sum::<u32>();
+                            let peak = (qsum, nonzero);
                             hs.push(hist);
                             peaks.push(peak);
                         }
@@ -603,13 +612,11 @@ pub fn compress(
             let hist = &an.hist[j * nd + di];
             let kept: f64 = hist[b..].iter().map(|x| x.0 as f64).sum();
             let dropped: f64 = hist[..b].iter().map(|x| x.1 as f64).sum();
-            // Dithered quantization costs about step²/6 per kept value; the
-            // low band has its own, larger step but few coefficients.
-            let [low_peak, detail_peak] = an.peak[j * nd + di].map(|s| s as f64 / q);
-            let (lw, lh) = band_size(w, h, depths[di]);
-            let low_kept = ((lw * lh) as f64).min(kept);
-            let qerr = channels as f64 / 6.0
-                * (low_kept * low_peak * low_peak + (kept - low_kept) * detail_peak * detail_peak);
+            // Dithered quantization costs about step²/6 per kept value, the
+            // step being its scale group's peak / Q.
+            let (qsum, nonzero) = an.peak[j * nd + di];
+            let qerr =
+                channels as f64 / 6.0 / (q * q) * qsum as f64 * kept / (nonzero.max(1) as f64);
             (kept, dropped + qerr)
         };
         let choose = |b: usize| -> (f64, Vec<[u32; 2]>) {

@@ -206,23 +206,20 @@ pub struct ColumnEntry {
     /// Column transform depth.
     pub depth: u8,
     pub encoding: Encoding,
-    /// Quantizer scales, `[group][channel]`: the largest kept weighted
-    /// magnitude of the low band (group 0) and of the detail bands (group 1).
-    pub scales: [[f32; 3]; 2],
 }
 
-/// Bytes of one column-table entry for `channels` channels.
-pub fn column_entry_len(channels: u32) -> usize {
-    28 + 8 * channels as usize
-}
+/// Bytes of one column-table entry.
+pub const COLUMN_ENTRY_LEN: usize = 28;
 
 /// A column as stored: sorted coefficient positions in the Mallat layout of
 /// its depth, and quantized values (`channels` per position).
 #[derive(Clone, Debug, Default, PartialEq)]
 pub struct SparseColumn {
     pub depth: u32,
-    /// Quantizer scales, `[group][channel]` (see [`ColumnEntry::scales`]).
-    pub scales: [[f32; 3]; 2],
+    /// Quantizer scale codes ([`crate::quant::decode_scale`]),
+    /// `(depth + 1) · channels` of them, group-major: group 0 is the low band,
+    /// group `k` the detail bands of level `k` ([`crate::quant::scale_groups`]).
+    pub scale_codes: Vec<u16>,
     pub indices: Vec<u32>,
     pub values: Vec<i32>,
 }
@@ -254,7 +251,11 @@ impl SparseColumn {
     /// Payload bytes: positions as varint gaps, then values as zigzag
     /// varints, channel-interleaved.
     pub fn to_payload(&self, channels: usize) -> Vec<u8> {
-        let mut out = Vec::with_capacity(self.indices.len() * (2 + channels));
+        let mut out =
+            Vec::with_capacity(2 * self.scale_codes.len() + self.indices.len() * (2 + channels));
+        for e in &self.scale_codes {
+            out.extend_from_slice(&e.to_le_bytes());
+        }
         let mut prev: i64 = -1;
         for &i in &self.indices {
             put_varint(&mut out, (i as i64 - prev - 1) as u64);
@@ -266,21 +267,27 @@ impl SparseColumn {
         out
     }
 
-    /// Parses a payload, checking every position against `pixels` and every
-    /// value against the quantizer's range.
+    /// Parses a payload of a column at `depth`, checking every position
+    /// against `pixels` and every value against the quantizer's range.
     pub fn from_payload(
         bytes: &[u8],
         nnz: usize,
         channels: usize,
         pixels: usize,
         bits: u32,
+        depth: u32,
     ) -> Result<SparseColumn> {
         let mut r = Reader::new(bytes, "column payload");
+        let groups = (depth as usize + 1) * channels;
         let mut col = SparseColumn {
+            depth,
+            scale_codes: Vec::with_capacity(groups),
             indices: Vec::with_capacity(nnz),
             values: Vec::with_capacity(nnz * channels),
-            ..Default::default()
         };
+        for _ in 0..groups {
+            col.scale_codes.push(r.u16()?);
+        }
         let mut next = 0u64;
         for _ in 0..nnz {
             let i = next + get_varint(&mut r)?;
@@ -348,7 +355,6 @@ impl EncodedColumn {
             crc: 0,
             depth: col.depth as u8,
             encoding: Encoding::Empty,
-            scales: col.scales,
         };
         if nnz == 0 {
             return EncodedColumn {
@@ -414,7 +420,7 @@ impl LtmWriter {
         let file = File::create(&tmp).map_err(|e| Error::io(&tmp, e))?;
         let chunks = 3 + albedo.is_some() as u64;
         let head_len = HEADER_LEN as u64 + DIR_ENTRY_LEN as u64 * chunks + 4;
-        let cols_len = (column_entry_len(meta.dims.channels) * meta.dims.lights()) as u64;
+        let cols_len = (COLUMN_ENTRY_LEN * meta.dims.lights()) as u64;
         let data_start =
             head_len + META_LEN as u64 + albedo.as_ref().map_or(0, |a| a.len() as u64) + cols_len;
         let mut w = LtmWriter {
@@ -463,7 +469,6 @@ impl LtmWriter {
             )));
         }
         self.meta.achieved_error = achieved_error;
-        let channels = self.meta.dims.channels as usize;
         let mut cols = Writer::default();
         for e in &self.entries {
             cols.u64(e.offset);
@@ -474,11 +479,6 @@ impl LtmWriter {
             cols.u8(e.depth);
             cols.u8(e.encoding as u8);
             cols.u16(0);
-            for group in &e.scales {
-                for s in &group[..channels] {
-                    cols.f32(*s);
-                }
-            }
         }
         let meta = self.meta.encode();
         let mut chunks: Vec<(&[u8; 4], Vec<u8>)> = vec![(b"META", meta)];
@@ -716,7 +716,7 @@ impl LtmFile {
             .find(|d| &d.tag == b"DATA")
             .ok_or_else(|| missing("DATA"))?;
         let data = data_dir.offset as usize..(data_dir.offset + data_dir.len) as usize;
-        let entry_len = column_entry_len(dims.channels);
+        let entry_len = COLUMN_ENTRY_LEN;
         if cols.len() != entry_len * dims.lights() {
             return Err(Error::corrupt(
                 "COLS chunk",
@@ -748,12 +748,6 @@ impl LtmFile {
                 r.u8()?,
             );
             r.u16()?;
-            let mut scales = [[0.0f32; 3]; 2];
-            for group in scales.iter_mut() {
-                for s in group.iter_mut().take(channels) {
-                    *s = r.f32()?;
-                }
-            }
             let bad = |detail: String| {
                 Err(Error::corrupt(
                     "COLS chunk",
@@ -777,10 +771,12 @@ impl LtmFile {
             if nnz as u64 > pixels {
                 return bad(format!("{nnz} nonzeros (valid: 0..={pixels})"));
             }
-            // A payload needs at least 1 byte per position and per value, and at most 5.
+            // A payload holds 2 bytes per scale, then 1 to 5 bytes per
+            // position and per value.
+            let scale_bytes = 2 * (depth as u64 + 1) * channels as u64;
             let (min_raw, max_raw) = (
-                nnz as u64 * (1 + channels as u64),
-                nnz as u64 * 5 * (1 + channels as u64),
+                scale_bytes + nnz as u64 * (1 + channels as u64),
+                scale_bytes + nnz as u64 * 5 * (1 + channels as u64),
             );
             if (encoding == Encoding::Empty) != (nnz == 0)
                 || (nnz > 0 && !(min_raw..=max_raw).contains(&(raw_len as u64)))
@@ -803,9 +799,6 @@ impl LtmFile {
                     data.len()
                 ));
             }
-            if scales.iter().flatten().any(|s| !s.is_finite() || *s < 0.0) {
-                return bad(format!("scales {scales:?} (valid: finite, >= 0)"));
-            }
             columns.push(ColumnEntry {
                 offset,
                 stored_len,
@@ -814,7 +807,6 @@ impl LtmFile {
                 crc,
                 depth,
                 encoding,
-                scales,
             });
         }
         Ok((meta, columns, albedo, data))
@@ -871,8 +863,11 @@ pub(crate) fn read_column(
     j: usize,
     e: &ColumnEntry,
 ) -> Result<SparseColumn> {
-    let mut col = match e.encoding {
-        Encoding::Empty => SparseColumn::default(),
+    let col = match e.encoding {
+        Encoding::Empty => SparseColumn {
+            depth: e.depth as u32,
+            ..Default::default()
+        },
         _ => {
             let stored = &data[e.offset as usize..(e.offset + e.stored_len as u64) as usize];
             let crc = crc32fast::hash(stored);
@@ -908,10 +903,9 @@ pub(crate) fn read_column(
                 meta.dims.channels as usize,
                 meta.dims.pixels(),
                 meta.bits,
+                e.depth as u32,
             )?
         }
     };
-    col.depth = e.depth as u32;
-    col.scales = e.scales;
     Ok(col)
 }

@@ -4,7 +4,7 @@
 
 use crate::container::{Meta, SparseColumn};
 use crate::error::Result;
-use crate::quant::{levels, scale_group, BandWeights};
+use crate::quant::{decode_scale, levels, scale_groups, BandWeights};
 use crate::wavelet::{self, band_size};
 
 /// Decoding state for one file's column filter and image size.
@@ -12,6 +12,8 @@ pub struct ColumnDecoder {
     meta: Meta,
     /// `1 / weight` per position, per depth.
     inv_weights: Vec<Vec<f32>>,
+    /// Scale group per position, per depth.
+    groups: Vec<Vec<u8>>,
 }
 
 impl ColumnDecoder {
@@ -21,44 +23,33 @@ impl ColumnDecoder {
         let inv_weights = (0..=meta.max_depth())
             .map(|d| weights.map(d).iter().map(|x| 1.0 / x).collect())
             .collect();
+        let groups = (0..=meta.max_depth()).map(|d| scale_groups(w, h, d)).collect();
         ColumnDecoder {
             meta: meta.clone(),
             inv_weights,
+            groups,
         }
     }
 
     /// Adds `gain ×` channel `channel` of `col`, dequantized (still weighted),
     /// into `plane` (one column image of `width·height` values).
     pub fn accumulate(&self, col: &SparseColumn, channel: usize, gain: f32, plane: &mut [f32]) {
-        let low = self.low_band(col.depth);
-        for (k, &i) in col.indices.iter().enumerate() {
-            plane[i as usize] += gain * self.dequantize(col, k, channel, low);
+        for k in 0..col.indices.len() {
+            plane[col.indices[k] as usize] += gain * self.dequantize(col, k, channel);
         }
     }
 
-    /// Size of the low band at `depth` (its scale group is 0).
-    pub fn low_band(&self, depth: u32) -> (usize, usize) {
-        band_size(
-            self.meta.dims.width as usize,
-            self.meta.dims.height as usize,
-            depth,
-        )
-    }
-
-    /// The weighted value of coefficient `k` of `col`, channel `channel`;
-    /// `low` is [`ColumnDecoder::low_band`] of the column's depth.
+    /// The weighted value of coefficient `k` of `col`, channel `channel`.
     #[inline]
-    pub fn dequantize(
-        &self,
-        col: &SparseColumn,
-        k: usize,
-        channel: usize,
-        low: (usize, usize),
-    ) -> f32 {
-        let dims = self.meta.dims;
-        let group = scale_group(dims.width as usize, low, col.indices[k] as usize);
-        col.values[k * dims.channels as usize + channel] as f32 * col.scales[group][channel]
-            / levels(self.meta.bits)
+    pub fn dequantize(&self, col: &SparseColumn, k: usize, channel: usize) -> f32 {
+        let channels = self.meta.dims.channels as usize;
+        let group = self.groups[col.depth as usize][col.indices[k] as usize] as usize;
+        let code = col
+            .scale_codes
+            .get(group * channels + channel)
+            .copied()
+            .unwrap_or(0);
+        col.values[k * channels + channel] as f32 * decode_scale(code) / levels(self.meta.bits)
     }
 
     /// Undoes the band weights of depth `depth` on a plane of weighted

@@ -8,7 +8,8 @@
 //! per-level scaling — and for the orthonormal filters it is 1.
 //!
 //! Quantization to `bits` maps a weighted value `u` whose column's largest
-//! kept weighted magnitude in its scale group ([`scale_group`]) is `s` to `q = floor(u/s·Q + d)` with
+//! kept weighted magnitude in its scale group ([`scale_groups`]), rounded up
+//! to a stored scale ([`encode_scale`]), is `s` to `q = floor(u/s·Q + d)` with
 //! `Q = 2^(bits−1) − 1` and a dither `d ∈ [0, 1)` drawn from a hash of
 //! (seed, column, index, channel). The dither makes the quantizer unbiased
 //! (`E[q] = u/s·Q`), so small kept coefficients survive on average instead of
@@ -33,13 +34,47 @@ pub fn dither(seed: u64, column: u32, index: u32, channel: u32) -> f32 {
     (z >> 40) as f32 / (1u64 << 24) as f32
 }
 
-/// Scale group of position `i` of a `width`-wide column image at `depth`:
-/// 0 in the low band (the whole image at depth 0), 1 in a detail band. Each
-/// group has its own quantizer scale, so the few large low-band coefficients
-/// do not coarsen the steps of the many small detail coefficients.
-#[inline]
-pub fn scale_group(width: usize, low: (usize, usize), i: usize) -> usize {
-    usize::from(i % width >= low.0 || i / width >= low.1)
+/// Scale group of every position of a `width` × `height` column image at
+/// `depth`: 0 in the low band (the whole image at depth 0), `k` in the detail
+/// bands of level `k` (1 = finest). Each group has its own quantizer scale, so
+/// large coarse coefficients do not coarsen the steps of small fine ones.
+pub fn scale_groups(width: usize, height: usize, depth: u32) -> Vec<u8> {
+    let mut map = vec![0u8; width * height];
+    for k in 1..=depth {
+        let (pw, ph) = band_size(width, height, k - 1);
+        let (lw, lh) = band_size(width, height, k);
+        for y in 0..ph {
+            for x in 0..pw {
+                if x >= lw || y >= lh {
+                    map[y * width + x] = k as u8;
+                }
+            }
+        }
+    }
+    map
+}
+
+/// A quantizer scale as stored: `s = 2^((e − 32768)/256)`, `e = 0` for 0.
+pub fn decode_scale(e: u16) -> f32 {
+    if e == 0 {
+        0.0
+    } else {
+        ((e as f64 - 32768.0) / 256.0).exp2() as f32
+    }
+}
+
+/// The smallest code whose scale is at least `s` (`s` finite, ≥ 0).
+pub fn encode_scale(s: f32) -> u16 {
+    if s <= 0.0 || !s.is_finite() {
+        return 0;
+    }
+    let mut e = ((s as f64).log2() * 256.0 + 32768.0)
+        .ceil()
+        .clamp(1.0, 65535.0) as u16;
+    while e < u16::MAX && decode_scale(e) < s {
+        e += 1;
+    }
+    e
 }
 
 /// Synthesis-norm weight of every coefficient position of a `width` ×

@@ -166,7 +166,11 @@ pub fn compress_cmd(a: CompressArgs) -> Result<()> {
         if stats.out_of_core { ", out of core" } else { "" }
     );
     if !stats.target_met {
-        eprintln!("warning: the target error was not reached: {} bits quantize too coarsely for it; try more --bits", a.bits);
+        if a.bits < 16 {
+            eprintln!("warning: the target error was not reached: {} bits quantize too coarsely for it; try more --bits", a.bits);
+        } else {
+            eprintln!("warning: the target error was not reached: it is below the quantization floor of 16 bits");
+        }
     }
     Ok(())
 }

@@ -216,6 +216,10 @@ const BINS: usize = 64;
 /// Bins per octave of squared magnitude.
 const BINS_PER_OCTAVE: f64 = 2.0;
 
+/// (Σ over nonzero positions of their scale group's squared peak, nonzero
+/// count) of one column at one depth.
+type QuantStat = (f32, u32);
+
 /// (count, energy) per bin of squared weighted magnitude.
 type Histogram = [(u32, f32); BINS];
 
@@ -225,7 +229,7 @@ struct Analysis {
     hist: Vec<Histogram>,
     /// Per column, per depth: (Σ over nonzero positions of their scale
     /// group's squared peak, nonzero count) — for the quantization error.
-    peak: Vec<(f32, u32)>,
+    peak: Vec<QuantStat>,
 }
 
 fn bin_of(e: f64, tau0_sq: f64) -> usize {
@@ -563,7 +567,7 @@ pub fn compress(
                 .into_par_iter()
                 .map_init(
                     || (vec![0.0f32; channels * p], vec![0.0f32; p]),
-                    |(coefs, work), l| -> Result<(Vec<Histogram>, Vec<(f32, u32)>)> {
+                    |(coefs, work), l| -> Result<(Vec<Histogram>, Vec<QuantStat>)> {
                         let planes = &data[l * channels * p..(l + 1) * channels * p];
                         let mut hs = Vec::with_capacity(nd);
                         let mut peaks = Vec::with_capacity(nd);

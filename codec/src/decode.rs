@@ -23,7 +23,9 @@ impl ColumnDecoder {
         let inv_weights = (0..=meta.max_depth())
             .map(|d| weights.map(d).iter().map(|x| 1.0 / x).collect())
             .collect();
-        let groups = (0..=meta.max_depth()).map(|d| scale_groups(w, h, d)).collect();
+        let groups = (0..=meta.max_depth())
+            .map(|d| scale_groups(w, h, d))
+            .collect();
         ColumnDecoder {
             meta: meta.clone(),
             inv_weights,

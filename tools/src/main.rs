@@ -3,6 +3,8 @@
 mod bake;
 mod codec_cmds;
 mod progress;
+mod reference;
+mod relight_cmd;
 
 use clap::{Parser, Subcommand};
 use std::process::ExitCode;
@@ -31,6 +33,10 @@ enum Command {
     Inspect(codec_cmds::InspectArgs),
     /// Decode an .ltm file to a dense NumPy matrix.
     Export(codec_cmds::ExportArgs),
+    /// Relight a compressed matrix under an environment map.
+    Relight(relight_cmd::RelightArgs),
+    /// Compute the exact relit image T·L from a raw store (the ground truth).
+    Reference(reference::ReferenceArgs),
 }
 
 fn main() -> ExitCode {
@@ -41,6 +47,8 @@ fn main() -> ExitCode {
         Command::Compress(args) => codec_cmds::compress_cmd(args),
         Command::Inspect(args) => codec_cmds::inspect_cmd(args),
         Command::Export(args) => codec_cmds::export(args),
+        Command::Relight(args) => relight_cmd::run(args),
+        Command::Reference(args) => reference::run(args),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,

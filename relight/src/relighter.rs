@@ -1,0 +1,422 @@
+//! The relighter: environment lighting → image from a compressed matrix
+//! (Cheslack-Postava et al. 2007 §4.5, eq. 6–8, Fig. 6).
+//!
+//! At open, every column is decoded once to an in-memory arena of
+//! `(position, value)` pairs whose values already carry the quantizer scale
+//! and the inverse band weight, so a frame is a stream of multiply-adds.
+//! Per frame:
+//! 1. the cubemap lighting gets the file's row transform;
+//! 2. the N lights of highest priority are chosen ([`select`]);
+//! 3. they are grouped by their column's depth, deepest first; each group is
+//!    multiply-added into the image planes, then one inverse column step
+//!    brings the planes one level up, until depth 0 (eq. 8);
+//! 4. a factored monochrome file multiplies in its albedo image.
+
+use crate::error::{RelightError, Result};
+use crate::image_io::Image;
+use crate::select::{select, support_area, Weighting};
+use ltm_codec::compress::row_forward;
+use ltm_codec::container::{LtmFile, Meta};
+use ltm_codec::quant::BandWeights;
+use ltm_codec::ColumnDecoder;
+use rayon::prelude::*;
+use std::path::Path;
+use std::time::{Duration, Instant};
+
+/// Pixels per parallel task of the multiply-add.
+const CHUNK_PIXELS: usize = 1 << 14;
+
+/// A compressed matrix ready to relight. Immutable and `Sync`: threads share
+/// one and each keeps its own [`FrameBuffers`].
+pub struct Relighter {
+    file: LtmFile,
+    decoder: ColumnDecoder,
+    /// Column `j`'s coefficients are `starts[j]..starts[j + 1]`.
+    starts: Vec<usize>,
+    positions: Vec<u32>,
+    /// `channels` values per coefficient, ready to multiply by the light.
+    values: Vec<f32>,
+    depths: Vec<u8>,
+    /// Per light: the transport-weighted and area-weighted priority scales.
+    norms: Vec<f32>,
+    areas: Vec<f32>,
+    ones: Vec<f32>,
+}
+
+/// Reusable per-thread frame state: no allocation of image or file size per
+/// frame once created.
+pub struct FrameBuffers {
+    light: Vec<[f32; 3]>,
+    plane: Vec<f32>,
+    work: Vec<f32>,
+    planes: [Vec<f32>; 3],
+    selected: Vec<u32>,
+    scratch: Vec<(f32, u32)>,
+    /// The last frame's image.
+    pub image: Image,
+}
+
+/// Where a frame's time went.
+#[derive(Clone, Copy, Debug, Default)]
+pub struct FrameStats {
+    pub light_transform: Duration,
+    pub selection: Duration,
+    pub multiply: Duration,
+    pub inverse: Duration,
+    /// Lights used (≤ N).
+    pub lights: usize,
+    /// Coefficients multiply-added.
+    pub nonzeros: u64,
+}
+
+impl FrameStats {
+    pub fn total(&self) -> Duration {
+        self.light_transform + self.selection + self.multiply + self.inverse
+    }
+}
+
+impl Relighter {
+    /// Opens an `.ltm` file (memory-mapped) and decodes its columns.
+    pub fn open(path: &Path) -> Result<Relighter> {
+        Relighter::new(LtmFile::open(path)?)
+    }
+
+    /// Prepares a relighter for an opened file.
+    pub fn new(file: LtmFile) -> Result<Relighter> {
+        let meta = file.meta().clone();
+        let dims = meta.dims;
+        let (w, h) = (dims.width as usize, dims.height as usize);
+        let channels = dims.channels as usize;
+        let n = dims.face_res as usize;
+        let weights = BandWeights::new(meta.col_filter, w, h, meta.max_depth());
+        let decoder = ColumnDecoder::new(&meta);
+        let decoded: Vec<(Vec<u32>, Vec<f32>, u8, f32)> = (0..dims.lights())
+            .into_par_iter()
+            .map(|j| -> Result<_> {
+                let col = file.column(j)?;
+                let map = weights.map(col.depth);
+                let mut values = Vec::with_capacity(col.values.len());
+                let mut norm_sq = 0.0f64;
+                for (k, &i) in col.indices.iter().enumerate() {
+                    for c in 0..channels {
+                        let weighted = decoder.dequantize(&col, k, c);
+                        norm_sq += (weighted as f64).powi(2);
+                        values.push(weighted / map[i as usize]);
+                    }
+                }
+                Ok((col.indices, values, col.depth as u8, norm_sq.sqrt() as f32))
+            })
+            .collect::<Result<_>>()?;
+        let total: usize = decoded.iter().map(|d| d.0.len()).sum();
+        let mut r = Relighter {
+            decoder,
+            starts: Vec::with_capacity(decoded.len() + 1),
+            positions: Vec::with_capacity(total),
+            values: Vec::with_capacity(total * channels),
+            depths: Vec::with_capacity(decoded.len()),
+            norms: Vec::with_capacity(decoded.len()),
+            areas: (0..dims.lights()).map(|j| support_area(n, j)).collect(),
+            ones: vec![1.0; dims.lights()],
+            file,
+        };
+        r.starts.push(0);
+        for (pos, val, depth, norm) in decoded {
+            r.positions.extend_from_slice(&pos);
+            r.values.extend_from_slice(&val);
+            r.starts.push(r.positions.len());
+            r.depths.push(depth);
+            r.norms.push(norm);
+        }
+        Ok(r)
+    }
+
+    /// The file's metadata.
+    pub fn meta(&self) -> &Meta {
+        self.file.meta()
+    }
+
+    /// The underlying file.
+    pub fn file(&self) -> &LtmFile {
+        &self.file
+    }
+
+    /// Number of lights (cubemap texels), the largest useful N.
+    pub fn lights(&self) -> usize {
+        self.depths.len()
+    }
+
+    /// Coefficients held in memory.
+    pub fn nonzeros(&self) -> usize {
+        self.positions.len()
+    }
+
+    /// Buffers for [`Relighter::relight`].
+    pub fn buffers(&self) -> FrameBuffers {
+        let dims = self.meta().dims;
+        let p = dims.pixels();
+        let n = dims.face_res as usize;
+        FrameBuffers {
+            light: vec![[0.0; 3]; dims.lights()],
+            plane: vec![0.0; dims.lights()],
+            work: vec![0.0; p.max(n * n)],
+            planes: [vec![0.0; p], vec![0.0; p], vec![0.0; p]],
+            selected: Vec::with_capacity(dims.lights()),
+            scratch: Vec::with_capacity(dims.lights()),
+            image: Image {
+                width: dims.width as usize,
+                height: dims.height as usize,
+                data: vec![[0.0; 3]; p],
+            },
+        }
+    }
+
+    fn check_light(&self, light: &[[f32; 3]]) -> Result<()> {
+        if light.len() != self.lights() {
+            return Err(RelightError::OutOfRange {
+                what: "cubemap lighting texels",
+                value: light.len().to_string(),
+                valid: format!(
+                    "{} (6·{}² for this file)",
+                    self.lights(),
+                    self.meta().dims.face_res
+                ),
+            });
+        }
+        if let Some(j) = light.iter().position(|c| c.iter().any(|v| !v.is_finite())) {
+            return Err(RelightError::Invalid(format!(
+                "cubemap lighting texel {j} is NaN or infinite"
+            )));
+        }
+        Ok(())
+    }
+
+    /// Row transform of the cubemap lighting into `bufs.light`.
+    fn transform_light(&self, light: &[[f32; 3]], bufs: &mut FrameBuffers) -> Result<()> {
+        let meta = self.meta();
+        let n = meta.dims.face_res as usize;
+        for c in 0..3 {
+            for (v, l) in bufs.plane.iter_mut().zip(light) {
+                *v = l[c];
+            }
+            row_forward(meta.row_filter, n, &mut bufs.plane, &mut bufs.work)?;
+            for (l, v) in bufs.light.iter_mut().zip(&bufs.plane) {
+                l[c] = *v;
+            }
+        }
+        Ok(())
+    }
+
+    fn priority_scale(&self, weighting: Weighting) -> &[f32] {
+        match weighting {
+            Weighting::Unweighted => &self.ones,
+            Weighting::Transport => &self.norms,
+            Weighting::Area => &self.areas,
+        }
+    }
+
+    /// Relights with the `terms` most important wavelet lights (all of them
+    /// when `terms` ≥ the number of lights): `light` is the mean radiance of
+    /// each cubemap texel (6·n² RGB values). The image lands in
+    /// `bufs.image`.
+    pub fn relight(
+        &self,
+        light: &[[f32; 3]],
+        terms: usize,
+        weighting: Weighting,
+        bufs: &mut FrameBuffers,
+    ) -> Result<FrameStats> {
+        self.check_light(light)?;
+        let mut stats = FrameStats::default();
+        let t0 = Instant::now();
+        self.transform_light(light, bufs)?;
+        let t1 = Instant::now();
+        select(
+            &bufs.light,
+            self.priority_scale(weighting),
+            terms,
+            &mut bufs.scratch,
+            &mut bufs.selected,
+        );
+        // Deepest columns first (eq. 8).
+        let depths = &self.depths;
+        bufs.selected
+            .sort_unstable_by_key(|&j| (std::cmp::Reverse(depths[j as usize]), j));
+        stats.lights = bufs.selected.len();
+        let t2 = Instant::now();
+        stats.light_transform = t1 - t0;
+        stats.selection = t2 - t1;
+
+        let channels = self.meta().dims.channels as usize;
+        for p in bufs.planes.iter_mut() {
+            p.fill(0.0);
+        }
+        let top = bufs
+            .selected
+            .first()
+            .map_or(0, |&j| self.depths[j as usize]);
+        let mut next = 0;
+        for depth in (0..=top).rev() {
+            let tm = Instant::now();
+            let start = next;
+            while next < bufs.selected.len() && self.depths[bufs.selected[next] as usize] == depth {
+                next += 1;
+            }
+            let group = &bufs.selected[start..next];
+            if !group.is_empty() {
+                stats.nonzeros += self.multiply_add(group, &bufs.light, channels, &mut bufs.planes);
+            }
+            let ti = Instant::now();
+            stats.multiply += ti - tm;
+            if depth > 0 {
+                for plane in bufs.planes.iter_mut() {
+                    self.decoder
+                        .inverse_step(depth as u32, plane, &mut bufs.work)?;
+                }
+            }
+            stats.inverse += ti.elapsed();
+        }
+        let ti = Instant::now();
+        self.finish_image(&bufs.planes, &mut bufs.image);
+        stats.inverse += ti.elapsed();
+        Ok(stats)
+    }
+
+    /// Multiply-adds the columns of `group` into the planes, in parallel over
+    /// pixel ranges (columns are sorted by position, so each range is a
+    /// sub-slice found by binary search). Returns the coefficients used.
+    fn multiply_add(
+        &self,
+        group: &[u32],
+        light: &[[f32; 3]],
+        channels: usize,
+        planes: &mut [Vec<f32>; 3],
+    ) -> u64 {
+        let [r, g, b] = planes;
+        let used: u64 = group
+            .iter()
+            .map(|&j| (self.starts[j as usize + 1] - self.starts[j as usize]) as u64)
+            .sum();
+        r.par_chunks_mut(CHUNK_PIXELS)
+            .zip(g.par_chunks_mut(CHUNK_PIXELS))
+            .zip(b.par_chunks_mut(CHUNK_PIXELS))
+            .enumerate()
+            .for_each(|(k, ((r, g), b))| {
+                let lo = (k * CHUNK_PIXELS) as u32;
+                let hi = lo + r.len() as u32;
+                for &j in group {
+                    let (s, e) = (self.starts[j as usize], self.starts[j as usize + 1]);
+                    let pos = &self.positions[s..e];
+                    let a = pos.partition_point(|&i| i < lo);
+                    let z = a + pos[a..].partition_point(|&i| i < hi);
+                    let l = light[j as usize];
+                    if channels == 1 {
+                        multiply_add_grey(&pos[a..z], &self.values[s + a..s + z], lo, l, r, g, b);
+                    } else {
+                        multiply_add_rgb(
+                            &pos[a..z],
+                            &self.values[3 * (s + a)..3 * (s + z)],
+                            lo,
+                            l,
+                            r,
+                            g,
+                            b,
+                        );
+                    }
+                }
+            });
+        used
+    }
+
+    fn finish_image(&self, planes: &[Vec<f32>; 3], image: &mut Image) {
+        let albedo = self.file.albedo();
+        for (p, px) in image.data.iter_mut().enumerate() {
+            *px = [planes[0][p], planes[1][p], planes[2][p]];
+            if let Some(a) = albedo {
+                for (c, v) in px.iter_mut().enumerate() {
+                    *v *= a[3 * p + c];
+                }
+            }
+        }
+    }
+
+    /// The same image by eq. 3: every chosen column fully decoded with the
+    /// codec's column decoder and summed — the slow reference the
+    /// level-recursive path is tested against.
+    pub fn relight_naive(
+        &self,
+        light: &[[f32; 3]],
+        terms: usize,
+        weighting: Weighting,
+    ) -> Result<Image> {
+        self.check_light(light)?;
+        let mut bufs = self.buffers();
+        self.transform_light(light, &mut bufs)?;
+        select(
+            &bufs.light,
+            self.priority_scale(weighting),
+            terms,
+            &mut bufs.scratch,
+            &mut bufs.selected,
+        );
+        let channels = self.meta().dims.channels as usize;
+        let p = self.meta().dims.pixels();
+        let mut plane = vec![0.0f32; p];
+        let mut acc = [vec![0.0f64; p], vec![0.0f64; p], vec![0.0f64; p]];
+        for &j in &bufs.selected {
+            let col = self.file.column(j as usize)?;
+            for fc in 0..channels {
+                self.decoder.decode(&col, fc, &mut plane, &mut bufs.work)?;
+                for (c, plane_acc) in acc.iter_mut().enumerate() {
+                    if channels == 1 || c == fc {
+                        let l = bufs.light[j as usize][c] as f64;
+                        for (a, v) in plane_acc.iter_mut().zip(&plane) {
+                            *a += l * *v as f64;
+                        }
+                    }
+                }
+            }
+        }
+        let planes = acc.map(|a| a.into_iter().map(|v| v as f32).collect::<Vec<f32>>());
+        self.finish_image(&planes, &mut bufs.image);
+        Ok(bufs.image)
+    }
+}
+
+/// `plane_c[pos − lo] += light_c · value` for a grey column: the scalar
+/// reference kernel of the multiply-add.
+#[inline]
+fn multiply_add_grey(
+    pos: &[u32],
+    val: &[f32],
+    lo: u32,
+    l: [f32; 3],
+    r: &mut [f32],
+    g: &mut [f32],
+    b: &mut [f32],
+) {
+    for (&i, &v) in pos.iter().zip(val) {
+        let i = (i - lo) as usize;
+        r[i] += l[0] * v;
+        g[i] += l[1] * v;
+        b[i] += l[2] * v;
+    }
+}
+
+/// The same for an RGB column (3 values per coefficient).
+#[inline]
+fn multiply_add_rgb(
+    pos: &[u32],
+    val: &[f32],
+    lo: u32,
+    l: [f32; 3],
+    r: &mut [f32],
+    g: &mut [f32],
+    b: &mut [f32],
+) {
+    for (&i, v) in pos.iter().zip(val.chunks_exact(3)) {
+        let i = (i - lo) as usize;
+        r[i] += l[0] * v[0];
+        g[i] += l[1] * v[1];
+        b[i] += l[2] * v[2];
+    }
+}

@@ -331,6 +331,11 @@ impl Ctx<'_> {
         let mut vals = [0i32; 3];
         for &i in &kept {
             let g = groups[i as usize] as usize;
+            // Below half a step, dithering costs more error than dropping.
+            let half_step = |c: usize| 0.5 * scales[g * c_n + c] / q;
+            if (0..c_n).all(|c| coefs[c * p + i as usize].abs() < half_step(c)) {
+                continue;
+            }
             let mut any = false;
             for (c, v) in vals.iter_mut().enumerate().take(c_n) {
                 let s = scales[g * c_n + c];
@@ -614,14 +619,31 @@ pub fn compress(
         // Estimated (kept, error) of column j at depth index di for bin b.
         let estimate = |j: usize, di: usize, b: usize| -> (f64, f64) {
             let hist = &an.hist[j * nd + di];
-            let kept: f64 = hist[b..].iter().map(|x| x.0 as f64).sum();
-            let dropped: f64 = hist[..b].iter().map(|x| x.1 as f64).sum();
-            // Dithered quantization costs about step²/6 per kept value, the
-            // step being its scale group's peak / Q.
+            let mut dropped: f64 = hist[..b].iter().map(|x| x.1 as f64).sum();
+            // Dithered quantization of a value x with step Δ costs
+            // f(1 − f)·Δ² on average (f the fractional part of x/Δ): Δ²/6 for
+            // x ≥ Δ, x(Δ − x) below — more than dropping it (x²) when
+            // x < Δ/2, so the coder drops those (see `Ctx::code`). Δ is the
+            // RMS step of the column's scale groups, x a bin's RMS magnitude
+            // per channel.
             let (qsum, nonzero) = an.peak[j * nd + di];
-            let qerr =
-                channels as f64 / 6.0 / (q * q) * qsum as f64 * kept / (nonzero.max(1) as f64);
-            (kept, dropped + qerr)
+            let step = (qsum as f64 / nonzero.max(1) as f64).sqrt() / q;
+            let mut kept = 0.0;
+            for &(count, energy) in hist[b..].iter().filter(|x| x.0 > 0) {
+                let x = (energy as f64 / count as f64 / channels as f64).sqrt();
+                if x < step / 2.0 {
+                    dropped += energy as f64;
+                } else {
+                    kept += count as f64;
+                    let per_value = if x >= step {
+                        step * step / 6.0
+                    } else {
+                        x * (step - x)
+                    };
+                    dropped += count as f64 * channels as f64 * per_value;
+                }
+            }
+            (kept, dropped)
         };
         let choose = |b: usize| -> (f64, Vec<[u32; 2]>) {
             let tau_sq = bin_threshold(b, tau0_sq);

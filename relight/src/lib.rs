@@ -4,6 +4,38 @@
 //! lighting (lat-long EXR or HDR maps, rotated and resampled exactly to the
 //! matrix's cubemap), RGB image output, and the exact dense reference
 //! `T·L` that relit images are measured against.
+//!
+//! ```
+//! use ltm_codec::compress::{compress, CompressOptions};
+//! use ltm_codec::{Dims, RawHeader, RawStore, RawWriter};
+//! use ltm_relight::{reference, relative_l2, EnvMap, Relighter, Rotation, Weighting};
+//!
+//! # fn main() -> Result<(), Box<dyn std::error::Error>> {
+//! let dir = tempfile::tempdir()?;
+//! // A small transport matrix: 16×16 pixels, 6·4² lights, one channel.
+//! let dims = Dims { width: 16, height: 16, face_res: 4, channels: 1 };
+//! let header = RawHeader::new(dims, false, 1 << 20);
+//! let mut writer = RawWriter::create(&dir.path().join("t.raw"), header)?;
+//! let rows: Vec<f32> = (0..dims.pixels() * dims.lights())
+//!     .map(|i| ((i % 97) as f32 * 0.01).sin().abs() * 1e-2)
+//!     .collect();
+//! writer.write_block(0, &rows, None)?;
+//! let raw = RawStore::open(&writer.finish()?)?;
+//!
+//! // Compress it, then relight under a sky that is brighter above.
+//! let ltm = dir.path().join("t.ltm");
+//! compress(&raw, &ltm, &CompressOptions::default(), &|_, _, _| {})?;
+//! let sky = EnvMap::from_fn(64, 32, |_, y| [1.0, 1.0, if y < 16 { 4.0 } else { 0.5 }])?;
+//! let light = sky.to_cubemap(4, &Rotation::IDENTITY);
+//!
+//! let relighter = Relighter::open(&ltm)?;
+//! let mut buffers = relighter.buffers(); // reused frame after frame
+//! let stats = relighter.relight(&light, 50, Weighting::Transport, &mut buffers)?;
+//! let exact = reference(&raw, &light)?;
+//! println!("{} lights, error {:.4}", stats.lights, relative_l2(&buffers.image, &exact)?);
+//! # Ok(())
+//! # }
+//! ```
 
 #![forbid(unsafe_code)]
 

@@ -2,7 +2,7 @@
 
 use anyhow::{bail, Context, Result};
 use clap::Args;
-use ltm_relight::{EnvMap, Relighter, Rotation, Weighting};
+use ltm_relight::{relative_l2, EnvMap, Image, Relighter, Rotation, Weighting};
 use std::path::PathBuf;
 use std::str::FromStr;
 
@@ -54,6 +54,13 @@ pub struct RelightArgs {
     /// Frames to time (the image is the same each frame; reports the median).
     #[arg(long, default_value_t = 1)]
     pub frames: usize,
+    /// An exact image from `ltm reference` (same map and rotation): print the
+    /// relit image's relative L2 error against it.
+    #[arg(long)]
+    pub reference: Option<PathBuf>,
+    /// Print one JSON line with the settings, timings and error.
+    #[arg(long)]
+    pub json: bool,
 }
 
 pub fn run(a: RelightArgs) -> Result<()> {
@@ -81,6 +88,37 @@ pub fn run(a: RelightArgs) -> Result<()> {
         bufs.image
             .write_png(png, a.exposure)
             .with_context(|| format!("writing {}", png.display()))?;
+    }
+    let error = match &a.reference {
+        Some(path) => {
+            let exact =
+                Image::read_exr(path).with_context(|| format!("reading {}", path.display()))?;
+            Some(
+                relative_l2(&bufs.image, &exact)
+                    .with_context(|| format!("comparing with {}", path.display()))?,
+            )
+        }
+        None => None,
+    };
+    if a.json {
+        let ms = |d: std::time::Duration| d.as_secs_f64() * 1e3;
+        let line = serde_json::json!({
+            "file": a.file,
+            "terms": a.terms.0.min(relighter.lights()),
+            "weighting": a.weighting.name(),
+            "lights": stats.lights,
+            "nonzeros": stats.nonzeros,
+            "frame_ms": ms(median),
+            "light_transform_ms": ms(stats.light_transform),
+            "selection_ms": ms(stats.selection),
+            "multiply_ms": ms(stats.multiply),
+            "inverse_ms": ms(stats.inverse),
+            "relative_error": error,
+        });
+        println!("{line}");
+    }
+    if let Some(e) = error {
+        eprintln!("relative L2 error against the reference: {e:.6}");
     }
     eprintln!(
         "wrote {}: {} lights, {} nonzeros, frame {:.3} ms (median of {}; light transform {:.3}, selection {:.3}, multiply {:.3}, inverse {:.3} ms)",

@@ -1,1 +1,38 @@
-//! placeholder
+//! `ltm-bake`: ray-traces a scene's light-transport matrix — one row per
+//! pixel, one column per cubemap texel of a distant environment — and
+//! streams it into the raw store of [`ltm_codec::raw`].
+//!
+//! A scene is a TOML file ([`scene`]) naming OBJ/PLY meshes, quads,
+//! Lambertian and glossy materials ([`material`]), a pinhole camera and the
+//! lighting resolution. [`Scene::build`] loads it into an obvhs BVH;
+//! [`bake`] computes the rows ([`transport`] defines them precisely) in
+//! parallel blocks and writes them to `PATH.partial`, resuming an
+//! interrupted bake, then renames the file to `PATH`.
+//!
+//! ```no_run
+//! use ltm_bake::{bake, BakeOptions, Scene, SceneDesc};
+//! let desc = SceneDesc::load("scene.toml".as_ref())?;
+//! let scene = Scene::build(&desc)?;
+//! bake(&scene, "scene.raw".as_ref(), &BakeOptions::default(), &|_| {})?;
+//! # Ok::<(), ltm_bake::BakeError>(())
+//! ```
+
+#![forbid(unsafe_code)]
+
+mod bake;
+mod error;
+pub mod material;
+mod mesh;
+mod ply;
+pub mod sampling;
+pub mod scene;
+pub mod transport;
+mod world;
+
+pub use bake::{
+    bake, raw_header, BakeOptions, BakeProgress, BakeReport, BlockBaker, DEFAULT_BLOCK_BYTES,
+};
+pub use error::{BakeError, Result};
+pub use scene::{Overrides, SceneDesc, DEFAULT_SCENE_TOML};
+pub use transport::RowStats;
+pub use world::{Camera, Hit, MeshStats, Scene, SceneStats, INSIDE_LIMIT};

@@ -13,9 +13,10 @@
 //!    error budget) so that the whole decoded matrix meets the target.
 //! 4. **Coding**: each column is transformed to its depth, thresholded,
 //!    weighted, dither-quantized and stored sparse (zstd). In adaptive mode the
-//!    two best depths by estimate are both coded and decoded with
-//!    [`ColumnDecoder`] — the relighter's code — and the one with the lower
-//!    measured cost is kept; the measured errors give the file's error.
+//!    two best depths by estimate, depth 0 and the full depth are each coded
+//!    and decoded with [`ColumnDecoder`] — the relighter's code — and the one
+//!    with the lowest measured cost is kept; the measured errors give the
+//!    file's error.
 
 use crate::container::{EncodedColumn, LtmWriter, Meta, Mode, SparseColumn};
 use crate::decode::ColumnDecoder;
@@ -710,7 +711,12 @@ pub fn compress(
                         let planes = &data[l * channels * p..(l + 1) * channels * p];
                         let (keep, tries, tau_sq) = match (&plan, opts.target) {
                             (Some((tau_sq, choice)), _) => {
+                                // The two best depths by estimate, and both
+                                // extremes (rows only, full depth): the
+                                // estimate ranks them least reliably.
                                 let mut t = choice[j].to_vec();
+                                t.extend([depths[0], depths[depths.len() - 1]]);
+                                t.sort_unstable();
                                 t.dedup();
                                 (Keep::Above(*tau_sq), t, *tau_sq)
                             }

@@ -1,14 +1,114 @@
 //! `ltm bake`.
 
+use crate::progress;
+use anyhow::Context;
 use clap::Args;
+use ltm_bake::{bake, BakeOptions, Overrides, Scene, SceneDesc};
+use std::path::PathBuf;
 
 /// Arguments of `ltm bake`.
 #[derive(Args)]
+#[command(
+    after_long_help = "Each row is a pixel of the camera image (row p = y·width + x, y from the top); each column \
+is a texel of a 6·n² cubemap of distant lighting (OpenGL face order, world Y up). Entry \
+T[p][j] is the light reflected to the camera through pixel p from texel j per unit radiance, \
+so that the pixel's radiance is Σ_j T[p][j]·L[j]. Scenes whose materials are all Lambertian \
+are stored as one grey channel plus an RGB albedo image; scenes with glossy materials as 3 \
+channels.\n\n\
+The store is written to RAW.partial and renamed to RAW when complete. Re-running the same \
+command after an interruption resumes: completed blocks whose checksums verify are kept.\n\n\
+The scene file format is described in the ltm-bake crate (module `scene`); \
+assets/scenes/default.toml is an example."
+)]
 pub struct BakeArgs {
-    /// Scene description (TOML).
-    pub scene: std::path::PathBuf,
+    /// Scene description (TOML); mesh paths in it are relative to its directory.
+    pub scene: PathBuf,
+    /// Output raw store.
+    #[arg(short, long, value_name = "RAW")]
+    pub output: PathBuf,
+    /// Image width in pixels (overrides camera.width).
+    #[arg(long, value_name = "W")]
+    pub width: Option<u32>,
+    /// Image height in pixels (overrides camera.height).
+    #[arg(long, value_name = "H")]
+    pub height: Option<u32>,
+    /// Cubemap face resolution n, a power of two: 6·n² lights (overrides lighting.face_res).
+    #[arg(long, value_name = "N")]
+    pub face_res: Option<u32>,
+    /// Direction samples per cubemap texel (overrides lighting.texel_samples).
+    #[arg(long, value_name = "S")]
+    pub texel_samples: Option<u32>,
+    /// Pixel sub-samples, averaged with a box filter (overrides camera.spp).
+    #[arg(long, value_name = "K")]
+    pub spp: Option<u32>,
 }
 
-pub fn run(_args: BakeArgs) -> anyhow::Result<()> {
-    anyhow::bail!("bake is not implemented yet")
+pub fn run(args: BakeArgs) -> anyhow::Result<()> {
+    let mut desc = SceneDesc::load(&args.scene)?;
+    desc.apply(&Overrides {
+        width: args.width,
+        height: args.height,
+        face_res: args.face_res,
+        texel_samples: args.texel_samples,
+        spp: args.spp,
+    })?;
+    let scene = Scene::build(&desc)?;
+    for m in &scene.stats().meshes {
+        if m.degenerate_skipped > 0 {
+            eprintln!(
+                "warning: {}: skipped {} degenerate (zero-area) triangles of {}",
+                m.path.display(),
+                m.degenerate_skipped,
+                m.triangles + m.degenerate_skipped
+            );
+        }
+    }
+    let dims = scene.dims();
+    eprintln!(
+        "baking {} × {} pixels × {} lights ({}×{} faces) × {} channel{}{}: {:.2} GB, {} triangles, {} texel samples, {} pixel samples",
+        dims.width,
+        dims.height,
+        dims.lights(),
+        dims.face_res,
+        dims.face_res,
+        dims.channels,
+        if dims.channels == 1 { "" } else { "s" },
+        if dims.channels == 1 { " + albedo image" } else { "" },
+        dims.raw_bytes() as f64 / 1e9,
+        scene.stats().triangles,
+        desc.lighting.texel_samples,
+        desc.camera.spp,
+    );
+    let bar = progress::bar(dims.pixels() as u64, "bake");
+    let options = BakeOptions::default();
+    let result = bake(&scene, &args.output, &options, &|p| {
+        // The bar counts all rows; resumed ones are complete already.
+        bar.set_position(dims.pixels() as u64 - p.rows_total + p.rows_done);
+        if p.rows_done == 1 {
+            bar.reset_eta();
+        }
+        let secs = p.elapsed.as_secs_f64().max(1e-9);
+        bar.set_message(format!("{:.1} Mray/s", p.shadow_rays as f64 / secs / 1e6));
+    });
+    bar.finish_and_clear();
+    let report = result.with_context(|| format!("baking {}", args.scene.display()))?;
+    let secs = report.elapsed.as_secs_f64().max(1e-9);
+    if report.blocks_resumed > 0 {
+        eprintln!(
+            "resumed {} of {} blocks from {}.partial",
+            report.blocks_resumed,
+            report.blocks_total,
+            report.path.display()
+        );
+    }
+    eprintln!(
+        "baked {} rows in {:.1} s: {:.0} rows/s, {:.2} M shadow rays/s ({} shadow rays) -> {}",
+        report.rows_baked,
+        secs,
+        report.rows_baked as f64 / secs,
+        report.rays.shadow_rays as f64 / secs / 1e6,
+        report.rays.shadow_rays,
+        report.path.display()
+    );
+    Ok(())
 }

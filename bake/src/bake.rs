@@ -1,0 +1,214 @@
+//! The bake driver: rows in blocks, computed in parallel, streamed to the raw
+//! store.
+//!
+//! Rows are grouped in the raw store's blocks (about
+//! [`BakeOptions::block_bytes`] of row data each). The blocks still pending
+//! in `PATH.partial` are computed one after the other, the rows of a block in
+//! parallel (rayon); a writer thread copies each finished block into the
+//! memory-mapped file while the next one is computed. At most three blocks
+//! are in memory at once (one being computed, one queued, one being
+//! written), so memory stays bounded whatever the matrix size.
+//!
+//! Resuming: [`ltm_codec::RawWriter::create`] reopens a `PATH.partial` with
+//! the same header and keeps its blocks whose checksums verify; only the
+//! others are baked. Every row is a pure function of the scene and the row
+//! index, so a resumed bake is byte-identical to an uninterrupted one. The
+//! file is renamed to `PATH` only when every block is complete.
+
+use crate::error::{BakeError, Result};
+use crate::transport::{RowStats, Scratch, Tables};
+use crate::world::Scene;
+use ltm_codec::{RawHeader, RawWriter};
+use rayon::prelude::*;
+use std::path::{Path, PathBuf};
+use std::sync::atomic::{AtomicU64, Ordering};
+use std::sync::mpsc::sync_channel;
+use std::time::{Duration, Instant};
+
+/// Default bytes of row data per block.
+pub const DEFAULT_BLOCK_BYTES: u64 = 32 << 20;
+
+/// Options of [`bake`].
+#[derive(Clone, Copy, Debug)]
+pub struct BakeOptions {
+    /// Bytes of row data per block (the unit of writing and resuming). A
+    /// `.partial` file resumes only with the same value.
+    pub block_bytes: u64,
+}
+
+impl Default for BakeOptions {
+    fn default() -> Self {
+        BakeOptions {
+            block_bytes: DEFAULT_BLOCK_BYTES,
+        }
+    }
+}
+
+/// Progress, reported after every row.
+#[derive(Clone, Copy, Debug)]
+pub struct BakeProgress {
+    /// Rows baked in this run.
+    pub rows_done: u64,
+    /// Rows to bake in this run (resumed rows excluded).
+    pub rows_total: u64,
+    /// Shadow rays traced in this run.
+    pub shadow_rays: u64,
+    /// Time since the bake started.
+    pub elapsed: Duration,
+}
+
+/// Summary of a finished bake.
+#[derive(Clone, Debug)]
+pub struct BakeReport {
+    /// The complete raw store.
+    pub path: PathBuf,
+    pub header: RawHeader,
+    pub blocks_total: usize,
+    /// Blocks found complete in a `.partial` file and kept.
+    pub blocks_resumed: usize,
+    pub rows_baked: u64,
+    pub rays: RowStats,
+    pub elapsed: Duration,
+}
+
+/// The raw store header for a scene: grey transport with an albedo image,
+/// or 3 channels.
+pub fn raw_header(scene: &Scene, block_bytes: u64) -> RawHeader {
+    RawHeader::new(scene.dims(), scene.channels() == 1, block_bytes)
+}
+
+/// Computes whole blocks of rows.
+pub struct BlockBaker<'a> {
+    scene: &'a Scene,
+    tables: Tables,
+    header: RawHeader,
+}
+
+impl<'a> BlockBaker<'a> {
+    /// A baker for `scene` writing blocks of `header` (from [`raw_header`]).
+    pub fn new(scene: &'a Scene, header: RawHeader) -> Result<BlockBaker<'a>> {
+        if header.dims != scene.dims() || header.has_albedo != (scene.channels() == 1) {
+            return Err(BakeError::Store(ltm_codec::Error::Invalid(format!(
+                "raw store header {:?} (albedo image: {}) does not match the scene's dimensions {:?}",
+                header.dims,
+                header.has_albedo,
+                scene.dims()
+            ))));
+        }
+        Ok(BlockBaker {
+            scene,
+            tables: Tables::new(scene),
+            header,
+        })
+    }
+
+    /// The header blocks are computed for.
+    pub fn header(&self) -> &RawHeader {
+        &self.header
+    }
+
+    /// Computes block `b` into `rows` (resized to its rows × M·C) and
+    /// `albedo` (3 values per row; zeros for 3-channel transport), calling
+    /// `on_row` after each row.
+    pub fn compute(
+        &self,
+        b: usize,
+        rows: &mut Vec<f32>,
+        albedo: &mut Vec<f32>,
+        on_row: &(dyn Fn(RowStats) + Sync),
+    ) -> RowStats {
+        let range = self.header.block_range(b);
+        let row_len = self.header.dims.row_len();
+        rows.clear();
+        rows.resize(range.len() * row_len, 0.0);
+        albedo.clear();
+        albedo.resize(range.len() * 3, 0.0);
+        let start = range.start;
+        rows.par_chunks_mut(row_len)
+            .zip(albedo.par_chunks_mut(3))
+            .enumerate()
+            .map_init(
+                || Scratch::new(self.scene),
+                |scratch, (i, (row, alb))| {
+                    let mut a = [0.0f32; 3];
+                    let s = self
+                        .scene
+                        .row_into(&self.tables, scratch, start + i, row, &mut a);
+                    alb.copy_from_slice(&a);
+                    on_row(s);
+                    s
+                },
+            )
+            .reduce(RowStats::default, |mut a, b| {
+                a += b;
+                a
+            })
+    }
+}
+
+/// Bakes `scene` into the raw store `out` (through `out.partial`, resuming
+/// it when its header matches), reporting progress after every row.
+pub fn bake(
+    scene: &Scene,
+    out: &Path,
+    options: &BakeOptions,
+    progress: &(dyn Fn(BakeProgress) + Sync),
+) -> Result<BakeReport> {
+    let start = Instant::now();
+    let header = raw_header(scene, options.block_bytes);
+    let baker = BlockBaker::new(scene, header)?;
+    let mut writer = RawWriter::create(out, header)?;
+    let pending = writer.pending_blocks();
+    let blocks_total = header.block_count();
+    let rows_total: u64 = pending
+        .iter()
+        .map(|&b| header.block_range(b).len() as u64)
+        .sum();
+    let rows_done = AtomicU64::new(0);
+    let shadow = AtomicU64::new(0);
+    let on_row = |s: RowStats| {
+        let done = rows_done.fetch_add(1, Ordering::Relaxed) + 1;
+        let rays = shadow.fetch_add(s.shadow_rays, Ordering::Relaxed) + s.shadow_rays;
+        progress(BakeProgress {
+            rows_done: done,
+            rows_total,
+            shadow_rays: rays,
+            elapsed: start.elapsed(),
+        });
+    };
+    let has_albedo = header.has_albedo;
+    let mut rays = RowStats::default();
+    let written: Result<()> = std::thread::scope(|s| {
+        let (tx, rx) = sync_channel::<(usize, Vec<f32>, Vec<f32>)>(1);
+        let writer_ref = &mut writer;
+        let handle = s.spawn(move || -> Result<()> {
+            for (b, rows, albedo) in rx {
+                writer_ref.write_block(b, &rows, has_albedo.then_some(albedo.as_slice()))?;
+            }
+            Ok(())
+        });
+        for &b in &pending {
+            let (mut rows, mut albedo) = (Vec::new(), Vec::new());
+            rays += baker.compute(b, &mut rows, &mut albedo, &on_row);
+            if tx.send((b, rows, albedo)).is_err() {
+                break; // the writer failed; its error is returned below
+            }
+        }
+        drop(tx);
+        match handle.join() {
+            Ok(r) => r,
+            Err(panic) => std::panic::resume_unwind(panic),
+        }
+    });
+    written?;
+    let path = writer.finish()?;
+    Ok(BakeReport {
+        path,
+        header,
+        blocks_total,
+        blocks_resumed: blocks_total - pending.len(),
+        rows_baked: rows_total,
+        rays,
+        elapsed: start.elapsed(),
+    })
+}

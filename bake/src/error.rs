@@ -1,0 +1,107 @@
+//! The baker's error type.
+
+use std::io;
+use std::path::PathBuf;
+
+/// Every failure of `ltm-bake`. Messages name the file (or the command line),
+/// the offending field or value, and the valid range.
+#[derive(Debug, thiserror::Error)]
+pub enum BakeError {
+    /// Reading a scene file failed (missing, unreadable).
+    #[error("{path}: {error}")]
+    Io { path: PathBuf, error: io::Error },
+    /// Reading a mesh file failed (missing, unreadable); `field` names the
+    /// scene entry, e.g. `meshes[0].path`.
+    #[error("{origin}: {field}: cannot read {path}: {error}")]
+    MeshIo {
+        origin: String,
+        field: String,
+        path: PathBuf,
+        error: io::Error,
+    },
+    /// The scene file is not valid TOML, or does not have the scene's
+    /// structure (unknown or missing field, wrong type).
+    #[error("{path}: {message}")]
+    SceneSyntax { path: PathBuf, message: String },
+    /// A scene setting outside its valid range. `origin` is the scene file,
+    /// or "command line" for an override.
+    #[error("{origin}: {field} = {value} is out of range (valid: {valid})")]
+    OutOfRange {
+        origin: String,
+        field: String,
+        value: String,
+        valid: String,
+    },
+    /// A scene setting that is in range but inconsistent (an unknown
+    /// material name, a camera looking along its up vector, ...).
+    #[error("{origin}: {field}: {message}")]
+    InvalidScene {
+        origin: String,
+        field: String,
+        message: String,
+    },
+    /// A mesh file that cannot be parsed, or whose contents are unusable
+    /// (non-finite vertices, indices out of range, no triangle with area).
+    #[error("{path}: malformed {format} mesh: {message}")]
+    MalformedMesh {
+        path: PathBuf,
+        format: &'static str,
+        message: String,
+    },
+    /// The camera sits inside a closed object (or right behind a surface):
+    /// most primary rays hit the back side of a triangle.
+    #[error(
+        "the camera at eye = [{}, {}, {}] appears to be inside geometry: {:.0} % of the probe rays \
+         through the image hit the back side of a surface (limit {:.0} %); move the eye out of the object",
+        eye[0], eye[1], eye[2], 100.0 * back_fraction, 100.0 * limit
+    )]
+    CameraInsideGeometry {
+        eye: [f64; 3],
+        back_fraction: f64,
+        limit: f64,
+    },
+    /// The scene's geometry cannot be traced safely.
+    #[error("scene geometry: {0}")]
+    Geometry(String),
+    /// Writing the raw store failed.
+    #[error(transparent)]
+    Store(#[from] ltm_codec::Error),
+}
+
+/// `Result` with [`BakeError`].
+pub type Result<T> = std::result::Result<T, BakeError>;
+
+impl BakeError {
+    pub(crate) fn io(path: impl Into<PathBuf>, error: io::Error) -> BakeError {
+        BakeError::Io {
+            path: path.into(),
+            error,
+        }
+    }
+
+    pub(crate) fn range(
+        origin: impl ToString,
+        field: impl ToString,
+        value: impl ToString,
+        valid: impl ToString,
+    ) -> BakeError {
+        BakeError::OutOfRange {
+            origin: origin.to_string(),
+            field: field.to_string(),
+            value: value.to_string(),
+            valid: valid.to_string(),
+        }
+    }
+
+    pub(crate) fn invalid(
+        origin: impl ToString,
+        field: impl ToString,
+        message: impl ToString,
+    ) -> BakeError {
+        BakeError::InvalidScene {
+            origin: origin.to_string(),
+            field: field.to_string(),
+            message: message.to_string(),
+        }
+    }
+}

@@ -1,0 +1,448 @@
+//! A small PLY reader: `format ascii 1.0` and `format binary_little_endian
+//! 1.0`, all scalar types, list properties, any elements (those other than
+//! `vertex` and `face` are read and skipped). It takes `vertex` properties
+//! `x, y, z` (and `nx, ny, nz` when all three are present) and the `face`
+//! list `vertex_indices` (or `vertex_index`); polygons are fanned into
+//! triangles.
+//!
+//! Errors are strings naming the header line or the element and index where
+//! the file went wrong; the caller adds the path.
+
+use crate::mesh::RawMesh;
+
+#[derive(Clone, Copy, Debug, PartialEq)]
+enum Ty {
+    I8,
+    U8,
+    I16,
+    U16,
+    I32,
+    U32,
+    F32,
+    F64,
+}
+
+impl Ty {
+    fn parse(s: &str) -> Option<Ty> {
+        Some(match s {
+            "char" | "int8" => Ty::I8,
+            "uchar" | "uint8" => Ty::U8,
+            "short" | "int16" => Ty::I16,
+            "ushort" | "uint16" => Ty::U16,
+            "int" | "int32" => Ty::I32,
+            "uint" | "uint32" => Ty::U32,
+            "float" | "float32" => Ty::F32,
+            "double" | "float64" => Ty::F64,
+            _ => return None,
+        })
+    }
+
+    fn size(self) -> usize {
+        match self {
+            Ty::I8 | Ty::U8 => 1,
+            Ty::I16 | Ty::U16 => 2,
+            Ty::I32 | Ty::U32 | Ty::F32 => 4,
+            Ty::F64 => 8,
+        }
+    }
+
+    fn is_int(self) -> bool {
+        !matches!(self, Ty::F32 | Ty::F64)
+    }
+}
+
+#[derive(Debug)]
+enum Prop {
+    Scalar { name: String, ty: Ty },
+    List { name: String, count: Ty, item: Ty },
+}
+
+#[derive(Debug)]
+struct Element {
+    name: String,
+    count: usize,
+    props: Vec<Prop>,
+}
+
+impl Element {
+    /// Smallest encoded size of one instance in binary (lists empty).
+    fn min_binary_size(&self) -> usize {
+        self.props
+            .iter()
+            .map(|p| match p {
+                Prop::Scalar { ty, .. } => ty.size(),
+                Prop::List { count, .. } => count.size(),
+            })
+            .sum()
+    }
+}
+
+/// Longest header accepted, in bytes.
+const MAX_HEADER: usize = 1 << 20;
+/// Largest polygon accepted (vertices per face).
+const MAX_POLYGON: usize = 1 << 16;
+
+/// Parses a PLY file held in memory.
+pub(crate) fn parse(bytes: &[u8]) -> Result<RawMesh, String> {
+    let (elements, binary, body) = parse_header(bytes)?;
+    let mut reader: Box<dyn Scalars> = if binary {
+        Box::new(Binary {
+            bytes: body,
+            pos: 0,
+        })
+    } else {
+        let text = std::str::from_utf8(body)
+            .map_err(|e| format!("the ASCII body is not valid text ({e})"))?;
+        Box::new(Ascii {
+            tokens: text.split_ascii_whitespace(),
+            remaining_bytes: body.len(),
+        })
+    };
+    let mut mesh = RawMesh::default();
+    let mut vertex_seen = false;
+    let mut face_seen = false;
+    let mut polygon: Vec<f64> = Vec::new();
+    for el in &elements {
+        // Refuse counts the remaining bytes cannot hold (truncation, or a
+        // header lying about its size) before allocating for them.
+        if el.props.is_empty() && el.name != "vertex" && el.name != "face" {
+            continue;
+        }
+        let min = if binary {
+            el.min_binary_size().max(1)
+        } else {
+            (2 * el.props.len()).max(1)
+        };
+        if el.count > (reader.remaining() + 1) / min {
+            return Err(format!(
+                "truncated: the header declares {} {} elements, but only {} bytes follow",
+                el.count,
+                el.name,
+                reader.remaining()
+            ));
+        }
+        match el.name.as_str() {
+            "vertex" => {
+                vertex_seen = true;
+                let idx = |n: &str| {
+                    el.props
+                        .iter()
+                        .position(|p| matches!(p, Prop::Scalar { name, .. } if name == n))
+                };
+                let (Some(ix), Some(iy), Some(iz)) = (idx("x"), idx("y"), idx("z")) else {
+                    return Err("element vertex lacks a scalar x, y or z property".into());
+                };
+                let normals = match (idx("nx"), idx("ny"), idx("nz")) {
+                    (Some(a), Some(b), Some(c)) => Some([a, b, c]),
+                    _ => None,
+                };
+                mesh.positions.reserve(el.count);
+                let mut vals = vec![0.0f64; el.props.len()];
+                let mut ns = Vec::with_capacity(if normals.is_some() { el.count } else { 0 });
+                for i in 0..el.count {
+                    for (k, p) in el.props.iter().enumerate() {
+                        let at = || format!("vertex {i} of {}", el.count);
+                        match p {
+                            Prop::Scalar { ty, .. } => vals[k] = reader.scalar(*ty, &at)?,
+                            Prop::List { count, item, .. } => {
+                                let n = list_len(reader.scalar(*count, &at)?, &at)?;
+                                for _ in 0..n {
+                                    reader.scalar(*item, &at)?;
+                                }
+                            }
+                        }
+                    }
+                    mesh.positions
+                        .push([vals[ix] as f32, vals[iy] as f32, vals[iz] as f32]);
+                    if let Some([a, b, c]) = normals {
+                        ns.push([vals[a] as f32, vals[b] as f32, vals[c] as f32]);
+                    }
+                }
+                if normals.is_some() {
+                    mesh.normals = Some(ns);
+                }
+            }
+            "face" => {
+                face_seen = true;
+                let Some(li) = el.props.iter().position(|p| {
+                    matches!(p, Prop::List { name, .. } if name == "vertex_indices" || name == "vertex_index")
+                }) else {
+                    return Err(
+                        "element face lacks a list property vertex_indices (or vertex_index)"
+                            .into(),
+                    );
+                };
+                mesh.triangles.reserve(el.count);
+                for i in 0..el.count {
+                    let at = || format!("face {i} of {}", el.count);
+                    for (k, p) in el.props.iter().enumerate() {
+                        match p {
+                            Prop::Scalar { ty, .. } => {
+                                reader.scalar(*ty, &at)?;
+                            }
+                            Prop::List { count, item, .. } => {
+                                let n = list_len(reader.scalar(*count, &at)?, &at)?;
+                                if k != li {
+                                    for _ in 0..n {
+                                        reader.scalar(*item, &at)?;
+                                    }
+                                    continue;
+                                }
+                                if !item.is_int() {
+                                    return Err(format!(
+                                        "{}: vertex indices are stored as floating point",
+                                        at()
+                                    ));
+                                }
+                                if n < 3 {
+                                    return Err(format!(
+                                        "{}: a face has {n} vertices, at least 3 are needed",
+                                        at()
+                                    ));
+                                }
+                                polygon.clear();
+                                for _ in 0..n {
+                                    polygon.push(reader.scalar(*item, &at)?);
+                                }
+                                let mut ids = [0u32; 3];
+                                for (slot, &v) in ids.iter_mut().zip(&polygon[..3]) {
+                                    *slot = index(v, &at)?;
+                                }
+                                mesh.triangles.push(ids);
+                                for &v in &polygon[3..] {
+                                    ids[1] = ids[2];
+                                    ids[2] = index(v, &at)?;
+                                    mesh.triangles.push(ids);
+                                }
+                            }
+                        }
+                    }
+                }
+            }
+            _ => {
+                for i in 0..el.count {
+                    let at = || format!("element {} {i} of {}", el.name, el.count);
+                    for p in &el.props {
+                        match p {
+                            Prop::Scalar { ty, .. } => {
+                                reader.scalar(*ty, &at)?;
+                            }
+                            Prop::List { count, item, .. } => {
+                                let n = list_len(reader.scalar(*count, &at)?, &at)?;
+                                for _ in 0..n {
+                                    reader.scalar(*item, &at)?;
+                                }
+                            }
+                        }
+                    }
+                }
+            }
+        }
+    }
+    if !vertex_seen {
+        return Err("the header declares no vertex element".into());
+    }
+    if !face_seen {
+        return Err("the header declares no face element (point clouds cannot be baked)".into());
+    }
+    Ok(mesh)
+}
+
+fn list_len(v: f64, at: &dyn Fn() -> String) -> Result<usize, String> {
+    if v < 0.0 || v > MAX_POLYGON as f64 || v.fract() != 0.0 {
+        return Err(format!(
+            "{}: list length {v} is out of range (valid: 0..={MAX_POLYGON})",
+            at()
+        ));
+    }
+    Ok(v as usize)
+}
+
+fn index(v: f64, at: &dyn Fn() -> String) -> Result<u32, String> {
+    if v < 0.0 || v >= u32::MAX as f64 || v.fract() != 0.0 {
+        return Err(format!(
+            "{}: vertex index {v} is negative or too large",
+            at()
+        ));
+    }
+    Ok(v as u32)
+}
+
+fn parse_header(bytes: &[u8]) -> Result<(Vec<Element>, bool, &[u8]), String> {
+    if !bytes.starts_with(b"ply\n") && !bytes.starts_with(b"ply\r\n") {
+        return Err("does not start with the line \"ply\"".into());
+    }
+    let mut pos = 0;
+    let mut lines = Vec::new();
+    loop {
+        let Some(nl) = bytes[pos..].iter().position(|&b| b == b'\n') else {
+            return Err("the header has no end_header line".into());
+        };
+        let line = &bytes[pos..pos + nl];
+        pos += nl + 1;
+        if pos > MAX_HEADER {
+            return Err(format!(
+                "the header is longer than {MAX_HEADER} bytes (no end_header line?)"
+            ));
+        }
+        let line = std::str::from_utf8(line)
+            .map_err(|_| format!("header line {} is not text", lines.len() + 1))?
+            .trim_end_matches('\r');
+        if line.trim() == "end_header" {
+            break;
+        }
+        lines.push(line.to_string());
+    }
+    let mut binary = None;
+    let mut elements: Vec<Element> = Vec::new();
+    for (i, line) in lines.iter().enumerate().skip(1) {
+        let ln = i + 1;
+        let w: Vec<&str> = line.split_whitespace().collect();
+        match w.first().copied() {
+            None | Some("comment") | Some("obj_info") => {}
+            Some("format") => {
+                binary = Some(match (w.get(1).copied(), w.get(2).copied()) {
+                    (Some("ascii"), Some("1.0")) => false,
+                    (Some("binary_little_endian"), Some("1.0")) => true,
+                    (Some("binary_big_endian"), _) => {
+                        return Err(
+                            "binary_big_endian PLY is not supported (valid: ascii 1.0, binary_little_endian 1.0)"
+                                .into(),
+                        )
+                    }
+                    _ => {
+                        return Err(format!(
+                            "header line {ln}: unknown format \"{line}\" (valid: ascii 1.0, binary_little_endian 1.0)"
+                        ))
+                    }
+                });
+            }
+            Some("element") => {
+                let (Some(name), Some(count), None) = (w.get(1), w.get(2), w.get(3)) else {
+                    return Err(format!(
+                        "header line {ln}: expected \"element NAME COUNT\", found \"{line}\""
+                    ));
+                };
+                let count = count.parse::<usize>().map_err(|_| {
+                    format!("header line {ln}: element count \"{count}\" is not a non-negative integer")
+                })?;
+                elements.push(Element {
+                    name: name.to_string(),
+                    count,
+                    props: Vec::new(),
+                });
+            }
+            Some("property") => {
+                let Some(el) = elements.last_mut() else {
+                    return Err(format!(
+                        "header line {ln}: property before any element"
+                    ));
+                };
+                let bad = || {
+                    format!("header line {ln}: expected \"property TYPE NAME\" or \"property list COUNT_TYPE ITEM_TYPE NAME\" with types char, uchar, short, ushort, int, uint, float, double; found \"{line}\"")
+                };
+                let prop = if w.get(1) == Some(&"list") {
+                    match (w.get(2), w.get(3), w.get(4), w.get(5)) {
+                        (Some(c), Some(t), Some(n), None) => {
+                            let count = Ty::parse(c).ok_or_else(bad)?;
+                            if !count.is_int() {
+                                return Err(bad());
+                            }
+                            Prop::List {
+                                name: n.to_string(),
+                                count,
+                                item: Ty::parse(t).ok_or_else(bad)?,
+                            }
+                        }
+                        _ => return Err(bad()),
+                    }
+                } else {
+                    match (w.get(1), w.get(2), w.get(3)) {
+                        (Some(t), Some(n), None) => Prop::Scalar {
+                            name: n.to_string(),
+                            ty: Ty::parse(t).ok_or_else(bad)?,
+                        },
+                        _ => return Err(bad()),
+                    }
+                };
+                el.props.push(prop);
+            }
+            Some(other) => {
+                return Err(format!(
+                    "header line {ln}: unknown keyword \"{other}\" (valid: format, element, property, comment, obj_info, end_header)"
+                ))
+            }
+        }
+    }
+    let Some(binary) = binary else {
+        return Err("the header has no format line".into());
+    };
+    Ok((elements, binary, &bytes[pos..]))
+}
+
+/// A source of scalar values (ASCII tokens or little-endian binary).
+trait Scalars {
+    fn scalar(&mut self, ty: Ty, at: &dyn Fn() -> String) -> Result<f64, String>;
+    /// Bytes left, an upper bound on what can still be read.
+    fn remaining(&self) -> usize;
+}
+
+struct Binary<'a> {
+    bytes: &'a [u8],
+    pos: usize,
+}
+
+impl Scalars for Binary<'_> {
+    fn scalar(&mut self, ty: Ty, at: &dyn Fn() -> String) -> Result<f64, String> {
+        let n = ty.size();
+        let Some(b) = self.bytes.get(self.pos..self.pos + n) else {
+            return Err(format!(
+                "truncated: {} ends past the end of the file ({} bytes of data)",
+                at(),
+                self.bytes.len()
+            ));
+        };
+        self.pos += n;
+        let mut a = [0u8; 8];
+        a[..n].copy_from_slice(b);
+        Ok(match ty {
+            Ty::I8 => a[0] as i8 as f64,
+            Ty::U8 => a[0] as f64,
+            Ty::I16 => i16::from_le_bytes([a[0], a[1]]) as f64,
+            Ty::U16 => u16::from_le_bytes([a[0], a[1]]) as f64,
+            Ty::I32 => i32::from_le_bytes([a[0], a[1], a[2], a[3]]) as f64,
+            Ty::U32 => u32::from_le_bytes([a[0], a[1], a[2], a[3]]) as f64,
+            Ty::F32 => f32::from_le_bytes([a[0], a[1], a[2], a[3]]) as f64,
+            Ty::F64 => f64::from_le_bytes(a),
+        })
+    }
+
+    fn remaining(&self) -> usize {
+        self.bytes.len() - self.pos
+    }
+}
+
+struct Ascii<'a> {
+    tokens: std::str::SplitAsciiWhitespace<'a>,
+    remaining_bytes: usize,
+}
+
+impl Scalars for Ascii<'_> {
+    fn scalar(&mut self, ty: Ty, at: &dyn Fn() -> String) -> Result<f64, String> {
+        let Some(tok) = self.tokens.next() else {
+            return Err(format!("unexpected end of file in {}", at()));
+        };
+        self.remaining_bytes = self.remaining_bytes.saturating_sub(tok.len() + 1);
+        let v: f64 = tok
+            .parse()
+            .map_err(|_| format!("{}: \"{tok}\" is not a number", at()))?;
+        if ty.is_int() && (v.fract() != 0.0 || !v.is_finite()) {
+            return Err(format!("{}: \"{tok}\" is not an integer", at()));
+        }
+        Ok(v)
+    }
+
+    fn remaining(&self) -> usize {
+        self.remaining_bytes
+    }
+}

@@ -1,0 +1,557 @@
+//! The scene description: a TOML file, parsed and validated.
+//!
+//! ```toml
+//! [camera]
+//! eye = [0.0, 1.2, 3.5]     # world position of the pinhole
+//! target = [0.0, 0.4, 0.0]  # point at the image centre
+//! up = [0.0, 1.0, 0.0]      # optional, default +Y
+//! fov = 35.0                # vertical field of view, degrees, in (0, 180)
+//! width = 256               # pixels
+//! height = 256
+//! spp = 4                   # optional, pixel sub-samples (box filter), default 1
+//!
+//! [lighting]
+//! face_res = 32             # cubemap face resolution n, a power of two: M = 6·n² lights
+//! texel_samples = 4         # optional, directions per cubemap texel S, default 4
+//!
+//! [materials.clay]
+//! type = "lambert"
+//! albedo = [0.8, 0.6, 0.5]
+//!
+//! [materials.porcelain]
+//! type = "glossy"
+//! albedo = [0.1, 0.2, 0.5]  # Lambertian base
+//! specular = [0.04, 0.04, 0.04]  # Schlick F0
+//! roughness = 0.2           # GGX alpha
+//!
+//! [[meshes]]
+//! path = "../meshes/bunny.ply"   # .obj or .ply, relative to this file
+//! material = "clay"
+//! smooth = true             # optional, interpolated vertex normals (default) or flat
+//! scale = 1.0               # optional, uniform or [x, y, z], default 1
+//! rotation = [0.0, 30.0, 0.0]    # optional, Euler angles in degrees, default 0
+//! translation = [0.0, 0.5, 0.0]  # optional, default 0
+//!
+//! [[quads]]                 # a rectangle in the local XZ plane, facing +Y
+//! center = [0.0, 0.0, 0.0]
+//! size = [8.0, 8.0]         # extent along local X and Z
+//! rotation = [0.0, 0.0, 0.0]  # optional, Euler angles in degrees
+//! material = "clay"
+//! ```
+//!
+//! Transforms map a model point `p` to `translation + R·(scale ⊙ p)` with
+//! `R = Rz(rz)·Ry(ry)·Rx(rx)` for `rotation = [rx, ry, rz]`: the rotation
+//! about X is applied first, then Y, then Z, each counter-clockwise when
+//! looking down the axis towards the origin (right-handed).
+//!
+//! Unknown fields are errors, so that a misspelt setting is never silently
+//! ignored.
+
+use crate::error::{BakeError, Result};
+use ltm_codec::raw::{MAX_FACE_RES, MAX_PIXELS, MAX_SIDE};
+use serde::de::{self, Deserializer, SeqAccess, Visitor};
+use serde::Deserialize;
+use std::collections::BTreeMap;
+use std::fmt;
+use std::path::{Path, PathBuf};
+
+/// The default scene (`assets/scenes/default.toml`), embedded; its mesh
+/// paths are relative to `assets/scenes/`.
+pub const DEFAULT_SCENE_TOML: &str = include_str!("../../assets/scenes/default.toml");
+
+/// Largest pixel supersampling.
+pub const MAX_SPP: u32 = 4096;
+/// Largest number of direction samples per cubemap texel.
+pub const MAX_TEXEL_SAMPLES: u32 = 65536;
+/// Smallest GGX roughness (alpha).
+pub const MIN_ROUGHNESS: f64 = 0.01;
+
+/// A parsed, validated scene description.
+#[derive(Clone, Debug)]
+pub struct SceneDesc {
+    pub camera: CameraDesc,
+    pub lighting: LightingDesc,
+    pub materials: BTreeMap<String, MaterialDesc>,
+    pub meshes: Vec<MeshDesc>,
+    pub quads: Vec<QuadDesc>,
+    /// Directory that relative mesh paths are resolved against.
+    pub base_dir: PathBuf,
+    /// Where the description came from, for messages.
+    pub origin: String,
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct SceneFile {
+    camera: CameraDesc,
+    lighting: LightingDesc,
+    #[serde(default)]
+    materials: BTreeMap<String, MaterialDesc>,
+    #[serde(default)]
+    meshes: Vec<MeshDesc>,
+    #[serde(default)]
+    quads: Vec<QuadDesc>,
+}
+
+/// Pinhole camera. Pixel `(x, y)` (row `y` counted from the top) is row
+/// `p = y·width + x` of the matrix.
+#[derive(Clone, Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct CameraDesc {
+    pub eye: [f64; 3],
+    pub target: [f64; 3],
+    #[serde(default = "default_up")]
+    pub up: [f64; 3],
+    /// Vertical field of view in degrees.
+    pub fov: f64,
+    pub width: u32,
+    pub height: u32,
+    /// Pixel sub-samples averaged into each row (a box pixel filter).
+    #[serde(default = "default_spp")]
+    pub spp: u32,
+}
+
+/// Lighting resolution.
+#[derive(Clone, Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct LightingDesc {
+    /// Cubemap face resolution n (a power of two); M = 6·n² columns.
+    pub face_res: u32,
+    /// Direction samples S per cubemap texel.
+    #[serde(default = "default_texel_samples")]
+    pub texel_samples: u32,
+}
+
+/// A material; `type = "lambert"` or `type = "glossy"`.
+#[derive(Clone, Debug, Deserialize, PartialEq)]
+#[serde(tag = "type", rename_all = "lowercase", deny_unknown_fields)]
+pub enum MaterialDesc {
+    /// Lambertian: f_r = albedo/π.
+    Lambert { albedo: [f64; 3] },
+    /// A Lambertian base plus a GGX specular lobe (see [`crate::material`]).
+    Glossy {
+        albedo: [f64; 3],
+        /// Schlick's F0, the specular reflectance at normal incidence.
+        specular: [f64; 3],
+        /// GGX alpha (the width of the microfacet slope distribution).
+        roughness: f64,
+    },
+}
+
+/// A triangle mesh from an OBJ or PLY file.
+#[derive(Clone, Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct MeshDesc {
+    /// OBJ or PLY file, relative to the scene file.
+    pub path: PathBuf,
+    pub material: String,
+    /// Interpolated vertex normals (true) or flat triangle normals.
+    #[serde(default = "default_true")]
+    pub smooth: bool,
+    #[serde(default = "default_scale")]
+    pub scale: Scale,
+    /// Euler angles in degrees `[rx, ry, rz]`, applied X, then Y, then Z.
+    #[serde(default)]
+    pub rotation: [f64; 3],
+    #[serde(default)]
+    pub translation: [f64; 3],
+}
+
+/// A rectangle: local `[-size/2, size/2]` in X and Z, facing +Y, rotated
+/// then moved to `center`.
+#[derive(Clone, Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct QuadDesc {
+    pub center: [f64; 3],
+    pub size: [f64; 2],
+    #[serde(default)]
+    pub rotation: [f64; 3],
+    pub material: String,
+}
+
+/// A uniform (`scale = 2.0`) or per-axis (`scale = [1, 2, 1]`) scale.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Scale(pub [f64; 3]);
+
+impl<'de> Deserialize<'de> for Scale {
+    fn deserialize<D: Deserializer<'de>>(d: D) -> std::result::Result<Scale, D::Error> {
+        struct V;
+        impl<'de> Visitor<'de> for V {
+            type Value = Scale;
+            fn expecting(&self, f: &mut fmt::Formatter) -> fmt::Result {
+                f.write_str("a number or an array of 3 numbers")
+            }
+            fn visit_f64<E: de::Error>(self, v: f64) -> std::result::Result<Scale, E> {
+                Ok(Scale([v; 3]))
+            }
+            fn visit_i64<E: de::Error>(self, v: i64) -> std::result::Result<Scale, E> {
+                Ok(Scale([v as f64; 3]))
+            }
+            fn visit_u64<E: de::Error>(self, v: u64) -> std::result::Result<Scale, E> {
+                Ok(Scale([v as f64; 3]))
+            }
+            fn visit_seq<A: SeqAccess<'de>>(
+                self,
+                mut seq: A,
+            ) -> std::result::Result<Scale, A::Error> {
+                let mut s = [0.0; 3];
+                for (i, v) in s.iter_mut().enumerate() {
+                    *v = seq
+                        .next_element()?
+                        .ok_or_else(|| de::Error::invalid_length(i, &self))?;
+                }
+                if seq.next_element::<f64>()?.is_some() {
+                    return Err(de::Error::invalid_length(4, &self));
+                }
+                Ok(Scale(s))
+            }
+        }
+        d.deserialize_any(V)
+    }
+}
+
+fn default_up() -> [f64; 3] {
+    [0.0, 1.0, 0.0]
+}
+fn default_spp() -> u32 {
+    1
+}
+fn default_texel_samples() -> u32 {
+    4
+}
+fn default_true() -> bool {
+    true
+}
+fn default_scale() -> Scale {
+    Scale([1.0; 3])
+}
+
+/// Settings that override the scene file (e.g. from the command line).
+#[derive(Clone, Copy, Debug, Default)]
+pub struct Overrides {
+    pub width: Option<u32>,
+    pub height: Option<u32>,
+    pub face_res: Option<u32>,
+    pub texel_samples: Option<u32>,
+    pub spp: Option<u32>,
+}
+
+impl SceneDesc {
+    /// Reads and validates a scene file; mesh paths resolve against its
+    /// directory. Meshes are not opened until [`crate::Scene::build`].
+    pub fn load(path: &Path) -> Result<SceneDesc> {
+        let text = std::fs::read_to_string(path).map_err(|e| BakeError::io(path, e))?;
+        let base = path.parent().unwrap_or(Path::new("")).to_path_buf();
+        SceneDesc::parse(&text, &base, path)
+    }
+
+    /// Parses and validates scene TOML; `name` is used in messages.
+    pub fn parse(text: &str, base_dir: &Path, name: &Path) -> Result<SceneDesc> {
+        let file: SceneFile = toml::from_str(text).map_err(|e| BakeError::SceneSyntax {
+            path: name.to_path_buf(),
+            message: toml_message(text, &e),
+        })?;
+        let desc = SceneDesc {
+            camera: file.camera,
+            lighting: file.lighting,
+            materials: file.materials,
+            meshes: file.meshes,
+            quads: file.quads,
+            base_dir: base_dir.to_path_buf(),
+            origin: name.display().to_string(),
+        };
+        desc.validate()?;
+        Ok(desc)
+    }
+
+    /// The embedded default scene (the bunny and a glossy teapot on a ground
+    /// quad), with mesh paths resolved against `assets_dir` (the repository's
+    /// `assets/` directory, which holds `meshes/`).
+    pub fn default_scene(assets_dir: &Path) -> Result<SceneDesc> {
+        SceneDesc::parse(
+            DEFAULT_SCENE_TOML,
+            &assets_dir.join("scenes"),
+            &assets_dir.join("scenes").join("default.toml"),
+        )
+    }
+
+    /// Applies overrides and re-validates; a bad override is reported as
+    /// coming from the command line.
+    pub fn apply(&mut self, o: &Overrides) -> Result<()> {
+        let cl = "command line";
+        for (flag, v) in [
+            ("--width", o.width),
+            ("--height", o.height),
+            ("--spp", o.spp),
+            ("--face-res", o.face_res),
+            ("--texel-samples", o.texel_samples),
+        ] {
+            if let Some(v) = v {
+                let (lo, hi) = match flag {
+                    "--width" | "--height" => (1, MAX_SIDE),
+                    "--spp" => (1, MAX_SPP),
+                    "--face-res" => (1, MAX_FACE_RES),
+                    _ => (1, MAX_TEXEL_SAMPLES),
+                };
+                if v < lo || v > hi {
+                    return Err(BakeError::range(cl, flag, v, format!("{lo}..={hi}")));
+                }
+                if flag == "--face-res" && !v.is_power_of_two() {
+                    return Err(BakeError::range(
+                        cl,
+                        flag,
+                        v,
+                        format!("a power of two in 1..={MAX_FACE_RES}"),
+                    ));
+                }
+            }
+        }
+        let c = &mut self.camera;
+        c.width = o.width.unwrap_or(c.width);
+        c.height = o.height.unwrap_or(c.height);
+        c.spp = o.spp.unwrap_or(c.spp);
+        let l = &mut self.lighting;
+        l.face_res = o.face_res.unwrap_or(l.face_res);
+        l.texel_samples = o.texel_samples.unwrap_or(l.texel_samples);
+        self.validate()
+    }
+
+    /// Checks every field against its valid range and cross-references
+    /// (material names).
+    pub fn validate(&self) -> Result<()> {
+        let o = &self.origin;
+        let c = &self.camera;
+        finite3(o, "camera.eye", c.eye)?;
+        finite3(o, "camera.target", c.target)?;
+        finite3(o, "camera.up", c.up)?;
+        let fwd = sub(c.target, c.eye);
+        if norm(fwd) == 0.0 {
+            return Err(BakeError::invalid(
+                o,
+                "camera.target",
+                "equals camera.eye; the camera needs a viewing direction",
+            ));
+        }
+        let cross = cross(fwd, c.up);
+        if norm(cross) <= 1e-9 * norm(fwd) * norm(c.up) {
+            return Err(BakeError::invalid(
+                o,
+                "camera.up",
+                format!(
+                    "{:?} is zero or parallel to the viewing direction (target − eye); choose an up vector across it",
+                    c.up
+                ),
+            ));
+        }
+        if !(c.fov > 0.0 && c.fov < 180.0) {
+            return Err(BakeError::range(
+                o,
+                "camera.fov",
+                c.fov,
+                "0 < fov < 180 degrees",
+            ));
+        }
+        for (f, v) in [("camera.width", c.width), ("camera.height", c.height)] {
+            if v == 0 || v > MAX_SIDE {
+                return Err(BakeError::range(o, f, v, format!("1..={MAX_SIDE}")));
+            }
+        }
+        let pixels = c.width as u64 * c.height as u64;
+        if pixels > MAX_PIXELS {
+            return Err(BakeError::range(
+                o,
+                "camera.width·camera.height",
+                pixels,
+                format!("at most {MAX_PIXELS}"),
+            ));
+        }
+        if c.spp == 0 || c.spp > MAX_SPP {
+            return Err(BakeError::range(
+                o,
+                "camera.spp",
+                c.spp,
+                format!("1..={MAX_SPP}"),
+            ));
+        }
+        let l = &self.lighting;
+        if !l.face_res.is_power_of_two() || l.face_res > MAX_FACE_RES {
+            return Err(BakeError::range(
+                o,
+                "lighting.face_res",
+                l.face_res,
+                format!("a power of two in 1..={MAX_FACE_RES}"),
+            ));
+        }
+        if l.texel_samples == 0 || l.texel_samples > MAX_TEXEL_SAMPLES {
+            return Err(BakeError::range(
+                o,
+                "lighting.texel_samples",
+                l.texel_samples,
+                format!("1..={MAX_TEXEL_SAMPLES}"),
+            ));
+        }
+        for (name, m) in &self.materials {
+            let f = |k: &str| format!("materials.{name}.{k}");
+            let (albedo, spec, rough) = match m {
+                MaterialDesc::Lambert { albedo } => (albedo, None, None),
+                MaterialDesc::Glossy {
+                    albedo,
+                    specular,
+                    roughness,
+                } => (albedo, Some(specular), Some(*roughness)),
+            };
+            unit3(o, &f("albedo"), *albedo)?;
+            if let Some(s) = spec {
+                unit3(o, &f("specular"), *s)?;
+            }
+            if let Some(r) = rough {
+                if !(MIN_ROUGHNESS..=1.0).contains(&r) {
+                    return Err(BakeError::range(
+                        o,
+                        f("roughness"),
+                        r,
+                        format!("{MIN_ROUGHNESS}..=1 (GGX alpha)"),
+                    ));
+                }
+            }
+        }
+        if self.meshes.is_empty() && self.quads.is_empty() {
+            return Err(BakeError::invalid(
+                o,
+                "meshes, quads",
+                "the scene has no geometry; add a [[meshes]] or [[quads]] entry",
+            ));
+        }
+        for (i, m) in self.meshes.iter().enumerate() {
+            let f = |k: &str| format!("meshes[{i}].{k}");
+            self.known_material(&f("material"), &m.material)?;
+            for (k, v) in m.scale.0.iter().enumerate() {
+                if !v.is_finite() || *v == 0.0 {
+                    return Err(BakeError::range(
+                        o,
+                        format!("{}[{k}]", f("scale")),
+                        v,
+                        "finite and non-zero",
+                    ));
+                }
+            }
+            finite3(o, &f("rotation"), m.rotation)?;
+            finite3(o, &f("translation"), m.translation)?;
+        }
+        for (i, q) in self.quads.iter().enumerate() {
+            let f = |k: &str| format!("quads[{i}].{k}");
+            self.known_material(&f("material"), &q.material)?;
+            finite3(o, &f("center"), q.center)?;
+            finite3(o, &f("rotation"), q.rotation)?;
+            for (k, v) in q.size.iter().enumerate() {
+                if !(v.is_finite() && *v > 0.0) {
+                    return Err(BakeError::range(
+                        o,
+                        format!("{}[{k}]", f("size")),
+                        v,
+                        "finite and > 0",
+                    ));
+                }
+            }
+        }
+        Ok(())
+    }
+
+    fn known_material(&self, field: &str, name: &str) -> Result<()> {
+        if self.materials.contains_key(name) {
+            return Ok(());
+        }
+        let known: Vec<&str> = self.materials.keys().map(String::as_str).collect();
+        Err(BakeError::invalid(
+            &self.origin,
+            field,
+            format!(
+                "unknown material \"{name}\" (defined: {})",
+                if known.is_empty() {
+                    "none; add a [materials.NAME] table".to_string()
+                } else {
+                    known.join(", ")
+                }
+            ),
+        ))
+    }
+
+    /// Resolves a mesh path against the scene's directory.
+    pub fn resolve(&self, path: &Path) -> PathBuf {
+        if path.is_absolute() {
+            path.to_path_buf()
+        } else {
+            self.base_dir.join(path)
+        }
+    }
+
+    /// True when some mesh or quad uses a glossy material, so that the
+    /// transport needs 3 channels.
+    pub fn needs_color_transport(&self) -> bool {
+        let used = self
+            .meshes
+            .iter()
+            .map(|m| &m.material)
+            .chain(self.quads.iter().map(|q| &q.material));
+        used.into_iter()
+            .any(|name| matches!(self.materials.get(name), Some(MaterialDesc::Glossy { .. })))
+    }
+}
+
+/// A one-line message with line and column from a TOML error.
+fn toml_message(text: &str, e: &toml::de::Error) -> String {
+    let msg = e.message().trim().replace('\n', "; ");
+    match e.span() {
+        Some(span) => {
+            let before = &text[..span.start.min(text.len())];
+            let line = before.matches('\n').count() + 1;
+            let line_start = before.rfind('\n').map_or(0, |i| i + 1);
+            let col = before.len() - line_start + 1;
+            let src = text[line_start..].lines().next().unwrap_or("").trim();
+            format!("line {line}, column {col} (`{src}`): {msg}")
+        }
+        None => msg,
+    }
+}
+
+fn finite3(o: &str, field: &str, v: [f64; 3]) -> Result<()> {
+    if v.iter().all(|x| x.is_finite()) {
+        Ok(())
+    } else {
+        Err(BakeError::range(
+            o,
+            field,
+            format!("{v:?}"),
+            "finite numbers",
+        ))
+    }
+}
+
+fn unit3(o: &str, field: &str, v: [f64; 3]) -> Result<()> {
+    if v.iter().all(|x| (0.0..=1.0).contains(x)) {
+        Ok(())
+    } else {
+        Err(BakeError::range(
+            o,
+            field,
+            format!("{v:?}"),
+            "each component in 0..=1",
+        ))
+    }
+}
+
+fn sub(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
+    [a[0] - b[0], a[1] - b[1], a[2] - b[2]]
+}
+
+fn cross(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
+    [
+        a[1] * b[2] - a[2] * b[1],
+        a[2] * b[0] - a[0] * b[2],
+        a[0] * b[1] - a[1] * b[0],
+    ]
+}
+
+fn norm(a: [f64; 3]) -> f64 {
+    (a[0] * a[0] + a[1] * a[1] + a[2] * a[2]).sqrt()
+}

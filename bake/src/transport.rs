@@ -1,0 +1,314 @@
+//! One row of the transport matrix: the light reflected towards the camera
+//! through pixel `p` from each cubemap texel of a distant environment.
+//!
+//! # Definition
+//!
+//! Rows are pixels, `p = y·width + x` with `y` counted from the top row
+//! (camera model: [`crate::Camera::direction`]). Columns are cubemap
+//! texels `j = face·n² + row·n + col` ([`ltm_codec::cubemap`]: OpenGL face
+//! order and orientation, world Y up). A row holds `M·C` values,
+//! channel-interleaved: `T[p][j][c]` at index `j·C + c`.
+//!
+//! Let `L[j] = (1/Ω_j) ∫_{texel j} L(ω) dω` be the mean radiance of texel
+//! `j` (Ω_j its solid angle). Then the pixel's radiance is
+//!
+//! `B[p][c] = Σ_j T[p][j][c] · L[j][c]`,
+//!
+//! `T[p][j][c] = (1/K) Σ_k ∫_{texel j} V(x_k, ω) · f_r,c(x_k, ω → ω_o,k) · max(0, n_k·ω) dω`,
+//!
+//! exactly when the environment is constant over each texel (otherwise it
+//! is the texel-average approximation of `∫ V f_r cos L dω`). The sum runs
+//! over the pixel's K sub-samples `k` (a box filter over the pixel's area):
+//! `x_k` is the first hit of the primary ray through sub-sample `k`,
+//! `ω_o,k` the direction back to the eye, `n_k` the shading normal, `f_r`
+//! the material's reflectance ([`crate::material`]) and `V` the binary
+//! visibility of the environment: 1 when a shadow ray from `x_k` towards
+//! `ω` hits no triangle, 0 when it does or when `ω` is below the geometric
+//! surface. Surfaces are two-sided (normals are flipped to face the eye).
+//! Sub-samples that miss the scene contribute zero; a pixel that misses
+//! everywhere has an all-zero row (flagged in the raw store). Emission and
+//! interreflection are not modelled: the matrix is direct lighting from the
+//! environment, in the same units as L.
+//!
+//! # Grey transport (1 channel)
+//!
+//! When every material used is Lambertian, `f_r = albedo/π` and
+//! `T[p][j][c] = albedo_c · t[p][j]` with the grey transport
+//! `t = ∫ V · max(0, n·ω)/π dω`. The store then holds `t` (C = 1) and the
+//! RGB albedo image `a[p]`, and `B[p][c] = a[p][c] · Σ_j t[p][j] · L[j][c]`.
+//! With K > 1 sub-samples of albedos `a_k` (zero for a miss), the stored
+//! albedo is their mean `(1/K) Σ_k a_k` and `t = Σ_k Y(a_k) t_k / Σ_k Y(a_k)`
+//! with `Y` the Rec. 709 luminance (0.2126, 0.7152, 0.0722): the product
+//! is exact in luminance always, and in every channel when the sub-samples'
+//! albedos are proportional (one material, or one material and the
+//! background; at a boundary between materials of different hues the
+//! pixel's colour is approximate).
+//!
+//! # Quadrature
+//!
+//! Texel `j = (face, row, col)` spans face coordinates
+//! `s ∈ [col/n, (col+1)/n]`, `t ∈ [row/n, (row+1)/n]`. Its S direction
+//! samples are the rotated Hammersley points `(u_i, v_i)` of
+//! [`crate::sampling`], `s_i = (col + u_i)/n`, `t_i = (row + v_i)/n`,
+//! `ω_i = face_point_direction(face, s_i, t_i)`. They are uniform in
+//! `(s, t)`, whose solid-angle density is `dω = J ds dt` with
+//! `J = 4/(1 + a² + b²)^{3/2}`, `a = 2s − 1`, `b = 2t − 1`. The estimate is
+//!
+//! `∫_{texel j} g dω ≈ Ω_j · Σ_i J_i g(ω_i) / Σ_i J_i`,
+//!
+//! with Ω_j the texel's exact solid angle
+//! ([`ltm_codec::cubemap::texel_solid_angle`]): the weights follow the
+//! solid-angle density and sum exactly to Ω_j, so an integrand that is
+//! constant over the texel is integrated exactly. A texel whose four corners
+//! all lie on or below the horizon of the shading or the geometric normal
+//! is skipped without tracing: a texel is the spherical convex hull of its
+//! corners, so it then lies wholly below and contributes nothing.
+//!
+//! Shadow rays start at `x + ε·n_g` with ε = 10⁻⁵ × max(bounding-box
+//! diagonal, largest coordinate magnitude, 10⁻³) of the scene, and use the
+//! BVH's any-hit query.
+
+use crate::material::Material;
+use crate::sampling::{hammersley, mix64, rotation, wrap};
+use crate::world::Scene;
+use glam::DVec3;
+use ltm_codec::cubemap::{face_point_direction, face_rect_solid_angle};
+use std::f64::consts::FRAC_1_PI;
+
+/// Rec. 709 luminance weights.
+pub const LUMINANCE: [f64; 3] = [0.2126, 0.7152, 0.0722];
+
+/// Rays traced for one or more rows.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct RowStats {
+    pub primary_rays: u64,
+    pub shadow_rays: u64,
+}
+
+impl std::ops::AddAssign for RowStats {
+    fn add_assign(&mut self, o: RowStats) {
+        self.primary_rays += o.primary_rays;
+        self.shadow_rays += o.shadow_rays;
+    }
+}
+
+/// Tables shared by every row of a bake.
+pub(crate) struct Tables {
+    n: usize,
+    /// Corner directions, `face·(n+1)² + r·(n+1) + c` for the grid point at
+    /// `s = c/n`, `t = r/n`.
+    corners: Vec<DVec3>,
+    /// Solid angle of the face-local texel `row·n + col` (the same on every
+    /// face).
+    omega: Vec<f64>,
+    texel_pts: Vec<[f64; 2]>,
+    pixel_pts: Vec<[f64; 2]>,
+}
+
+impl Tables {
+    pub(crate) fn new(scene: &Scene) -> Tables {
+        let n = scene.face_res as usize;
+        let nf = n as f64;
+        let mut corners = Vec::with_capacity(6 * (n + 1) * (n + 1));
+        for face in 0..6 {
+            for r in 0..=n {
+                for c in 0..=n {
+                    corners.push(face_point_direction(face, c as f64 / nf, r as f64 / nf));
+                }
+            }
+        }
+        let mut omega = Vec::with_capacity(n * n);
+        for r in 0..n {
+            for c in 0..n {
+                omega.push(face_rect_solid_angle(
+                    c as f64 / nf,
+                    (c + 1) as f64 / nf,
+                    r as f64 / nf,
+                    (r + 1) as f64 / nf,
+                ));
+            }
+        }
+        Tables {
+            n,
+            corners,
+            omega,
+            texel_pts: hammersley(scene.texel_samples),
+            pixel_pts: hammersley(scene.spp),
+        }
+    }
+}
+
+/// Per-thread working memory.
+pub(crate) struct Scratch {
+    acc: Vec<f64>,
+}
+
+impl Scratch {
+    pub(crate) fn new(scene: &Scene) -> Scratch {
+        let m = 6 * scene.face_res as usize * scene.face_res as usize;
+        Scratch {
+            acc: vec![0.0; m * scene.channels as usize],
+        }
+    }
+}
+
+const PIXEL_KEY: u64 = 0x5049_5845_4c00_0000;
+const DIR_KEY: u64 = 0x4449_5200_0000_0000;
+
+impl Scene {
+    /// Computes row `p` (M·C values, channel-interleaved) and, for grey
+    /// transport, the pixel's RGB albedo (zero otherwise). See the module
+    /// docs for the definition.
+    pub fn transport_row(&self, p: usize, row: &mut [f32], albedo: &mut [f32; 3]) -> RowStats {
+        let tables = Tables::new(self);
+        let mut scratch = Scratch::new(self);
+        self.row_into(&tables, &mut scratch, p, row, albedo)
+    }
+
+    pub(crate) fn row_into(
+        &self,
+        tables: &Tables,
+        scratch: &mut Scratch,
+        p: usize,
+        row: &mut [f32],
+        albedo_out: &mut [f32; 3],
+    ) -> RowStats {
+        let cam = &self.camera;
+        let (x, y) = (
+            (p % cam.width as usize) as f64,
+            (p / cam.width as usize) as f64,
+        );
+        let k_count = self.spp as usize;
+        let acc = &mut scratch.acc;
+        acc.iter_mut().for_each(|v| *v = 0.0);
+        let mut stats = RowStats::default();
+        let mut albedo_sum = [0.0f64; 3];
+        let mut lum_sum = 0.0;
+        let pix_rot = rotation(mix64(p as u64 ^ PIXEL_KEY));
+        for k in 0..k_count {
+            let (dx, dy) = if k_count == 1 {
+                (0.5, 0.5)
+            } else {
+                let [u, v] = tables.pixel_pts[k];
+                (wrap(u, pix_rot[0]), wrap(v, pix_rot[1]))
+            };
+            stats.primary_rays += 1;
+            let dir = cam.direction(x + dx, y + dy);
+            let Some(hit) = self.intersect(cam.eye, dir) else {
+                continue;
+            };
+            let material = &self.materials[hit.material];
+            let seed = mix64(((p as u64) << 12 ^ k as u64) ^ DIR_KEY);
+            let wo = -dir;
+            if self.channels == 1 {
+                let a = material.albedo();
+                let lum: f64 = (0..3).map(|c| LUMINANCE[c] * a[c]).sum();
+                for c in 0..3 {
+                    albedo_sum[c] += a[c];
+                }
+                if lum <= 0.0 {
+                    continue;
+                }
+                lum_sum += lum;
+                stats.shadow_rays +=
+                    self.integrate(tables, &hit, seed, |_, _| [lum * FRAC_1_PI; 1], acc);
+            } else {
+                let w = 1.0 / k_count as f64;
+                stats.shadow_rays += self.integrate(
+                    tables,
+                    &hit,
+                    seed,
+                    |m: &Material, d| m.eval(hit.ns, d, wo).map(|v| v * w),
+                    acc,
+                );
+            }
+        }
+        if self.channels == 1 {
+            let inv = if lum_sum > 0.0 { 1.0 / lum_sum } else { 0.0 };
+            for (o, a) in row.iter_mut().zip(acc.iter()) {
+                *o = (a * inv) as f32;
+            }
+            for c in 0..3 {
+                albedo_out[c] = (albedo_sum[c] / k_count as f64) as f32;
+            }
+        } else {
+            for (o, a) in row.iter_mut().zip(acc.iter()) {
+                *o = *a as f32;
+            }
+            *albedo_out = [0.0; 3];
+        }
+        stats
+    }
+
+    /// Adds `∫_{texel j} V · f(ω) · max(0, n_s·ω) dω` for every texel into
+    /// `acc` (C values per texel); returns the shadow rays traced.
+    fn integrate<const C: usize>(
+        &self,
+        tables: &Tables,
+        hit: &crate::world::Hit,
+        seed: u64,
+        f: impl Fn(&Material, DVec3) -> [f64; C],
+        acc: &mut [f64],
+    ) -> u64 {
+        let n = tables.n;
+        let nf = n as f64;
+        let (ns, ng) = (hit.ns, hit.ng);
+        let origin = hit.point + self.epsilon * ng;
+        let material = &self.materials[hit.material];
+        let stride = n + 1;
+        let mut rays = 0;
+        for face in 0..6 {
+            let cbase = face * stride * stride;
+            for r in 0..n {
+                for c in 0..n {
+                    let i0 = cbase + r * stride + c;
+                    let quad = [
+                        tables.corners[i0],
+                        tables.corners[i0 + 1],
+                        tables.corners[i0 + stride],
+                        tables.corners[i0 + stride + 1],
+                    ];
+                    if quad.iter().all(|d| ns.dot(*d) <= 0.0)
+                        || quad.iter().all(|d| ng.dot(*d) <= 0.0)
+                    {
+                        continue;
+                    }
+                    let j = (face * n + r) * n + c;
+                    let rot = rotation(seed ^ (j as u64).wrapping_mul(0x9E37_79B9_7F4A_7C15));
+                    let mut sum_j = 0.0;
+                    let mut sum = [0.0f64; C];
+                    for &[u, v] in &tables.texel_pts {
+                        let s = (c as f64 + wrap(u, rot[0])) / nf;
+                        let t = (r as f64 + wrap(v, rot[1])) / nf;
+                        let (a, b) = (2.0 * s - 1.0, 2.0 * t - 1.0);
+                        let q = 1.0 + a * a + b * b;
+                        let jac = 1.0 / (q * q.sqrt());
+                        sum_j += jac;
+                        let d = face_point_direction(face, s, t);
+                        let cos = ns.dot(d);
+                        if cos <= 0.0 || ng.dot(d) <= 0.0 {
+                            continue;
+                        }
+                        let fr = f(material, d);
+                        if fr.iter().all(|&v| v == 0.0) {
+                            continue;
+                        }
+                        rays += 1;
+                        if self.occluded(origin, d) {
+                            continue;
+                        }
+                        let w = jac * cos;
+                        for ch in 0..C {
+                            sum[ch] += w * fr[ch];
+                        }
+                    }
+                    let scale = tables.omega[r * n + c] / sum_j;
+                    for ch in 0..C {
+                        acc[j * C + ch] += sum[ch] * scale;
+                    }
+                }
+            }
+        }
+        rays
+    }
+}

@@ -68,7 +68,7 @@ pub struct CompressArgs {
     #[arg(long, default_value = "legall53")]
     pub col_filter: Filter,
     /// Quantization bits per coefficient (2..=16).
-    #[arg(long, default_value_t = 9)]
+    #[arg(long, default_value_t = 9, value_parser = clap::value_parser!(u32).range(2..=16))]
     pub bits: u32,
     /// Keep the N largest coefficients of each column (the paper's rule).
     #[arg(long, conflicts_with = "max_error")]

@@ -2,6 +2,7 @@
 
 mod bake;
 mod codec_cmds;
+mod demo;
 mod progress;
 mod reference;
 mod relight_cmd;
@@ -23,6 +24,8 @@ struct Cli {
 
 #[derive(Subcommand)]
 enum Command {
+    /// Run the whole pipeline on the default scene and the maps in assets/.
+    Demo(demo::DemoArgs),
     /// Ray-trace a scene's transport matrix into a raw store.
     Bake(bake::BakeArgs),
     /// Convert a NumPy matrix into a raw store.
@@ -42,6 +45,7 @@ enum Command {
 fn main() -> ExitCode {
     let cli = Cli::parse();
     let result = match cli.command {
+        Command::Demo(args) => demo::run(args),
         Command::Bake(args) => bake::run(args),
         Command::Import(args) => codec_cmds::import(args),
         Command::Compress(args) => codec_cmds::compress_cmd(args),

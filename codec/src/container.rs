@@ -908,7 +908,9 @@ pub fn repair_checksums(b: &mut [u8]) {
     for (tag, offset, len, crc_at) in &chunks {
         if let (false, Some(r)) = (tag == b"DATA", span(b.len(), *offset, *len)) {
             let crc = crc32fast::hash(&b[r]);
-            b[*crc_at..*crc_at + 4].copy_from_slice(&crc.to_le_bytes());
+            if let Some(dst) = b.get_mut(*crc_at..*crc_at + 4) {
+                dst.copy_from_slice(&crc.to_le_bytes());
+            }
         }
     }
     let dir_end = 24 + 32 * count;

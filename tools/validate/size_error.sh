@@ -8,7 +8,7 @@ raw=$1
 ltm=${2:-target/release/ltm}
 tmp=$(mktemp -d)
 trap 'rm -rf "$tmp"' EXIT
-for mode in 2d 4d adaptive; do
+for mode in ${MODES:-2d 4d adaptive}; do
   for bits in 6 8 9 10 12; do
     for target in 0.003 0.01 0.03 0.1; do
       start=$(date +%s.%N)

@@ -15,8 +15,8 @@
 //!    weighted, dither-quantized and stored sparse (zstd). In adaptive mode the
 //!    two best depths by estimate, depth 0 and the full depth are each coded
 //!    and decoded with [`ColumnDecoder`] — the relighter's code — and the one
-//!    with the lowest measured cost is kept; the measured errors give the
-//!    file's error.
+//!    with the lowest measured cost (zstd-coded bytes plus error/τ²) is kept;
+//!    the measured errors give the file's error.
 
 use crate::container::{EncodedColumn, LtmWriter, Meta, Mode, SparseColumn};
 use crate::decode::ColumnDecoder;
@@ -211,6 +211,12 @@ fn is_monochrome(raw: &RawStore) -> bool {
         mono
     })
 }
+
+/// Stored bytes of a typical coefficient: the exchange rate between a
+/// candidate depth's coded size and the analysis's unit (one coefficient).
+/// Deeper transforms keep fewer coefficients but larger values, so the
+/// depth choice counts coded bytes, not coefficients.
+const BYTES_PER_COEFFICIENT: f64 = 3.0;
 
 /// Squared-magnitude histogram window used by the analysis.
 const BINS: usize = 64;
@@ -733,7 +739,10 @@ pub fn compress(
                             // Target error: Lagrangian cost; terms: the paper's rule
                             // (less error wins; on ties, fewer nonzeros).
                             let cost = if tau_sq > 0.0 {
-                                col.indices.len() as f64 + err / tau_sq
+                                let bytes = EncodedColumn::new(&col, channels, opts.zstd_level)
+                                    .bytes
+                                    .len() as f64;
+                                bytes / BYTES_PER_COEFFICIENT + err / tau_sq
                             } else {
                                 err
                             };
@@ -773,7 +782,7 @@ pub fn compress(
             0.0
         };
         attempt += 1;
-        if err_total > budget * 1.0001 && plan.as_ref().is_some_and(|p| p.0 > 0.0) && attempt < 4 {
+        if err_total > budget * 1.0001 && plan.as_ref().is_some_and(|p| p.0 > 0.0) && attempt < 8 {
             effective_budget *= 0.9 * budget / err_total;
             writer.abandon();
             continue;

@@ -394,6 +394,9 @@ enum Keep {
 
 /// Compresses a raw store into `out` (written atomically). `progress` gets
 /// (stage, done, total) updates.
+///
+/// The same as [`Transposed::new`] followed by [`Transposed::code`]; a sweep
+/// over coding settings builds the [`Transposed`] matrix once instead.
 pub fn compress(
     raw: &RawStore,
     out: &Path,
@@ -401,395 +404,498 @@ pub fn compress(
     progress: &(dyn Fn(Stage, u64, u64) + Sync),
 ) -> Result<CompressStats> {
     check_options(opts)?;
-    let src = raw.dims();
-    let mono = is_monochrome(raw);
-    let channels = if mono { 1 } else { src.channels as usize };
-    let dims = Dims {
-        channels: channels as u32,
-        ..src
-    };
-    let (n, p, m) = (dims.face_res as usize, dims.pixels(), dims.lights());
-    let (w, h) = (dims.width as usize, dims.height as usize);
-    let max_depth = max_levels(w, h);
-    let mem = opts.mem_budget as usize / 4; // in f32 values
+    let dir = out
+        .parent()
+        .filter(|d| !d.as_os_str().is_empty())
+        .unwrap_or(Path::new("."));
+    Transposed::new(raw, opts.row_filter, opts.mem_budget, dir, progress)?.code(out, opts, progress)
+}
 
-    // Column groups: G columns × channels × P values each within half the budget.
-    let group = (mem / 2 / (channels * p)).clamp(1, m);
-    let groups = m.div_ceil(group);
-    let total = m * channels * p;
-    let out_of_core = total > mem;
-    let mut store = if out_of_core {
-        let dir = out
-            .parent()
-            .filter(|d| !d.as_os_str().is_empty())
-            .unwrap_or(Path::new("."));
-        Store::File(tempfile_in(dir)?)
-    } else {
-        Store::Memory(vec![0.0; total])
-    };
+/// A raw store after the row transform and the transpose (steps 1 and 2):
+/// the input of every coding setting that shares its row filter.
+pub struct Transposed<'a> {
+    raw: &'a RawStore,
+    /// The stored dimensions (1 channel when the store is monochrome RGB).
+    dims: Dims,
+    row_filter: Filter,
+    store: Store,
+    /// Columns per group.
+    group: usize,
+    norm_sq: f64,
+    /// Depth-0 histogram of squared row-transformed values (512 half-octaves).
+    hist0: Vec<(u64, f64)>,
+    out_of_core: bool,
+}
 
-    // 1. Rows: transform, accumulate the norm and the depth-0 histogram, scatter.
-    let block = (mem / 4 / (m * channels)).clamp(1, p);
-    let mut norm_sq = 0.0f64;
-    let mut hist0 = vec![(0u64, 0.0f64); 512];
-    let hist0_bin =
-        |e: f64| ((e.log2() * BINS_PER_OCTAVE).floor() as i64 + 320).clamp(0, 511) as usize;
-    let mut tbuf = vec![0.0f32; block * m * channels];
-    let mut verified = 0;
-    let mut p0 = 0;
-    while p0 < p {
-        let rows = block.min(p - p0);
-        // Check the CRC of every raw block these rows touch, once.
-        while verified < raw.header().block_count()
-            && raw.header().block_range(verified).start < p0 + rows
-        {
-            raw.verify_block(verified)?;
-            raw.release_rows(raw.header().block_range(verified));
-            verified += 1;
+/// Bin of the 512-bin histogram of squared values built with the rows.
+fn hist0_bin(e: f64) -> usize {
+    ((e.log2() * BINS_PER_OCTAVE).floor() as i64 + 320).clamp(0, 511) as usize
+}
+
+impl<'a> Transposed<'a> {
+    /// Row-transforms every row of `raw` with `row_filter` and transposes the
+    /// result into column groups: in memory when the matrix fits
+    /// `mem_budget` bytes, else in an unlinked temporary file in `temp_dir`.
+    /// Each raw block's checksum is verified before its rows are used.
+    pub fn new(
+        raw: &'a RawStore,
+        row_filter: Filter,
+        mem_budget: u64,
+        temp_dir: &Path,
+        progress: &(dyn Fn(Stage, u64, u64) + Sync),
+    ) -> Result<Transposed<'a>> {
+        if !row_filter.is_orthonormal() {
+            return Err(Error::range(
+                "row filter",
+                row_filter,
+                "haar, d4, d6 or d8 (orthonormal)",
+            ));
         }
-        let src_rows = raw.rows(p0..p0 + rows);
-        // Transformed rows, channel-planar: rbuf[(r·C + c)·M + j].
-        let mut rbuf = vec![0.0f32; rows * channels * m];
-        rbuf.par_chunks_mut(channels * m)
-            .enumerate()
-            .try_for_each_init(
-                || vec![0.0f32; n * n],
-                |work, (r, out)| -> Result<()> {
-                    let row = &src_rows
-                        [r * m * src.channels as usize..(r + 1) * m * src.channels as usize];
-                    for c in 0..channels {
-                        let plane = &mut out[c * m..(c + 1) * m];
-                        for (j, v) in plane.iter_mut().enumerate() {
-                            *v = row[j * src.channels as usize + c];
-                        }
-                        row_forward(opts.row_filter, n, plane, work)?;
-                    }
-                    Ok(())
-                },
-            )?;
-        // Per row, then summed in row order: the same sums whatever the thread
-        // count and block size.
-        let partial: Vec<(f64, Vec<(u64, f64)>)> = rbuf
-            .par_chunks(channels * m)
-            .map(|chunk| {
-                let mut norm = 0.0f64;
-                let mut hist = vec![(0u64, 0.0f64); 512];
-                for v in chunk {
-                    let e = (*v as f64).powi(2);
-                    norm += e;
-                    if e > 0.0 {
-                        let bin = &mut hist[hist0_bin(e)];
-                        bin.0 += 1;
-                        bin.1 += e;
-                    }
-                }
-                (norm, hist)
-            })
-            .collect();
-        for (norm, hist) in partial {
-            norm_sq += norm;
-            for (a, b) in hist0.iter_mut().zip(hist) {
-                a.0 += b.0;
-                a.1 += b.1;
-            }
+        if mem_budget < 1 << 20 {
+            return Err(Error::range("memory budget", mem_budget, "at least 1 MiB"));
         }
-        // Transpose the block: tbuf[(j·C + c)·rows + r].
-        tbuf[..rows * m * channels]
-            .par_chunks_mut(rows)
-            .enumerate()
-            .for_each(|(jc, run)| {
-                let (j, c) = (jc / channels, jc % channels);
-                for (r, v) in run.iter_mut().enumerate() {
-                    *v = rbuf[(r * channels + c) * m + j];
-                }
-            });
-        for jc in 0..m * channels {
-            let (j, c) = (jc / channels, jc % channels);
-            let (g, l) = (j / group, j % group);
-            let offset = g * group * channels * p + (l * channels + c) * p + p0;
-            store.write(offset, &tbuf[jc * rows..(jc + 1) * rows])?;
-        }
-        raw.release_rows(p0..p0 + rows);
-        p0 += rows;
-        progress(Stage::Rows, p0 as u64, p as u64);
-    }
-    drop(tbuf);
-    let norm = norm_sq.sqrt();
-
-    let weights = BandWeights::new(opts.col_filter, w, h, max_depth);
-    let meta = Meta {
-        dims,
-        mode: opts.mode,
-        row_filter: opts.row_filter,
-        col_filter: opts.col_filter,
-        bits: opts.bits,
-        seed: opts.seed,
-        target_error: 0.0,
-        achieved_error: 0.0,
-        terms: 0,
-        norm,
-    };
-    let decoder = ColumnDecoder::new(&meta);
-    let scale_group_maps: Vec<Vec<u8>> = (0..=max_depth).map(|d| scale_groups(w, h, d)).collect();
-    let ctx = Ctx {
-        dims,
-        channels,
-        opts,
-        weights: &weights,
-        decoder: &decoder,
-        groups: &scale_group_maps,
-    };
-    let depths = candidate_depths(opts.mode, max_depth);
-    let q = levels(opts.bits) as f64;
-
-    let read_group = |g: usize| -> Result<Vec<f32>> {
-        let cols = group.min(m - g * group);
-        let mut data = vec![0.0f32; cols * channels * p];
-        store.read(g * group * channels * p, &mut data)?;
-        Ok(data)
-    };
-
-    // 2. Analysis: global threshold and per-column depth for a target error.
-    let budget = match opts.target {
-        Target::MaxError(e) => (e * norm).powi(2),
-        Target::Terms(_) => 0.0,
-    };
-    let mut analysis: Option<(Analysis, f64)> = None;
-    if let Target::MaxError(_) = opts.target {
-        // First guess τ0 from the depth-0 histogram: drop the smallest bins
-        // while their energy stays within half the budget.
-        let mut acc = 0.0;
-        let mut tau0_sq = f64::MIN_POSITIVE;
-        for (b, &(_, e)) in hist0.iter().enumerate() {
-            if acc + e > budget * 0.5 {
-                tau0_sq = 2f64.powf((b as f64 - 320.0) / BINS_PER_OCTAVE);
-                break;
-            }
-            acc += e;
-        }
-        let nd = depths.len();
-        let mut an = Analysis {
-            hist: vec![[(0, 0.0); BINS]; m * nd],
-            peak: vec![(0.0, 0); m * nd],
+        let src = raw.dims();
+        let mono = is_monochrome(raw);
+        let channels = if mono { 1 } else { src.channels as usize };
+        let dims = Dims {
+            channels: channels as u32,
+            ..src
         };
-        for g in 0..groups {
-            let data = read_group(g)?;
-            let cols = data.len() / (channels * p);
-            let results: Vec<_> = (0..cols)
-                .into_par_iter()
-                .map_init(
-                    || (vec![0.0f32; channels * p], vec![0.0f32; p]),
-                    |(coefs, work), l| -> Result<(Vec<Histogram>, Vec<QuantStat>)> {
-                        let planes = &data[l * channels * p..(l + 1) * channels * p];
-                        let mut hs = Vec::with_capacity(nd);
-                        let mut peaks = Vec::with_capacity(nd);
-                        for &d in &depths {
-                            ctx.weighted(planes, d, coefs, work)?;
-                            let groups = &ctx.groups[d as usize];
-                            let mut hist = [(0u32, 0.0f32); BINS];
-                            let mut peak = vec![(0.0f32, 0u32); d as usize + 1];
-                            for i in 0..p {
-                                let e = ctx.energy(coefs, i);
-                                if e > 0.0 {
-                                    let bin = &mut hist[bin_of(e, tau0_sq)];
-                                    bin.0 += 1;
-                                    bin.1 += e as f32;
-                                    let g = &mut peak[groups[i] as usize];
-                                    g.0 = g.0.max(e.sqrt() as f32);
-                                    g.1 += 1;
-                                }
+        let (n, p, m) = (dims.face_res as usize, dims.pixels(), dims.lights());
+        let mem = usize::try_from(mem_budget / 4).unwrap_or(usize::MAX); // in f32 values
+
+        // Column groups: G columns × channels × P values each within half the budget.
+        let group = (mem / 2 / (channels * p)).clamp(1, m);
+        let total = m * channels * p;
+        let out_of_core = total > mem;
+        let mut store = if out_of_core {
+            Store::File(tempfile_in(temp_dir)?)
+        } else {
+            Store::Memory(vec![0.0; total])
+        };
+
+        // Transform, accumulate the norm and the depth-0 histogram, scatter.
+        let block = (mem / 4 / (m * channels)).clamp(1, p);
+        let mut norm_sq = 0.0f64;
+        let mut hist0 = vec![(0u64, 0.0f64); 512];
+        let mut tbuf = vec![0.0f32; block * m * channels];
+        let mut verified = 0;
+        let mut p0 = 0;
+        while p0 < p {
+            let rows = block.min(p - p0);
+            // Check the CRC of every raw block these rows touch, once.
+            while verified < raw.header().block_count()
+                && raw.header().block_range(verified).start < p0 + rows
+            {
+                raw.verify_block(verified)?;
+                raw.release_rows(raw.header().block_range(verified));
+                verified += 1;
+            }
+            let src_rows = raw.rows(p0..p0 + rows);
+            // Transformed rows, channel-planar: rbuf[(r·C + c)·M + j].
+            let mut rbuf = vec![0.0f32; rows * channels * m];
+            rbuf.par_chunks_mut(channels * m)
+                .enumerate()
+                .try_for_each_init(
+                    || vec![0.0f32; n * n],
+                    |work, (r, out)| -> Result<()> {
+                        let row = &src_rows
+                            [r * m * src.channels as usize..(r + 1) * m * src.channels as usize];
+                        for c in 0..channels {
+                            let plane = &mut out[c * m..(c + 1) * m];
+                            for (j, v) in plane.iter_mut().enumerate() {
+                                *v = row[j * src.channels as usize + c];
                             }
-                            let qsum = peak.iter().map(|(s, n)| s * s * *n as f32).sum::<f32>();
-                            let nonzero = peak.iter().map(|(_, n)| n).sum::<u32>();
-                            let peak = (qsum, nonzero);
-                            hs.push(hist);
-                            peaks.push(peak);
+                            row_forward(row_filter, n, plane, work)?;
                         }
-                        Ok((hs, peaks))
+                        Ok(())
                     },
-                )
-                .collect::<Result<_>>()?;
-            for (l, (hs, peaks)) in results.into_iter().enumerate() {
-                let j = g * group + l;
-                an.hist[j * nd..(j + 1) * nd].copy_from_slice(&hs);
-                an.peak[j * nd..(j + 1) * nd].copy_from_slice(&peaks);
-            }
-            progress(Stage::Analysis, ((g + 1) * group).min(m) as u64, m as u64);
-        }
-        analysis = Some((an, tau0_sq));
-    }
-    let nd = depths.len();
-    // Threshold and (best, runner-up) depth per column for an error budget.
-    let plan_for = |budget: f64| -> Option<(f64, Vec<[u32; 2]>)> {
-        let (an, tau0_sq) = analysis.as_ref()?;
-        let tau0_sq = *tau0_sq;
-        // Estimated (kept, error) of column j at depth index di for bin b.
-        let estimate = |j: usize, di: usize, b: usize| -> (f64, f64) {
-            let hist = &an.hist[j * nd + di];
-            let mut dropped: f64 = hist[..b].iter().map(|x| x.1 as f64).sum();
-            // Dithered quantization of a value x with step Δ costs
-            // f(1 − f)·Δ² on average (f the fractional part of x/Δ): Δ²/6 for
-            // x ≥ Δ, x(Δ − x) below — more than dropping it (x²) when
-            // x < Δ/2, so the coder drops those (see `Ctx::code`). Δ is the
-            // RMS step of the column's scale groups, x a bin's RMS magnitude
-            // per channel.
-            let (qsum, nonzero) = an.peak[j * nd + di];
-            let step = (qsum as f64 / nonzero.max(1) as f64).sqrt() / q;
-            let mut kept = 0.0;
-            for &(count, energy) in hist[b..].iter().filter(|x| x.0 > 0) {
-                let x = (energy as f64 / count as f64 / channels as f64).sqrt();
-                if x < step / 2.0 {
-                    dropped += energy as f64;
-                } else {
-                    kept += count as f64;
-                    let per_value = if x >= step {
-                        step * step / 6.0
-                    } else {
-                        x * (step - x)
-                    };
-                    dropped += count as f64 * channels as f64 * per_value;
-                }
-            }
-            (kept, dropped)
-        };
-        let choose = |b: usize| -> (f64, Vec<[u32; 2]>) {
-            let tau_sq = bin_threshold(b, tau0_sq);
-            let mut total = 0.0;
-            let choice = (0..m)
-                .map(|j| {
-                    let mut costs: Vec<(f64, f64, usize)> = (0..nd)
-                        .map(|di| {
-                            let (k, e) = estimate(j, di, b);
-                            (k + e / tau_sq, e, di)
-                        })
-                        .collect();
-                    costs.sort_by(|a, b| a.0.total_cmp(&b.0));
-                    total += costs[0].1;
-                    let second = costs.get(1).map_or(costs[0].2, |c| c.2);
-                    [depths[costs[0].2], depths[second]]
+                )?;
+            // Per row, then summed in row order: the same sums whatever the thread
+            // count and block size.
+            let partial: Vec<(f64, Vec<(u64, f64)>)> = rbuf
+                .par_chunks(channels * m)
+                .map(|chunk| {
+                    let mut norm = 0.0f64;
+                    let mut hist = vec![(0u64, 0.0f64); 512];
+                    for v in chunk {
+                        let e = (*v as f64).powi(2);
+                        norm += e;
+                        if e > 0.0 {
+                            let bin = &mut hist[hist0_bin(e)];
+                            bin.0 += 1;
+                            bin.1 += e;
+                        }
+                    }
+                    (norm, hist)
                 })
                 .collect();
-            (total, choice)
-        };
-        // Largest threshold whose estimated error fits the budget.
-        for b in (0..BINS).rev() {
-            let (err, choice) = choose(b);
-            if err <= budget {
-                return Some((bin_threshold(b, tau0_sq), choice));
+            for (norm, hist) in partial {
+                norm_sq += norm;
+                for (a, b) in hist0.iter_mut().zip(hist) {
+                    a.0 += b.0;
+                    a.1 += b.1;
+                }
             }
+            // Transpose the block: tbuf[(j·C + c)·rows + r].
+            tbuf[..rows * m * channels]
+                .par_chunks_mut(rows)
+                .enumerate()
+                .for_each(|(jc, run)| {
+                    let (j, c) = (jc / channels, jc % channels);
+                    for (r, v) in run.iter_mut().enumerate() {
+                        *v = rbuf[(r * channels + c) * m + j];
+                    }
+                });
+            for jc in 0..m * channels {
+                let (j, c) = (jc / channels, jc % channels);
+                let (g, l) = (j / group, j % group);
+                let offset = g * group * channels * p + (l * channels + c) * p + p0;
+                store.write(offset, &tbuf[jc * rows..(jc + 1) * rows])?;
+            }
+            raw.release_rows(p0..p0 + rows);
+            p0 += rows;
+            progress(Stage::Rows, p0 as u64, p as u64);
         }
-        Some((0.0, choose(0).1))
-    };
 
-    // 3. Coding.
-    let albedo = raw.albedo();
-    let mut meta = meta;
-    match opts.target {
-        Target::MaxError(e) => meta.target_error = e as f32,
-        Target::Terms(t) => meta.terms = t as u32,
-    }
-    // The analysis estimates errors from band weights; the coder measures
-    // them. When the measured error misses the target, the budget shrinks by
-    // the miss and the columns are coded again (at most a few times: bits that
-    // are too few for the target give a floor no threshold can pass).
-    let mut effective_budget = budget;
-    let mut attempt = 0;
-    loop {
-        let plan = plan_for(effective_budget);
-        let mut writer = LtmWriter::create(out, meta.clone(), albedo)?;
-        let mut stats = CompressStats {
-            raw_bytes: src.raw_bytes(),
-            channels: channels as u32,
-            depth_histogram: vec![0; max_depth as usize + 1],
+        Ok(Transposed {
+            raw,
+            dims,
+            row_filter,
+            store,
+            group,
+            norm_sq,
+            hist0,
             out_of_core,
-            ..Default::default()
+        })
+    }
+
+    /// The stored dimensions (1 channel when every row is grey).
+    pub fn dims(&self) -> Dims {
+        self.dims
+    }
+
+    /// The Frobenius norm of the matrix.
+    pub fn norm(&self) -> f64 {
+        self.norm_sq.sqrt()
+    }
+
+    /// Used a temporary file.
+    pub fn out_of_core(&self) -> bool {
+        self.out_of_core
+    }
+
+    /// Codes the matrix with `opts` into `out` (written atomically): steps
+    /// 3 and 4. `opts.row_filter` must be the filter the matrix was
+    /// transformed with; `opts.mem_budget` is not used (the column groups were
+    /// sized by [`Transposed::new`]).
+    pub fn code(
+        &self,
+        out: &Path,
+        opts: &CompressOptions,
+        progress: &(dyn Fn(Stage, u64, u64) + Sync),
+    ) -> Result<CompressStats> {
+        check_options(opts)?;
+        if opts.row_filter != self.row_filter {
+            return Err(Error::Invalid(format!(
+                "row filter {} differs from the {} the matrix was transposed with",
+                opts.row_filter, self.row_filter
+            )));
+        }
+        let raw = self.raw;
+        let src = raw.dims();
+        let dims = self.dims;
+        let channels = dims.channels as usize;
+        let (p, m) = (dims.pixels(), dims.lights());
+        let (w, h) = (dims.width as usize, dims.height as usize);
+        let max_depth = max_levels(w, h);
+        let (group, norm_sq, out_of_core) = (self.group, self.norm_sq, self.out_of_core);
+        let groups = m.div_ceil(group);
+        let norm = norm_sq.sqrt();
+        let hist0 = &self.hist0;
+        let store = &self.store;
+        let weights = BandWeights::new(opts.col_filter, w, h, max_depth);
+        let meta = Meta {
+            dims,
+            mode: opts.mode,
+            row_filter: opts.row_filter,
+            col_filter: opts.col_filter,
+            bits: opts.bits,
+            seed: opts.seed,
+            target_error: 0.0,
+            achieved_error: 0.0,
+            terms: 0,
+            norm,
         };
-        let mut err_total = 0.0f64;
-        for g in 0..groups {
-            let data = read_group(g)?;
-            let cols = data.len() / (channels * p);
-            let coded: Vec<(EncodedColumn, f64)> = (0..cols)
-                .into_par_iter()
-                .map_init(
-                    || (vec![0.0f32; channels * p], vec![0.0f32; p], vec![0.0f32; p]),
-                    |(coefs, plane, work), l| -> Result<(EncodedColumn, f64)> {
-                        let j = g * group + l;
-                        let planes = &data[l * channels * p..(l + 1) * channels * p];
-                        let (keep, tries, tau_sq) = match (&plan, opts.target) {
-                            (Some((tau_sq, choice)), _) => {
-                                // The two best depths by estimate, and both
-                                // extremes (rows only, full depth): the
-                                // estimate ranks them least reliably.
-                                let mut t = choice[j].to_vec();
-                                t.extend([depths[0], depths[depths.len() - 1]]);
-                                t.sort_unstable();
-                                t.dedup();
-                                (Keep::Above(*tau_sq), t, *tau_sq)
-                            }
-                            (None, Target::Terms(nt)) => (Keep::Largest(nt), depths.clone(), 0.0),
-                            (None, Target::MaxError(_)) => {
-                                unreachable!("the analysis always plans a target-error run")
-                            }
-                        };
-                        let mut best: Option<(SparseColumn, f64, f64)> = None;
-                        for d in tries {
-                            ctx.weighted(planes, d, coefs, work)?;
-                            let col = ctx.code(j, coefs, d, keep);
-                            let err = ctx.measured_error(&col, planes, plane, work)?;
-                            // Target error: Lagrangian cost; terms: the paper's rule
-                            // (less error wins; on ties, fewer nonzeros).
-                            let cost = if tau_sq > 0.0 {
-                                let bytes = EncodedColumn::new(&col, channels, opts.zstd_level)
-                                    .bytes
-                                    .len() as f64;
-                                bytes / BYTES_PER_COEFFICIENT + err / tau_sq
-                            } else {
-                                err
-                            };
-                            let better = match &best {
-                                None => true,
-                                Some((b, berr, bcost)) => {
-                                    let tie = (err - berr).abs() <= 1e-12 * (err + berr)
-                                        || (tau_sq == 0.0
-                                            && err.max(*berr) <= 1e-14 * norm_sq / m as f64);
-                                    if tau_sq == 0.0 && tie {
-                                        col.indices.len() < b.indices.len()
-                                    } else {
-                                        cost < *bcost
+        let decoder = ColumnDecoder::new(&meta);
+        let scale_group_maps: Vec<Vec<u8>> =
+            (0..=max_depth).map(|d| scale_groups(w, h, d)).collect();
+        let ctx = Ctx {
+            dims,
+            channels,
+            opts,
+            weights: &weights,
+            decoder: &decoder,
+            groups: &scale_group_maps,
+        };
+        let depths = candidate_depths(opts.mode, max_depth);
+        let q = levels(opts.bits) as f64;
+
+        let read_group = |g: usize| -> Result<Vec<f32>> {
+            let cols = group.min(m - g * group);
+            let mut data = vec![0.0f32; cols * channels * p];
+            store.read(g * group * channels * p, &mut data)?;
+            Ok(data)
+        };
+
+        // 2. Analysis: global threshold and per-column depth for a target error.
+        let budget = match opts.target {
+            Target::MaxError(e) => (e * norm).powi(2),
+            Target::Terms(_) => 0.0,
+        };
+        let mut analysis: Option<(Analysis, f64)> = None;
+        if let Target::MaxError(_) = opts.target {
+            // First guess τ0 from the depth-0 histogram: drop the smallest bins
+            // while their energy stays within half the budget.
+            let mut acc = 0.0;
+            let mut tau0_sq = f64::MIN_POSITIVE;
+            for (b, &(_, e)) in hist0.iter().enumerate() {
+                if acc + e > budget * 0.5 {
+                    tau0_sq = 2f64.powf((b as f64 - 320.0) / BINS_PER_OCTAVE);
+                    break;
+                }
+                acc += e;
+            }
+            let nd = depths.len();
+            let mut an = Analysis {
+                hist: vec![[(0, 0.0); BINS]; m * nd],
+                peak: vec![(0.0, 0); m * nd],
+            };
+            for g in 0..groups {
+                let data = read_group(g)?;
+                let cols = data.len() / (channels * p);
+                let results: Vec<_> = (0..cols)
+                    .into_par_iter()
+                    .map_init(
+                        || (vec![0.0f32; channels * p], vec![0.0f32; p]),
+                        |(coefs, work), l| -> Result<(Vec<Histogram>, Vec<QuantStat>)> {
+                            let planes = &data[l * channels * p..(l + 1) * channels * p];
+                            let mut hs = Vec::with_capacity(nd);
+                            let mut peaks = Vec::with_capacity(nd);
+                            for &d in &depths {
+                                ctx.weighted(planes, d, coefs, work)?;
+                                let groups = &ctx.groups[d as usize];
+                                let mut hist = [(0u32, 0.0f32); BINS];
+                                let mut peak = vec![(0.0f32, 0u32); d as usize + 1];
+                                for i in 0..p {
+                                    let e = ctx.energy(coefs, i);
+                                    if e > 0.0 {
+                                        let bin = &mut hist[bin_of(e, tau0_sq)];
+                                        bin.0 += 1;
+                                        bin.1 += e as f32;
+                                        let g = &mut peak[groups[i] as usize];
+                                        g.0 = g.0.max(e.sqrt() as f32);
+                                        g.1 += 1;
                                     }
                                 }
-                            };
-                            if better {
-                                best = Some((col, err, cost));
+                                let qsum = peak.iter().map(|(s, n)| s * s * *n as f32).sum::<f32>();
+                                let nonzero = peak.iter().map(|(_, n)| n).sum::<u32>();
+                                let peak = (qsum, nonzero);
+                                hs.push(hist);
+                                peaks.push(peak);
                             }
-                        }
-                        let (col, err, _) = best.expect("at least one candidate depth");
-                        Ok((EncodedColumn::new(&col, channels, opts.zstd_level), err))
-                    },
-                )
-                .collect::<Result<_>>()?;
-            for (col, err) in coded {
-                stats.nonzeros += col.entry.nnz as u64;
-                stats.depth_histogram[col.entry.depth as usize] += 1;
-                err_total += err;
-                writer.push_column(col)?;
+                            Ok((hs, peaks))
+                        },
+                    )
+                    .collect::<Result<_>>()?;
+                for (l, (hs, peaks)) in results.into_iter().enumerate() {
+                    let j = g * group + l;
+                    an.hist[j * nd..(j + 1) * nd].copy_from_slice(&hs);
+                    an.peak[j * nd..(j + 1) * nd].copy_from_slice(&peaks);
+                }
+                progress(Stage::Analysis, ((g + 1) * group).min(m) as u64, m as u64);
             }
-            progress(Stage::Coding, ((g + 1) * group).min(m) as u64, m as u64);
+            analysis = Some((an, tau0_sq));
         }
-        stats.achieved_error = if norm > 0.0 {
-            err_total.sqrt() / norm
-        } else {
-            0.0
+        let nd = depths.len();
+        // Threshold and (best, runner-up) depth per column for an error budget.
+        let plan_for = |budget: f64| -> Option<(f64, Vec<[u32; 2]>)> {
+            let (an, tau0_sq) = analysis.as_ref()?;
+            let tau0_sq = *tau0_sq;
+            // Estimated (kept, error) of column j at depth index di for bin b.
+            let estimate = |j: usize, di: usize, b: usize| -> (f64, f64) {
+                let hist = &an.hist[j * nd + di];
+                let mut dropped: f64 = hist[..b].iter().map(|x| x.1 as f64).sum();
+                // Dithered quantization of a value x with step Δ costs
+                // f(1 − f)·Δ² on average (f the fractional part of x/Δ): Δ²/6 for
+                // x ≥ Δ, x(Δ − x) below — more than dropping it (x²) when
+                // x < Δ/2, so the coder drops those (see `Ctx::code`). Δ is the
+                // RMS step of the column's scale groups, x a bin's RMS magnitude
+                // per channel.
+                let (qsum, nonzero) = an.peak[j * nd + di];
+                let step = (qsum as f64 / nonzero.max(1) as f64).sqrt() / q;
+                let mut kept = 0.0;
+                for &(count, energy) in hist[b..].iter().filter(|x| x.0 > 0) {
+                    let x = (energy as f64 / count as f64 / channels as f64).sqrt();
+                    if x < step / 2.0 {
+                        dropped += energy as f64;
+                    } else {
+                        kept += count as f64;
+                        let per_value = if x >= step {
+                            step * step / 6.0
+                        } else {
+                            x * (step - x)
+                        };
+                        dropped += count as f64 * channels as f64 * per_value;
+                    }
+                }
+                (kept, dropped)
+            };
+            let choose = |b: usize| -> (f64, Vec<[u32; 2]>) {
+                let tau_sq = bin_threshold(b, tau0_sq);
+                let mut total = 0.0;
+                let choice = (0..m)
+                    .map(|j| {
+                        let mut costs: Vec<(f64, f64, usize)> = (0..nd)
+                            .map(|di| {
+                                let (k, e) = estimate(j, di, b);
+                                (k + e / tau_sq, e, di)
+                            })
+                            .collect();
+                        costs.sort_by(|a, b| a.0.total_cmp(&b.0));
+                        total += costs[0].1;
+                        let second = costs.get(1).map_or(costs[0].2, |c| c.2);
+                        [depths[costs[0].2], depths[second]]
+                    })
+                    .collect();
+                (total, choice)
+            };
+            // Largest threshold whose estimated error fits the budget.
+            for b in (0..BINS).rev() {
+                let (err, choice) = choose(b);
+                if err <= budget {
+                    return Some((bin_threshold(b, tau0_sq), choice));
+                }
+            }
+            Some((0.0, choose(0).1))
         };
-        attempt += 1;
-        if err_total > budget * 1.0001 && plan.as_ref().is_some_and(|p| p.0 > 0.0) && attempt < 8 {
-            effective_budget *= 0.9 * budget / err_total;
-            writer.abandon();
-            continue;
+
+        // 3. Coding.
+        let albedo = raw.albedo();
+        let mut meta = meta;
+        match opts.target {
+            Target::MaxError(e) => meta.target_error = e as f32,
+            Target::Terms(t) => meta.terms = t as u32,
         }
-        stats.target_met = plan.is_none() || err_total <= budget * 1.0001;
-        stats.file_bytes = writer.finish(stats.achieved_error as f32)?;
-        return Ok(stats);
+        // The analysis estimates errors from band weights; the coder measures
+        // them. When the measured error misses the target, the budget shrinks by
+        // the miss and the columns are coded again (at most a few times: bits that
+        // are too few for the target give a floor no threshold can pass).
+        let mut effective_budget = budget;
+        let mut attempt = 0;
+        loop {
+            let plan = plan_for(effective_budget);
+            let mut writer = LtmWriter::create(out, meta.clone(), albedo)?;
+            let mut stats = CompressStats {
+                raw_bytes: src.raw_bytes(),
+                channels: channels as u32,
+                depth_histogram: vec![0; max_depth as usize + 1],
+                out_of_core,
+                ..Default::default()
+            };
+            let mut err_total = 0.0f64;
+            for g in 0..groups {
+                let data = read_group(g)?;
+                let cols = data.len() / (channels * p);
+                let coded: Vec<(EncodedColumn, f64)> = (0..cols)
+                    .into_par_iter()
+                    .map_init(
+                        || (vec![0.0f32; channels * p], vec![0.0f32; p], vec![0.0f32; p]),
+                        |(coefs, plane, work), l| -> Result<(EncodedColumn, f64)> {
+                            let j = g * group + l;
+                            let planes = &data[l * channels * p..(l + 1) * channels * p];
+                            let (keep, tries, tau_sq) = match (&plan, opts.target) {
+                                (Some((tau_sq, choice)), _) => {
+                                    // The two best depths by estimate, and both
+                                    // extremes (rows only, full depth): the
+                                    // estimate ranks them least reliably.
+                                    let mut t = choice[j].to_vec();
+                                    t.extend([depths[0], depths[depths.len() - 1]]);
+                                    t.sort_unstable();
+                                    t.dedup();
+                                    (Keep::Above(*tau_sq), t, *tau_sq)
+                                }
+                                (None, Target::Terms(nt)) => {
+                                    (Keep::Largest(nt), depths.clone(), 0.0)
+                                }
+                                (None, Target::MaxError(_)) => {
+                                    unreachable!("the analysis always plans a target-error run")
+                                }
+                            };
+                            let mut best: Option<(SparseColumn, f64, f64)> = None;
+                            for d in tries {
+                                ctx.weighted(planes, d, coefs, work)?;
+                                let col = ctx.code(j, coefs, d, keep);
+                                let err = ctx.measured_error(&col, planes, plane, work)?;
+                                // Target error: Lagrangian cost; terms: the paper's rule
+                                // (less error wins; on ties, fewer nonzeros).
+                                let cost = if tau_sq > 0.0 {
+                                    let bytes = EncodedColumn::new(&col, channels, opts.zstd_level)
+                                        .bytes
+                                        .len()
+                                        as f64;
+                                    bytes / BYTES_PER_COEFFICIENT + err / tau_sq
+                                } else {
+                                    err
+                                };
+                                let better = match &best {
+                                    None => true,
+                                    Some((b, berr, bcost)) => {
+                                        let tie = (err - berr).abs() <= 1e-12 * (err + berr)
+                                            || (tau_sq == 0.0
+                                                && err.max(*berr) <= 1e-14 * norm_sq / m as f64);
+                                        if tau_sq == 0.0 && tie {
+                                            col.indices.len() < b.indices.len()
+                                        } else {
+                                            cost < *bcost
+                                        }
+                                    }
+                                };
+                                if better {
+                                    best = Some((col, err, cost));
+                                }
+                            }
+                            let (col, err, _) = best.expect("at least one candidate depth");
+                            Ok((EncodedColumn::new(&col, channels, opts.zstd_level), err))
+                        },
+                    )
+                    .collect::<Result<_>>()?;
+                for (col, err) in coded {
+                    stats.nonzeros += col.entry.nnz as u64;
+                    stats.depth_histogram[col.entry.depth as usize] += 1;
+                    err_total += err;
+                    writer.push_column(col)?;
+                }
+                progress(Stage::Coding, ((g + 1) * group).min(m) as u64, m as u64);
+            }
+            stats.achieved_error = if norm > 0.0 {
+                err_total.sqrt() / norm
+            } else {
+                0.0
+            };
+            attempt += 1;
+            if err_total > budget * 1.0001
+                && plan.as_ref().is_some_and(|p| p.0 > 0.0)
+                && attempt < 8
+            {
+                effective_budget *= 0.9 * budget / err_total;
+                writer.abandon();
+                continue;
+            }
+            stats.target_met = plan.is_none() || err_total <= budget * 1.0001;
+            stats.file_bytes = writer.finish(stats.achieved_error as f32)?;
+            return Ok(stats);
+        }
     }
 }
 

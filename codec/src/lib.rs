@@ -21,7 +21,7 @@ pub mod raw;
 pub mod wavelet;
 
 pub use bytes::MAX_ALLOC_BYTES;
-pub use compress::{compress, CompressOptions, CompressStats, Stage, Target};
+pub use compress::{compress, CompressOptions, CompressStats, Stage, Target, Transposed};
 pub use container::{LtmFile, LtmWriter, Meta, Mode, SparseColumn};
 pub use decode::ColumnDecoder;
 pub use error::{Error, Result};

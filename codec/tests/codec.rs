@@ -6,7 +6,7 @@ use ltm_codec::compress::{compress, CompressOptions, Target};
 use ltm_codec::container::{LtmFile, Mode};
 use ltm_codec::cubemap::{texel_direction, texel_solid_angle};
 use ltm_codec::npy::decode_matrix;
-use ltm_codec::{Dims, Filter, RawHeader, RawStore, RawWriter};
+use ltm_codec::{Dims, Filter, RawHeader, RawStore, RawWriter, Transposed};
 use std::path::{Path, PathBuf};
 
 /// Writes a raw store from a dense `P × M × C` matrix.
@@ -331,6 +331,54 @@ fn out_of_core_transpose_gives_the_same_file() {
     let (b, sb) = run(dir.path(), &raw, &opts, "b.ltm");
     assert!(!sa.out_of_core && sb.out_of_core);
     assert_eq!(std::fs::read(a).unwrap(), std::fs::read(b).unwrap());
+}
+
+/// One transposed matrix coded with several settings (as `ltm report`
+/// does) gives the files `compress` writes for each setting alone, in core
+/// and out of core; a setting with another row filter is refused.
+#[test]
+fn one_transpose_codes_every_setting_like_compress() {
+    let dir = tempfile::tempdir().unwrap();
+    let dims = Dims {
+        width: 64,
+        height: 48,
+        face_res: 4,
+        channels: 3,
+    };
+    let raw_path = write_raw(dir.path(), "m.raw", dims, &scene(dims));
+    let raw = RawStore::open(&raw_path).unwrap();
+    for budget in [1u64 << 30, 1 << 20] {
+        let shared =
+            Transposed::new(&raw, Filter::Haar, budget, dir.path(), &|_, _, _| {}).unwrap();
+        assert_eq!(shared.out_of_core(), budget == 1 << 20);
+        for (mode, bits, target) in [
+            (Mode::Adaptive, 12, Target::MaxError(0.01)),
+            (Mode::TwoD, 8, Target::MaxError(0.05)),
+            (Mode::FourD, 10, Target::Terms(7)),
+        ] {
+            let opts = CompressOptions {
+                mode,
+                bits,
+                target,
+                mem_budget: budget,
+                ..Default::default()
+            };
+            let a = dir.path().join("shared.ltm");
+            let b = dir.path().join("alone.ltm");
+            let sa = shared.code(&a, &opts, &|_, _, _| {}).unwrap();
+            let sb = compress(&raw, &b, &opts, &|_, _, _| {}).unwrap();
+            assert_eq!(sa.file_bytes, sb.file_bytes);
+            assert_eq!(std::fs::read(&a).unwrap(), std::fs::read(&b).unwrap());
+        }
+        let other = CompressOptions {
+            row_filter: Filter::D4,
+            ..Default::default()
+        };
+        let err = shared
+            .code(&dir.path().join("x.ltm"), &other, &|_, _, _| {})
+            .unwrap_err();
+        assert!(err.to_string().contains("row filter"), "{err}");
+    }
 }
 
 /// Mutated and truncated files must give errors, never panics.

@@ -3,14 +3,35 @@
 //! (throughput: coefficients multiply-added), decoding one column (pixels),
 //! resampling an environment map to the cubemap (map pixels) and the row
 //! transform of the lighting (lights).
+//!
+//! The `quantize` group times the column quantizer on its own, on a
+//! synthetic 256×256 single-channel column image (smooth shading with a hard
+//! shadow edge plus noise), LeGall 5/3–transformed to depth 4 and
+//! band-weighted as the coder does, at 12 bits with the largest 10 % of the
+//! coefficients kept:
+//! - `code_column`: threshold, per-scale-group peaks and stored scales, then
+//!   dither-quantize the kept coefficients with the coder's quantizer
+//!   (`quant::quantize`; throughput: image coefficients);
+//! - `encode_payload`: varint serialization and zstd of the quantized column
+//!   (`EncodedColumn::new`, default level; throughput: kept coefficients);
+//! - `parse_payload`: `SparseColumn::from_payload` on the plain payload
+//!   (kept coefficients);
+//! - `dequantize_unweight`: `ColumnDecoder::accumulate` into a cleared plane
+//!   then `unweight`, i.e. decoding without the inverse transform (image
+//!   coefficients);
+//! - `decode_column`: the same plus the four inverse steps (image
+//!   coefficients), for comparison.
 
 use criterion::{criterion_group, criterion_main, BenchmarkId, Criterion, Throughput};
 use ltm::bake::{bake, BakeOptions, Overrides, Scene, SceneDesc};
 use ltm::codec::compress::{compress, row_forward, CompressOptions, Target};
-use ltm::codec::container::Mode;
-use ltm::codec::{ColumnDecoder, Filter, RawStore};
+use ltm::codec::container::{EncodedColumn, Mode};
+use ltm::codec::quant::{self, scale_groups, BandWeights};
+use ltm::codec::wavelet;
+use ltm::codec::{ColumnDecoder, Dims, Filter, Meta, RawStore, SparseColumn};
 use ltm::relight::{EnvMap, Relighter, Rotation, Weighting};
 use std::path::Path;
+use std::time::Duration;
 
 fn bench(c: &mut Criterion) {
     let dir = tempfile::tempdir().unwrap();
@@ -102,9 +123,143 @@ fn bench(c: &mut Criterion) {
     g.finish();
 }
 
+/// A `w` × `h` column image: smooth shading, a hard shadow edge and a
+/// highlight, plus uniform noise of ±1 %.
+fn column_image(w: usize, h: usize, seed: u64) -> Vec<f32> {
+    let mut s = seed | 1;
+    (0..w * h)
+        .map(|k| {
+            let (x, y) = ((k % w) as f32 / w as f32, (k / w) as f32 / h as f32);
+            let shade = 0.6 + 0.3 * (6.0 * x).sin() * (4.0 * y).cos();
+            let shadow = if x + 0.3 * y > 0.6 { 1.0 } else { 0.35 };
+            let highlight = 0.8 * (-((x - 0.3).powi(2) + (y - 0.6).powi(2)) / 0.01).exp();
+            s ^= s << 13;
+            s ^= s >> 7;
+            s ^= s << 17;
+            let noise = ((s >> 40) as f32 / (1u64 << 24) as f32 - 0.5) * 0.02;
+            shade * shadow + highlight + noise
+        })
+        .collect()
+}
+
+/// Keeps positions with `u² ≥ tau_sq` of one channel of weighted
+/// coefficients and quantizes them with the coder's quantizer.
+fn code_column(
+    coefs: &[f32],
+    groups: &[u8],
+    depth: u32,
+    tau_sq: f64,
+    bits: u32,
+    seed: u64,
+    j: u32,
+) -> SparseColumn {
+    let kept: Vec<u32> = (0..coefs.len() as u32)
+        .filter(|&i| {
+            let e = (coefs[i as usize] as f64).powi(2);
+            e >= tau_sq && e > 0.0
+        })
+        .collect();
+    quant::quantize(coefs, 1, &kept, groups, depth, bits, seed, j)
+}
+
+fn quantize(c: &mut Criterion) {
+    const W: usize = 256;
+    const H: usize = 256;
+    const DEPTH: u32 = 4;
+    const BITS: u32 = 12;
+    const P: usize = W * H;
+    let opts = CompressOptions::default();
+    let filter = Filter::LeGall53;
+    let image = column_image(W, H, 0x5eed);
+    let weights = BandWeights::new(filter, W, H, DEPTH);
+    let mut coefs = image.clone();
+    let mut work = vec![0.0f32; P];
+    wavelet::forward(filter, &mut coefs, W, H, DEPTH, &mut work).unwrap();
+    for (v, m) in coefs.iter_mut().zip(weights.map(DEPTH)) {
+        *v *= m;
+    }
+    let groups = scale_groups(W, H, DEPTH);
+    // τ² keeping the largest 10 % of the coefficients.
+    let mut energy: Vec<f64> = coefs.iter().map(|&v| (v as f64).powi(2)).collect();
+    let keep = P / 10;
+    let tau_sq = *energy.select_nth_unstable_by(P - keep, f64::total_cmp).1;
+    let col = code_column(&coefs, &groups, DEPTH, tau_sq, BITS, opts.seed, 0);
+    let nnz = col.indices.len();
+
+    let meta = Meta {
+        dims: Dims {
+            width: W as u32,
+            height: H as u32,
+            face_res: 16,
+            channels: 1,
+        },
+        mode: Mode::Adaptive,
+        row_filter: Filter::Haar,
+        col_filter: filter,
+        bits: BITS,
+        seed: opts.seed,
+        target_error: 0.01,
+        achieved_error: 0.0,
+        terms: 0,
+        norm: 1.0,
+    };
+    let decoder = ColumnDecoder::new(&meta);
+    let mut plane = vec![0.0f32; P];
+    decoder.decode(&col, 0, &mut plane, &mut work).unwrap();
+    let err = plane
+        .iter()
+        .zip(&image)
+        .map(|(a, b)| ((a - b) as f64).powi(2))
+        .sum::<f64>()
+        .sqrt()
+        / image
+            .iter()
+            .map(|&v| (v as f64).powi(2))
+            .sum::<f64>()
+            .sqrt();
+    assert!(err < 0.05, "relative error {err}");
+    let payload = col.to_payload(1);
+    let encoded = EncodedColumn::new(&col, 1, opts.zstd_level);
+    println!(
+        "quantize: {W}x{H} depth {DEPTH}, {BITS} bits: {nnz} of {P} coefficients kept, \
+         relative L2 error {err:.4}, payload {} B, stored {} B ({:?})",
+        payload.len(),
+        encoded.bytes.len(),
+        encoded.entry.encoding
+    );
+
+    let mut g = c.benchmark_group("quantize");
+    // Microsecond kernels: short windows are plenty.
+    g.warm_up_time(Duration::from_secs(1));
+    g.measurement_time(Duration::from_secs(2));
+    g.throughput(Throughput::Elements(P as u64));
+    g.bench_function(format!("code_column/{W}x{H}_d{DEPTH}_b{BITS}"), |b| {
+        b.iter(|| code_column(&coefs, &groups, DEPTH, tau_sq, BITS, opts.seed, 0))
+    });
+    g.throughput(Throughput::Elements(nnz as u64));
+    g.bench_function(format!("encode_payload/nnz{nnz}"), |b| {
+        b.iter(|| EncodedColumn::new(&col, 1, opts.zstd_level))
+    });
+    g.bench_function(format!("parse_payload/nnz{nnz}"), |b| {
+        b.iter(|| SparseColumn::from_payload(&payload, nnz, 1, P, BITS, DEPTH).unwrap())
+    });
+    g.throughput(Throughput::Elements(P as u64));
+    g.bench_function(format!("dequantize_unweight/nnz{nnz}"), |b| {
+        b.iter(|| {
+            plane.fill(0.0);
+            decoder.accumulate(&col, 0, 1.0, &mut plane);
+            decoder.unweight(col.depth, &mut plane);
+        })
+    });
+    g.bench_function(format!("decode_column/nnz{nnz}"), |b| {
+        b.iter(|| decoder.decode(&col, 0, &mut plane, &mut work).unwrap())
+    });
+    g.finish();
+}
+
 criterion_group! {
     name = benches;
     config = Criterion::default().sample_size(20);
-    targets = bench
+    targets = bench, quantize
 }
 criterion_main!(benches);

@@ -21,7 +21,7 @@
 use crate::container::{EncodedColumn, LtmWriter, Meta, Mode, SparseColumn};
 use crate::decode::ColumnDecoder;
 use crate::error::{Error, Result};
-use crate::quant::{decode_scale, dither, encode_scale, levels, scale_groups, BandWeights};
+use crate::quant::{levels, quantize, scale_groups, BandWeights};
 use crate::raw::{Dims, RawStore};
 use crate::wavelet::{self, max_levels, Filter};
 use rayon::prelude::*;
@@ -318,49 +318,16 @@ impl Ctx<'_> {
             }
         };
         kept.sort_unstable();
-        let groups = &self.groups[depth as usize];
-        let c_n = self.channels;
-        let mut peak = vec![0.0f32; (depth as usize + 1) * c_n];
-        for &i in &kept {
-            let g = groups[i as usize] as usize;
-            for c in 0..c_n {
-                peak[g * c_n + c] = peak[g * c_n + c].max(coefs[c * p + i as usize].abs());
-            }
-        }
-        let scale_codes: Vec<u16> = peak.iter().map(|&s| encode_scale(s)).collect();
-        let scales: Vec<f32> = scale_codes.iter().map(|&e| decode_scale(e)).collect();
-        let q = levels(self.opts.bits);
-        let mut col = SparseColumn {
+        quantize(
+            coefs,
+            self.channels,
+            &kept,
+            &self.groups[depth as usize],
             depth,
-            scale_codes,
-            ..Default::default()
-        };
-        let mut vals = [0i32; 3];
-        for &i in &kept {
-            let g = groups[i as usize] as usize;
-            // Below half a step, dithering costs more error than dropping.
-            let half_step = |c: usize| 0.5 * scales[g * c_n + c] / q;
-            if (0..c_n).all(|c| coefs[c * p + i as usize].abs() < half_step(c)) {
-                continue;
-            }
-            let mut any = false;
-            for (c, v) in vals.iter_mut().enumerate().take(c_n) {
-                let s = scales[g * c_n + c];
-                *v = if s > 0.0 {
-                    let x = coefs[c * p + i as usize] / s * q;
-                    ((x + dither(self.opts.seed, j as u32, i, c as u32)).floor()).clamp(-q, q)
-                        as i32
-                } else {
-                    0
-                };
-                any |= *v != 0;
-            }
-            if any {
-                col.indices.push(i);
-                col.values.extend_from_slice(&vals[..c_n]);
-            }
-        }
-        col
+            self.opts.bits,
+            self.opts.seed,
+            j as u32,
+        )
     }
 
     /// Squared pixel-domain error of `col` against `planes`, decoded with the

@@ -15,6 +15,7 @@
 //! (`E[q] = u/s·Q`), so small kept coefficients survive on average instead of
 //! all rounding the same way; zero stays zero. Decoding is `u = q·s/Q`.
 
+use crate::container::SparseColumn;
 use crate::wavelet::{self, band_size, Filter};
 
 /// Quantization levels on each side of zero for `bits` (2..=16).
@@ -75,6 +76,68 @@ pub fn encode_scale(s: f32) -> u16 {
         e += 1;
     }
     e
+}
+
+/// The coder's quantizer: stores the sorted positions `kept` of one column's
+/// weighted coefficients `coefs` (`channels` planes of equal length, in the
+/// column transform's layout at `depth`). Each scale group (`groups`, from
+/// [`scale_groups`]) and channel gets one log-coded scale, its largest kept
+/// magnitude; values become `floor(u/s·Q + d)` with `Q = levels(bits)` and
+/// `d` the dither of (`seed`, `column`, position, channel). Positions whose
+/// every channel is below half a step are dropped (dithering them costs
+/// more error than dropping them), as are positions that quantize to zero.
+#[allow(clippy::too_many_arguments)]
+pub fn quantize(
+    coefs: &[f32],
+    channels: usize,
+    kept: &[u32],
+    groups: &[u8],
+    depth: u32,
+    bits: u32,
+    seed: u64,
+    column: u32,
+) -> SparseColumn {
+    let p = coefs.len() / channels.max(1);
+    let c_n = channels;
+    let mut peak = vec![0.0f32; (depth as usize + 1) * c_n];
+    for &i in kept {
+        let g = groups[i as usize] as usize;
+        for c in 0..c_n {
+            peak[g * c_n + c] = peak[g * c_n + c].max(coefs[c * p + i as usize].abs());
+        }
+    }
+    let scale_codes: Vec<u16> = peak.iter().map(|&s| encode_scale(s)).collect();
+    let scales: Vec<f32> = scale_codes.iter().map(|&e| decode_scale(e)).collect();
+    let q = levels(bits);
+    let mut col = SparseColumn {
+        depth,
+        scale_codes,
+        ..Default::default()
+    };
+    let mut vals = [0i32; 3];
+    for &i in kept {
+        let g = groups[i as usize] as usize;
+        let half_step = |c: usize| 0.5 * scales[g * c_n + c] / q;
+        if (0..c_n).all(|c| coefs[c * p + i as usize].abs() < half_step(c)) {
+            continue;
+        }
+        let mut any = false;
+        for (c, v) in vals.iter_mut().enumerate().take(c_n) {
+            let s = scales[g * c_n + c];
+            *v = if s > 0.0 {
+                let x = coefs[c * p + i as usize] / s * q;
+                ((x + dither(seed, column, i, c as u32)).floor()).clamp(-q, q) as i32
+            } else {
+                0
+            };
+            any |= *v != 0;
+        }
+        if any {
+            col.indices.push(i);
+            col.values.extend_from_slice(&vals[..c_n]);
+        }
+    }
+    col
 }
 
 /// Synthesis-norm weight of every coefficient position of a `width` ×

@@ -39,7 +39,7 @@ pub struct DemoArgs {
     pub bits: u32,
 }
 
-fn assets_dir(given: Option<PathBuf>) -> Result<PathBuf> {
+pub(crate) fn assets_dir(given: Option<PathBuf>) -> Result<PathBuf> {
     let candidates = match given {
         Some(p) => vec![p],
         None => vec![
@@ -54,7 +54,7 @@ fn assets_dir(given: Option<PathBuf>) -> Result<PathBuf> {
 }
 
 /// Exposure (EV) that maps the 99th-percentile luminance of `image` to 0.8.
-fn auto_exposure(image: &Image) -> f32 {
+pub(crate) fn auto_exposure(image: &Image) -> f32 {
     let mut lum: Vec<f32> = image
         .data
         .iter()
@@ -67,6 +67,43 @@ fn auto_exposure(image: &Image) -> f32 {
     let k = (lum.len() * 99 / 100).min(lum.len() - 1);
     let (_, v, _) = lum.select_nth_unstable_by(k, |a, b| a.total_cmp(b));
     (0.8 / *v).log2().clamp(-30.0, 30.0)
+}
+
+/// The environment maps (.exr, .hdr) in `assets/envmaps`, sorted.
+pub(crate) fn env_maps(assets: &Path) -> Result<Vec<PathBuf>> {
+    let dir = assets.join("envmaps");
+    let mut maps: Vec<PathBuf> = std::fs::read_dir(&dir)
+        .with_context(|| format!("reading {}", dir.display()))?
+        .filter_map(|e| e.ok().map(|e| e.path()))
+        .filter(|p| p.extension().is_some_and(|x| x == "exr" || x == "hdr"))
+        .collect();
+    maps.sort();
+    if maps.is_empty() {
+        bail!("no environment maps (.exr, .hdr) in {}", dir.display());
+    }
+    Ok(maps)
+}
+
+/// Bakes `desc` into `raw_path` unless a complete store is already there
+/// (an interrupted bake is resumed).
+pub(crate) fn bake_cached(desc: &SceneDesc, raw_path: &Path) -> Result<()> {
+    if raw_path.exists() {
+        eprintln!("using the cached bake {}", raw_path.display());
+        return Ok(());
+    }
+    let scene = Scene::build(desc)?;
+    let bar = progress::bar(0, "bake");
+    let report = bake(&scene, raw_path, &BakeOptions::default(), &|p| {
+        bar.set_length(p.rows_total);
+        bar.set_position(p.rows_done);
+    })?;
+    bar.finish_and_clear();
+    eprintln!(
+        "baked {} rows in {:.1} s",
+        report.rows_baked,
+        report.elapsed.as_secs_f64()
+    );
+    Ok(())
 }
 
 /// Compresses `raw` in 2d mode to about `bytes` bytes (within 3 %) by a
@@ -107,29 +144,14 @@ pub fn run(a: DemoArgs) -> Result<()> {
 
     // 1. Bake (cached: a complete raw store of the same settings is reused).
     let raw_path = out(&format!("scene-{}px-n{}.raw", a.size, a.face_res));
-    if !raw_path.exists() {
-        let mut desc = SceneDesc::default_scene(&assets)?;
-        desc.apply(&Overrides {
-            width: Some(a.size),
-            height: Some(a.size),
-            face_res: Some(a.face_res),
-            ..Default::default()
-        })?;
-        let scene = Scene::build(&desc)?;
-        let bar = progress::bar(0, "bake");
-        let report = bake(&scene, &raw_path, &BakeOptions::default(), &|p| {
-            bar.set_length(p.rows_total);
-            bar.set_position(p.rows_done);
-        })?;
-        bar.finish_and_clear();
-        eprintln!(
-            "baked {} rows in {:.1} s",
-            report.rows_baked,
-            report.elapsed.as_secs_f64()
-        );
-    } else {
-        eprintln!("using the cached bake {}", raw_path.display());
-    }
+    let mut desc = SceneDesc::default_scene(&assets)?;
+    desc.apply(&Overrides {
+        width: Some(a.size),
+        height: Some(a.size),
+        face_res: Some(a.face_res),
+        ..Default::default()
+    })?;
+    bake_cached(&desc, &raw_path)?;
     let raw = RawStore::open(&raw_path)?;
     let dims = raw.dims();
 
@@ -158,17 +180,7 @@ pub fn run(a: DemoArgs) -> Result<()> {
     eprintln!("2d at the same size: {twod_bytes} bytes, error {twod_error:.4}");
 
     // 3. Relight under every map.
-    let mut maps: Vec<PathBuf> = std::fs::read_dir(assets.join("envmaps"))?
-        .filter_map(|e| e.ok().map(|e| e.path()))
-        .filter(|p| p.extension().is_some_and(|x| x == "exr" || x == "hdr"))
-        .collect();
-    maps.sort();
-    if maps.is_empty() {
-        bail!(
-            "no environment maps (.exr, .hdr) in {}",
-            assets.join("envmaps").display()
-        );
-    }
+    let maps = env_maps(&assets)?;
     let relighters = [
         ("adaptive", Relighter::open(&adaptive_path)?),
         ("2d", Relighter::open(&twod_path)?),

@@ -6,6 +6,7 @@ mod demo;
 mod progress;
 mod reference;
 mod relight_cmd;
+mod report;
 
 use clap::{Parser, Subcommand};
 use std::process::ExitCode;
@@ -40,6 +41,9 @@ enum Command {
     Relight(relight_cmd::RelightArgs),
     /// Compute the exact relit image T·L from a raw store (the ground truth).
     Reference(reference::ReferenceArgs),
+    /// Measure size, speed and error over a sweep of settings; write
+    /// index.md, results.json and SVG plots.
+    Report(report::ReportArgs),
 }
 
 fn main() -> ExitCode {
@@ -53,6 +57,7 @@ fn main() -> ExitCode {
         Command::Export(args) => codec_cmds::export(args),
         Command::Relight(args) => relight_cmd::run(args),
         Command::Reference(args) => reference::run(args),
+        Command::Report(args) => report::run(args),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,

@@ -59,6 +59,102 @@ fn demo_runs_end_to_end() {
     assert!(ok && stderr.contains("cached"), "{stderr}");
 }
 
+/// `ltm report --quick` (as CI runs it): every section, plot and measured
+/// point is there and consistent. Timings are not checked.
+#[test]
+fn report_quick_writes_every_section() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("report");
+    let assets = Path::new(env!("CARGO_MANIFEST_DIR")).join("../assets");
+    let env = |name: &str| assets.join("envmaps").join(name);
+    let (ok, _, stderr) = ltm(&[
+        "report",
+        "--quick",
+        "-o",
+        out.to_str().unwrap(),
+        "--assets",
+        assets.to_str().unwrap(),
+        "--env",
+        env("interior.exr").to_str().unwrap(),
+        "--env",
+        env("sunset.exr").to_str().unwrap(),
+    ]);
+    assert!(ok, "{stderr}");
+    let index = std::fs::read_to_string(out.join("index.md")).unwrap();
+    for heading in [
+        "## Headline",
+        "## 1. Size against matrix error",
+        "## 2. Relit error",
+        "## 3. Frame time",
+        "## 4. Average column depth",
+        "## 5. Speed against error",
+        "**Machine:**",
+        "**Date:**",
+    ] {
+        assert!(index.contains(heading), "index.md lacks {heading}");
+    }
+    for svg in [
+        "size-error.svg",
+        "relit-error-interior.svg",
+        "relit-error-sunset.svg",
+        "frame-time.svg",
+        "dynamic-compression.svg",
+        "depth-by-level.svg",
+        "speed-error.svg",
+    ] {
+        let text = std::fs::read_to_string(out.join(svg)).unwrap();
+        assert!(text.starts_with("<svg") && text.contains("<text"), "{svg}");
+        assert!(
+            index.contains(&format!("]({svg})")),
+            "index.md does not show {svg}"
+        );
+    }
+    let r: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("results.json")).unwrap()).unwrap();
+    let codings = r["codings"].as_array().unwrap();
+    // 3 modes × 1 bit depth × 2 target errors; the pair is among them.
+    assert_eq!(codings.len(), 6);
+    for c in codings {
+        let (target, error) = (
+            c["target_error"].as_f64().unwrap(),
+            c["matrix_error"].as_f64().unwrap(),
+        );
+        assert!(c["target_met"].as_bool().unwrap() && error <= target * 1.0001);
+        let pair = c["quality_pair"].as_bool().unwrap();
+        // 2 maps × 3 values of N, with 3 weightings for the pair.
+        let points = c["relight"].as_array().unwrap();
+        assert_eq!(points.len(), if pair { 18 } else { 6 });
+        for p in points {
+            let e = p["relit_error"].as_f64().unwrap();
+            assert!(e.is_finite() && e >= 0.0, "{p}");
+            assert!(p["frame_ms"].as_f64().unwrap() > 0.0);
+            assert!(p["lights"].as_u64().unwrap() <= p["n"].as_u64().unwrap());
+        }
+        let name = format!(
+            "{}-12b-e{}.ltm",
+            c["mode"].as_str().unwrap(),
+            c["target_error"].as_f64().unwrap()
+        );
+        assert_eq!(out.join("files").join(&name).is_file(), pair, "{name}");
+    }
+    let pairs = codings.iter().filter(|c| c["quality_pair"] == true).count();
+    assert_eq!(pairs, 2);
+    let baselines = r["baselines"].as_array().unwrap();
+    let of = |m: &str| -> Vec<f64> {
+        baselines
+            .iter()
+            .filter(|b| b["method"] == m)
+            .map(|b| b["matrix_error"].as_f64().unwrap())
+            .collect()
+    };
+    assert_eq!(of("zstd-raw"), vec![0.0]);
+    let (pca, sh) = (of("pca"), of("sh"));
+    assert_eq!((pca.len(), sh.len()), (3, 3));
+    assert!(pca.windows(2).all(|w| w[1] < w[0]), "{pca:?}");
+    assert!(sh.windows(2).all(|w| w[1] < w[0]), "{sh:?}");
+    assert_eq!(r["sh_relight"].as_array().unwrap().len(), 2 * 3);
+}
+
 #[test]
 fn bad_input_exits_non_zero_with_a_message() {
     let dir = tempfile::tempdir().unwrap();
@@ -67,6 +163,38 @@ fn bad_input_exits_non_zero_with_a_message() {
     let missing = dir.path().join("missing.raw");
     let out = dir.path().join("o.ltm");
     let cases: Vec<(Vec<&str>, &str)> = vec![
+        (
+            vec![
+                "report",
+                "--raw",
+                missing.to_str().unwrap(),
+                "-o",
+                dir.path().to_str().unwrap(),
+            ],
+            "missing.raw",
+        ),
+        (
+            vec![
+                "report",
+                "--quick",
+                "--bits",
+                "20",
+                "-o",
+                dir.path().to_str().unwrap(),
+            ],
+            "--bits 20 is out of range",
+        ),
+        (
+            vec![
+                "report",
+                "--quick",
+                "--errors",
+                "1.5",
+                "-o",
+                dir.path().to_str().unwrap(),
+            ],
+            "target error 1.5",
+        ),
         (vec!["inspect", junk.to_str().unwrap()], "not an .ltm file"),
         (
             vec![

@@ -1,0 +1,627 @@
+//! `ltm report`: sweeps of codec settings on one matrix, each measured
+//! against the exact product `T·L`, written as `index.md`, `results.json`
+//! and SVG plots. The sections follow Cheslack-Postava et al. 2007
+//! (Figs. 7, 8, 9) and the error graphs of Ng et al. 2003.
+//!
+//! The matrix is row-transformed and transposed once
+//! ([`ltm_codec::Transposed`]); every setting is coded from it.
+
+pub mod baselines;
+mod page;
+pub mod plot;
+
+use crate::codec_cmds::{default_mem_budget, parse_size};
+use crate::demo::{assets_dir, bake_cached, env_maps};
+use crate::progress;
+use anyhow::{bail, Context, Result};
+use clap::Args;
+use ltm_bake::{Overrides, SceneDesc};
+use ltm_codec::compress::row_level;
+use ltm_codec::{CompressOptions, Mode, RawStore, Target, Transposed};
+use ltm_relight::{reference, relative_l2, EnvMap, Image, Relighter, Rotation, Weighting};
+use serde::{Deserialize, Serialize};
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+
+/// Arguments of `ltm report`.
+#[derive(Args)]
+pub struct ReportArgs {
+    /// Scene to bake (the bake is cached in the output directory)
+    /// [default: the default scene in assets/].
+    #[arg(long, conflicts_with = "raw")]
+    pub scene: Option<PathBuf>,
+    /// An existing raw store to report on instead of baking a scene.
+    #[arg(long)]
+    pub raw: Option<PathBuf>,
+    /// Environment map (.exr, .hdr); repeat for several
+    /// [default: every map in assets/envmaps].
+    #[arg(long = "env")]
+    pub envs: Vec<PathBuf>,
+    /// Output directory.
+    #[arg(short, long, default_value = "ltm-report")]
+    pub output: PathBuf,
+    /// A small, fast run (32² pixels, n = 8, few settings) that checks the
+    /// whole report end to end; its timings mean little.
+    #[arg(long)]
+    pub quick: bool,
+    /// The repository's assets directory [default: ./assets].
+    #[arg(long)]
+    pub assets: Option<PathBuf>,
+    /// Image side when baking a scene [default: 128; quick: 32].
+    #[arg(long)]
+    pub size: Option<u32>,
+    /// Cubemap face resolution when baking a scene [default: 16; quick: 8].
+    #[arg(long)]
+    pub face_res: Option<u32>,
+    /// Quantization bits swept, comma-separated [default: 10,12; quick: 12].
+    #[arg(long, value_delimiter = ',')]
+    pub bits: Vec<u32>,
+    /// Target matrix errors swept [default: 0.003,0.01,0.03,0.1; quick: 0.01,0.05].
+    #[arg(long, value_delimiter = ',')]
+    pub errors: Vec<f64>,
+    /// Numbers of wavelet lights N relit with every setting
+    /// [default: 10,20,50,100,200,500,1000,2000,5000; quick: 10,50,200].
+    /// Values above the number of lights are clamped.
+    #[arg(long, value_delimiter = ',')]
+    pub terms: Vec<usize>,
+    /// Matrix error of the 2d and adaptive pair compared at equal quality.
+    #[arg(long, default_value_t = 0.01)]
+    pub quality: f64,
+    /// Bits of that pair.
+    #[arg(long, default_value_t = 12)]
+    pub quality_bits: u32,
+    /// Frames timed per (setting, N, map); the median is reported
+    /// [default: 11; quick: 3].
+    #[arg(long)]
+    pub frames: Option<usize>,
+    /// PCA ranks [default: 1,2,4,…,256; quick: 1,4,16].
+    #[arg(long, value_delimiter = ',')]
+    pub pca_ranks: Vec<usize>,
+    /// Spherical-harmonics orders L (L² coefficients)
+    /// [default: 2..=20; quick: 2,4,8].
+    #[arg(long, value_delimiter = ',')]
+    pub sh_orders: Vec<usize>,
+    /// Memory for the transpose, e.g. 512M or 4G [default: a quarter of RAM, at most 8 GiB].
+    #[arg(long)]
+    pub mem_budget: Option<String>,
+    /// Keep every coded .ltm file (by default only the equal-quality pair).
+    #[arg(long)]
+    pub keep_files: bool,
+    /// Measure nothing: rewrite index.md and the plots of the output
+    /// directory from its results.json.
+    #[arg(long)]
+    pub replot: bool,
+}
+
+/// The settings a run used, after defaults.
+#[derive(Clone, Debug, Serialize, Deserialize)]
+pub struct Settings {
+    pub quick: bool,
+    pub bits: Vec<u32>,
+    pub errors: Vec<f64>,
+    pub terms: Vec<usize>,
+    pub quality: f64,
+    pub quality_bits: u32,
+    pub frames: usize,
+    pub pca_ranks: Vec<usize>,
+    pub sh_orders: Vec<usize>,
+    pub row_filter: String,
+    pub col_filter: String,
+    pub zstd_raw_level: i32,
+}
+
+#[derive(Clone, Debug, Serialize, Deserialize)]
+pub struct Machine {
+    pub cpu: String,
+    pub threads: usize,
+    pub memory_gib: f64,
+    pub os: String,
+}
+
+#[derive(Clone, Debug, Serialize, Deserialize)]
+pub struct SceneInfo {
+    /// The scene file or raw store reported on.
+    pub source: String,
+    pub width: u32,
+    pub height: u32,
+    pub face_res: u32,
+    pub lights: usize,
+    /// Channels of the raw store.
+    pub channels: u32,
+    pub raw_bytes: u64,
+    pub has_albedo: bool,
+}
+
+/// One relit frame setting, measured.
+#[derive(Clone, Debug, Serialize, Deserialize)]
+pub struct RelightPoint {
+    pub env: String,
+    pub weighting: String,
+    /// Requested wavelet lights.
+    pub n: usize,
+    /// Lights used (≤ n).
+    pub lights: usize,
+    /// Median frame time.
+    pub frame_ms: f64,
+    /// Stored coefficients multiply-added.
+    pub nonzeros: u64,
+    /// Dense entries of the used columns (lights × pixels × stored channels)
+    /// over `nonzeros`: the dynamic compression rate of Fig. 9a.
+    pub dynamic_compression: f64,
+    /// Relative L2 error against the exact `T·L`.
+    pub relit_error: f64,
+}
+
+/// One coded setting.
+#[derive(Clone, Debug, Serialize, Deserialize)]
+pub struct Coding {
+    pub mode: String,
+    pub bits: u32,
+    pub target_error: f64,
+    pub file_bytes: u64,
+    pub matrix_error: f64,
+    pub target_met: bool,
+    pub nonzeros: u64,
+    pub code_s: f64,
+    /// Columns per column-transform depth.
+    pub depth_histogram: Vec<u64>,
+    /// Average column depth per row-wavelet level (0 = the faces' scaling
+    /// functions), Fig. 8.
+    pub depth_by_row_level: Vec<f64>,
+    /// The equal-quality pair member (also relit with every weighting).
+    pub quality_pair: bool,
+    pub relight: Vec<RelightPoint>,
+}
+
+#[derive(Clone, Debug, Serialize, Deserialize)]
+pub struct ShRelightPoint {
+    pub env: String,
+    pub order: usize,
+    pub coefficients: usize,
+    pub relit_error: f64,
+}
+
+#[derive(Clone, Debug, Serialize, Deserialize)]
+pub struct Timings {
+    pub bake_or_open_s: f64,
+    pub references_s: f64,
+    pub transpose_s: f64,
+    pub baselines_s: f64,
+    pub total_s: f64,
+}
+
+/// Everything a report measured: `results.json`.
+#[derive(Clone, Debug, Serialize, Deserialize)]
+pub struct Results {
+    pub date: String,
+    pub command: String,
+    pub machine: Machine,
+    pub scene: SceneInfo,
+    pub envs: Vec<String>,
+    pub settings: Settings,
+    pub out_of_core: bool,
+    pub matrix_norm: f64,
+    pub codings: Vec<Coding>,
+    pub baselines: Vec<baselines::BaselinePoint>,
+    pub sh_relight: Vec<ShRelightPoint>,
+    pub timings: Timings,
+}
+
+fn or_default<T: Clone>(given: &[T], full: &[T], quick: &[T], is_quick: bool) -> Vec<T> {
+    if !given.is_empty() {
+        given.to_vec()
+    } else if is_quick {
+        quick.to_vec()
+    } else {
+        full.to_vec()
+    }
+}
+
+fn settings(a: &ReportArgs) -> Result<Settings> {
+    let q = a.quick;
+    let s = Settings {
+        quick: q,
+        bits: or_default(&a.bits, &[10, 12], &[12], q),
+        errors: or_default(&a.errors, &[0.003, 0.01, 0.03, 0.1], &[0.01, 0.05], q),
+        terms: or_default(
+            &a.terms,
+            &[10, 20, 50, 100, 200, 500, 1000, 2000, 5000],
+            &[10, 50, 200],
+            q,
+        ),
+        quality: a.quality,
+        quality_bits: a.quality_bits,
+        frames: a.frames.unwrap_or(if q { 3 } else { 11 }),
+        pca_ranks: or_default(
+            &a.pca_ranks,
+            &[1, 2, 4, 8, 16, 32, 64, 128, 256],
+            &[1, 4, 16],
+            q,
+        ),
+        sh_orders: or_default(&a.sh_orders, &(2..=20).collect::<Vec<_>>(), &[2, 4, 8], q),
+        row_filter: CompressOptions::default().row_filter.to_string(),
+        col_filter: CompressOptions::default().col_filter.to_string(),
+        zstd_raw_level: 3,
+    };
+    if let Some(b) = s
+        .bits
+        .iter()
+        .chain([&s.quality_bits])
+        .find(|b| !(2..=16).contains(*b))
+    {
+        bail!("--bits {b} is out of range: 2..=16");
+    }
+    if let Some(e) = s
+        .errors
+        .iter()
+        .chain([&s.quality])
+        .find(|e| !(**e > 0.0 && **e < 1.0))
+    {
+        bail!("target error {e} is out of range: 0 < E < 1");
+    }
+    if s.terms.contains(&0) {
+        bail!("--terms values must be at least 1");
+    }
+    if s.frames == 0 {
+        bail!("--frames must be at least 1");
+    }
+    if s.pca_ranks.contains(&0) || s.sh_orders.contains(&0) {
+        bail!("PCA ranks and SH orders must be at least 1");
+    }
+    Ok(s)
+}
+
+/// A map's name and its cubemap lighting and exact image.
+struct Env {
+    name: String,
+    light: Vec<[f32; 3]>,
+    exact: Image,
+}
+
+fn median(mut v: Vec<f64>) -> f64 {
+    v.sort_by(f64::total_cmp);
+    v[v.len() / 2]
+}
+
+/// Relights `frames` times; the median time, the last frame's statistics
+/// and its error.
+fn measure(
+    relighter: &Relighter,
+    env: &Env,
+    n: usize,
+    weighting: Weighting,
+    frames: usize,
+) -> Result<RelightPoint> {
+    let mut bufs = relighter.buffers();
+    let mut times = Vec::with_capacity(frames);
+    let mut stats = Default::default();
+    for _ in 0..frames {
+        stats = relighter.relight(&env.light, n, weighting, &mut bufs)?;
+        times.push(stats.total().as_secs_f64());
+    }
+    let stats: ltm_relight::FrameStats = stats;
+    let dims = relighter.meta().dims;
+    let dense = stats.lights as f64 * dims.pixels() as f64 * dims.channels as f64;
+    Ok(RelightPoint {
+        env: env.name.clone(),
+        weighting: weighting.name().to_string(),
+        n,
+        lights: stats.lights,
+        frame_ms: median(times) * 1e3,
+        nonzeros: stats.nonzeros,
+        dynamic_compression: if stats.nonzeros > 0 {
+            dense / stats.nonzeros as f64
+        } else {
+            0.0
+        },
+        relit_error: relative_l2(&bufs.image, &env.exact)?,
+    })
+}
+
+fn depth_by_row_level(relighter: &Relighter) -> Vec<f64> {
+    let n = relighter.meta().dims.face_res as usize;
+    let levels = row_level(n, n * n - 1) as usize + 1;
+    let mut sum = vec![(0.0, 0usize); levels];
+    for (j, c) in relighter.file().columns().iter().enumerate() {
+        let s = &mut sum[row_level(n, j) as usize];
+        s.0 += c.depth as f64;
+        s.1 += 1;
+    }
+    sum.iter().map(|(d, k)| d / (*k).max(1) as f64).collect()
+}
+
+fn machine() -> Machine {
+    let cpuinfo = std::fs::read_to_string("/proc/cpuinfo").unwrap_or_default();
+    let cpu = cpuinfo
+        .lines()
+        .find_map(|l| l.strip_prefix("model name"))
+        .and_then(|l| l.split(':').nth(1))
+        .map_or_else(
+            || std::env::consts::ARCH.to_string(),
+            |s| s.trim().to_string(),
+        );
+    let memory_gib = std::fs::read_to_string("/proc/meminfo")
+        .ok()
+        .and_then(|m| {
+            m.lines()
+                .find_map(|l| l.strip_prefix("MemTotal:"))
+                .and_then(|v| v.trim().trim_end_matches("kB").trim().parse::<f64>().ok())
+        })
+        .map_or(0.0, |kb| kb / (1024.0 * 1024.0));
+    Machine {
+        cpu,
+        threads: rayon::current_num_threads(),
+        memory_gib,
+        os: std::env::consts::OS.to_string(),
+    }
+}
+
+/// Today's UTC date and time, `YYYY-MM-DD HH:MM UTC`.
+fn utc_now() -> String {
+    let secs = std::time::SystemTime::now()
+        .duration_since(std::time::UNIX_EPOCH)
+        .map_or(0, |d| d.as_secs());
+    let (days, rem) = ((secs / 86_400) as i64, secs % 86_400);
+    // Civil date from days since 1970-01-01 (proleptic Gregorian).
+    let z = days + 719_468;
+    let era = z.div_euclid(146_097);
+    let doe = z - era * 146_097;
+    let yoe = (doe - doe / 1460 + doe / 36_524 - doe / 146_096) / 365;
+    let doy = doe - (365 * yoe + yoe / 4 - yoe / 100);
+    let mp = (5 * doy + 2) / 153;
+    let d = doy - (153 * mp + 2) / 5 + 1;
+    let m = if mp < 10 { mp + 3 } else { mp - 9 };
+    let y = yoe + era * 400 + i64::from(m <= 2);
+    format!(
+        "{y:04}-{m:02}-{d:02} {:02}:{:02} UTC",
+        rem / 3600,
+        rem % 3600 / 60
+    )
+}
+
+fn file_name(mode: Mode, bits: u32, err: f64) -> String {
+    format!("{}-{bits}b-e{err}.ltm", mode.name())
+}
+
+pub fn run(a: ReportArgs) -> Result<()> {
+    if a.replot {
+        let path = a.output.join("results.json");
+        let text = std::fs::read_to_string(&path)
+            .with_context(|| format!("reading {}", path.display()))?;
+        let results: Results = serde_json::from_str(&text)
+            .with_context(|| format!("{} is not a report's results.json", path.display()))?;
+        page::write(&a.output, &results)?;
+        eprintln!("rewrote {}", a.output.join("index.md").display());
+        return Ok(());
+    }
+    let start = Instant::now();
+    let s = settings(&a)?;
+    std::fs::create_dir_all(&a.output)
+        .with_context(|| format!("creating {}", a.output.display()))?;
+    let files_dir = a.output.join("files");
+    std::fs::create_dir_all(&files_dir)
+        .with_context(|| format!("creating {}", files_dir.display()))?;
+    let assets = || assets_dir(a.assets.clone());
+
+    // 1. The matrix: a raw store, or a scene baked once into the output.
+    let t = Instant::now();
+    let (raw_path, source) = match &a.raw {
+        Some(p) => (p.clone(), p.display().to_string()),
+        None => {
+            let size = a.size.unwrap_or(if a.quick { 32 } else { 128 });
+            let face_res = a.face_res.unwrap_or(if a.quick { 8 } else { 16 });
+            let (mut desc, source) = match &a.scene {
+                Some(p) => (SceneDesc::load(p)?, p.display().to_string()),
+                None => (
+                    SceneDesc::default_scene(&assets()?)?,
+                    "assets/scenes/default.toml".to_string(),
+                ),
+            };
+            desc.apply(&Overrides {
+                width: Some(size),
+                height: Some(size),
+                face_res: Some(face_res),
+                ..Default::default()
+            })?;
+            let path = a.output.join(format!("scene-{size}px-n{face_res}.raw"));
+            bake_cached(&desc, &path)?;
+            (path, format!("{source} at {size}×{size}, n = {face_res}"))
+        }
+    };
+    let raw = RawStore::open(&raw_path)?;
+    let bake_or_open_s = t.elapsed().as_secs_f64();
+    let dims = raw.dims();
+    let m = dims.lights();
+    let scene = SceneInfo {
+        source,
+        width: dims.width,
+        height: dims.height,
+        face_res: dims.face_res,
+        lights: m,
+        channels: dims.channels,
+        raw_bytes: dims.raw_bytes(),
+        has_albedo: raw.albedo().is_some(),
+    };
+
+    // 2. Lighting and the exact images.
+    let env_paths = if a.envs.is_empty() {
+        env_maps(&assets()?)?
+    } else {
+        a.envs.clone()
+    };
+    let t = Instant::now();
+    let mut envs = Vec::new();
+    for path in &env_paths {
+        let name = path
+            .file_stem()
+            .map_or("map".into(), |s| s.to_string_lossy().into_owned());
+        if envs.iter().any(|e: &Env| e.name == name) {
+            bail!("two environment maps are named {name}: give maps distinct file names");
+        }
+        let map = EnvMap::load(path).with_context(|| format!("loading {}", path.display()))?;
+        let light = map.to_cubemap(dims.face_res as usize, &Rotation::IDENTITY);
+        let exact = reference(&raw, &light)?;
+        envs.push(Env { name, light, exact });
+    }
+    let references_s = t.elapsed().as_secs_f64();
+    eprintln!("{} exact images in {references_s:.1} s", envs.len());
+
+    // 3. Row transform and transpose, once.
+    let mem_budget = match &a.mem_budget {
+        Some(v) => parse_size(v)?,
+        None => default_mem_budget(),
+    };
+    let base = CompressOptions {
+        mem_budget,
+        ..Default::default()
+    };
+    let t = Instant::now();
+    let bar = progress::bar(0, "transpose");
+    let transposed = Transposed::new(&raw, base.row_filter, mem_budget, &files_dir, &|_, d, n| {
+        bar.set_length(n);
+        bar.set_position(d);
+    })?;
+    bar.finish_and_clear();
+    let transpose_s = t.elapsed().as_secs_f64();
+    eprintln!("row transform and transpose in {transpose_s:.1} s");
+
+    // 4. The sweep: every mode × bits × target error, plus the pair.
+    let mut plan: Vec<(Mode, u32, f64)> = Vec::new();
+    for mode in [Mode::TwoD, Mode::FourD, Mode::Adaptive] {
+        for &b in &s.bits {
+            for &e in &s.errors {
+                plan.push((mode, b, e));
+            }
+        }
+    }
+    for mode in [Mode::TwoD, Mode::Adaptive] {
+        if !plan.contains(&(mode, s.quality_bits, s.quality)) {
+            plan.push((mode, s.quality_bits, s.quality));
+        }
+    }
+    let mut terms: Vec<usize> = s.terms.iter().map(|&n| n.min(m)).collect();
+    terms.sort_unstable();
+    terms.dedup();
+    let mut codings = Vec::new();
+    for (i, &(mode, bits, err)) in plan.iter().enumerate() {
+        let opts = CompressOptions {
+            mode,
+            bits,
+            target: Target::MaxError(err),
+            ..base.clone()
+        };
+        let path = files_dir.join(file_name(mode, bits, err));
+        let label = format!(
+            "[{}/{}] {} {bits} bits {err}",
+            i + 1,
+            plan.len(),
+            mode.name()
+        );
+        let bar = progress::bar(0, &label);
+        let t = Instant::now();
+        let stats = transposed.code(&path, &opts, &|_, d, n| {
+            bar.set_length(n);
+            bar.set_position(d);
+        })?;
+        bar.finish_and_clear();
+        let code_s = t.elapsed().as_secs_f64();
+        let quality_pair = bits == s.quality_bits && err == s.quality && mode != Mode::FourD;
+        let relighter = Relighter::open(&path)?;
+        let mut relight = Vec::new();
+        let weightings: &[Weighting] = if quality_pair {
+            &[Weighting::Transport, Weighting::Unweighted, Weighting::Area]
+        } else {
+            &[Weighting::Transport]
+        };
+        for env in &envs {
+            for &weighting in weightings {
+                for &n in &terms {
+                    relight.push(measure(&relighter, env, n, weighting, s.frames)?);
+                }
+            }
+        }
+        let coding = Coding {
+            mode: mode.name().to_string(),
+            bits,
+            target_error: err,
+            file_bytes: stats.file_bytes,
+            matrix_error: stats.achieved_error,
+            target_met: stats.target_met,
+            nonzeros: stats.nonzeros,
+            code_s,
+            depth_histogram: stats.depth_histogram.clone(),
+            depth_by_row_level: depth_by_row_level(&relighter),
+            quality_pair,
+            relight,
+        };
+        drop(relighter);
+        if !(quality_pair || a.keep_files) {
+            std::fs::remove_file(&path).with_context(|| format!("removing {}", path.display()))?;
+        }
+        eprintln!(
+            "{label}: {:.2} MB, matrix error {:.3} %, {code_s:.1} s",
+            coding.file_bytes as f64 / 1e6,
+            100.0 * coding.matrix_error
+        );
+        codings.push(coding);
+    }
+    let (out_of_core, matrix_norm) = (transposed.out_of_core(), transposed.norm());
+    drop(transposed);
+
+    // 5. Baselines on the same matrix.
+    let t = Instant::now();
+    eprintln!("baselines: zstd of the raw matrix, PCA, spherical harmonics");
+    let mut base_points = vec![baselines::zstd_raw(&raw, s.zstd_raw_level)?];
+    base_points.extend(baselines::pca(&raw, &s.pca_ranks, 0x6c74_6d01)?);
+    let sh = baselines::sh(&raw, &s.sh_orders)?;
+    base_points.extend(sh.points());
+    let mut sh_relight = Vec::new();
+    for env in &envs {
+        for &order in &s.sh_orders {
+            let image = sh.relight(&env.light, order)?;
+            sh_relight.push(ShRelightPoint {
+                env: env.name.clone(),
+                order,
+                coefficients: order * order,
+                relit_error: relative_l2(&image, &env.exact)?,
+            });
+        }
+    }
+    let baselines_s = t.elapsed().as_secs_f64();
+
+    let results = Results {
+        date: utc_now(),
+        command: std::env::args().collect::<Vec<_>>().join(" "),
+        machine: machine(),
+        scene,
+        envs: envs.iter().map(|e| e.name.clone()).collect(),
+        settings: s,
+        out_of_core,
+        matrix_norm,
+        codings,
+        baselines: base_points,
+        sh_relight,
+        timings: Timings {
+            bake_or_open_s,
+            references_s,
+            transpose_s,
+            baselines_s,
+            total_s: start.elapsed().as_secs_f64(),
+        },
+    };
+    page::write(&a.output, &results)?;
+    eprintln!(
+        "wrote {} in {:.0} s",
+        a.output.join("index.md").display(),
+        start.elapsed().as_secs_f64()
+    );
+    Ok(())
+}
+
+/// Writes `bytes` to `path` atomically.
+pub(crate) fn write_atomic(path: &Path, bytes: &[u8]) -> Result<()> {
+    let tmp = path.with_extension("tmp");
+    std::fs::write(&tmp, bytes).with_context(|| format!("writing {}", tmp.display()))?;
+    std::fs::rename(&tmp, path).with_context(|| format!("renaming to {}", path.display()))?;
+    Ok(())
+}

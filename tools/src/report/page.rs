@@ -1,0 +1,650 @@
+//! The report's pages: `index.md`, `results.json` and the SVG plots, all
+//! derived from [`Results`].
+
+use super::plot::{write_svg, Axis, Chart, Series, Style};
+use super::{write_atomic, Coding, RelightPoint, Results};
+use anyhow::Result;
+use std::fmt::Write as _;
+use std::path::Path;
+
+const MODES: [&str; 3] = ["2d", "4d", "adaptive"];
+
+/// The relit-frame numbers of one (setting, weighting, N), averaged over maps.
+#[derive(Clone, Copy, Debug, Default)]
+struct Frame {
+    n: usize,
+    lights: usize,
+    frame_ms: f64,
+    relit_error: f64,
+    dynamic_compression: f64,
+}
+
+/// Mean over maps of each N's points with `weighting`, in N order.
+fn frames(points: &[RelightPoint], weighting: &str) -> Vec<Frame> {
+    let mut ns: Vec<usize> = points.iter().map(|p| p.n).collect();
+    ns.sort_unstable();
+    ns.dedup();
+    ns.into_iter()
+        .filter_map(|n| {
+            let sel: Vec<&RelightPoint> = points
+                .iter()
+                .filter(|p| p.n == n && p.weighting == weighting)
+                .collect();
+            let k = sel.len() as f64;
+            (!sel.is_empty()).then(|| Frame {
+                n,
+                lights: sel[0].lights,
+                frame_ms: sel.iter().map(|p| p.frame_ms).sum::<f64>() / k,
+                relit_error: sel.iter().map(|p| p.relit_error).sum::<f64>() / k,
+                dynamic_compression: sel.iter().map(|p| p.dynamic_compression).sum::<f64>() / k,
+            })
+        })
+        .collect()
+}
+
+/// Points that no other point beats in both coordinates (smaller is
+/// better), sorted by x.
+fn pareto(mut pts: Vec<(f64, f64)>) -> Vec<(f64, f64)> {
+    pts.retain(|p| p.0.is_finite() && p.1.is_finite());
+    pts.sort_by(|a, b| a.0.total_cmp(&b.0).then(a.1.total_cmp(&b.1)));
+    let mut front: Vec<(f64, f64)> = Vec::new();
+    for p in pts {
+        if front.last().is_none_or(|l| p.1 < l.1) {
+            front.push(p);
+        }
+    }
+    front
+}
+
+/// Bytes a mode needs for matrix error `e`: log-log interpolation on its
+/// size/error front; None outside the front's range.
+fn size_at_error(codings: &[Coding], mode: &str, e: f64) -> Option<f64> {
+    let front = pareto(
+        codings
+            .iter()
+            .filter(|c| c.mode == mode && c.matrix_error > 0.0)
+            .map(|c| (c.matrix_error, c.file_bytes as f64))
+            .collect(),
+    );
+    front.windows(2).find_map(|w| {
+        let ((e0, b0), (e1, b1)) = (w[0], w[1]);
+        (e0 <= e && e <= e1).then(|| {
+            let t = (e.ln() - e0.ln()) / (e1.ln() - e0.ln()).max(f64::MIN_POSITIVE);
+            (b0.ln() + t * (b1.ln() - b0.ln())).exp()
+        })
+    })
+}
+
+fn pair<'a>(r: &'a Results, mode: &str) -> Option<&'a Coding> {
+    r.codings.iter().find(|c| c.quality_pair && c.mode == mode)
+}
+
+fn mb(bytes: f64) -> String {
+    format!("{:.3}", bytes / 1e6)
+}
+
+fn pct(e: f64) -> String {
+    format!("{:.3} %", 100.0 * e)
+}
+
+fn svg(dir: &Path, name: &str, chart: Chart) -> Result<String> {
+    write_svg(&dir.join(name), &chart)?;
+    Ok(format!("![{}]({name})\n", chart.title))
+}
+
+fn series(name: impl Into<String>, points: Vec<(f64, f64)>, style: Style) -> Series {
+    Series {
+        name: name.into(),
+        points,
+        style,
+        color: None,
+    }
+}
+
+fn chart(title: &str, x: &str, y: &str, axes: (Axis, Axis), series: Vec<Series>) -> Chart {
+    Chart {
+        title: title.into(),
+        x_label: x.into(),
+        y_label: y.into(),
+        x_axis: axes.0,
+        y_axis: axes.1,
+        series,
+    }
+}
+
+const LOG: (Axis, Axis) = (Axis::Log, Axis::Log);
+
+/// Writes `results.json`, the plots and `index.md` into `dir`.
+pub fn write(dir: &Path, r: &Results) -> Result<()> {
+    write_atomic(
+        &dir.join("results.json"),
+        serde_json::to_string_pretty(r)?.as_bytes(),
+    )?;
+    let mut md = String::new();
+    let s = &r.settings;
+    let sc = &r.scene;
+    writeln!(md, "# ltm report\n")?;
+    writeln!(
+        md,
+        "- **Date:** {}\n- **Machine:** {}, {} threads, {:.1} GiB RAM, {}\n- **Matrix:** {}; {}×{} pixels, 6·{}² = {} lights, {} channel(s){}; raw {} MB{}\n- **Maps:** {}\n- **Settings:** row filter {}, column filter {}; bits {:?}; target errors {:?}; N {:?}; median of {} frames; equal-quality pair at {} matrix error and {} bits\n- **Command:** `{}`\n",
+        r.date,
+        r.machine.cpu,
+        r.machine.threads,
+        r.machine.memory_gib,
+        r.machine.os,
+        sc.source,
+        sc.width,
+        sc.height,
+        sc.face_res,
+        sc.lights,
+        sc.channels,
+        if sc.has_albedo { " + albedo" } else { "" },
+        mb(sc.raw_bytes as f64),
+        if r.out_of_core { " (transposed out of core)" } else { "" },
+        r.envs.join(", "),
+        s.row_filter,
+        s.col_filter,
+        s.bits,
+        s.errors,
+        s.terms,
+        s.frames,
+        pct(s.quality),
+        s.quality_bits,
+        r.command,
+    )?;
+    if s.quick {
+        writeln!(md, "> A `--quick` run: a tiny matrix and few settings. It checks that every section is produced; its figures are not meaningful.\n")?;
+    }
+    writeln!(md, "Errors are relative L2 (Frobenius) norms: the *matrix error* of a decoded file against the raw matrix; the *relit error* of a relit image against the exact product `T·L` of the raw matrix (`ltm reference`). Frame times are medians; relit numbers are means over the maps.\n")?;
+
+    headline(&mut md, r)?;
+    size_error(&mut md, dir, r)?;
+    relit_error(&mut md, dir, r)?;
+    frame_time(&mut md, dir, r)?;
+    depth_by_level(&mut md, dir, r)?;
+    speed_error(&mut md, dir, r)?;
+
+    let t = &r.timings;
+    writeln!(md, "## Run time\n")?;
+    writeln!(md, "| bake or open | exact images | row transform + transpose | coding + relighting | baselines | total |\n|---|---|---|---|---|---|")?;
+    let coding: f64 = r.codings.iter().map(|c| c.code_s).sum();
+    writeln!(
+        md,
+        "| {:.1} s | {:.1} s | {:.1} s | {:.1} s (coding {:.1} s) | {:.1} s | {:.1} s |",
+        t.bake_or_open_s,
+        t.references_s,
+        t.transpose_s,
+        t.total_s - t.bake_or_open_s - t.references_s - t.transpose_s - t.baselines_s,
+        coding,
+        t.baselines_s,
+        t.total_s
+    )?;
+    write_atomic(&dir.join("index.md"), md.as_bytes())
+}
+
+fn headline(md: &mut String, r: &Results) -> Result<()> {
+    let s = &r.settings;
+    writeln!(md, "## Headline\n")?;
+    let raw = r.scene.raw_bytes as f64;
+    if let Some(a) = pair(r, "adaptive") {
+        writeln!(
+            md,
+            "Adaptive at `--bits {} --max-error {}`: {} MB, **{:.1}× smaller than the raw matrix** ({} MB), matrix error {}.\n",
+            a.bits,
+            s.quality,
+            mb(a.file_bytes as f64),
+            raw / a.file_bytes as f64,
+            mb(raw),
+            pct(a.matrix_error)
+        )?;
+    }
+    writeln!(md, "Size at equal matrix error (log-log interpolation on each mode's size/error front over all bit depths):\n")?;
+    writeln!(
+        md,
+        "| matrix error | 2d MB | 4d MB | adaptive MB | 2d / adaptive | 4d / adaptive |\n|---|---|---|---|---|---|"
+    )?;
+    let mut errors = s.errors.clone();
+    errors.push(s.quality);
+    errors.sort_by(f64::total_cmp);
+    errors.dedup();
+    for e in errors {
+        let sz: Vec<Option<f64>> = MODES
+            .iter()
+            .map(|m| size_at_error(&r.codings, m, e))
+            .collect();
+        let cell = |v: Option<f64>| v.map_or("–".into(), mb);
+        let ratio = |a: Option<f64>, b: Option<f64>| match (a, b) {
+            (Some(a), Some(b)) => format!("{:.2}×", a / b),
+            _ => "–".into(),
+        };
+        writeln!(
+            md,
+            "| {} | {} | {} | {} | {} | {} |",
+            pct(e),
+            cell(sz[0]),
+            cell(sz[1]),
+            cell(sz[2]),
+            ratio(sz[0], sz[2]),
+            ratio(sz[1], sz[2])
+        )?;
+    }
+    writeln!(
+        md,
+        "\n\"–\": the error lies outside the errors that mode reached in this sweep.\n"
+    )?;
+    if let (Some(a), Some(d)) = (pair(r, "adaptive"), pair(r, "2d")) {
+        writeln!(
+            md,
+            "Relighting the equal-quality pair (both at {} target matrix error, {} bits; transport-weighted wavelet lights):\n",
+            pct(s.quality),
+            s.quality_bits
+        )?;
+        writeln!(md, "| N | 2d frames/s | adaptive frames/s | adaptive vs 2d | relit error 2d | relit error adaptive |\n|---|---|---|---|---|---|")?;
+        let (fa, fd) = (
+            frames(&a.relight, "transport"),
+            frames(&d.relight, "transport"),
+        );
+        for (x, y) in fd.iter().zip(&fa) {
+            writeln!(
+                md,
+                "| {} | {:.0} | {:.0} | {:.2}× | {} | {} |",
+                x.n,
+                1e3 / x.frame_ms,
+                1e3 / y.frame_ms,
+                x.frame_ms / y.frame_ms,
+                pct(x.relit_error),
+                pct(y.relit_error)
+            )?;
+        }
+        writeln!(md)?;
+    }
+    Ok(())
+}
+
+fn size_error(md: &mut String, dir: &Path, r: &Results) -> Result<()> {
+    writeln!(md, "## 1. Size against matrix error\n")?;
+    let mut ser = Vec::new();
+    for mode in MODES {
+        for &b in &r.settings.bits {
+            let mut pts: Vec<(f64, f64)> = r
+                .codings
+                .iter()
+                .filter(|c| c.mode == mode && c.bits == b)
+                .map(|c| (c.matrix_error, c.file_bytes as f64 / 1e6))
+                .collect();
+            pts.sort_by(|a, b| a.0.total_cmp(&b.0));
+            ser.push(series(format!("{mode} {b} bits"), pts, Style::LinePoints));
+        }
+    }
+    let mut x_range = r
+        .codings
+        .iter()
+        .map(|c| c.matrix_error)
+        .filter(|e| *e > 0.0)
+        .fold((f64::INFINITY, 0.0f64), |(lo, hi), e| {
+            (lo.min(e), hi.max(e))
+        });
+    for method in ["pca", "sh"] {
+        let mut pts: Vec<(f64, f64)> = r
+            .baselines
+            .iter()
+            .filter(|b| b.method == method)
+            .map(|b| (b.matrix_error, b.bytes as f64 / 1e6))
+            .collect();
+        pts.sort_by(|a, b| a.0.total_cmp(&b.0));
+        for p in &pts {
+            if p.0 > 0.0 {
+                x_range = (x_range.0.min(p.0), x_range.1.max(p.0));
+            }
+        }
+        let name = if method == "pca" {
+            "PCA (rank k)"
+        } else {
+            "spherical harmonics (order L)"
+        };
+        ser.push(series(name, pts, Style::LinePoints));
+    }
+    if x_range.0.is_finite() {
+        let flat = |y: f64| vec![(x_range.0, y), (x_range.1, y)];
+        if let Some(z) = r.baselines.iter().find(|b| b.method == "zstd-raw") {
+            ser.push(series(
+                "zstd of the raw matrix (lossless)",
+                flat(z.bytes as f64 / 1e6),
+                Style::Dashed,
+            ));
+        }
+        ser.push(series(
+            "raw matrix",
+            flat(r.scene.raw_bytes as f64 / 1e6),
+            Style::Dashed,
+        ));
+    }
+    md.push_str(&svg(
+        dir,
+        "size-error.svg",
+        chart(
+            "Size against matrix error",
+            "relative L2 matrix error",
+            "file size (MB)",
+            LOG,
+            ser,
+        ),
+    )?);
+    writeln!(md, "\nEvery coded setting (`ltm compress --mode M --bits B --max-error E`, coded from one transposed matrix):\n")?;
+    writeln!(md, "| mode | bits | target | MB | ratio vs raw | matrix error | target met | nonzeros | coding s |\n|---|---|---|---|---|---|---|---|---|")?;
+    for c in &r.codings {
+        writeln!(
+            md,
+            "| {} | {} | {} | {} | {:.1}× | {} | {} | {} | {:.1} |",
+            c.mode,
+            c.bits,
+            pct(c.target_error),
+            mb(c.file_bytes as f64),
+            r.scene.raw_bytes as f64 / c.file_bytes as f64,
+            pct(c.matrix_error),
+            if c.target_met { "yes" } else { "no" },
+            c.nonzeros,
+            c.code_s
+        )?;
+    }
+    writeln!(md, "\nBaselines on the same matrix: lossless zstd (level {}) of the raw f32 rows; PCA over rows (rank-k randomized SVD, f32 factors, error measured in f64); spherical-harmonics projection of each row (order L, L² f32 coefficients per pixel and channel):\n", r.settings.zstd_raw_level)?;
+    writeln!(
+        md,
+        "| method | k or L | MB | ratio vs raw | matrix error |\n|---|---|---|---|---|"
+    )?;
+    for b in &r.baselines {
+        writeln!(
+            md,
+            "| {} | {} | {} | {:.1}× | {} |",
+            b.method,
+            b.param,
+            mb(b.bytes as f64),
+            r.scene.raw_bytes as f64 / b.bytes as f64,
+            pct(b.matrix_error)
+        )?;
+    }
+    writeln!(md)?;
+    Ok(())
+}
+
+fn relit_error(md: &mut String, dir: &Path, r: &Results) -> Result<()> {
+    writeln!(
+        md,
+        "## 2. Relit error against the number of wavelet lights\n"
+    )?;
+    let Some(a) = pair(r, "adaptive") else {
+        return Ok(());
+    };
+    writeln!(md, "The adaptive file of the equal-quality pair, with each rule for choosing the N wavelet lights (Ng et al. 2003): unweighted (largest |L|), transport-weighted (|L| × column norm) and area-weighted (|L| × support area). Spherical harmonics with L² coefficients are on the same axes.\n")?;
+    let weightings = ["unweighted", "transport", "area"];
+    for env in &r.envs {
+        let pts: Vec<RelightPoint> = a
+            .relight
+            .iter()
+            .filter(|p| &p.env == env)
+            .cloned()
+            .collect();
+        let mut ser: Vec<Series> = weightings
+            .iter()
+            .map(|w| {
+                let f = frames(&pts, w);
+                series(
+                    format!("adaptive, {w}"),
+                    f.iter().map(|f| (f.lights as f64, f.relit_error)).collect(),
+                    Style::LinePoints,
+                )
+            })
+            .collect();
+        ser.push(series(
+            "spherical harmonics (L² terms)",
+            r.sh_relight
+                .iter()
+                .filter(|p| &p.env == env)
+                .map(|p| (p.coefficients as f64, p.relit_error))
+                .collect(),
+            Style::LinePoints,
+        ));
+        md.push_str(&svg(
+            dir,
+            &format!("relit-error-{env}.svg"),
+            chart(
+                &format!("Relit error under {env}"),
+                "lighting terms N",
+                "relative L2 error vs T·L",
+                LOG,
+                ser,
+            ),
+        )?);
+    }
+    writeln!(md, "\nMean over maps:\n")?;
+    writeln!(
+        md,
+        "| N | unweighted | transport | area |\n|---|---|---|---|"
+    )?;
+    let f: Vec<Vec<Frame>> = weightings.iter().map(|w| frames(&a.relight, w)).collect();
+    for ((u, t), a) in f[0].iter().zip(&f[1]).zip(&f[2]) {
+        writeln!(
+            md,
+            "| {} | {} | {} | {} |",
+            u.n,
+            pct(u.relit_error),
+            pct(t.relit_error),
+            pct(a.relit_error)
+        )?;
+    }
+    writeln!(
+        md,
+        "\n| SH order L | terms | mean relit error |\n|---|---|---|"
+    )?;
+    for &order in &r.settings.sh_orders {
+        let e: Vec<f64> = r
+            .sh_relight
+            .iter()
+            .filter(|p| p.order == order)
+            .map(|p| p.relit_error)
+            .collect();
+        writeln!(
+            md,
+            "| {order} | {} | {} |",
+            order * order,
+            pct(e.iter().sum::<f64>() / e.len().max(1) as f64)
+        )?;
+    }
+    writeln!(md)?;
+    Ok(())
+}
+
+fn frame_time(md: &mut String, dir: &Path, r: &Results) -> Result<()> {
+    writeln!(md, "## 3. Frame time and dynamic compression against N\n")?;
+    let pairs: Vec<&Coding> = ["2d", "adaptive"]
+        .iter()
+        .filter_map(|m| pair(r, m))
+        .collect();
+    if pairs.is_empty() {
+        return Ok(());
+    }
+    writeln!(md, "The equal-quality pair (Fig. 9), transport weighting. The dynamic compression rate is the dense size of the N columns used (N × pixels × channels) over the coefficients multiply-added.\n")?;
+    let f: Vec<Vec<Frame>> = pairs
+        .iter()
+        .map(|c| frames(&c.relight, "transport"))
+        .collect();
+    let ser = |g: fn(&Frame) -> f64| -> Vec<Series> {
+        pairs
+            .iter()
+            .zip(&f)
+            .map(|(c, f)| {
+                series(
+                    format!("{} ({} MB)", c.mode, mb(c.file_bytes as f64)),
+                    f.iter().map(|x| (x.lights as f64, g(x))).collect(),
+                    Style::LinePoints,
+                )
+            })
+            .collect()
+    };
+    md.push_str(&svg(
+        dir,
+        "frame-time.svg",
+        chart(
+            "Frame time",
+            "lighting terms N",
+            "median frame time (ms)",
+            LOG,
+            ser(|x| x.frame_ms),
+        ),
+    )?);
+    md.push_str(&svg(
+        dir,
+        "dynamic-compression.svg",
+        chart(
+            "Dynamic compression rate",
+            "lighting terms N",
+            "dense entries / coefficients used",
+            LOG,
+            ser(|x| x.dynamic_compression),
+        ),
+    )?);
+    write!(md, "\n| N |")?;
+    for c in &pairs {
+        write!(
+            md,
+            " {m} ms | {m} frames/s | {m} dyn. compression |",
+            m = c.mode
+        )?;
+    }
+    writeln!(md, "\n|---|{}", "---|".repeat(3 * pairs.len()))?;
+    for i in 0..f[0].len() {
+        write!(md, "| {} |", f[0][i].n)?;
+        for fr in &f {
+            let x = fr[i];
+            write!(
+                md,
+                " {:.3} | {:.0} | {:.1}× |",
+                x.frame_ms,
+                1e3 / x.frame_ms,
+                x.dynamic_compression
+            )?;
+        }
+        writeln!(md)?;
+    }
+    writeln!(md)?;
+    Ok(())
+}
+
+fn depth_by_level(md: &mut String, dir: &Path, r: &Results) -> Result<()> {
+    writeln!(md, "## 4. Average column depth by row-wavelet level\n")?;
+    writeln!(md, "Adaptive files (Fig. 8). Level 0 is each face's scaling function; higher levels are finer wavelet lights.\n")?;
+    let adaptive: Vec<&Coding> = r.codings.iter().filter(|c| c.mode == "adaptive").collect();
+    let ser = adaptive
+        .iter()
+        .map(|c| {
+            series(
+                format!("{} bits, {}", c.bits, pct(c.target_error)),
+                c.depth_by_row_level
+                    .iter()
+                    .enumerate()
+                    .map(|(l, d)| (l as f64, *d))
+                    .collect(),
+                Style::LinePoints,
+            )
+        })
+        .collect();
+    md.push_str(&svg(
+        dir,
+        "depth-by-level.svg",
+        chart(
+            "Average column depth by row level",
+            "row-wavelet level",
+            "average column transform depth",
+            (Axis::Linear, Axis::Linear),
+            ser,
+        ),
+    )?);
+    let levels = adaptive.first().map_or(0, |c| c.depth_by_row_level.len());
+    write!(md, "\n| bits | target |")?;
+    for l in 0..levels {
+        write!(md, " level {l} |")?;
+    }
+    writeln!(md, "\n|---|---|{}", "---|".repeat(levels))?;
+    for c in &adaptive {
+        write!(md, "| {} | {} |", c.bits, pct(c.target_error))?;
+        for d in &c.depth_by_row_level {
+            write!(md, " {d:.2} |")?;
+        }
+        writeln!(md)?;
+    }
+    writeln!(md)?;
+    Ok(())
+}
+
+fn speed_error(md: &mut String, dir: &Path, r: &Results) -> Result<()> {
+    writeln!(md, "## 5. Speed against error\n")?;
+    writeln!(md, "Every (coded setting, N) as one point: median frame time against relit error (transport weighting, means over maps), with each mode's Pareto front.\n")?;
+    let mut ser = Vec::new();
+    let mut fronts = Vec::new();
+    for (i, mode) in MODES.into_iter().enumerate() {
+        let pts: Vec<(f64, f64)> = r
+            .codings
+            .iter()
+            .filter(|c| c.mode == mode)
+            .flat_map(|c| frames(&c.relight, "transport"))
+            .map(|f| (f.frame_ms, f.relit_error))
+            .collect();
+        let front = pareto(pts.clone());
+        for (name, pts, style) in [
+            ("settings", pts, Style::Points),
+            ("front", front.clone(), Style::Line),
+        ] {
+            ser.push(Series {
+                color: Some(i),
+                ..series(format!("{mode} {name}"), pts, style)
+            });
+        }
+        fronts.push((mode, front));
+    }
+    md.push_str(&svg(
+        dir,
+        "speed-error.svg",
+        chart(
+            "Speed against error",
+            "median frame time (ms)",
+            "relit error vs T·L",
+            LOG,
+            ser,
+        ),
+    )?);
+    writeln!(md, "\nFastest frame time reaching each relit error:\n")?;
+    write!(md, "| relit error |")?;
+    for (mode, _) in &fronts {
+        write!(md, " {mode} ms |")?;
+    }
+    writeln!(md, "\n|---|{}", "---|".repeat(fronts.len()))?;
+    for e in [0.1, 0.05, 0.02, 0.01, 0.005, 0.002] {
+        write!(md, "| ≤ {} |", pct(e))?;
+        for (_, front) in &fronts {
+            match front.iter().find(|p| p.1 <= e) {
+                Some(p) => write!(md, " {:.3} |", p.0)?,
+                None => write!(md, " – |")?,
+            }
+        }
+        writeln!(md)?;
+    }
+    writeln!(md)?;
+    Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn pareto_keeps_only_undominated_points() {
+        let f = pareto(vec![
+            (3.0, 1.0),
+            (1.0, 5.0),
+            (2.0, 2.0),
+            (2.5, 3.0),
+            (f64::NAN, 0.0),
+        ]);
+        assert_eq!(f, vec![(1.0, 5.0), (2.0, 2.0), (3.0, 1.0)]);
+    }
+}

@@ -17,6 +17,7 @@ struct Frame {
     frame_ms: f64,
     relit_error: f64,
     dynamic_compression: f64,
+    nonzeros: f64,
 }
 
 /// Mean over maps of each N's points with `weighting`, in N order.
@@ -37,6 +38,7 @@ fn frames(points: &[RelightPoint], weighting: &str) -> Vec<Frame> {
                 frame_ms: sel.iter().map(|p| p.frame_ms).sum::<f64>() / k,
                 relit_error: sel.iter().map(|p| p.relit_error).sum::<f64>() / k,
                 dynamic_compression: sel.iter().map(|p| p.dynamic_compression).sum::<f64>() / k,
+                nonzeros: sel.iter().map(|p| p.nonzeros as f64).sum::<f64>() / k,
             })
         })
         .collect()
@@ -463,7 +465,7 @@ fn frame_time(md: &mut String, dir: &Path, r: &Results) -> Result<()> {
     if pairs.is_empty() {
         return Ok(());
     }
-    writeln!(md, "The equal-quality pair (Fig. 9), transport weighting. The dynamic compression rate is the dense size of the N columns used (N × pixels × channels) over the coefficients multiply-added.\n")?;
+    writeln!(md, "The equal-quality pair (Fig. 9), transport weighting. The dynamic compression rate is the dense size of the N columns used (N × pixels × channels) over the coefficients multiply-added. G coef./s is the coefficients multiply-added per second of the whole frame (light transform, selection, multiply-add and inverse steps); each coefficient carries all stored channels.\n")?;
     let f: Vec<Vec<Frame>> = pairs
         .iter()
         .map(|c| frames(&c.relight, "transport"))
@@ -507,21 +509,22 @@ fn frame_time(md: &mut String, dir: &Path, r: &Results) -> Result<()> {
     for c in &pairs {
         write!(
             md,
-            " {m} ms | {m} frames/s | {m} dyn. compression |",
+            " {m} ms | {m} frames/s | {m} dyn. compression | {m} G coef./s |",
             m = c.mode
         )?;
     }
-    writeln!(md, "\n|---|{}", "---|".repeat(3 * pairs.len()))?;
+    writeln!(md, "\n|---|{}", "---|".repeat(4 * pairs.len()))?;
     for i in 0..f[0].len() {
         write!(md, "| {} |", f[0][i].n)?;
         for fr in &f {
             let x = fr[i];
             write!(
                 md,
-                " {:.3} | {:.0} | {:.1}× |",
+                " {:.3} | {:.0} | {:.1}× | {:.2} |",
                 x.frame_ms,
                 1e3 / x.frame_ms,
-                x.dynamic_compression
+                x.dynamic_compression,
+                x.nonzeros / x.frame_ms * 1e-6
             )?;
         }
         writeln!(md)?;

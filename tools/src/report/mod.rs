@@ -20,18 +20,22 @@ use ltm_codec::compress::row_level;
 use ltm_codec::{CompressOptions, Mode, RawStore, Target, Transposed};
 use ltm_relight::{reference, relative_l2, EnvMap, Image, Relighter, Rotation, Weighting};
 use serde::{Deserialize, Serialize};
+use std::io::Write as _;
 use std::path::{Path, PathBuf};
+use std::sync::atomic::{AtomicU64, Ordering};
 use std::time::Instant;
 
 /// Arguments of `ltm report`.
 #[derive(Args)]
-#[command(long_about = "Measure size, speed and error over a sweep of settings on one matrix.
+#[command(
+    long_about = "Measure size, speed and error over a sweep of settings on one matrix.
 
 The matrix (a baked scene or --raw) is row-transformed and transposed once; every mode (2d, 4d, adaptive) × --bits × --errors is coded from it, relit under every --env at every --terms N, and compared with the exact product T·L. Baselines on the same matrix: lossless zstd of the raw matrix, PCA (rank k) and spherical harmonics (order L).
 
 Writes OUTPUT/index.md (machine, date, settings, headline table and five sections: size against matrix error, relit error against N for the three light weightings and SH, frame time and dynamic compression against N, average column depth by row level, speed against error with Pareto fronts), the SVG plots, and OUTPUT/results.json with every measured point. OUTPUT/files/ keeps the 2d and adaptive files compared at equal quality.
 
-A full run on the default 128² scene takes a few minutes on 2 cores; --quick takes seconds.")]
+A full run on the default 128² scene takes about a minute on 2 cores; --quick takes seconds."
+)]
 pub struct ReportArgs {
     /// Scene to bake (the bake is cached in the output directory)
     /// [default: the default scene in assets/].
@@ -55,10 +59,10 @@ pub struct ReportArgs {
     #[arg(long)]
     pub assets: Option<PathBuf>,
     /// Image side when baking a scene [default: 128; quick: 32].
-    #[arg(long)]
+    #[arg(long, conflicts_with = "raw")]
     pub size: Option<u32>,
     /// Cubemap face resolution when baking a scene [default: 16; quick: 8].
-    #[arg(long)]
+    #[arg(long, conflicts_with = "raw")]
     pub face_res: Option<u32>,
     /// Quantization bits swept, comma-separated [default: 10,12,14; quick: 12].
     #[arg(long, value_delimiter = ',')]
@@ -625,10 +629,34 @@ pub fn run(a: ReportArgs) -> Result<()> {
     Ok(())
 }
 
-/// Writes `bytes` to `path` atomically.
+/// Temporary-file counter: concurrent writers in one process never share a
+/// temporary name.
+static TMP_COUNTER: AtomicU64 = AtomicU64::new(0);
+
+/// Writes `bytes` to `path` atomically: a temporary file beside it, synced,
+/// then renamed over it (removed again on failure).
 pub(crate) fn write_atomic(path: &Path, bytes: &[u8]) -> Result<()> {
-    let tmp = path.with_extension("tmp");
-    std::fs::write(&tmp, bytes).with_context(|| format!("writing {}", tmp.display()))?;
-    std::fs::rename(&tmp, path).with_context(|| format!("renaming to {}", path.display()))?;
-    Ok(())
+    let name = path
+        .file_name()
+        .with_context(|| format!("{}: not a file path", path.display()))?;
+    let tmp = path.with_file_name(format!(
+        ".{}.{}-{}.tmp",
+        name.to_string_lossy(),
+        std::process::id(),
+        TMP_COUNTER.fetch_add(1, Ordering::Relaxed)
+    ));
+    let write = || -> std::io::Result<()> {
+        let mut f = std::fs::OpenOptions::new()
+            .write(true)
+            .create_new(true)
+            .open(&tmp)?;
+        f.write_all(bytes)?;
+        f.sync_all()?;
+        drop(f);
+        std::fs::rename(&tmp, path)
+    };
+    write().map_err(|e| {
+        let _ = std::fs::remove_file(&tmp);
+        anyhow::Error::new(e).context(format!("writing {}", path.display()))
+    })
 }

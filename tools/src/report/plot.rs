@@ -10,14 +10,11 @@
 //! 1–2–5 / 1–9 multiples of them when the data spans less than a decade,
 //! on log axes), so labels read as `1e-3, 0.01, 0.1, 1, 10, 100, 1e3`.
 
-use anyhow::{Context, Result};
+use anyhow::Result;
 use plotters::coord::ranged1d::{DefaultFormatting, KeyPointHint};
 use plotters::prelude::*;
-use std::fs::{self, OpenOptions};
-use std::io::Write;
 use std::ops::Range;
-use std::path::{Path, PathBuf};
-use std::sync::atomic::{AtomicU64, Ordering};
+use std::path::Path;
 
 /// Chart size in pixels.
 const SIZE: (u32, u32) = (800, 520);
@@ -383,15 +380,7 @@ fn legend_corner(
 ) -> (SeriesLabelPosition, usize, f64) {
     let plot_w = (SIZE.0 - Y_LABEL_AREA - 2 * MARGIN) as f64;
     let plot_h = (SIZE.1 - X_LABEL_AREA - 2 * MARGIN - 2 * CAPTION_SIZE) as f64;
-    let longest = chart
-        .series
-        .iter()
-        .map(|s| s.name.chars().count())
-        .max()
-        .unwrap_or(0);
-    // The naive font estimate: 0.7 em per character.
-    let char_w = LEGEND_SIZE as f64 / 1.24 / 1.24 * 0.7;
-    let w = ((longest as f64 * char_w + 60.0) / plot_w).min(1.0);
+    let w = (legend_width(chart) as f64 / plot_w).min(1.0);
     let h = ((chart.series.len() as f64 * (LEGEND_SIZE as f64 + 5.0) + 30.0) / plot_h).min(1.0);
     let mut samples = Vec::new();
     for (s, runs) in chart.series.iter().zip(data) {
@@ -604,37 +593,15 @@ impl Glyph {
     }
 }
 
-/// Distinguishes temporary files of concurrent writers in one process.
-static TMP_COUNTER: AtomicU64 = AtomicU64::new(0);
-
 /// Writes it atomically (temporary file in the same directory, then rename).
 pub fn write_svg(path: &Path, chart: &Chart) -> Result<()> {
-    let svg = render_svg(chart)?;
-    let name = path
-        .file_name()
-        .with_context(|| format!("{}: not a file path", path.display()))?;
-    let tmp: PathBuf = path.with_file_name(format!(
-        ".{}.{}-{}.tmp",
-        name.to_string_lossy(),
-        std::process::id(),
-        TMP_COUNTER.fetch_add(1, Ordering::Relaxed)
-    ));
-    let write = || -> std::io::Result<()> {
-        let mut f = OpenOptions::new().write(true).create_new(true).open(&tmp)?;
-        f.write_all(svg.as_bytes())?;
-        f.sync_all()?;
-        drop(f);
-        fs::rename(&tmp, path)
-    };
-    write().map_err(|e| {
-        let _ = fs::remove_file(&tmp);
-        anyhow::Error::new(e).context(format!("writing {}", path.display()))
-    })
+    super::write_atomic(path, render_svg(chart)?.as_bytes())
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
+    use std::fs;
 
     fn series(name: &str, style: Style, points: Vec<(f64, f64)>) -> Series {
         Series {

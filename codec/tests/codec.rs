@@ -381,6 +381,39 @@ fn one_transpose_codes_every_setting_like_compress() {
     }
 }
 
+/// Too few bits for the target: missed at fixed bits, met when the coder
+/// may raise them; the file records the bits it was coded with.
+#[test]
+fn raise_bits_meets_a_target_that_fixed_bits_miss() {
+    let dir = tempfile::tempdir().unwrap();
+    let dims = Dims {
+        width: 32,
+        height: 24,
+        face_res: 4,
+        channels: 1,
+    };
+    let t = scene(dims);
+    let raw = write_raw(dir.path(), "m.raw", dims, &t);
+    let mut opts = CompressOptions {
+        bits: 4,
+        target: Target::MaxError(0.002),
+        ..Default::default()
+    };
+    let (_, fixed) = run(dir.path(), &raw, &opts, "fixed.ltm");
+    assert!(!fixed.target_met && fixed.bits == 4, "{fixed:?}");
+    opts.raise_bits = true;
+    let (path, raised) = run(dir.path(), &raw, &opts, "raised.ltm");
+    assert!(
+        raised.target_met && raised.achieved_error <= 0.002,
+        "{raised:?}"
+    );
+    assert!(raised.bits > 4 && raised.bits <= 16 && raised.bits % 2 == 0);
+    let file = LtmFile::open(&path).unwrap();
+    assert_eq!(file.meta().bits, raised.bits);
+    let decoded = decode_matrix(&file).unwrap();
+    assert!(rel_error(&decoded, &t) <= 0.002 * 1.0001);
+}
+
 /// Mutated and truncated files must give errors, never panics.
 #[test]
 fn hostile_files_error_and_never_panic() {
@@ -514,4 +547,5 @@ fn golden_hashes_of_deterministic_outputs() {
 }
 
 const GOLDEN_RAW: u32 = 0xf20f_83f3;
-const GOLDEN_LTM: u32 = 0x74ff_6703;
+/// The default options: adaptive, 10 bits, 1 % target.
+const GOLDEN_LTM: u32 = 0x5832_3993;

@@ -3,7 +3,9 @@
 use crate::progress;
 use anyhow::{bail, Context, Result};
 use clap::Args;
-use ltm_codec::compress::{compress, row_level, CompressOptions, Stage, Target, DEFAULT_MAX_ERROR};
+use ltm_codec::compress::{
+    compress, row_level, CompressOptions, Stage, Target, DEFAULT_BITS, DEFAULT_MAX_ERROR,
+};
 use ltm_codec::container::{LtmFile, Mode};
 use ltm_codec::npy::{export_npy, import_npy};
 use ltm_codec::{Filter, RawStore};
@@ -67,9 +69,10 @@ pub struct CompressArgs {
     /// Column image filter: legall53, cdf97, haar, d4, d6 or d8.
     #[arg(long, default_value = "legall53")]
     pub col_filter: Filter,
-    /// Quantization bits per coefficient (2..=16).
-    #[arg(long, default_value_t = 9, value_parser = clap::value_parser!(u32).range(2..=16))]
-    pub bits: u32,
+    /// Quantization bits per coefficient (2..=16) [default: 10, raised by 2
+    /// at a time (up to 16) while a --max-error target is missed].
+    #[arg(long, value_parser = clap::value_parser!(u32).range(2..=16))]
+    pub bits: Option<u32>,
     /// Keep the N largest coefficients of each column (the paper's rule).
     #[arg(long, conflicts_with = "max_error")]
     pub terms: Option<usize>,
@@ -132,7 +135,8 @@ pub fn compress_cmd(a: CompressArgs) -> Result<()> {
         mode: a.mode,
         row_filter: a.row_filter,
         col_filter: a.col_filter,
-        bits: a.bits,
+        bits: a.bits.unwrap_or(DEFAULT_BITS),
+        raise_bits: a.bits.is_none(),
         target,
         mem_budget,
         seed: a.seed,
@@ -154,20 +158,32 @@ pub fn compress_cmd(a: CompressArgs) -> Result<()> {
     bar.lock().expect("progress lock").0.finish_and_clear();
     let secs = start.elapsed().as_secs_f64();
     eprintln!(
-        "wrote {}: {} bytes ({:.1}x smaller than {} raw), {} nonzeros, relative L2 error {:.5}, {:.1} s ({:.1} MB/s of raw matrix){}",
+        "wrote {}: {} bytes ({:.1}x smaller than {} raw), {} bits, {} nonzeros, relative L2 error {:.5}, {:.1} s ({:.1} MB/s of raw matrix){}",
         a.output.display(),
         stats.file_bytes,
         stats.raw_bytes as f64 / stats.file_bytes as f64,
         stats.raw_bytes,
+        stats.bits,
         stats.nonzeros,
         stats.achieved_error,
         secs,
         stats.raw_bytes as f64 / 1e6 / secs,
         if stats.out_of_core { ", out of core" } else { "" }
     );
+    if opts.raise_bits && stats.bits > opts.bits {
+        eprintln!(
+            "coded at {} bits: {} missed the target",
+            stats.bits,
+            (opts.bits..stats.bits)
+                .step_by(2)
+                .map(|b| b.to_string())
+                .collect::<Vec<_>>()
+                .join(", ")
+        );
+    }
     if !stats.target_met {
-        if a.bits < 16 {
-            eprintln!("warning: the target error was not reached: {} bits quantize too coarsely for it; try more --bits", a.bits);
+        if stats.bits < 16 {
+            eprintln!("warning: the target error was not reached: {} bits quantize too coarsely for it; try more --bits", stats.bits);
         } else {
             eprintln!("warning: the target error was not reached: it is below the quantization floor of 16 bits");
         }

@@ -20,6 +20,7 @@ use ltm_codec::compress::row_level;
 use ltm_codec::{CompressOptions, Mode, RawStore, Target, Transposed};
 use ltm_relight::{reference, relative_l2, EnvMap, Image, Relighter, Rotation, Weighting};
 use serde::{Deserialize, Serialize};
+use std::hash::{Hash, Hasher};
 use std::io::Write as _;
 use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicU64, Ordering};
@@ -37,7 +38,8 @@ Writes OUTPUT/index.md (machine, date, settings, headline table and five section
 A full run on the default 128² scene takes about a minute on 2 cores; --quick takes seconds."
 )]
 pub struct ReportArgs {
-    /// Scene to bake (the bake is cached in the output directory)
+    /// Scene to bake (cached in the output directory under a name that
+    /// covers the scene description and sizes; delete it to bake again)
     /// [default: the default scene in assets/].
     #[arg(long, conflicts_with = "raw")]
     pub scene: Option<PathBuf>,
@@ -434,7 +436,16 @@ pub fn run(a: ReportArgs) -> Result<()> {
                 face_res: Some(face_res),
                 ..Default::default()
             })?;
-            let path = a.output.join(format!("scene-{size}px-n{face_res}.raw"));
+            // The cache key covers the whole description (meshes, materials,
+            // camera, sizes): an edited or different scene is baked anew.
+            let key = {
+                let mut h = std::hash::DefaultHasher::new();
+                format!("{desc:?}").hash(&mut h);
+                h.finish()
+            };
+            let path = a
+                .output
+                .join(format!("scene-{size}px-n{face_res}-{key:016x}.raw"));
             bake_cached(&desc, &path)?;
             (path, format!("{source} at {size}×{size}, n = {face_res}"))
         }

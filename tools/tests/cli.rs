@@ -153,6 +153,22 @@ fn report_quick_writes_every_section() {
     assert!(pca.windows(2).all(|w| w[1] < w[0]), "{pca:?}");
     assert!(sh.windows(2).all(|w| w[1] < w[0]), "{sh:?}");
     assert_eq!(r["sh_relight"].as_array().unwrap().len(), 2 * 3);
+
+    // --replot redraws the same page and plots from results.json alone.
+    std::fs::remove_file(out.join("size-error.svg")).unwrap();
+    let (ok, _, stderr) = ltm(&["report", "--replot", "-o", out.to_str().unwrap()]);
+    assert!(ok, "{stderr}");
+    assert_eq!(
+        std::fs::read_to_string(out.join("index.md")).unwrap(),
+        index
+    );
+    assert!(out.join("size-error.svg").is_file());
+    std::fs::write(out.join("results.json"), r#"{"codings": 3}"#).unwrap();
+    let (ok, _, stderr) = ltm(&["report", "--replot", "-o", out.to_str().unwrap()]);
+    assert!(
+        !ok && stderr.contains("is not a report's results.json"),
+        "{stderr}"
+    );
 }
 
 #[test]

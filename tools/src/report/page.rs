@@ -514,7 +514,10 @@ fn frame_time(md: &mut String, dir: &Path, r: &Results) -> Result<()> {
         )?;
     }
     writeln!(md, "\n|---|{}", "---|".repeat(4 * pairs.len()))?;
-    for i in 0..f[0].len() {
+    // Rows of N that every file was relit at (a results.json edited by hand
+    // may hold fewer points for one of them).
+    let rows = f.iter().map(Vec::len).min().unwrap_or(0);
+    for i in 0..rows {
         write!(md, "| {} |", f[0][i].n)?;
         for fr in &f {
             let x = fr[i];

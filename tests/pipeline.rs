@@ -139,6 +139,22 @@ fn more_terms_give_less_error_and_threads_agree() {
         hs.into_iter().map(|h| h.join().unwrap()).collect()
     });
     assert_eq!(images[0], images[1]);
+    // The multiply-add's split into pixel ranges follows the pool's thread
+    // count; every pixel is still summed in the same order.
+    let frame = |threads: usize| {
+        let pool = rayon::ThreadPoolBuilder::new()
+            .num_threads(threads)
+            .build()
+            .unwrap();
+        pool.install(|| {
+            let mut b = relighter.buffers();
+            relighter
+                .relight(&l, 384, Weighting::Transport, &mut b)
+                .unwrap();
+            b.image
+        })
+    };
+    assert_eq!(frame(1), frame(3));
 }
 
 #[test]

@@ -23,8 +23,13 @@ use rayon::prelude::*;
 use std::path::Path;
 use std::time::{Duration, Instant};
 
-/// Pixels per parallel task of the multiply-add.
-const CHUNK_PIXELS: usize = 1 << 14;
+/// Pixel blocks of the block index: each column records where its entries
+/// cross every block boundary, so a frame can split the multiply-add into
+/// pixel ranges of equal work (deep columns crowd into the first blocks,
+/// where the coarse bands are) without searching.
+const BLOCKS: usize = 64;
+/// Parallel tasks per thread of the multiply-add.
+const TASKS_PER_THREAD: usize = 4;
 
 /// A compressed matrix ready to relight. Immutable and `Sync`: threads share
 /// one and each keeps its own [`FrameBuffers`].
@@ -36,6 +41,11 @@ pub struct Relighter {
     positions: Vec<u32>,
     /// `channels` values per coefficient, ready to multiply by the light.
     values: Vec<f32>,
+    /// Pixels per block of the block index (the last block may be shorter).
+    block_pixels: usize,
+    /// Column `j`'s entries in block `b` are `starts[j] + block_index[j·(BLOCKS
+    /// + 1) + b] ..` up to the next boundary's offset.
+    block_index: Vec<u32>,
     depths: Vec<u8>,
     /// Per light: the transport-weighted and area-weighted priority scales.
     norms: Vec<f32>,
@@ -108,7 +118,10 @@ impl Relighter {
             })
             .collect::<Result<_>>()?;
         let total: usize = decoded.iter().map(|d| d.0.len()).sum();
+        let block_pixels = dims.pixels().div_ceil(BLOCKS).max(1);
         let mut r = Relighter {
+            block_pixels,
+            block_index: Vec::with_capacity(decoded.len() * (BLOCKS + 1)),
             decoder,
             starts: Vec::with_capacity(decoded.len() + 1),
             positions: Vec::with_capacity(total),
@@ -121,6 +134,11 @@ impl Relighter {
         };
         r.starts.push(0);
         for (pos, val, depth, norm) in decoded {
+            // Positions are sorted (the container stores them as gaps).
+            r.block_index.extend(
+                (0..=BLOCKS)
+                    .map(|b| pos.partition_point(|&i| (i as usize) < b * block_pixels) as u32),
+            );
             r.positions.extend_from_slice(&pos);
             r.values.extend_from_slice(&val);
             r.starts.push(r.positions.len());
@@ -282,8 +300,9 @@ impl Relighter {
     }
 
     /// Multiply-adds the columns of `group` into the planes, in parallel over
-    /// pixel ranges (columns are sorted by position, so each range is a
-    /// sub-slice found by binary search). Returns the coefficients used.
+    /// pixel ranges of about equal work (from the block index; each pixel is
+    /// summed by one task in group order, so the image does not depend on
+    /// the split). Returns the coefficients used.
     fn multiply_add(
         &self,
         group: &[u32],
@@ -291,39 +310,56 @@ impl Relighter {
         channels: usize,
         planes: &mut [Vec<f32>; 3],
     ) -> u64 {
+        let offsets = |j: u32| &self.block_index[j as usize * (BLOCKS + 1)..][..BLOCKS + 1];
+        let mut work = [0u64; BLOCKS];
+        for &j in group {
+            for (w, o) in work.iter_mut().zip(offsets(j).windows(2)) {
+                *w += u64::from(o[1] - o[0]);
+            }
+        }
+        let used: u64 = work.iter().sum();
+        // Consecutive blocks grouped into ranges of about equal work.
+        let tasks = TASKS_PER_THREAD * rayon::current_num_threads();
+        let target = (used / tasks as u64).max(1);
+        let mut ranges = Vec::with_capacity(tasks + 1);
+        let (mut first, mut acc) = (0, 0);
+        for (b, w) in work.iter().enumerate() {
+            acc += w;
+            if acc >= target {
+                ranges.push(first..b + 1);
+                (first, acc) = (b + 1, 0);
+            }
+        }
+        if first < BLOCKS {
+            ranges.push(first..BLOCKS);
+        }
+        // Disjoint plane slices, one set per range.
+        let p = planes[0].len();
         let [r, g, b] = planes;
-        let used: u64 = group
-            .iter()
-            .map(|&j| (self.starts[j as usize + 1] - self.starts[j as usize]) as u64)
-            .sum();
-        r.par_chunks_mut(CHUNK_PIXELS)
-            .zip(g.par_chunks_mut(CHUNK_PIXELS))
-            .zip(b.par_chunks_mut(CHUNK_PIXELS))
-            .enumerate()
-            .for_each(|(k, ((r, g), b))| {
-                let lo = (k * CHUNK_PIXELS) as u32;
-                let hi = lo + r.len() as u32;
-                for &j in group {
-                    let (s, e) = (self.starts[j as usize], self.starts[j as usize + 1]);
-                    let pos = &self.positions[s..e];
-                    let a = pos.partition_point(|&i| i < lo);
-                    let z = a + pos[a..].partition_point(|&i| i < hi);
-                    let l = light[j as usize];
-                    if channels == 1 {
-                        multiply_add_grey(&pos[a..z], &self.values[s + a..s + z], lo, l, r, g, b);
-                    } else {
-                        multiply_add_rgb(
-                            &pos[a..z],
-                            &self.values[3 * (s + a)..3 * (s + z)],
-                            lo,
-                            l,
-                            r,
-                            g,
-                            b,
-                        );
-                    }
+        let (mut r, mut g, mut b) = (&mut r[..], &mut g[..], &mut b[..]);
+        let mut parts = Vec::with_capacity(ranges.len());
+        let mut lo = 0;
+        for range in ranges {
+            let hi = (range.end * self.block_pixels).min(p).max(lo);
+            let (r0, r1) = r.split_at_mut(hi - lo);
+            let (g0, g1) = g.split_at_mut(hi - lo);
+            let (b0, b1) = b.split_at_mut(hi - lo);
+            parts.push((range, lo as u32, r0, g0, b0));
+            (r, g, b, lo) = (r1, g1, b1, hi);
+        }
+        parts.into_par_iter().for_each(|(range, lo, r, g, b)| {
+            for &j in group {
+                let (s, o) = (self.starts[j as usize], offsets(j));
+                let (a, z) = (s + o[range.start] as usize, s + o[range.end] as usize);
+                let pos = &self.positions[a..z];
+                let l = light[j as usize];
+                if channels == 1 {
+                    multiply_add_grey(pos, &self.values[a..z], lo, l, r, g, b);
+                } else {
+                    multiply_add_rgb(pos, &self.values[3 * a..3 * z], lo, l, r, g, b);
                 }
-            });
+            }
+        });
         used
     }
 

@@ -3,6 +3,7 @@
 //! at the same file size, relight under every map, and write images and a
 //! summary with sizes, errors against the exact `T·L` and frame rates.
 
+use crate::output::write_atomic;
 use crate::progress;
 use anyhow::{bail, Context, Result};
 use clap::Args;
@@ -12,6 +13,7 @@ use ltm_codec::container::Mode;
 use ltm_codec::RawStore;
 use ltm_relight::{reference, relative_l2, EnvMap, Image, Relighter, Rotation, Weighting};
 use std::fmt::Write as _;
+use std::hash::{Hash, Hasher};
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
@@ -84,16 +86,24 @@ pub(crate) fn env_maps(assets: &Path) -> Result<Vec<PathBuf>> {
     Ok(maps)
 }
 
-/// Bakes `desc` into `raw_path` unless a complete store is already there
-/// (an interrupted bake is resumed).
-pub(crate) fn bake_cached(desc: &SceneDesc, raw_path: &Path) -> Result<()> {
+/// Bakes `desc` into `dir/{label}-{key}.raw` unless a complete store is
+/// already there, and returns its path. The key hashes the whole description
+/// (meshes, materials, camera, sizes), so an edited or different scene is
+/// baked anew; delete the file to bake again after editing a mesh file.
+pub(crate) fn bake_cached(desc: &SceneDesc, dir: &Path, label: &str) -> Result<PathBuf> {
+    let key = {
+        let mut h = std::hash::DefaultHasher::new();
+        format!("{desc:?}").hash(&mut h);
+        h.finish()
+    };
+    let raw_path = dir.join(format!("{label}-{key:016x}.raw"));
     if raw_path.exists() {
         eprintln!("using the cached bake {}", raw_path.display());
-        return Ok(());
+        return Ok(raw_path);
     }
     let scene = Scene::build(desc)?;
     let bar = progress::bar(0, "bake");
-    let report = bake(&scene, raw_path, &BakeOptions::default(), &|p| {
+    let report = bake(&scene, &raw_path, &BakeOptions::default(), &|p| {
         bar.set_length(p.rows_total);
         bar.set_position(p.rows_done);
     })?;
@@ -103,7 +113,7 @@ pub(crate) fn bake_cached(desc: &SceneDesc, raw_path: &Path) -> Result<()> {
         report.rows_baked,
         report.elapsed.as_secs_f64()
     );
-    Ok(())
+    Ok(raw_path)
 }
 
 /// Compresses `raw` in 2d mode to about `bytes` bytes (within 3 %) by a
@@ -143,7 +153,6 @@ pub fn run(a: DemoArgs) -> Result<()> {
     let start = Instant::now();
 
     // 1. Bake (cached: a complete raw store of the same settings is reused).
-    let raw_path = out(&format!("scene-{}px-n{}.raw", a.size, a.face_res));
     let mut desc = SceneDesc::default_scene(&assets)?;
     desc.apply(&Overrides {
         width: Some(a.size),
@@ -151,7 +160,11 @@ pub fn run(a: DemoArgs) -> Result<()> {
         face_res: Some(a.face_res),
         ..Default::default()
     })?;
-    bake_cached(&desc, &raw_path)?;
+    let raw_path = bake_cached(
+        &desc,
+        &a.output,
+        &format!("scene-{}px-n{}", a.size, a.face_res),
+    )?;
     let raw = RawStore::open(&raw_path)?;
     let dims = raw.dims();
 
@@ -275,8 +288,7 @@ pub fn run(a: DemoArgs) -> Result<()> {
     writeln!(md, "| map | file | N | nonzeros | frame ms | frames/s | relit error |\n|---|---|---|---|---|---|---|")?;
     md.push_str(&table);
     writeln!(md, "\n`contact-sheet.png`: one row per map; columns: exact `T·L`, adaptive N = 200, 2d (same file size) N = 200.")?;
-    std::fs::write(out("summary.md"), &md)
-        .with_context(|| format!("writing {}", out("summary.md").display()))?;
+    write_atomic(&out("summary.md"), md.as_bytes())?;
     println!("{md}");
     eprintln!("wrote {}", a.output.display());
     Ok(())

@@ -3,6 +3,7 @@
 mod bake;
 mod codec_cmds;
 mod demo;
+mod output;
 mod progress;
 mod reference;
 mod relight_cmd;

@@ -18,12 +18,11 @@ use clap::Args;
 use ltm_bake::{Overrides, SceneDesc};
 use ltm_codec::compress::row_level;
 use ltm_codec::{CompressOptions, Mode, RawStore, Target, Transposed};
-use ltm_relight::{reference, relative_l2, EnvMap, Image, Relighter, Rotation, Weighting};
+use ltm_relight::{
+    reference, relative_l2, EnvMap, FrameBuffers, Image, Relighter, Rotation, Weighting,
+};
 use serde::{Deserialize, Serialize};
-use std::hash::{Hash, Hasher};
-use std::io::Write as _;
-use std::path::{Path, PathBuf};
-use std::sync::atomic::{AtomicU64, Ordering};
+use std::path::PathBuf;
 use std::time::Instant;
 
 /// Arguments of `ltm report`.
@@ -300,16 +299,16 @@ fn median(mut v: Vec<f64>) -> f64 {
 /// and its error.
 fn measure(
     relighter: &Relighter,
+    bufs: &mut FrameBuffers,
     env: &Env,
     n: usize,
     weighting: Weighting,
     frames: usize,
 ) -> Result<RelightPoint> {
-    let mut bufs = relighter.buffers();
     let mut times = Vec::with_capacity(frames);
     let mut stats = Default::default();
     for _ in 0..frames {
-        stats = relighter.relight(&env.light, n, weighting, &mut bufs)?;
+        stats = relighter.relight(&env.light, n, weighting, bufs)?;
         times.push(stats.total().as_secs_f64());
     }
     let stats: ltm_relight::FrameStats = stats;
@@ -436,17 +435,7 @@ pub fn run(a: ReportArgs) -> Result<()> {
                 face_res: Some(face_res),
                 ..Default::default()
             })?;
-            // The cache key covers the whole description (meshes, materials,
-            // camera, sizes): an edited or different scene is baked anew.
-            let key = {
-                let mut h = std::hash::DefaultHasher::new();
-                format!("{desc:?}").hash(&mut h);
-                h.finish()
-            };
-            let path = a
-                .output
-                .join(format!("scene-{size}px-n{face_res}-{key:016x}.raw"));
-            bake_cached(&desc, &path)?;
+            let path = bake_cached(&desc, &a.output, &format!("scene-{size}px-n{face_res}"))?;
             (path, format!("{source} at {size}×{size}, n = {face_res}"))
         }
     };
@@ -549,6 +538,7 @@ pub fn run(a: ReportArgs) -> Result<()> {
         let code_s = t.elapsed().as_secs_f64();
         let quality_pair = bits == s.quality_bits && err == s.quality && mode != Mode::FourD;
         let relighter = Relighter::open(&path)?;
+        let mut bufs = relighter.buffers();
         let mut relight = Vec::new();
         let weightings: &[Weighting] = if quality_pair {
             &[Weighting::Transport, Weighting::Unweighted, Weighting::Area]
@@ -558,7 +548,7 @@ pub fn run(a: ReportArgs) -> Result<()> {
         for env in &envs {
             for &weighting in weightings {
                 for &n in &terms {
-                    relight.push(measure(&relighter, env, n, weighting, s.frames)?);
+                    relight.push(measure(&relighter, &mut bufs, env, n, weighting, s.frames)?);
                 }
             }
         }
@@ -638,36 +628,4 @@ pub fn run(a: ReportArgs) -> Result<()> {
         start.elapsed().as_secs_f64()
     );
     Ok(())
-}
-
-/// Temporary-file counter: concurrent writers in one process never share a
-/// temporary name.
-static TMP_COUNTER: AtomicU64 = AtomicU64::new(0);
-
-/// Writes `bytes` to `path` atomically: a temporary file beside it, synced,
-/// then renamed over it (removed again on failure).
-pub(crate) fn write_atomic(path: &Path, bytes: &[u8]) -> Result<()> {
-    let name = path
-        .file_name()
-        .with_context(|| format!("{}: not a file path", path.display()))?;
-    let tmp = path.with_file_name(format!(
-        ".{}.{}-{}.tmp",
-        name.to_string_lossy(),
-        std::process::id(),
-        TMP_COUNTER.fetch_add(1, Ordering::Relaxed)
-    ));
-    let write = || -> std::io::Result<()> {
-        let mut f = std::fs::OpenOptions::new()
-            .write(true)
-            .create_new(true)
-            .open(&tmp)?;
-        f.write_all(bytes)?;
-        f.sync_all()?;
-        drop(f);
-        std::fs::rename(&tmp, path)
-    };
-    write().map_err(|e| {
-        let _ = std::fs::remove_file(&tmp);
-        anyhow::Error::new(e).context(format!("writing {}", path.display()))
-    })
 }

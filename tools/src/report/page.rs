@@ -2,7 +2,8 @@
 //! derived from [`Results`].
 
 use super::plot::{write_svg, Axis, Chart, Series, Style};
-use super::{write_atomic, Coding, RelightPoint, Results};
+use super::{Coding, RelightPoint, Results};
+use crate::output::write_atomic;
 use anyhow::Result;
 use std::fmt::Write as _;
 use std::path::Path;

@@ -595,7 +595,7 @@ impl Glyph {
 
 /// Writes it atomically (temporary file in the same directory, then rename).
 pub fn write_svg(path: &Path, chart: &Chart) -> Result<()> {
-    super::write_atomic(path, render_svg(chart)?.as_bytes())
+    crate::output::write_atomic(path, render_svg(chart)?.as_bytes())
 }
 
 #[cfg(test)]

@@ -187,12 +187,7 @@ fn quantize(c: &mut Criterion) {
     let nnz = col.indices.len();
 
     let meta = Meta {
-        dims: Dims {
-            width: W as u32,
-            height: H as u32,
-            face_res: 16,
-            channels: 1,
-        },
+        dims: Dims::image(W as u32, H as u32, 16, 1),
         mode: Mode::Adaptive,
         row_filter: Filter::Haar,
         col_filter: filter,

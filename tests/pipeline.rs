@@ -41,7 +41,7 @@ fn relighting_matches_the_dense_reference_and_eq3() {
     let dir = tempfile::tempdir().unwrap();
     let raw_path = bake_default(dir.path());
     let raw = RawStore::open(&raw_path).unwrap();
-    let n = raw.dims().face_res as usize;
+    let n = raw.dims().face_res() as usize;
     for env in ["interior.exr", "sunset.exr"] {
         let l = light(n, env);
         let exact = reference(&raw, &l).unwrap();
@@ -95,7 +95,7 @@ fn more_terms_give_less_error_and_threads_agree() {
     let dir = tempfile::tempdir().unwrap();
     let raw_path = bake_default(dir.path());
     let raw = RawStore::open(&raw_path).unwrap();
-    let l = light(raw.dims().face_res as usize, "studio.exr");
+    let l = light(raw.dims().face_res() as usize, "studio.exr");
     let exact = reference(&raw, &l).unwrap();
     let out = dir.path().join("scene.ltm");
     compress(

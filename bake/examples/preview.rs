@@ -43,7 +43,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         })
         .collect();
     let mut out = std::io::BufWriter::new(std::fs::File::create(&args[2])?);
-    write!(out, "P6\n{} {}\n255\n", dims.width, dims.height)?;
+    write!(out, "P6\n{} {}\n255\n", dims.width(), dims.height())?;
     for px in pixels {
         for v in px {
             out.write_all(&[(v.clamp(0.0, 1.0).powf(1.0 / 2.2) * 255.0 + 0.5) as u8])?;

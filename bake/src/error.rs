@@ -6,10 +6,17 @@ use std::path::PathBuf;
 /// Every failure of `ltm-bake`. Messages name the file (or the command line),
 /// the offending field or value, and the valid range.
 #[derive(Debug, thiserror::Error)]
+#[non_exhaustive]
 pub enum BakeError {
     /// Reading a scene file failed (missing, unreadable).
     #[error("{path}: {error}")]
-    Io { path: PathBuf, error: io::Error },
+    Io {
+        /// The file.
+        path: PathBuf,
+        /// What the system said.
+        #[source]
+        error: io::Error,
+    },
     /// Reading a mesh file failed (missing, unreadable); `field` names the
     /// scene entry, e.g. `meshes[0].path`.
     #[error("{origin}: {field}: cannot read {path}: {error}")]
@@ -17,6 +24,7 @@ pub enum BakeError {
         origin: String,
         field: String,
         path: PathBuf,
+        #[source]
         error: io::Error,
     },
     /// The scene file is not valid TOML, or does not have the scene's

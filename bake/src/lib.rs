@@ -18,12 +18,14 @@
 //! ```
 
 #![forbid(unsafe_code)]
+#![warn(missing_docs)]
 
 mod bake;
 mod error;
 pub mod material;
 mod mesh;
 mod ply;
+mod rows;
 pub mod sampling;
 pub mod scene;
 pub mod transport;
@@ -33,6 +35,7 @@ pub use bake::{
     bake, raw_header, BakeOptions, BakeProgress, BakeReport, BlockBaker, DEFAULT_BLOCK_BYTES,
 };
 pub use error::{BakeError, Result};
+pub use rows::{RowSample, RowSource};
 pub use scene::{Overrides, SceneDesc, DEFAULT_SCENE_TOML};
 pub use transport::RowStats;
 pub use world::{Camera, Hit, MeshStats, Scene, SceneStats, INSIDE_LIMIT};

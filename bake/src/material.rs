@@ -35,6 +35,7 @@ const TABLE_GRID: usize = 96;
 
 /// A material ready to evaluate.
 #[derive(Clone, Debug)]
+#[non_exhaustive]
 pub enum Material {
     Lambert { albedo: [f64; 3] },
     Glossy(Box<Glossy>),

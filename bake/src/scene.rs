@@ -48,7 +48,7 @@
 //! ignored.
 
 use crate::error::{BakeError, Result};
-use ltm_codec::raw::{MAX_FACE_RES, MAX_PIXELS, MAX_SIDE};
+use ltm_codec::{MAX_FACE_RES, MAX_PIXELS, MAX_SIDE};
 use serde::de::{self, Deserializer, SeqAccess, Visitor};
 use serde::Deserialize;
 use std::collections::BTreeMap;
@@ -125,6 +125,7 @@ pub struct LightingDesc {
 /// A material; `type = "lambert"` or `type = "glossy"`.
 #[derive(Clone, Debug, Deserialize, PartialEq)]
 #[serde(tag = "type", rename_all = "lowercase", deny_unknown_fields)]
+#[non_exhaustive]
 pub enum MaterialDesc {
     /// Lambertian: f_r = albedo/π.
     Lambert { albedo: [f64; 3] },

@@ -69,6 +69,7 @@
 //! BVH's any-hit query.
 
 use crate::material::Material;
+use crate::rows::RowSample;
 use crate::sampling::{hammersley, mix64, rotation, wrap};
 use crate::world::Scene;
 use glam::DVec3;
@@ -133,7 +134,7 @@ impl Tables {
             corners,
             omega,
             texel_pts: hammersley(scene.texel_samples),
-            pixel_pts: hammersley(scene.spp),
+            pixel_pts: hammersley(scene.rows.samples_per_row()),
         }
     }
 }
@@ -152,7 +153,6 @@ impl Scratch {
     }
 }
 
-const PIXEL_KEY: u64 = 0x5049_5845_4c00_0000;
 const DIR_KEY: u64 = 0x4449_5200_0000_0000;
 
 impl Scene {
@@ -173,33 +173,21 @@ impl Scene {
         row: &mut [f32],
         albedo_out: &mut [f32; 3],
     ) -> RowStats {
-        let cam = &self.camera;
-        let (x, y) = (
-            (p % cam.width as usize) as f64,
-            (p / cam.width as usize) as f64,
-        );
-        let k_count = self.spp as usize;
+        let k_count = self.rows.samples_per_row() as usize;
         let acc = &mut scratch.acc;
         acc.iter_mut().for_each(|v| *v = 0.0);
         let mut stats = RowStats::default();
         let mut albedo_sum = [0.0f64; 3];
         let mut lum_sum = 0.0;
-        let pix_rot = rotation(mix64(p as u64 ^ PIXEL_KEY));
+        let rot = self.rows.row_rotation(p);
         for k in 0..k_count {
-            let (dx, dy) = if k_count == 1 {
-                (0.5, 0.5)
-            } else {
-                let [u, v] = tables.pixel_pts[k];
-                (wrap(u, pix_rot[0]), wrap(v, pix_rot[1]))
-            };
             stats.primary_rays += 1;
-            let dir = cam.direction(x + dx, y + dy);
-            let Some(hit) = self.intersect(cam.eye, dir) else {
+            let Some(RowSample { hit, wo }) = self.rows.sample(self, p, k, &tables.pixel_pts, rot)
+            else {
                 continue;
             };
             let material = &self.materials[hit.material];
             let seed = mix64(((p as u64) << 12 ^ k as u64) ^ DIR_KEY);
-            let wo = -dir;
             if self.channels == 1 {
                 let a = material.albedo();
                 let lum: f64 = (0..3).map(|c| LUMINANCE[c] * a[c]).sum();

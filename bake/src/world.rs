@@ -26,6 +26,7 @@
 use crate::error::{BakeError, Result};
 use crate::material::Material;
 use crate::mesh::{self, RawMesh};
+use crate::rows::RowSource;
 use crate::scene::{CameraDesc, SceneDesc};
 use glam::{DMat3, DVec3, Vec3A};
 use obvhs::cwbvh::builder::build_cwbvh_from_tris;
@@ -126,10 +127,9 @@ pub struct Hit {
 
 /// A scene ready to trace.
 pub struct Scene {
-    pub(crate) camera: Camera,
+    pub(crate) rows: RowSource,
     pub(crate) face_res: u32,
     pub(crate) texel_samples: u32,
-    pub(crate) spp: u32,
     pub(crate) materials: Vec<Material>,
     pub(crate) channels: u32,
     tris: Vec<RtTriangle>,
@@ -244,10 +244,12 @@ impl Scene {
             .collect();
         let shade: Vec<Shade> = order.iter().map(|&i| shade[i as usize]).collect();
         let scene = Scene {
-            camera: Camera::new(&desc.camera),
+            rows: RowSource::Camera {
+                camera: Camera::new(&desc.camera),
+                spp: desc.camera.spp,
+            },
             face_res: desc.lighting.face_res,
             texel_samples: desc.lighting.texel_samples,
-            spp: desc.camera.spp,
             channels: if desc.needs_color_transport() { 3 } else { 1 },
             materials,
             tris: rt,
@@ -265,9 +267,16 @@ impl Scene {
         &self.stats
     }
 
-    /// The camera.
-    pub fn camera(&self) -> &Camera {
-        &self.camera
+    /// What the rows are.
+    pub fn rows(&self) -> &RowSource {
+        &self.rows
+    }
+
+    /// The camera whose pixels are the rows.
+    pub fn camera(&self) -> Option<&Camera> {
+        match &self.rows {
+            RowSource::Camera { camera, .. } => Some(camera),
+        }
     }
 
     /// Channels of the transport: 1 (grey transport with an albedo image)
@@ -279,9 +288,8 @@ impl Scene {
     /// Matrix dimensions.
     pub fn dims(&self) -> ltm_codec::Dims {
         ltm_codec::Dims {
-            width: self.camera.width,
-            height: self.camera.height,
-            face_res: self.face_res,
+            rows: self.rows.layout(),
+            lights: ltm_codec::LightBasis::Cubemap { n: self.face_res },
             channels: self.channels,
         }
     }
@@ -344,7 +352,9 @@ impl Scene {
     /// Probes the image with up to 32×32 pixel-centre rays and fails when
     /// more than [`INSIDE_LIMIT`] of them hit the back side of a triangle.
     fn check_camera(&self) -> Result<()> {
-        let c = &self.camera;
+        let Some(c) = self.camera() else {
+            return Ok(());
+        };
         let (gx, gy) = (c.width.min(32), c.height.min(32));
         let mut back = 0usize;
         for j in 0..gy {

@@ -49,7 +49,10 @@ fn default_scene_bakes_into_a_valid_store() {
 
     let store = RawStore::open(&out).unwrap();
     let d = store.dims();
-    assert_eq!((d.width, d.height, d.face_res, d.channels), (64, 64, 8, 3));
+    assert_eq!(
+        (d.width(), d.height(), d.face_res(), d.channels),
+        (64, 64, 8, 3)
+    );
     assert!(store.albedo().is_none());
     for b in 0..store.header().block_count() {
         store.verify_block(b).unwrap();

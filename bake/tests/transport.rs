@@ -96,7 +96,7 @@ fn occluder_zeroes_the_covered_texels() {
     let open = plane_scene("", lighting);
     let shadowed = plane_scene(occluder, lighting);
     // The 9×9 image's centre pixel looks exactly at the target, the origin.
-    let c = shadowed.camera();
+    let c = shadowed.camera().expect("a camera bake");
     let hit = shadowed
         .intersect(c.eye, c.direction(4.5, 4.5))
         .expect("hit");

@@ -1,10 +1,6 @@
-//! Explicit little-endian reading and writing of header fields, and
-//! allocation limits for sizes read from files.
+//! Explicit little-endian reading and writing of header fields.
 
 use crate::error::{Error, Result};
-
-/// Largest single allocation a decoder makes from a size read in a file.
-pub const MAX_ALLOC_BYTES: u64 = 1 << 34;
 
 /// A bounds-checked little-endian cursor over untrusted bytes.
 pub(crate) struct Reader<'a> {
@@ -102,20 +98,4 @@ impl Writer {
     pub fn pad_to(&mut self, len: usize) {
         self.bytes.resize(len, 0);
     }
-}
-
-/// Checks that an allocation of `count` elements of `elem` bytes sized by a
-/// file field stays under [`MAX_ALLOC_BYTES`] and returns the byte count.
-pub(crate) fn checked_alloc(what: &'static str, count: u64, elem: u64) -> Result<usize> {
-    let bytes = count
-        .checked_mul(elem)
-        .filter(|&b| b <= MAX_ALLOC_BYTES)
-        .ok_or_else(|| {
-            Error::range(
-                what,
-                count,
-                format!("at most {} elements", MAX_ALLOC_BYTES / elem.max(1)),
-            )
-        })?;
-    usize::try_from(bytes).map_err(|_| Error::range(what, count, "addressable on this machine"))
 }

@@ -20,9 +20,10 @@
 
 use crate::container::{EncodedColumn, LtmWriter, Meta, Mode, SparseColumn};
 use crate::decode::ColumnDecoder;
+use crate::dims::Dims;
 use crate::error::{Error, Result};
 use crate::quant::{levels, quantize, scale_groups, BandWeights};
-use crate::raw::{Dims, RawStore};
+use crate::raw::RawStore;
 use crate::wavelet::{self, max_levels, Filter};
 use rayon::prelude::*;
 use std::fs::File;
@@ -88,6 +89,7 @@ impl Default for CompressOptions {
 
 /// Stages reported to the progress callback.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[non_exhaustive]
 pub enum Stage {
     Rows,
     Analysis,
@@ -292,7 +294,7 @@ impl Ctx<'_> {
         out: &mut [f32],
         work: &mut [f32],
     ) -> Result<()> {
-        let (w, h) = (self.dims.width as usize, self.dims.height as usize);
+        let (w, h) = (self.dims.width() as usize, self.dims.height() as usize);
         out.copy_from_slice(planes);
         let map = self.weights.map(depth);
         for plane in out.chunks_mut(w * h) {
@@ -442,7 +444,7 @@ impl<'a> Transposed<'a> {
             channels: channels as u32,
             ..src
         };
-        let (n, p, m) = (dims.face_res as usize, dims.pixels(), dims.lights());
+        let (n, p, m) = (dims.face_res() as usize, dims.pixels(), dims.lights());
         let mem = usize::try_from(mem_budget / 4).unwrap_or(usize::MAX); // in f32 values
 
         // Column groups: G columns × channels × P values each within half the budget.
@@ -605,7 +607,7 @@ impl<'a> Transposed<'a> {
         let dims = self.dims;
         let channels = dims.channels as usize;
         let (p, m) = (dims.pixels(), dims.lights());
-        let (w, h) = (dims.width as usize, dims.height as usize);
+        let (w, h) = (dims.width() as usize, dims.height() as usize);
         let max_depth = max_levels(w, h);
         let (group, norm_sq, out_of_core) = (self.group, self.norm_sq, self.out_of_core);
         let groups = m.div_ceil(group);

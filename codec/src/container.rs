@@ -12,15 +12,17 @@
 //! any chunk is read, and no allocation is sized by a field that has not
 //! been checked against the dimensions.
 
-use crate::bytes::{checked_alloc, Reader, Writer};
+use crate::bytes::{Reader, Writer};
+use crate::dims::Dims;
 use crate::error::{Error, Result};
+use crate::limits::Limits;
 use crate::mmap;
-use crate::raw::Dims;
 use crate::wavelet::{max_levels, Filter};
 use memmap2::Mmap;
 use std::fs::File;
 use std::io::{BufWriter, Seek, SeekFrom, Write};
 use std::path::{Path, PathBuf};
+use std::sync::Arc;
 
 /// File magic: `\x89LTM\r\n\x1a\n`.
 pub const MAGIC: [u8; 8] = *b"\x89LTM\r\n\x1a\n";
@@ -35,6 +37,7 @@ const META_LEN: usize = 64;
 
 /// How columns were transformed.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[non_exhaustive]
 pub enum Mode {
     /// Rows only (Ng et al. 2003): every column at depth 0.
     TwoD,
@@ -103,17 +106,12 @@ pub struct Meta {
 impl Meta {
     /// Deepest column transform possible for the image size.
     pub fn max_depth(&self) -> u32 {
-        max_levels(self.dims.width as usize, self.dims.height as usize)
+        max_levels(self.dims.width() as usize, self.dims.height() as usize)
     }
 
     fn encode(&self) -> Vec<u8> {
         let mut w = Writer::default();
-        for v in [
-            self.dims.width,
-            self.dims.height,
-            self.dims.face_res,
-            self.dims.channels,
-        ] {
+        for v in self.dims.to_fields() {
             w.u32(v);
         }
         w.u8(self.mode.code());
@@ -131,12 +129,7 @@ impl Meta {
 
     fn decode(bytes: &[u8]) -> Result<Meta> {
         let mut r = Reader::new(bytes, "META chunk");
-        let dims = Dims {
-            width: r.u32()?,
-            height: r.u32()?,
-            face_res: r.u32()?,
-            channels: r.u32()?,
-        };
+        let dims = Dims::read_fields(&mut r)?;
         dims.validate()?;
         let mode = r.u8()?;
         let mode = Mode::from_code(mode)
@@ -181,6 +174,7 @@ impl Meta {
 
 /// How a column payload is stored.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[non_exhaustive]
 pub enum Encoding {
     /// No nonzero coefficient: no payload.
     Empty = 0,
@@ -542,19 +536,52 @@ impl LtmWriter {
     }
 }
 
-/// An opened, validated `.ltm` file (memory-mapped).
+/// The bytes of an opened file: a memory map, or a buffer the caller owns.
+enum Bytes {
+    Mapped(Mmap),
+    Shared(Arc<[u8]>),
+}
+
+impl std::ops::Deref for Bytes {
+    type Target = [u8];
+    fn deref(&self) -> &[u8] {
+        match self {
+            Bytes::Mapped(m) => m,
+            Bytes::Shared(b) => b,
+        }
+    }
+}
+
+/// What [`LtmFile::parse`] finds in a file: everything but the column
+/// payloads, validated.
+#[derive(Clone, Debug)]
+pub struct LtmIndex {
+    /// The metadata (chunk META).
+    pub meta: Meta,
+    /// The column table (chunk COLS), one entry per column.
+    pub columns: Vec<ColumnEntry>,
+    /// The RGB albedo image (chunk ALBD), if stored.
+    pub albedo: Option<Vec<f32>>,
+    /// Where the column payloads (chunk DATA) lie in the file.
+    pub data: std::ops::Range<usize>,
+}
+
+/// An opened, validated `.ltm` file (memory-mapped, or held in memory).
 pub struct LtmFile {
-    map: Mmap,
-    meta: Meta,
-    columns: Vec<ColumnEntry>,
-    albedo: Option<Vec<f32>>,
-    data: std::ops::Range<usize>,
+    bytes: Bytes,
+    index: LtmIndex,
 }
 
 impl LtmFile {
     /// Opens a file and validates its header, directory, chunk CRCs, metadata
-    /// and column table. Column payloads are checked when read.
+    /// and column table, with the default [`Limits`]. Column payloads are
+    /// checked when read.
     pub fn open(path: &Path) -> Result<LtmFile> {
+        Self::open_with_limits(path, &Limits::default())
+    }
+
+    /// [`LtmFile::open`] with the given limits.
+    pub fn open_with_limits(path: &Path, limits: &Limits) -> Result<LtmFile> {
         let file = File::open(path).map_err(|e| Error::io(path, e))?;
         let map = mmap::map_read(&file).map_err(|e| Error::io(path, e))?;
         if map.len() < 8 || map[..8] != MAGIC {
@@ -564,27 +591,27 @@ impl LtmFile {
                 found: map[..map.len().min(8)].to_vec(),
             });
         }
-        let parsed = Self::parse(&map)?;
+        let index = Self::parse(&map, limits)?;
         Ok(LtmFile {
-            map,
-            meta: parsed.0,
-            columns: parsed.1,
-            albedo: parsed.2,
-            data: parsed.3,
+            bytes: Bytes::Mapped(map),
+            index,
         })
     }
 
-    /// Parses and validates a whole file held in memory (also used by the
-    /// fuzz target and tests).
-    #[allow(clippy::type_complexity)]
-    pub fn parse(
-        bytes: &[u8],
-    ) -> Result<(
-        Meta,
-        Vec<ColumnEntry>,
-        Option<Vec<f32>>,
-        std::ops::Range<usize>,
-    )> {
+    /// Opens a whole file held in memory (from a network, an archive, a
+    /// wasm host), validated as [`LtmFile::open`] does.
+    pub fn from_bytes(bytes: impl Into<Arc<[u8]>>, limits: &Limits) -> Result<LtmFile> {
+        let bytes: Arc<[u8]> = bytes.into();
+        let index = Self::parse(&bytes, limits)?;
+        Ok(LtmFile {
+            bytes: Bytes::Shared(bytes),
+            index,
+        })
+    }
+
+    /// Parses and validates a whole file held in memory: header, directory,
+    /// chunk CRCs, metadata and column table (not the column payloads).
+    pub fn parse(bytes: &[u8], limits: &Limits) -> Result<LtmIndex> {
         let mut r = Reader::new(bytes, ".ltm header");
         if r.take(8)? != MAGIC {
             return Err(Error::corrupt(".ltm header", "bad magic bytes"));
@@ -730,7 +757,7 @@ impl LtmFile {
         let max_depth = meta.max_depth();
         let pixels = dims.pixels() as u64;
         let channels = dims.channels as usize;
-        checked_alloc(
+        limits.check_alloc(
             "column table",
             dims.lights() as u64,
             std::mem::size_of::<ColumnEntry>() as u64,
@@ -809,49 +836,55 @@ impl LtmFile {
                 encoding,
             });
         }
-        Ok((meta, columns, albedo, data))
+        Ok(LtmIndex {
+            meta,
+            columns,
+            albedo,
+            data,
+        })
     }
 
+    /// The metadata.
     pub fn meta(&self) -> &Meta {
-        &self.meta
+        &self.index.meta
     }
 
     /// The column table.
     pub fn columns(&self) -> &[ColumnEntry] {
-        &self.columns
+        &self.index.columns
     }
 
     /// The albedo image (3 values per pixel), if stored.
     pub fn albedo(&self) -> Option<&[f32]> {
-        self.albedo.as_deref()
+        self.index.albedo.as_deref()
     }
 
     /// File size in bytes.
     pub fn file_bytes(&self) -> u64 {
-        self.map.len() as u64
+        self.bytes.len() as u64
     }
 
     /// Column `j` as stored (checked: CRC, positions, value range).
     pub fn column(&self, j: usize) -> Result<SparseColumn> {
-        let Some(e) = self.columns.get(j) else {
+        let Some(e) = self.index.columns.get(j) else {
             return Err(Error::range(
                 "column",
                 j,
-                format!("0..{}", self.columns.len()),
+                format!("0..{}", self.index.columns.len()),
             ));
         };
-        read_column(&self.map[self.data.clone()], &self.meta, j, e)
+        read_column(&self.bytes[self.index.data.clone()], &self.index.meta, j, e)
     }
 }
 
-/// Parses a whole file held in memory and reads every column: the decoder's
-/// full validation, as the fuzz target runs it. Returns the nonzero count.
-pub fn validate_bytes(bytes: &[u8]) -> Result<u64> {
-    let (meta, columns, _, data) = LtmFile::parse(bytes)?;
-    let data = &bytes[data];
+/// Opens a whole file held in memory and reads every column: the decoder's
+/// full validation through its public entry points, as the fuzz target runs
+/// it. Returns the nonzero count.
+pub fn validate_bytes(bytes: &[u8], limits: &Limits) -> Result<u64> {
+    let file = LtmFile::from_bytes(bytes, limits)?;
     let mut nnz = 0;
-    for (j, e) in columns.iter().enumerate() {
-        nnz += read_column(data, &meta, j, e)?.indices.len() as u64;
+    for j in 0..file.columns().len() {
+        nnz += file.column(j)?.indices.len() as u64;
     }
     Ok(nnz)
 }
@@ -860,6 +893,8 @@ pub fn validate_bytes(bytes: &[u8]) -> Result<u64> {
 /// chunk's and the directory's — from the bytes it covers, as far as the
 /// (unchecked) directory and column table can be followed. For fuzzing and
 /// tests: it lets mutated files reach the structural checks behind the CRCs.
+/// Only with the `fuzzing` feature.
+#[cfg(feature = "fuzzing")]
 pub fn repair_checksums(b: &mut [u8]) {
     let u32_at = |b: &[u8], at: usize| {
         b.get(at..at + 4)

@@ -3,7 +3,7 @@
 //! column's depth, undo the band weights, then inverse steps.
 
 use crate::container::{Meta, SparseColumn};
-use crate::error::Result;
+use crate::error::{Error, Result};
 use crate::quant::{decode_scale, levels, scale_groups, BandWeights};
 use crate::wavelet::{self, band_size};
 
@@ -17,8 +17,10 @@ pub struct ColumnDecoder {
 }
 
 impl ColumnDecoder {
+    /// Precomputes the band weights and scale groups of `meta`'s column
+    /// filter and image size at every depth.
     pub fn new(meta: &Meta) -> ColumnDecoder {
-        let (w, h) = (meta.dims.width as usize, meta.dims.height as usize);
+        let (w, h) = (meta.dims.width() as usize, meta.dims.height() as usize);
         let weights = BandWeights::new(meta.col_filter, w, h, meta.max_depth());
         let inv_weights = (0..=meta.max_depth())
             .map(|d| weights.map(d).iter().map(|x| 1.0 / x).collect())
@@ -64,9 +66,17 @@ impl ColumnDecoder {
 
     /// One inverse column step from depth `level` to `level − 1`.
     pub fn inverse_step(&self, level: u32, plane: &mut [f32], work: &mut [f32]) -> Result<()> {
+        let max = self.meta.max_depth();
+        if level == 0 || level > max {
+            return Err(Error::range(
+                "inverse step level",
+                level,
+                format!("1..={max}"),
+            ));
+        }
         let (w, h) = (
-            self.meta.dims.width as usize,
-            self.meta.dims.height as usize,
+            self.meta.dims.width() as usize,
+            self.meta.dims.height() as usize,
         );
         let (bw, bh) = band_size(w, h, level - 1);
         wavelet::inverse_step(self.meta.col_filter, plane, w, bw, bh, work)
@@ -81,6 +91,21 @@ impl ColumnDecoder {
         plane: &mut [f32],
         work: &mut [f32],
     ) -> Result<()> {
+        let p = self.meta.dims.pixels();
+        if plane.len() != p || work.len() < p {
+            return Err(Error::BufferTooSmall {
+                what: "column decode plane and work",
+                len: plane.len().min(work.len()),
+                need: p,
+            });
+        }
+        if col.depth > self.meta.max_depth() {
+            return Err(Error::range(
+                "column depth",
+                col.depth,
+                format!("0..={}", self.meta.max_depth()),
+            ));
+        }
         plane.fill(0.0);
         self.accumulate(col, channel, 1.0, plane);
         self.unweight(col.depth, plane);

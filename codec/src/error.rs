@@ -6,47 +6,85 @@ use std::path::PathBuf;
 /// Every failure of `ltm-codec`. Messages name the offending value and the
 /// valid range.
 #[derive(Debug, thiserror::Error)]
+#[non_exhaustive]
 pub enum Error {
     /// A parameter or header field outside its valid range.
     #[error("{what} = {value} is out of range (valid: {valid})")]
     OutOfRange {
+        /// The parameter or field.
         what: &'static str,
+        /// Its value.
         value: String,
+        /// The valid range.
         valid: String,
     },
     /// A caller-provided buffer that is too short.
     #[error("{what}: buffer holds {len} values, needs {need}")]
     BufferTooSmall {
+        /// The buffer.
         what: &'static str,
+        /// Its length.
         len: usize,
+        /// The length needed.
         need: usize,
     },
     /// Reading or writing a file failed.
     #[error("{path}: {error}")]
-    Io { path: PathBuf, error: io::Error },
+    Io {
+        /// The file.
+        path: PathBuf,
+        /// What the system said.
+        #[source]
+        error: io::Error,
+    },
     /// The file is not of the expected kind.
     #[error("{path}: not {expected} (magic bytes {found:02x?})")]
     BadMagic {
+        /// The file.
         path: PathBuf,
+        /// The kind of file expected.
         expected: &'static str,
+        /// Its first bytes.
         found: Vec<u8>,
     },
     /// The file was written by a newer format version.
     #[error("{what} format version {found} is not supported (this build reads up to {supported})")]
     Version {
+        /// The format.
         what: &'static str,
+        /// The file's version.
         found: u32,
+        /// The newest version this build reads.
         supported: u32,
     },
     /// Structural damage: truncation, bad offsets, inconsistent fields.
     #[error("corrupt {what}: {detail}")]
-    Corrupt { what: &'static str, detail: String },
+    Corrupt {
+        /// The damaged structure.
+        what: &'static str,
+        /// What is wrong with it.
+        detail: String,
+    },
     /// A chunk whose checksum does not match its bytes.
     #[error("CRC mismatch in {chunk}: stored {stored:08x}, computed {computed:08x}")]
     Crc {
+        /// The chunk or column.
         chunk: String,
+        /// The checksum stored in the file.
         stored: u32,
+        /// The checksum of the bytes.
         computed: u32,
+    },
+    /// An allocation sized by a file or argument that exceeds the
+    /// [`Limits`](crate::Limits) passed in.
+    #[error("{what} needs {needed} bytes, more than the limit of {limit} bytes (raise the memory limit if the file is trusted)")]
+    Limit {
+        /// What would be allocated.
+        what: String,
+        /// Bytes needed.
+        needed: u64,
+        /// The limit in force.
+        limit: u64,
     },
     /// Input data that cannot be encoded (NaN, infinity, wrong dtype, ...).
     #[error("invalid input: {0}")]

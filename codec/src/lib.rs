@@ -7,23 +7,28 @@
 //! transformed as images to an adaptively chosen depth.
 
 #![deny(unsafe_code)]
+#![warn(missing_docs)]
 
 mod bytes;
 pub mod compress;
 pub mod container;
 pub mod cubemap;
 mod decode;
+mod dims;
 mod error;
+mod fileio;
+mod limits;
 mod mmap;
 pub mod npy;
 pub mod quant;
 pub mod raw;
 pub mod wavelet;
 
-pub use bytes::MAX_ALLOC_BYTES;
 pub use compress::{compress, CompressOptions, CompressStats, Stage, Target, Transposed};
 pub use container::{LtmFile, LtmWriter, Meta, Mode, SparseColumn};
 pub use decode::ColumnDecoder;
+pub use dims::{Dims, LightBasis, RowLayout, MAX_FACE_RES, MAX_PIXELS, MAX_SIDE};
 pub use error::{Error, Result};
-pub use raw::{Dims, RawHeader, RawStore, RawWriter};
+pub use limits::Limits;
+pub use raw::{RawHeader, RawStore, RawWriter};
 pub use wavelet::Filter;

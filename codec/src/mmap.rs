@@ -8,11 +8,15 @@ use std::io;
 
 /// Maps a whole file read-only.
 pub(crate) fn map_read(file: &File) -> io::Result<Mmap> {
-    // SAFETY: the mapping is only read through `&[u8]`. Every reader
-    // validates what it reads (sizes, offsets, CRCs), so a file changed by
-    // another process while mapped gives wrong values or an error, never
-    // undefined behaviour in this crate's logic. ltm never truncates a file
-    // it has mapped; outputs are written to a temporary file and renamed.
+    // SAFETY: this assumes that the file is not modified or truncated while
+    // it is mapped, which Rust's aliasing rules for the `&[u8]` we hand out
+    // require and nothing here can enforce: a change by another process is
+    // undefined behaviour in principle, and truncation raises SIGBUS on
+    // access. ltm itself never writes to or truncates a file it has mapped
+    // for reading (outputs go to a temporary file that is renamed into
+    // place), and docs/FORMAT.md tells users not to change inputs during a
+    // run. Readers still validate what they read (sizes, offsets, CRCs), so
+    // a file that was complete but wrong gives an error.
     unsafe { Mmap::map(file) }
 }
 

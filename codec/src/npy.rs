@@ -4,8 +4,10 @@
 use crate::compress::row_inverse;
 use crate::container::LtmFile;
 use crate::decode::ColumnDecoder;
+use crate::dims::Dims;
 use crate::error::{Error, Result};
-use crate::raw::{Dims, RawHeader, RawWriter};
+use crate::limits::Limits;
+use crate::raw::{RawHeader, RawWriter};
 use std::fs::File;
 use std::io::{BufReader, BufWriter, Read, Write};
 use std::path::Path;
@@ -14,6 +16,7 @@ const NPY_MAGIC: &[u8; 6] = b"\x93NUMPY";
 
 /// Element type of an `.npy` array.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[non_exhaustive]
 pub enum NpyDtype {
     F32,
     F64,
@@ -150,12 +153,7 @@ fn import_npy_inner(
             "array has {cols} columns: expected 6·n² cubemap texels (n a power of two)"
         )));
     }
-    let dims = Dims {
-        width,
-        height,
-        face_res: n,
-        channels: channels as u32,
-    };
+    let dims = Dims::image(width, height, n, channels as u32);
     dims.validate()?;
     let item = if header.dtype == NpyDtype::F32 { 4 } else { 8 };
     let need = header.data_offset as u64 + dims.raw_bytes() / 4 * item;
@@ -204,23 +202,14 @@ fn import_npy_inner(
     Ok(dims)
 }
 
-/// Largest dense matrix `export_npy` builds in memory.
-pub const MAX_EXPORT_BYTES: u64 = 8 << 30;
-
 /// Decodes a whole `.ltm` file to the pixel lighting basis: `P × M × C`
-/// values, C order.
-pub fn decode_matrix(file: &LtmFile) -> Result<Vec<f32>> {
+/// values, C order. The dense matrix must fit `limits`.
+pub fn decode_matrix(file: &LtmFile, limits: &Limits) -> Result<Vec<f32>> {
     let meta = file.meta();
     let dims = meta.dims;
-    if dims.raw_bytes() > MAX_EXPORT_BYTES {
-        return Err(Error::range(
-            "decoded matrix bytes",
-            dims.raw_bytes(),
-            format!("at most {MAX_EXPORT_BYTES} for a dense export"),
-        ));
-    }
+    limits.check_alloc("dense decoded matrix", dims.raw_bytes() / 4, 4)?;
     let (p, m, c) = (dims.pixels(), dims.lights(), dims.channels as usize);
-    let n = dims.face_res as usize;
+    let n = dims.face_res() as usize;
     let decoder = ColumnDecoder::new(meta);
     let mut dense = vec![0.0f32; p * m * c];
     let mut plane = vec![0.0f32; p];
@@ -250,10 +239,10 @@ pub fn decode_matrix(file: &LtmFile) -> Result<Vec<f32>> {
 }
 
 /// Writes the decoded matrix as a float32 `.npy` of shape `(P, M)` or
-/// `(P, M, C)`, atomically.
-pub fn export_npy(file: &LtmFile, out: &Path) -> Result<()> {
+/// `(P, M, C)`, atomically. The dense matrix must fit `limits`.
+pub fn export_npy(file: &LtmFile, out: &Path, limits: &Limits) -> Result<()> {
     let dims = file.meta().dims;
-    let dense = decode_matrix(file)?;
+    let dense = decode_matrix(file, limits)?;
     let shape = if dims.channels == 1 {
         format!("({}, {})", dims.pixels(), dims.lights())
     } else {

@@ -30,12 +30,14 @@
 #[cfg(target_endian = "big")]
 compile_error!("ltm's file formats are little-endian and are mapped directly; big-endian targets are not supported");
 
-use crate::bytes::{checked_alloc, Reader, Writer};
+use crate::bytes::{Reader, Writer};
+use crate::dims::Dims;
 use crate::error::{Error, Result};
+use crate::fileio::PositionedIo as _;
+use crate::limits::Limits;
 use crate::mmap;
 use memmap2::Mmap;
 use std::fs::{File, OpenOptions};
-use std::os::unix::fs::FileExt;
 use std::path::{Path, PathBuf};
 
 const MAGIC: [u8; 8] = *b"LTMRAW\0\x01";
@@ -43,72 +45,6 @@ const VERSION: u32 = 1;
 const HEADER_LEN: u64 = 64;
 const FLAG_ALBEDO: u32 = 1;
 const DATA_ALIGN: u64 = 4096;
-
-/// Largest image side.
-pub const MAX_SIDE: u32 = 1 << 15;
-/// Largest pixel count P.
-pub const MAX_PIXELS: u64 = 1 << 26;
-/// Largest cubemap face resolution n.
-pub const MAX_FACE_RES: u32 = 1024;
-
-/// Dimensions of a transport matrix: P = width·height rows, M = 6·n² columns,
-/// `channels` values per entry.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub struct Dims {
-    pub width: u32,
-    pub height: u32,
-    pub face_res: u32,
-    pub channels: u32,
-}
-
-impl Dims {
-    /// Checks every field against its valid range.
-    pub fn validate(&self) -> Result<()> {
-        for (what, v) in [("width", self.width), ("height", self.height)] {
-            if v == 0 || v > MAX_SIDE {
-                return Err(Error::range(what, v, format!("1..={MAX_SIDE}")));
-            }
-        }
-        if self.pixels() as u64 > MAX_PIXELS {
-            return Err(Error::range(
-                "width·height",
-                self.pixels(),
-                format!("at most {MAX_PIXELS}"),
-            ));
-        }
-        if !self.face_res.is_power_of_two() || self.face_res > MAX_FACE_RES {
-            return Err(Error::range(
-                "face_res",
-                self.face_res,
-                format!("a power of two in 1..={MAX_FACE_RES}"),
-            ));
-        }
-        if self.channels != 1 && self.channels != 3 {
-            return Err(Error::range("channels", self.channels, "1 or 3"));
-        }
-        Ok(())
-    }
-
-    /// Number of rows P (pixels).
-    pub fn pixels(&self) -> usize {
-        self.width as usize * self.height as usize
-    }
-
-    /// Number of columns M = 6·n² (lighting directions).
-    pub fn lights(&self) -> usize {
-        6 * self.face_res as usize * self.face_res as usize
-    }
-
-    /// Values per row: M·C.
-    pub fn row_len(&self) -> usize {
-        self.lights() * self.channels as usize
-    }
-
-    /// Bytes of the dense f32 matrix, P·M·C·4.
-    pub fn raw_bytes(&self) -> u64 {
-        self.pixels() as u64 * self.row_len() as u64 * 4
-    }
-}
 
 /// Header of a raw store.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -194,15 +130,10 @@ impl RawHeader {
         w.bytes.extend_from_slice(&MAGIC);
         w.u32(VERSION);
         w.u32(if self.has_albedo { FLAG_ALBEDO } else { 0 });
-        for v in [
-            self.dims.width,
-            self.dims.height,
-            self.dims.face_res,
-            self.dims.channels,
-            self.block_rows,
-        ] {
+        for v in self.dims.to_fields() {
             w.u32(v);
         }
+        w.u32(self.block_rows);
         w.u32(layout.block_count as u32);
         w.u64(layout.data_offset);
         w.u64(layout.albedo_offset);
@@ -247,12 +178,7 @@ impl RawHeader {
                 "bit 0 only",
             ));
         }
-        let dims = Dims {
-            width: r.u32()?,
-            height: r.u32()?,
-            face_res: r.u32()?,
-            channels: r.u32()?,
-        };
+        let dims = Dims::read_fields(&mut r)?;
         let header = RawHeader {
             dims,
             block_rows: r.u32()?,
@@ -443,6 +369,39 @@ impl RawWriter {
         Ok(())
     }
 
+    /// Writes a whole matrix held in memory — `t` with P·M·C values, `albedo`
+    /// with 3·P when the header has an albedo image — block by block, and
+    /// finishes the store. Returns its path.
+    pub fn write_dense(
+        path: &Path,
+        header: RawHeader,
+        t: &[f32],
+        albedo: Option<&[f32]>,
+    ) -> Result<PathBuf> {
+        let (p, row) = (header.dims.pixels(), header.dims.row_len());
+        if t.len() != p * row {
+            return Err(Error::BufferTooSmall {
+                what: "dense matrix",
+                len: t.len(),
+                need: p * row,
+            });
+        }
+        if albedo.is_some_and(|a| a.len() != 3 * p) || albedo.is_some() != header.has_albedo {
+            return Err(Error::BufferTooSmall {
+                what: "albedo image",
+                len: albedo.map_or(0, <[f32]>::len),
+                need: if header.has_albedo { 3 * p } else { 0 },
+            });
+        }
+        let mut w = RawWriter::create(path, header)?;
+        for b in 0..header.block_count() {
+            let r = header.block_range(b);
+            let a = albedo.map(|a| &a[3 * r.start..3 * r.end]);
+            w.write_block(b, &t[r.start * row..r.end * row], a)?;
+        }
+        w.finish()
+    }
+
     /// Checks that every block is complete, syncs, and renames the file into
     /// place.
     pub fn finish(self) -> Result<PathBuf> {
@@ -471,8 +430,13 @@ pub struct RawStore {
 impl RawStore {
     /// Opens and validates a raw store: header CRC, dimensions, file length
     /// and completeness of every block. Block CRCs are checked by
-    /// [`RawStore::verify_block`].
+    /// [`RawStore::verify_block`]. Uses the default [`Limits`].
     pub fn open(path: &Path) -> Result<RawStore> {
+        Self::open_with_limits(path, &Limits::default())
+    }
+
+    /// [`RawStore::open`] with the given limits.
+    pub fn open_with_limits(path: &Path, limits: &Limits) -> Result<RawStore> {
         let file = File::open(path).map_err(|e| Error::io(path, e))?;
         let map = mmap::map_read(&file).map_err(|e| Error::io(path, e))?;
         let (header, layout) = RawHeader::decode(&map, path)?;
@@ -487,7 +451,7 @@ impl RawStore {
                 ),
             ));
         }
-        checked_alloc("raw store block table", layout.block_count, 8)?;
+        limits.check_alloc("raw store block table", layout.block_count, 8)?;
         let table = &map[HEADER_LEN as usize..layout.flags_offset as usize];
         if let Some(b) = table
             .chunks_exact(8)

@@ -6,30 +6,23 @@ use ltm_codec::compress::{compress, CompressOptions, Target};
 use ltm_codec::container::{LtmFile, Mode};
 use ltm_codec::cubemap::{texel_direction, texel_solid_angle};
 use ltm_codec::npy::decode_matrix;
+use ltm_codec::Limits;
 use ltm_codec::{Dims, Filter, RawHeader, RawStore, RawWriter, Transposed};
 use std::path::{Path, PathBuf};
 
 /// Writes a raw store from a dense `P × M × C` matrix.
 fn write_raw(dir: &Path, name: &str, dims: Dims, t: &[f32]) -> PathBuf {
-    let path = dir.join(name);
     let header = RawHeader::new(dims, false, 64 << 10);
-    let mut w = RawWriter::create(&path, header).unwrap();
-    let row = dims.row_len();
-    for b in 0..header.block_count() {
-        let r = header.block_range(b);
-        w.write_block(b, &t[r.start * row..r.end * row], None)
-            .unwrap();
-    }
-    w.finish().unwrap()
+    RawWriter::write_dense(&dir.join(name), header, t, None).unwrap()
 }
 
 /// A plausible transport matrix: a curved surface with a shadowing ridge,
 /// cosine-weighted, zero background pixels.
 fn scene(dims: Dims) -> Vec<f32> {
     let (w, h, n, c) = (
-        dims.width as usize,
-        dims.height as usize,
-        dims.face_res as usize,
+        dims.width() as usize,
+        dims.height() as usize,
+        dims.face_res() as usize,
         dims.channels as usize,
     );
     let m = dims.lights();
@@ -88,12 +81,7 @@ fn run(
 #[test]
 fn every_mode_meets_its_target_and_reports_the_measured_error() {
     let dir = tempfile::tempdir().unwrap();
-    let dims = Dims {
-        width: 24,
-        height: 20,
-        face_res: 4,
-        channels: 1,
-    };
+    let dims = Dims::image(24, 20, 4, 1);
     let t = scene(dims);
     let raw = write_raw(dir.path(), "m.raw", dims, &t);
     for mode in [Mode::TwoD, Mode::FourD, Mode::Adaptive] {
@@ -106,7 +94,7 @@ fn every_mode_meets_its_target_and_reports_the_measured_error() {
             };
             let (out, stats) = run(dir.path(), &raw, &opts, "m.ltm");
             let file = LtmFile::open(&out).unwrap();
-            let dense = decode_matrix(&file).unwrap();
+            let dense = decode_matrix(&file, &Limits::default()).unwrap();
             let err = rel_error(&dense, &t);
             assert!(dense.iter().all(|v| v.is_finite()));
             assert!(
@@ -137,6 +125,7 @@ fn every_mode_meets_its_target_and_reports_the_measured_error() {
                 Mode::TwoD => assert!(depths.iter().all(|&d| d == 0)),
                 Mode::FourD => assert!(depths.iter().all(|&d| d as u32 == file.meta().max_depth())),
                 Mode::Adaptive => {}
+                other => panic!("mode {other:?} is not tested here"),
             }
         }
     }
@@ -145,12 +134,7 @@ fn every_mode_meets_its_target_and_reports_the_measured_error() {
 #[test]
 fn near_lossless_at_16_bits() {
     let dir = tempfile::tempdir().unwrap();
-    let dims = Dims {
-        width: 16,
-        height: 12,
-        face_res: 4,
-        channels: 3,
-    };
+    let dims = Dims::image(16, 12, 4, 3);
     let t = scene(dims);
     let raw = write_raw(dir.path(), "c.raw", dims, &t);
     for col_filter in Filter::ALL {
@@ -161,7 +145,7 @@ fn near_lossless_at_16_bits() {
             ..Default::default()
         };
         let (out, _) = run(dir.path(), &raw, &opts, "c.ltm");
-        let dense = decode_matrix(&LtmFile::open(&out).unwrap()).unwrap();
+        let dense = decode_matrix(&LtmFile::open(&out).unwrap(), &Limits::default()).unwrap();
         let err = rel_error(&dense, &t);
         assert!(err <= 0.001, "{col_filter}: {err}");
     }
@@ -170,12 +154,7 @@ fn near_lossless_at_16_bits() {
 #[test]
 fn terms_mode_keeps_at_most_n_per_column_and_adaptive_is_no_worse_than_2d() {
     let dir = tempfile::tempdir().unwrap();
-    let dims = Dims {
-        width: 32,
-        height: 32,
-        face_res: 4,
-        channels: 1,
-    };
+    let dims = Dims::image(32, 32, 4, 1);
     let t = scene(dims);
     let raw = write_raw(dir.path(), "t.raw", dims, &t);
     let mut errors = Vec::new();
@@ -189,7 +168,10 @@ fn terms_mode_keeps_at_most_n_per_column_and_adaptive_is_no_worse_than_2d() {
         let (out, _) = run(dir.path(), &raw, &opts, "t.ltm");
         let file = LtmFile::open(&out).unwrap();
         assert!(file.columns().iter().all(|c| c.nnz <= 40));
-        errors.push(rel_error(&decode_matrix(&file).unwrap(), &t));
+        errors.push(rel_error(
+            &decode_matrix(&file, &Limits::default()).unwrap(),
+            &t,
+        ));
     }
     assert!(
         errors[1] <= errors[0] * 1.0001,
@@ -202,12 +184,7 @@ fn terms_mode_keeps_at_most_n_per_column_and_adaptive_is_no_worse_than_2d() {
 #[test]
 fn monochrome_rgb_is_stored_as_one_channel() {
     let dir = tempfile::tempdir().unwrap();
-    let dims = Dims {
-        width: 8,
-        height: 8,
-        face_res: 2,
-        channels: 3,
-    };
+    let dims = Dims::image(8, 8, 2, 3);
     let grey = scene(Dims {
         channels: 1,
         ..dims
@@ -224,64 +201,26 @@ fn hard_numerical_cases_never_produce_nan() {
     let dir = tempfile::tempdir().unwrap();
     type Entry = Box<dyn Fn(usize, usize) -> f32>;
     let cases: Vec<(&str, Dims, Entry)> = vec![
-        (
-            "zero",
-            Dims {
-                width: 5,
-                height: 3,
-                face_res: 2,
-                channels: 1,
-            },
-            Box::new(|_, _| 0.0),
-        ),
+        ("zero", Dims::image(5, 3, 2, 1), Box::new(|_, _| 0.0)),
         (
             "impulse",
-            Dims {
-                width: 7,
-                height: 9,
-                face_res: 2,
-                channels: 1,
-            },
+            Dims::image(7, 9, 2, 1),
             Box::new(|p, j| if p == 31 && j == 5 { 3.5 } else { 0.0 }),
         ),
-        (
-            "constant",
-            Dims {
-                width: 6,
-                height: 5,
-                face_res: 2,
-                channels: 1,
-            },
-            Box::new(|_, _| 0.25),
-        ),
+        ("constant", Dims::image(6, 5, 2, 1), Box::new(|_, _| 0.25)),
         (
             "1x1",
-            Dims {
-                width: 1,
-                height: 1,
-                face_res: 4,
-                channels: 1,
-            },
+            Dims::image(1, 1, 4, 1),
             Box::new(|_, j| j as f32 * 0.01),
         ),
         (
             "97x61",
-            Dims {
-                width: 97,
-                height: 61,
-                face_res: 1,
-                channels: 1,
-            },
+            Dims::image(97, 61, 1, 1),
             Box::new(|p, j| ((p * 7 + j * 3) % 11) as f32),
         ),
         (
             "range",
-            Dims {
-                width: 12,
-                height: 10,
-                face_res: 2,
-                channels: 1,
-            },
+            Dims::image(12, 10, 2, 1),
             Box::new(|p, j| 10f32.powi(((p + j) % 11) as i32 - 6)),
         ),
     ];
@@ -298,7 +237,8 @@ fn hard_numerical_cases_never_produce_nan() {
                     ..Default::default()
                 };
                 let (out, stats) = run(dir.path(), &raw, &opts, "h.ltm");
-                let dense = decode_matrix(&LtmFile::open(&out).unwrap()).unwrap();
+                let dense =
+                    decode_matrix(&LtmFile::open(&out).unwrap(), &Limits::default()).unwrap();
                 assert!(
                     dense.iter().all(|v| v.is_finite()),
                     "{name} bits {bits} {mode:?}: NaN"
@@ -316,12 +256,7 @@ fn hard_numerical_cases_never_produce_nan() {
 #[test]
 fn out_of_core_transpose_gives_the_same_file() {
     let dir = tempfile::tempdir().unwrap();
-    let dims = Dims {
-        width: 64,
-        height: 48,
-        face_res: 8,
-        channels: 1,
-    };
+    let dims = Dims::image(64, 48, 8, 1);
     let t = scene(dims);
     let raw = write_raw(dir.path(), "big.raw", dims, &t);
     assert!(dims.raw_bytes() > 3 << 20);
@@ -339,12 +274,7 @@ fn out_of_core_transpose_gives_the_same_file() {
 #[test]
 fn one_transpose_codes_every_setting_like_compress() {
     let dir = tempfile::tempdir().unwrap();
-    let dims = Dims {
-        width: 64,
-        height: 48,
-        face_res: 4,
-        channels: 3,
-    };
+    let dims = Dims::image(64, 48, 4, 3);
     let raw_path = write_raw(dir.path(), "m.raw", dims, &scene(dims));
     let raw = RawStore::open(&raw_path).unwrap();
     for budget in [1u64 << 30, 1 << 20] {
@@ -386,12 +316,7 @@ fn one_transpose_codes_every_setting_like_compress() {
 #[test]
 fn raise_bits_meets_a_target_that_fixed_bits_miss() {
     let dir = tempfile::tempdir().unwrap();
-    let dims = Dims {
-        width: 32,
-        height: 24,
-        face_res: 4,
-        channels: 1,
-    };
+    let dims = Dims::image(32, 24, 4, 1);
     let t = scene(dims);
     let raw = write_raw(dir.path(), "m.raw", dims, &t);
     let mut opts = CompressOptions {
@@ -410,7 +335,7 @@ fn raise_bits_meets_a_target_that_fixed_bits_miss() {
     assert!(raised.bits > 4 && raised.bits <= 16 && raised.bits % 2 == 0);
     let file = LtmFile::open(&path).unwrap();
     assert_eq!(file.meta().bits, raised.bits);
-    let decoded = decode_matrix(&file).unwrap();
+    let decoded = decode_matrix(&file, &Limits::default()).unwrap();
     assert!(rel_error(&decoded, &t) <= 0.002 * 1.0001);
 }
 
@@ -418,22 +343,17 @@ fn raise_bits_meets_a_target_that_fixed_bits_miss() {
 #[test]
 fn hostile_files_error_and_never_panic() {
     let dir = tempfile::tempdir().unwrap();
-    let dims = Dims {
-        width: 8,
-        height: 6,
-        face_res: 2,
-        channels: 3,
-    };
+    let dims = Dims::image(8, 6, 2, 3);
     let t = scene(dims);
     let raw = write_raw(dir.path(), "x.raw", dims, &t);
     let (out, _) = run(dir.path(), &raw, &CompressOptions::default(), "x.ltm");
     let good = std::fs::read(&out).unwrap();
     let check = |bytes: &[u8]| {
-        let _ = ltm_codec::container::validate_bytes(bytes);
+        let _ = ltm_codec::container::validate_bytes(bytes, &ltm_codec::Limits::default());
         // Also past the checksums, to reach the structural checks.
         let mut repaired = bytes.to_vec();
         ltm_codec::container::repair_checksums(&mut repaired);
-        let _ = ltm_codec::container::validate_bytes(&repaired);
+        let _ = ltm_codec::container::validate_bytes(&repaired, &ltm_codec::Limits::default());
         let path = dir.path().join("mut.ltm");
         std::fs::write(&path, bytes).unwrap();
         if let Ok(f) = LtmFile::open(&path) {
@@ -460,19 +380,16 @@ fn hostile_files_error_and_never_panic() {
     // A header that claims a newer version is refused with a clear message.
     let mut newer = good.clone();
     newer[8] = 9;
-    let err = LtmFile::parse(&newer).unwrap_err().to_string();
+    let err = LtmFile::parse(&newer, &ltm_codec::Limits::default())
+        .unwrap_err()
+        .to_string();
     assert!(err.contains("version 9"), "{err}");
 }
 
 #[test]
 fn hostile_raw_stores_error() {
     let dir = tempfile::tempdir().unwrap();
-    let dims = Dims {
-        width: 4,
-        height: 4,
-        face_res: 2,
-        channels: 1,
-    };
+    let dims = Dims::image(4, 4, 2, 1);
     let raw = write_raw(dir.path(), "r.raw", dims, &scene(dims));
     let good = std::fs::read(&raw).unwrap();
     let path = dir.path().join("bad.raw");
@@ -504,7 +421,8 @@ fn fuzz_regressions_are_errors() {
                 ltm_codec::container::repair_checksums(&mut bytes);
             }
             assert!(
-                ltm_codec::container::validate_bytes(&bytes).is_err(),
+                ltm_codec::container::validate_bytes(&bytes, &ltm_codec::Limits::default())
+                    .is_err(),
                 "{name}"
             );
             n += 1;
@@ -520,12 +438,7 @@ fn fuzz_regressions_are_errors() {
 #[test]
 fn golden_hashes_of_deterministic_outputs() {
     let dir = tempfile::tempdir().unwrap();
-    let dims = Dims {
-        width: 24,
-        height: 20,
-        face_res: 4,
-        channels: 3,
-    };
+    let dims = Dims::image(24, 20, 4, 3);
     // Arithmetic only (no libm), so the input is bit-identical everywhere.
     let m = dims.lights();
     let t: Vec<f32> = (0..dims.pixels() * m * 3)

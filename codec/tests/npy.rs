@@ -4,6 +4,7 @@
 use ltm_codec::compress::{compress, CompressOptions, Target};
 use ltm_codec::container::LtmFile;
 use ltm_codec::npy::{decode_matrix, export_npy, import_npy, read_npy_header, NpyDtype};
+use ltm_codec::Limits;
 use ltm_codec::RawStore;
 use std::path::Path;
 
@@ -35,7 +36,7 @@ fn import_compress_export_round_trip() {
     write_npy(&npy, "<f4", &format!("({p}, {m})"), &f32_bytes(&t));
     let raw = dir.path().join("t.raw");
     let dims = import_npy(&npy, 4, 3, &raw, &|_, _| {}).unwrap();
-    assert_eq!((dims.face_res, dims.channels), (2, 1));
+    assert_eq!((dims.face_res(), dims.channels), (2, 1));
     let store = RawStore::open(&raw).unwrap();
     assert_eq!(store.rows(0..p), &t[..]);
     let ltm = dir.path().join("t.ltm");
@@ -47,7 +48,7 @@ fn import_compress_export_round_trip() {
     compress(&store, &ltm, &opts, &|_, _, _| {}).unwrap();
     let out = dir.path().join("d.npy");
     let file = LtmFile::open(&ltm).unwrap();
-    export_npy(&file, &out).unwrap();
+    export_npy(&file, &out, &Limits::default()).unwrap();
     let mut r = std::io::BufReader::new(std::fs::File::open(&out).unwrap());
     let header = read_npy_header(&mut r).unwrap();
     assert_eq!(
@@ -59,7 +60,7 @@ fn import_compress_export_round_trip() {
         .chunks_exact(4)
         .map(|c| f32::from_le_bytes(c.try_into().unwrap()))
         .collect();
-    assert_eq!(d, decode_matrix(&file).unwrap());
+    assert_eq!(d, decode_matrix(&file, &Limits::default()).unwrap());
     let err: f64 = d
         .iter()
         .zip(&t)
@@ -83,7 +84,7 @@ fn float64_and_three_channels_import() {
     );
     let raw = dir.path().join("t.raw");
     let dims = import_npy(&npy, 2, 1, &raw, &|_, _| {}).unwrap();
-    assert_eq!((dims.face_res, dims.channels), (1, 3));
+    assert_eq!((dims.face_res(), dims.channels), (1, 3));
     let store = RawStore::open(&raw).unwrap();
     assert_eq!(store.row(1)[0], 9.0);
 }

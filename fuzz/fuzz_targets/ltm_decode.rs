@@ -5,5 +5,5 @@
 use libfuzzer_sys::fuzz_target;
 
 fuzz_target!(|data: &[u8]| {
-    let _ = ltm_codec::container::validate_bytes(data);
+    ltm_fuzz::decode_through_public_api(data);
 });

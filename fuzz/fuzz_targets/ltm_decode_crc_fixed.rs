@@ -8,5 +8,5 @@ use libfuzzer_sys::fuzz_target;
 fuzz_target!(|data: &[u8]| {
     let mut bytes = data.to_vec();
     ltm_codec::container::repair_checksums(&mut bytes);
-    let _ = ltm_codec::container::validate_bytes(&bytes);
+    ltm_fuzz::decode_through_public_api(&bytes);
 });

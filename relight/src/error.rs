@@ -6,6 +6,7 @@ use std::path::PathBuf;
 /// Every failure of `ltm-relight`. Messages name the offending value and,
 /// where there is one, its valid range.
 #[derive(Debug, thiserror::Error)]
+#[non_exhaustive]
 pub enum RelightError {
     /// A failure reported by the codec (opening or reading a raw store or an
     /// `.ltm` file).
@@ -13,10 +14,21 @@ pub enum RelightError {
     Codec(#[from] ltm_codec::Error),
     /// Reading or writing a file failed at the operating-system level.
     #[error("{path}: {error}")]
-    Io { path: PathBuf, error: io::Error },
+    Io {
+        /// The file.
+        path: PathBuf,
+        /// What the system said.
+        #[source]
+        error: io::Error,
+    },
     /// An image file could not be decoded or encoded.
     #[error("{path}: {detail}")]
-    Image { path: PathBuf, detail: String },
+    Image {
+        /// The file.
+        path: PathBuf,
+        /// What is wrong.
+        detail: String,
+    },
     /// An environment map that cannot be used as lighting: NaN or infinite
     /// pixels, a wrong shape.
     #[error("invalid environment map: {0}")]
@@ -24,8 +36,11 @@ pub enum RelightError {
     /// A parameter outside its valid range.
     #[error("{what} = {value} is out of range (valid: {valid})")]
     OutOfRange {
+        /// The parameter.
         what: &'static str,
+        /// Its value.
         value: String,
+        /// The valid range.
         valid: String,
     },
     /// Any other unusable input.

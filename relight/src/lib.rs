@@ -13,7 +13,7 @@
 //! # fn main() -> Result<(), Box<dyn std::error::Error>> {
 //! let dir = tempfile::tempdir()?;
 //! // A small transport matrix: 16×16 pixels, 6·4² lights, one channel.
-//! let dims = Dims { width: 16, height: 16, face_res: 4, channels: 1 };
+//! let dims = Dims::image(16, 16, 4, 1);
 //! let header = RawHeader::new(dims, false, 1 << 20);
 //! let mut writer = RawWriter::create(&dir.path().join("t.raw"), header)?;
 //! let rows: Vec<f32> = (0..dims.pixels() * dims.lights())

@@ -37,7 +37,7 @@ pub fn reference_with_progress(
         return Err(RelightError::range(
             "lighting texels",
             light.len(),
-            format!("6·n² = {m} for the store's n = {}", dims.face_res),
+            format!("6·n² = {m} for the store's n = {}", dims.face_res()),
         ));
     }
     if let Some(j) = light.iter().position(|l| l.iter().any(|v| !v.is_finite())) {
@@ -52,7 +52,7 @@ pub fn reference_with_progress(
     let header = *raw.header();
     let total = dims.pixels();
     let done = AtomicUsize::new(0);
-    let mut image = Image::new(dims.width as usize, dims.height as usize);
+    let mut image = Image::new(dims.width() as usize, dims.height() as usize);
     image
         .data
         .par_chunks_mut(header.block_rows as usize)

@@ -18,7 +18,7 @@ use crate::select::{select, support_area, Weighting};
 use ltm_codec::compress::row_forward;
 use ltm_codec::container::{LtmFile, Meta};
 use ltm_codec::quant::BandWeights;
-use ltm_codec::ColumnDecoder;
+use ltm_codec::{ColumnDecoder, Limits};
 use rayon::prelude::*;
 use std::path::Path;
 use std::time::{Duration, Instant};
@@ -86,18 +86,31 @@ impl FrameStats {
 }
 
 impl Relighter {
-    /// Opens an `.ltm` file (memory-mapped) and decodes its columns.
+    /// Opens an `.ltm` file (memory-mapped) and decodes its columns, with
+    /// the default [`Limits`].
     pub fn open(path: &Path) -> Result<Relighter> {
-        Relighter::new(LtmFile::open(path)?)
+        Relighter::open_with_limits(path, &Limits::default())
     }
 
-    /// Prepares a relighter for an opened file.
-    pub fn new(file: LtmFile) -> Result<Relighter> {
+    /// [`Relighter::open`] with the given limits.
+    pub fn open_with_limits(path: &Path, limits: &Limits) -> Result<Relighter> {
+        Relighter::new(LtmFile::open_with_limits(path, limits)?, limits)
+    }
+
+    /// Prepares a relighter for an opened file. The arena of decoded
+    /// coefficients, sized by the file's column table, is checked against
+    /// `limits` before anything is decoded.
+    pub fn new(file: LtmFile, limits: &Limits) -> Result<Relighter> {
         let meta = file.meta().clone();
         let dims = meta.dims;
-        let (w, h) = (dims.width as usize, dims.height as usize);
+        let nonzeros: u64 = file.columns().iter().map(|c| c.nnz as u64).sum();
+        // Positions and values, held twice while the columns are gathered.
+        let entry_bytes = 2 * (4 + 4 * dims.channels as u64);
+        limits.check_alloc("relighting arena", nonzeros, entry_bytes)?;
+        limits.check_alloc("frame image planes", dims.pixels() as u64, 4 * 6)?;
+        let (w, h) = (dims.width() as usize, dims.height() as usize);
         let channels = dims.channels as usize;
-        let n = dims.face_res as usize;
+        let n = dims.face_res() as usize;
         let weights = BandWeights::new(meta.col_filter, w, h, meta.max_depth());
         let decoder = ColumnDecoder::new(&meta);
         let decoded: Vec<(Vec<u32>, Vec<f32>, u8, f32)> = (0..dims.lights())
@@ -172,7 +185,7 @@ impl Relighter {
     pub fn buffers(&self) -> FrameBuffers {
         let dims = self.meta().dims;
         let p = dims.pixels();
-        let n = dims.face_res as usize;
+        let n = dims.face_res() as usize;
         FrameBuffers {
             light: vec![[0.0; 3]; dims.lights()],
             plane: vec![0.0; dims.lights()],
@@ -181,8 +194,8 @@ impl Relighter {
             selected: Vec::with_capacity(dims.lights()),
             scratch: Vec::with_capacity(dims.lights()),
             image: Image {
-                width: dims.width as usize,
-                height: dims.height as usize,
+                width: dims.width() as usize,
+                height: dims.height() as usize,
                 data: vec![[0.0; 3]; p],
             },
         }
@@ -196,7 +209,7 @@ impl Relighter {
                 valid: format!(
                     "{} (6·{}² for this file)",
                     self.lights(),
-                    self.meta().dims.face_res
+                    self.meta().dims.face_res()
                 ),
             });
         }
@@ -211,7 +224,7 @@ impl Relighter {
     /// Row transform of the cubemap lighting into `bufs.light`.
     fn transform_light(&self, light: &[[f32; 3]], bufs: &mut FrameBuffers) -> Result<()> {
         let meta = self.meta();
-        let n = meta.dims.face_res as usize;
+        let n = meta.dims.face_res() as usize;
         for c in 0..3 {
             for (v, l) in bufs.plane.iter_mut().zip(light) {
                 *v = l[c];

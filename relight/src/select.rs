@@ -6,6 +6,7 @@ use std::str::FromStr;
 
 /// The priority rule for choosing wavelet lights.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Default)]
+#[non_exhaustive]
 pub enum Weighting {
     /// |c|: the lighting coefficient's magnitude.
     #[default]

@@ -7,17 +7,9 @@ use std::path::{Path, PathBuf};
 /// Writes a raw store of `t` (P·M·C values) with small blocks (several per
 /// store), and an albedo image when given.
 fn write_raw(dir: &Path, name: &str, dims: Dims, t: &[f32], albedo: Option<&[f32]>) -> PathBuf {
-    let path = dir.join(name);
     let header = RawHeader::new(dims, albedo.is_some(), 2 * dims.row_len() as u64 * 4);
     assert!(header.block_count() > 1);
-    let mut w = RawWriter::create(&path, header).unwrap();
-    let row = dims.row_len();
-    for b in 0..header.block_count() {
-        let r = header.block_range(b);
-        let a = albedo.map(|a| &a[3 * r.start..3 * r.end]);
-        w.write_block(b, &t[r.start * row..r.end * row], a).unwrap();
-    }
-    w.finish().unwrap()
+    RawWriter::write_dense(&dir.join(name), header, t, albedo).unwrap()
 }
 
 /// A deterministic matrix with some all-zero rows (every third pixel) and
@@ -88,12 +80,7 @@ fn assert_matches(img: &Image, want: &[[f64; 3]]) {
 }
 
 fn dims(width: u32, height: u32, face_res: u32, channels: u32) -> Dims {
-    Dims {
-        width,
-        height,
-        face_res,
-        channels,
-    }
+    Dims::image(width, height, face_res, channels)
 }
 
 #[test]

@@ -66,11 +66,11 @@ pub fn run(args: BakeArgs) -> anyhow::Result<()> {
     let dims = scene.dims();
     eprintln!(
         "baking {} × {} pixels × {} lights ({}×{} faces) × {} channel{}{}: {:.2} GB, {} triangles, {} texel samples, {} pixel samples",
-        dims.width,
-        dims.height,
+        dims.width(),
+        dims.height(),
         dims.lights(),
-        dims.face_res,
-        dims.face_res,
+        dims.face_res(),
+        dims.face_res(),
         dims.channels,
         if dims.channels == 1 { "" } else { "s" },
         if dims.channels == 1 { " + albedo image" } else { "" },

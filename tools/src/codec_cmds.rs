@@ -42,9 +42,9 @@ pub fn import(a: ImportArgs) -> Result<()> {
     eprintln!(
         "wrote {}: {}x{} pixels, n = {} ({} lights), {} channel(s)",
         a.output.display(),
-        dims.width,
-        dims.height,
-        dims.face_res,
+        dims.width(),
+        dims.height(),
+        dims.face_res(),
         dims.lights(),
         dims.channels
     );
@@ -231,7 +231,7 @@ pub struct Inspection {
 pub fn inspect(file: &LtmFile) -> Inspection {
     let meta = file.meta();
     let dims = meta.dims;
-    let n = dims.face_res as usize;
+    let n = dims.face_res() as usize;
     let mut hist = vec![0u64; meta.max_depth() as usize + 1];
     let levels = row_level(n, n * n - 1) as usize + 1;
     let mut by_level = vec![(0.0f64, 0u64); levels];
@@ -246,9 +246,9 @@ pub fn inspect(file: &LtmFile) -> Inspection {
     let raw_bytes = dims.raw_bytes();
     let elements = raw_bytes / 4;
     Inspection {
-        width: dims.width,
-        height: dims.height,
-        face_res: dims.face_res,
+        width: dims.width(),
+        height: dims.height(),
+        face_res: dims.face_res(),
         channels: dims.channels,
         mode: meta.mode.name().into(),
         row_filter: meta.row_filter.name().into(),
@@ -332,7 +332,8 @@ pub struct ExportArgs {
 
 pub fn export(a: ExportArgs) -> Result<()> {
     let file = LtmFile::open(&a.file).with_context(|| format!("opening {}", a.file.display()))?;
-    export_npy(&file, &a.output).with_context(|| format!("exporting to {}", a.output.display()))?;
+    export_npy(&file, &a.output, &ltm_codec::Limits::default())
+        .with_context(|| format!("exporting to {}", a.output.display()))?;
     eprintln!("wrote {}", a.output.display());
     Ok(())
 }

@@ -200,13 +200,13 @@ pub fn run(a: DemoArgs) -> Result<()> {
     ];
     let n_values = [50usize, 200, 1000];
     let mut table = String::new();
-    let (w, h) = (dims.width as usize, dims.height as usize);
+    let (w, h) = (dims.width() as usize, dims.height() as usize);
     let mut sheet = Image::new(3 * w, maps.len() * h);
     for (row, map) in maps.iter().enumerate() {
         let name = map
             .file_stem()
             .map_or("map".into(), |s| s.to_string_lossy().into_owned());
-        let light = EnvMap::load(map)?.to_cubemap(dims.face_res as usize, &Rotation::IDENTITY);
+        let light = EnvMap::load(map)?.to_cubemap(dims.face_res() as usize, &Rotation::IDENTITY);
         let exact = reference(&raw, &light)?;
         let ev = auto_exposure(&exact);
         exact.write_exr(&out(&format!("{name}-reference.exr")))?;
@@ -257,7 +257,7 @@ pub fn run(a: DemoArgs) -> Result<()> {
     // 4. Summary.
     let mut md = String::new();
     writeln!(md, "# ltm demo\n")?;
-    writeln!(md, "Default scene (bunny and glossy teapot), {}×{} pixels, 6·{}² lights, {} channel(s); {} raw bytes.", dims.width, dims.height, dims.face_res, dims.channels, dims.raw_bytes())?;
+    writeln!(md, "Default scene (bunny and glossy teapot), {}×{} pixels, 6·{}² lights, {} channel(s); {} raw bytes.", dims.width(), dims.height(), dims.face_res(), dims.channels, dims.raw_bytes())?;
     writeln!(
         md,
         "Machine: {} CPU threads. Total demo time {:.0} s.\n",

@@ -61,7 +61,7 @@ pub fn run(args: ReferenceArgs) -> anyhow::Result<()> {
     let dims = raw.dims();
     let env = EnvMap::load(&args.env)
         .with_context(|| format!("loading environment map {}", args.env.display()))?;
-    let n = dims.face_res as usize;
+    let n = dims.face_res() as usize;
     let light = env.to_cubemap(n, &args.rotate);
 
     let bar = progress::bar(dims.pixels() as u64, "reference");
@@ -80,8 +80,8 @@ pub fn run(args: ReferenceArgs) -> anyhow::Result<()> {
     eprintln!(
         "wrote {}: {}×{} pixels, {} lights (n = {}), {} channel(s){}, lighting {} rotated {}, {:.2} s",
         args.output.display(),
-        dims.width,
-        dims.height,
+        dims.width(),
+        dims.height(),
         dims.lights(),
         n,
         dims.channels,

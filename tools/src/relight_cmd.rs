@@ -67,7 +67,7 @@ pub fn run(a: RelightArgs) -> Result<()> {
     let relighter =
         Relighter::open(&a.file).with_context(|| format!("opening {}", a.file.display()))?;
     let env = EnvMap::load(&a.env).with_context(|| format!("loading {}", a.env.display()))?;
-    let n = relighter.meta().dims.face_res as usize;
+    let n = relighter.meta().dims.face_res() as usize;
     let light = env.to_cubemap(n, &a.rotate);
     if a.frames == 0 {
         bail!("--frames must be at least 1");

@@ -38,6 +38,7 @@ use std::str::FromStr;
 
 /// A wavelet filter of the bank.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+#[non_exhaustive]
 pub enum Filter {
     /// Haar (orthonormal, 2 taps).
     Haar,

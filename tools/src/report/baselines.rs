@@ -517,7 +517,7 @@ fn sh_with(raw: &RawStore, orders: &[usize], chunk_values: usize) -> Result<ShPr
         max_order <= MAX_SH_ORDER,
         "spherical-harmonics order {max_order} is too large (at most {MAX_SH_ORDER})"
     );
-    let (n, m) = (dims.face_res as usize, dims.lights());
+    let (n, m) = (dims.face_res() as usize, dims.lights());
     let channels = dims.channels as usize;
     let n_rows = dims.pixels() * channels;
     let k = max_order * max_order;
@@ -674,7 +674,7 @@ impl ShProjection {
             light.len() == m,
             "lighting has {} texels; the store needs 6·n² = {m} (n = {})",
             light.len(),
-            dims.face_res
+            dims.face_res()
         );
         if let Some(j) = light.iter().position(|l| l.iter().any(|v| !v.is_finite())) {
             return Err(anyhow!(
@@ -715,7 +715,7 @@ impl ShProjection {
                 out.map(|v| v as f32)
             })
             .collect();
-        let image = Image::from_data(dims.width as usize, dims.height as usize, data)?;
+        let image = Image::from_data(dims.width() as usize, dims.height() as usize, data)?;
         if let Some((x, y)) = image.first_non_finite() {
             return Err(anyhow!(
                 "SH relit pixel ({x}, {y}) is not finite (exceeds the f32 range)"
@@ -741,29 +741,16 @@ mod tests {
         albedo: Option<&[f32]>,
         block_pixels: usize,
     ) -> PathBuf {
-        let path = dir.join(name);
         let header = RawHeader::new(
             dims,
             albedo.is_some(),
             (block_pixels * dims.row_len() * 4) as u64,
         );
-        let mut w = RawWriter::create(&path, header).unwrap();
-        let row = dims.row_len();
-        for b in 0..header.block_count() {
-            let r = header.block_range(b);
-            let a = albedo.map(|a| &a[3 * r.start..3 * r.end]);
-            w.write_block(b, &t[r.start * row..r.end * row], a).unwrap();
-        }
-        w.finish().unwrap()
+        RawWriter::write_dense(&dir.join(name), header, t, albedo).unwrap()
     }
 
     fn dims(width: u32, height: u32, face_res: u32, channels: u32) -> Dims {
-        Dims {
-            width,
-            height,
-            face_res,
-            channels,
-        }
+        Dims::image(width, height, face_res, channels)
     }
 
     /// The store as a dense matrix, rows (pixel, channel), f64.
@@ -1020,7 +1007,7 @@ mod tests {
         let raw =
             RawStore::open(&write_raw(dir.path(), "t.raw", d, &t, albedo.as_deref(), 3)).unwrap();
         let proj = sh_with(&raw, &[2, 4], 700).unwrap();
-        let n = d.face_res as usize;
+        let n = d.face_res() as usize;
         let c = d.channels as usize;
         let mut rng = SplitMix64(9);
         let light: Vec<[f32; 3]> = (0..d.lights())

@@ -331,7 +331,7 @@ fn measure(
 }
 
 fn depth_by_row_level(relighter: &Relighter) -> Vec<f64> {
-    let n = relighter.meta().dims.face_res as usize;
+    let n = relighter.meta().dims.face_res() as usize;
     let levels = row_level(n, n * n - 1) as usize + 1;
     let mut sum = vec![(0.0, 0usize); levels];
     for (j, c) in relighter.file().columns().iter().enumerate() {
@@ -445,9 +445,9 @@ pub fn run(a: ReportArgs) -> Result<()> {
     let m = dims.lights();
     let scene = SceneInfo {
         source,
-        width: dims.width,
-        height: dims.height,
-        face_res: dims.face_res,
+        width: dims.width(),
+        height: dims.height(),
+        face_res: dims.face_res(),
         lights: m,
         channels: dims.channels,
         raw_bytes: dims.raw_bytes(),
@@ -470,7 +470,7 @@ pub fn run(a: ReportArgs) -> Result<()> {
             bail!("two environment maps are named {name}: give maps distinct file names");
         }
         let map = EnvMap::load(path).with_context(|| format!("loading {}", path.display()))?;
-        let light = map.to_cubemap(dims.face_res as usize, &Rotation::IDENTITY);
+        let light = map.to_cubemap(dims.face_res() as usize, &Rotation::IDENTITY);
         let exact = reference(&raw, &light)?;
         envs.push(Env { name, light, exact });
     }

@@ -1,0 +1,31 @@
+//! What every fuzz target runs: a file given as bytes goes through the
+//! decoder's public entry points as an embedding program would use them.
+
+use ltm_codec::{ColumnDecoder, Limits, LtmFile};
+
+/// Limits small enough that a hostile header cannot slow the fuzzer down.
+const LIMITS: Limits = Limits {
+    max_alloc_bytes: 64 << 20,
+};
+
+/// Opens `bytes` with [`LtmFile::from_bytes`], reads every column and, for
+/// small images, decodes it to the pixel domain with [`ColumnDecoder`]. Any
+/// outcome but a panic is fine.
+pub fn decode_through_public_api(bytes: &[u8]) {
+    let Ok(file) = LtmFile::from_bytes(bytes, &LIMITS) else {
+        return;
+    };
+    let dims = file.meta().dims;
+    let decoder = ColumnDecoder::new(file.meta());
+    let small = dims.pixels() <= 1 << 12;
+    let mut plane = vec![0.0f32; if small { dims.pixels() } else { 0 }];
+    let mut work = plane.clone();
+    for j in 0..file.columns().len() {
+        let Ok(col) = file.column(j) else { continue };
+        if small {
+            for c in 0..dims.channels as usize {
+                let _ = decoder.decode(&col, c, &mut plane, &mut work);
+            }
+        }
+    }
+}

@@ -48,6 +48,8 @@ pub enum Mode {
 }
 
 impl Mode {
+    /// The mode's name on the command line and in reports: `2d`, `4d` or
+    /// `adaptive`.
     pub fn name(self) -> &'static str {
         match self {
             Mode::TwoD => "2d",
@@ -84,9 +86,13 @@ impl std::str::FromStr for Mode {
 /// Everything about a file except its columns.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Meta {
+    /// What the rows and columns are, and the stored channels.
     pub dims: Dims,
+    /// How the columns were transformed.
     pub mode: Mode,
+    /// The row transform over each cube face (orthonormal).
     pub row_filter: Filter,
+    /// The column image transform.
     pub col_filter: Filter,
     /// Quantization bits (2..=16).
     pub bits: u32,
@@ -199,6 +205,7 @@ pub struct ColumnEntry {
     pub crc: u32,
     /// Column transform depth.
     pub depth: u8,
+    /// How the payload is stored.
     pub encoding: Encoding,
 }
 
@@ -209,12 +216,15 @@ pub const COLUMN_ENTRY_LEN: usize = 28;
 /// its depth, and quantized values (`channels` per position).
 #[derive(Clone, Debug, Default, PartialEq)]
 pub struct SparseColumn {
+    /// Column transform depth (0 = rows only).
     pub depth: u32,
     /// Quantizer scale codes ([`crate::quant::decode_scale`]),
     /// `(depth + 1) · channels` of them, group-major: group 0 is the low band,
     /// group `k` the detail bands of level `k` ([`crate::quant::scale_groups`]).
     pub scale_codes: Vec<u16>,
+    /// Sorted positions of the kept coefficients in the column image.
     pub indices: Vec<u32>,
+    /// Quantized values, `channels` per position, position-major.
     pub values: Vec<i32>,
 }
 
@@ -333,7 +343,9 @@ struct DirEntry {
 /// A column ready to append: its stored bytes and table entry (offset not
 /// yet set). Encoding is independent per column, so it runs in parallel.
 pub struct EncodedColumn {
+    /// The payload as stored (plain or zstd).
     pub bytes: Vec<u8>,
+    /// Its column-table entry.
     pub entry: ColumnEntry,
 }
 

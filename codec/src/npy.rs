@@ -18,28 +18,26 @@ const NPY_MAGIC: &[u8; 6] = b"\x93NUMPY";
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 #[non_exhaustive]
 pub enum NpyDtype {
+    /// Little-endian float32 (`<f4`).
     F32,
+    /// Little-endian float64 (`<f8`).
     F64,
 }
 
 /// The header of an `.npy` file.
 #[derive(Clone, Debug, PartialEq, Eq)]
 pub struct NpyHeader {
+    /// Element type.
     pub dtype: NpyDtype,
+    /// Array shape, C order.
     pub shape: Vec<usize>,
     /// Bytes before the data.
     pub data_offset: usize,
 }
 
-fn field<'a>(dict: &'a str, key: &str) -> Result<&'a str> {
-    let pat = format!("'{key}':");
-    let at = dict
-        .find(&pat)
-        .ok_or_else(|| Error::Invalid(format!(".npy header has no '{key}' field: {dict}")))?;
-    Ok(dict[at + pat.len()..].trim_start())
-}
-
-/// Parses an `.npy` header (format versions 1–3).
+/// Parses an `.npy` header (format versions 1–3). The header dictionary is
+/// parsed strictly ([`parse_header_dict`]): what numpy writes is accepted,
+/// anything else is an error.
 pub fn read_npy_header(r: &mut impl Read) -> Result<NpyHeader> {
     let bad = |d: String| Error::Invalid(format!("not a readable .npy file: {d}"));
     let mut pre = [0u8; 8];
@@ -65,41 +63,168 @@ pub fn read_npy_header(r: &mut impl Read) -> Result<NpyHeader> {
     }
     let mut text = vec![0u8; len];
     r.read_exact(&mut text).map_err(|e| bad(e.to_string()))?;
-    let dict = String::from_utf8_lossy(&text).into_owned();
-    let descr = field(&dict, "descr")?;
-    let dtype = if descr.starts_with("'<f4'") {
-        NpyDtype::F32
-    } else if descr.starts_with("'<f8'") {
-        NpyDtype::F64
-    } else {
-        return Err(Error::Invalid(format!(
-            "unsupported .npy dtype {} (supported: float32 '<f4', float64 '<f8')",
-            descr.split(',').next().unwrap_or(descr)
-        )));
-    };
-    if !field(&dict, "fortran_order")?.starts_with("False") {
-        return Err(Error::Invalid(
-            "Fortran-ordered .npy arrays are not supported: save with C order".into(),
-        ));
-    }
-    let shape_text = field(&dict, "shape")?;
-    let close = shape_text
-        .find(')')
-        .ok_or_else(|| bad("malformed shape".into()))?;
-    let shape = shape_text[1..close]
-        .split(',')
-        .map(str::trim)
-        .filter(|s| !s.is_empty())
-        .map(|s| {
-            s.parse::<usize>()
-                .map_err(|_| bad(format!("malformed shape {}", &shape_text[..=close])))
-        })
-        .collect::<Result<Vec<_>>>()?;
+    let dict = std::str::from_utf8(&text)
+        .map_err(|_| bad("the header dictionary is not UTF-8 text".into()))?;
+    let (dtype, shape) = parse_header_dict(dict)?;
     Ok(NpyHeader {
         dtype,
         shape,
         data_offset: prefix + len,
     })
+}
+
+/// Parses the header dictionary numpy writes, e.g.
+/// `{'descr': '<f4', 'fortran_order': False, 'shape': (4, 24), }`: exactly
+/// the keys `descr`, `fortran_order` and `shape`, each once, in any order,
+/// with single- or double-quoted strings, then spaces and a newline.
+pub fn parse_header_dict(dict: &str) -> Result<(NpyDtype, Vec<usize>)> {
+    let mut p = DictParser { s: dict.as_bytes(), at: 0 };
+    let (mut descr, mut fortran, mut shape) = (None, None, None);
+    p.expect(b'{')?;
+    loop {
+        if p.eat(b'}') {
+            break;
+        }
+        let key = p.string()?;
+        p.expect(b':')?;
+        let dup = match key.as_str() {
+            "descr" => descr.replace(p.string()?).is_some(),
+            "fortran_order" => fortran.replace(p.boolean()?).is_some(),
+            "shape" => shape.replace(p.tuple()?).is_some(),
+            _ => return Err(p.error(&format!("unknown key '{key}' (valid: descr, fortran_order, shape)"))),
+        };
+        if dup {
+            return Err(p.error(&format!("key '{key}' appears more than once")));
+        }
+        if !p.eat(b',') {
+            p.expect(b'}')?;
+            break;
+        }
+    }
+    p.skip_space();
+    if p.at != p.s.len() {
+        return Err(p.error("text after the dictionary"));
+    }
+    let missing = |k: &str| Error::Invalid(format!(".npy header has no '{k}' field: {dict}"));
+    let descr = descr.ok_or_else(|| missing("descr"))?;
+    let dtype = match descr.as_str() {
+        "<f4" => NpyDtype::F32,
+        "<f8" => NpyDtype::F64,
+        other => {
+            return Err(Error::Invalid(format!(
+                "unsupported .npy dtype '{other}' (supported: float32 '<f4', float64 '<f8')"
+            )))
+        }
+    };
+    if fortran.ok_or_else(|| missing("fortran_order"))? {
+        return Err(Error::Invalid(
+            "Fortran-ordered .npy arrays are not supported: save with C order".into(),
+        ));
+    }
+    Ok((dtype, shape.ok_or_else(|| missing("shape"))?))
+}
+
+/// A cursor over a header dictionary's bytes.
+struct DictParser<'a> {
+    s: &'a [u8],
+    at: usize,
+}
+
+impl DictParser<'_> {
+    fn error(&self, what: &str) -> Error {
+        Error::Invalid(format!(
+            "malformed .npy header at byte {}: {what} (header: {})",
+            self.at,
+            String::from_utf8_lossy(self.s).trim_end()
+        ))
+    }
+
+    fn skip_space(&mut self) {
+        while self.s.get(self.at).is_some_and(|c| matches!(c, b' ' | b'\t' | b'\n' | b'\r')) {
+            self.at += 1;
+        }
+    }
+
+    /// Skips spaces, then consumes `c` if it is next.
+    fn eat(&mut self, c: u8) -> bool {
+        self.skip_space();
+        let found = self.s.get(self.at) == Some(&c);
+        self.at += found as usize;
+        found
+    }
+
+    fn expect(&mut self, c: u8) -> Result<()> {
+        if self.eat(c) {
+            Ok(())
+        } else {
+            Err(self.error(&format!("expected '{}'", c as char)))
+        }
+    }
+
+    /// A string in single or double quotes, without escapes.
+    fn string(&mut self) -> Result<String> {
+        self.skip_space();
+        let quote = match self.s.get(self.at) {
+            Some(&q @ (b'\'' | b'"')) => q,
+            _ => return Err(self.error("expected a quoted string")),
+        };
+        let start = self.at + 1;
+        let len = self.s[start..]
+            .iter()
+            .position(|&c| c == quote)
+            .ok_or_else(|| self.error("unterminated string"))?;
+        let text = &self.s[start..start + len];
+        if text.contains(&b'\\') {
+            return Err(self.error("escapes in strings are not supported"));
+        }
+        self.at = start + len + 1;
+        Ok(String::from_utf8_lossy(text).into_owned())
+    }
+
+    fn boolean(&mut self) -> Result<bool> {
+        self.skip_space();
+        for (word, value) in [(&b"True"[..], true), (&b"False"[..], false)] {
+            if self.s[self.at..].starts_with(word) {
+                self.at += word.len();
+                return Ok(value);
+            }
+        }
+        Err(self.error("expected True or False"))
+    }
+
+    /// A tuple of non-negative integers: `()`, `(5,)`, `(3, 4)`, `(3, 4, 2)`.
+    fn tuple(&mut self) -> Result<Vec<usize>> {
+        self.expect(b'(')?;
+        let mut dims = Vec::new();
+        loop {
+            if self.eat(b')') {
+                break;
+            }
+            dims.push(self.integer()?);
+            if !self.eat(b',') {
+                self.expect(b')')?;
+                if dims.len() == 1 {
+                    return Err(self.error("a one-element shape needs a trailing comma"));
+                }
+                break;
+            }
+        }
+        Ok(dims)
+    }
+
+    fn integer(&mut self) -> Result<usize> {
+        self.skip_space();
+        let digits = self.s[self.at..].iter().take_while(|c| c.is_ascii_digit()).count();
+        if digits == 0 {
+            return Err(self.error("expected a non-negative integer"));
+        }
+        let text = std::str::from_utf8(&self.s[self.at..self.at + digits]).unwrap_or("");
+        let value = text
+            .parse::<usize>()
+            .map_err(|_| self.error(&format!("dimension {text} is too large")))?;
+        self.at += digits;
+        Ok(value)
+    }
 }
 
 /// Imports a `(P, M)` or `(P, M, C)` `.npy` matrix as a raw store.
@@ -152,6 +277,9 @@ fn import_npy_inner(
         return Err(Error::Invalid(format!(
             "array has {cols} columns: expected 6·n² cubemap texels (n a power of two)"
         )));
+    }
+    if channels != 1 && channels != 3 {
+        return Err(Error::range("array channels (third dimension)", channels, "1 or 3"));
     }
     let dims = Dims::image(width, height, n, channels as u32);
     dims.validate()?;

@@ -49,6 +49,7 @@ const DATA_ALIGN: u64 = 4096;
 /// Header of a raw store.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct RawHeader {
+    /// The matrix's dimensions.
     pub dims: Dims,
     /// Rows per block (the unit of writing, resuming and checksumming).
     pub block_rows: u32,

@@ -115,12 +115,18 @@ fn bad_npy_files_are_refused_and_leave_nothing() {
             "inf",
         ),
         ("<f4", "(4, 54)".into(), f32_bytes(&[1.0; 216]), 4, "6·n²"),
+        // 2^32 + 3 channels: must not be read as 3.
+        ("<f4", "(4, 6, 4294967299)".into(), good.clone(), 4, "channels"),
+        ("<f4", "(4, 6, 2)".into(), f32_bytes(&[0.5; 48]), 4, "channels"),
     ];
     for (descr, shape, data, width, what) in cases {
         let npy = dir.path().join("bad.npy");
         write_npy(&npy, descr, &shape, &data);
         let err = import_npy(&npy, width, 1, &raw, &|_, _| {}).expect_err(what);
         assert!(!err.to_string().is_empty());
+        if what == "channels" {
+            assert!(err.to_string().contains("channels"), "{err}");
+        }
         assert!(
             !raw.exists() && !dir.path().join("x.raw.partial").exists(),
             "{what}: output left behind ({err})"
@@ -129,4 +135,51 @@ fn bad_npy_files_are_refused_and_leave_nothing() {
     std::fs::write(dir.path().join("junk.npy"), b"not numpy at all").unwrap();
     assert!(import_npy(&dir.path().join("junk.npy"), 1, 1, &raw, &|_, _| {}).is_err());
     assert!(import_npy(&dir.path().join("missing.npy"), 1, 1, &raw, &|_, _| {}).is_err());
+}
+
+#[test]
+fn header_dictionary_accepts_what_numpy_writes() {
+    use ltm_codec::npy::parse_header_dict;
+    for (dict, shape) in [
+        ("{'descr': '<f4', 'fortran_order': False, 'shape': (3, 4), }", vec![3, 4]),
+        ("{\"descr\": \"<f4\", \"fortran_order\": False, \"shape\": (3, 4, 3)}", vec![3, 4, 3]),
+        ("{'shape': (5,), 'fortran_order': False, 'descr': '<f4'}   \n", vec![5]),
+        ("{'descr':'<f4','fortran_order':False,'shape':()}", vec![]),
+    ] {
+        let (dtype, s) = parse_header_dict(dict).unwrap_or_else(|e| panic!("{dict}: {e}"));
+        assert_eq!((dtype, s), (NpyDtype::F32, shape), "{dict}");
+    }
+    let (dtype, s) =
+        parse_header_dict("{'descr': '<f8', 'fortran_order': False, 'shape': (4294967297, 6), }")
+            .unwrap();
+    // A dimension above u32 is kept whole (not truncated to 32 bits).
+    assert_eq!((dtype, s), (NpyDtype::F64, vec![4294967297, 6]));
+}
+
+#[test]
+fn malformed_header_dictionaries_are_errors() {
+    use ltm_codec::npy::parse_header_dict;
+    for dict in [
+        "",
+        "{",
+        "{'descr': '<f4', 'fortran_order': False, 'shape': )3, 4(, }",
+        "{'descr': '<f4', 'fortran_order': False, 'shape': (3, 4}",
+        "{'descr': '<f4', 'fortran_order': False, 'shape': (3 4), }",
+        "{'descr': '<f4', 'fortran_order': False, 'shape': (3), }",
+        "{'descr': '<f4', 'fortran_order': False, 'shape': (-3, 4), }",
+        "{'descr': '<f4', 'fortran_order': False, 'shape': (99999999999999999999999, 4), }",
+        "{'descr': '<f4', 'descr': '<f8', 'fortran_order': False, 'shape': (3, 4), }",
+        "{'descr': '<f4', 'fortran_order': False, 'shape': (3, 4), 'shape': (6, 2), }",
+        "{'descr': '<f4', 'fortran_order': False, 'shape': (3, 4), 'extra': 1}",
+        "{'descr': '<f4', 'fortran_order': False}",
+        "{'descr': '<f4', 'fortran_order': maybe, 'shape': (3, 4)}",
+        "{'descr': '<f4', 'fortran_order': True, 'shape': (3, 4)}",
+        "{'descr': '>f4', 'fortran_order': False, 'shape': (3, 4)}",
+        "{'descr': '<i4', 'fortran_order': False, 'shape': (3, 4)}",
+        "{'descr: '<f4', 'fortran_order': False, 'shape': (3, 4)}",
+        "{'descr': '<f4', 'fortran_order': False, 'shape': (3, 4)} trailing",
+        "{'descr': '<f\\4', 'fortran_order': False, 'shape': (3, 4)}",
+    ] {
+        assert!(parse_header_dict(dict).is_err(), "accepted: {dict}");
+    }
 }

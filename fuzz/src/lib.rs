@@ -29,3 +29,24 @@ pub fn decode_through_public_api(bytes: &[u8]) {
         }
     }
 }
+
+/// Writes `bytes` to a temporary file, opens it with
+/// [`ltm_codec::RawStore::open_with_limits`] and, when it opens, verifies
+/// every block and reads every row and its zero flag.
+pub fn read_raw_store(bytes: &[u8]) {
+    let Ok(dir) = tempfile::tempdir() else { return };
+    let path = dir.path().join("f.raw");
+    if std::fs::write(&path, bytes).is_err() {
+        return;
+    }
+    let Ok(raw) = ltm_codec::RawStore::open_with_limits(&path, &LIMITS) else {
+        return;
+    };
+    for b in 0..raw.header().block_count() {
+        let _ = raw.verify_block(b);
+    }
+    for p in 0..raw.dims().pixels() {
+        let _ = (raw.row(p).len(), raw.is_zero_row(p));
+    }
+    let _ = raw.albedo();
+}

@@ -2,7 +2,7 @@
 
 #![allow(unsafe_code)]
 
-use memmap2::{Mmap, MmapMut, MmapOptions, UncheckedAdvice};
+use memmap2::{Mmap, UncheckedAdvice};
 use std::fs::File;
 use std::io;
 
@@ -18,14 +18,6 @@ pub(crate) fn map_read(file: &File) -> io::Result<Mmap> {
     // run. Readers still validate what they read (sizes, offsets, CRCs), so
     // a file that was complete but wrong gives an error.
     unsafe { Mmap::map(file) }
-}
-
-/// Maps `len` bytes of a file at `offset` for writing.
-pub(crate) fn map_write(file: &File, offset: u64, len: usize) -> io::Result<MmapMut> {
-    // SAFETY: the file is a private temporary file of this process, opened
-    // for writing and already sized to cover `offset + len`; the mapping is
-    // dropped before the file is renamed into place.
-    unsafe { MmapOptions::new().offset(offset).len(len).map_mut(file) }
 }
 
 /// Tells the kernel it may drop the pages of `map[offset..offset + len]`

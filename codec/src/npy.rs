@@ -78,7 +78,10 @@ pub fn read_npy_header(r: &mut impl Read) -> Result<NpyHeader> {
 /// the keys `descr`, `fortran_order` and `shape`, each once, in any order,
 /// with single- or double-quoted strings, then spaces and a newline.
 pub fn parse_header_dict(dict: &str) -> Result<(NpyDtype, Vec<usize>)> {
-    let mut p = DictParser { s: dict.as_bytes(), at: 0 };
+    let mut p = DictParser {
+        s: dict.as_bytes(),
+        at: 0,
+    };
     let (mut descr, mut fortran, mut shape) = (None, None, None);
     p.expect(b'{')?;
     loop {
@@ -91,7 +94,11 @@ pub fn parse_header_dict(dict: &str) -> Result<(NpyDtype, Vec<usize>)> {
             "descr" => descr.replace(p.string()?).is_some(),
             "fortran_order" => fortran.replace(p.boolean()?).is_some(),
             "shape" => shape.replace(p.tuple()?).is_some(),
-            _ => return Err(p.error(&format!("unknown key '{key}' (valid: descr, fortran_order, shape)"))),
+            _ => {
+                return Err(p.error(&format!(
+                    "unknown key '{key}' (valid: descr, fortran_order, shape)"
+                )))
+            }
         };
         if dup {
             return Err(p.error(&format!("key '{key}' appears more than once")));
@@ -140,7 +147,11 @@ impl DictParser<'_> {
     }
 
     fn skip_space(&mut self) {
-        while self.s.get(self.at).is_some_and(|c| matches!(c, b' ' | b'\t' | b'\n' | b'\r')) {
+        while self
+            .s
+            .get(self.at)
+            .is_some_and(|c| matches!(c, b' ' | b'\t' | b'\n' | b'\r'))
+        {
             self.at += 1;
         }
     }
@@ -214,7 +225,10 @@ impl DictParser<'_> {
 
     fn integer(&mut self) -> Result<usize> {
         self.skip_space();
-        let digits = self.s[self.at..].iter().take_while(|c| c.is_ascii_digit()).count();
+        let digits = self.s[self.at..]
+            .iter()
+            .take_while(|c| c.is_ascii_digit())
+            .count();
         if digits == 0 {
             return Err(self.error("expected a non-negative integer"));
         }
@@ -279,7 +293,11 @@ fn import_npy_inner(
         )));
     }
     if channels != 1 && channels != 3 {
-        return Err(Error::range("array channels (third dimension)", channels, "1 or 3"));
+        return Err(Error::range(
+            "array channels (third dimension)",
+            channels,
+            "1 or 3",
+        ));
     }
     let dims = Dims::image(width, height, n, channels as u32);
     dims.validate()?;

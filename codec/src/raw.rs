@@ -22,7 +22,8 @@
 //! A block is `block_rows` consecutive rows (the last may be shorter); its
 //! CRC covers its row flags, then its albedo values, then its data.
 //!
-//! Writing goes to `PATH.partial`, one memory-mapped block at a time, and the
+//! Writing goes to `PATH.partial`, one block at a time with plain positioned
+//! writes (so that a full disk is an error, not a signal), and the
 //! file is renamed to `PATH` when every block is complete. Re-opening an
 //! interrupted `.partial` with the same header resumes: blocks marked
 //! complete whose CRC verifies are kept, the others are pending.
@@ -45,6 +46,8 @@ const VERSION: u32 = 1;
 const HEADER_LEN: u64 = 64;
 const FLAG_ALBEDO: u32 = 1;
 const DATA_ALIGN: u64 = 4096;
+/// Bytes read at a time when a resumed block's CRC is checked.
+const CRC_CHUNK: u64 = 8 << 20;
 
 /// Header of a raw store.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -296,13 +299,18 @@ impl RawWriter {
             h.update(&buf);
         }
         let row_bytes = self.header.dims.row_len() as u64 * 4;
-        let map = mmap::map_write(
-            &self.file,
+        let (start, end) = (
             self.layout.data_offset + rows.start as u64 * row_bytes,
-            (n * row_bytes) as usize,
-        )
-        .map_err(io)?;
-        h.update(&map);
+            self.layout.data_offset + rows.end as u64 * row_bytes,
+        );
+        buf.resize((end - start).min(CRC_CHUNK) as usize, 0);
+        let mut at = start;
+        while at < end {
+            let len = (end - at).min(CRC_CHUNK) as usize;
+            self.file.read_exact_at(&mut buf[..len], at).map_err(io)?;
+            h.update(&buf[..len]);
+            at += len as u64;
+        }
         Ok(h.finalize())
     }
 
@@ -349,17 +357,16 @@ impl RawWriter {
             (false, None) => {}
             _ => return Err(Error::Invalid(format!("albedo for block {b} must be given exactly when the store has an albedo image, 3 values per row"))),
         }
+        // Plain positioned writes, not a memory map of the sparse file: a full
+        // disk is then an ENOSPC error here rather than SIGBUS on a page.
         let bytes: &[u8] = bytemuck::cast_slice(rows);
         let row_bytes = row_len as u64 * 4;
-        let mut map = mmap::map_write(
-            &self.file,
-            self.layout.data_offset + range.start as u64 * row_bytes,
-            bytes.len(),
-        )
-        .map_err(io)?;
-        map.copy_from_slice(bytes);
-        map.flush().map_err(io)?;
-        drop(map);
+        self.file
+            .write_all_at(
+                bytes,
+                self.layout.data_offset + range.start as u64 * row_bytes,
+            )
+            .map_err(io)?;
         h.update(bytes);
         let mut entry = 1u32.to_le_bytes().to_vec();
         entry.extend_from_slice(&h.finalize().to_le_bytes());

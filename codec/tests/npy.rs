@@ -116,8 +116,20 @@ fn bad_npy_files_are_refused_and_leave_nothing() {
         ),
         ("<f4", "(4, 54)".into(), f32_bytes(&[1.0; 216]), 4, "6·n²"),
         // 2^32 + 3 channels: must not be read as 3.
-        ("<f4", "(4, 6, 4294967299)".into(), good.clone(), 4, "channels"),
-        ("<f4", "(4, 6, 2)".into(), f32_bytes(&[0.5; 48]), 4, "channels"),
+        (
+            "<f4",
+            "(4, 6, 4294967299)".into(),
+            good.clone(),
+            4,
+            "channels",
+        ),
+        (
+            "<f4",
+            "(4, 6, 2)".into(),
+            f32_bytes(&[0.5; 48]),
+            4,
+            "channels",
+        ),
     ];
     for (descr, shape, data, width, what) in cases {
         let npy = dir.path().join("bad.npy");
@@ -141,9 +153,18 @@ fn bad_npy_files_are_refused_and_leave_nothing() {
 fn header_dictionary_accepts_what_numpy_writes() {
     use ltm_codec::npy::parse_header_dict;
     for (dict, shape) in [
-        ("{'descr': '<f4', 'fortran_order': False, 'shape': (3, 4), }", vec![3, 4]),
-        ("{\"descr\": \"<f4\", \"fortran_order\": False, \"shape\": (3, 4, 3)}", vec![3, 4, 3]),
-        ("{'shape': (5,), 'fortran_order': False, 'descr': '<f4'}   \n", vec![5]),
+        (
+            "{'descr': '<f4', 'fortran_order': False, 'shape': (3, 4), }",
+            vec![3, 4],
+        ),
+        (
+            "{\"descr\": \"<f4\", \"fortran_order\": False, \"shape\": (3, 4, 3)}",
+            vec![3, 4, 3],
+        ),
+        (
+            "{'shape': (5,), 'fortran_order': False, 'descr': '<f4'}   \n",
+            vec![5],
+        ),
         ("{'descr':'<f4','fortran_order':False,'shape':()}", vec![]),
     ] {
         let (dtype, s) = parse_header_dict(dict).unwrap_or_else(|e| panic!("{dict}: {e}"));

@@ -1,0 +1,142 @@
+//! Faults a tool that feeds hours of later work must survive: each test
+//! injects one and checks that `ltm` exits with a message (not a signal),
+//! leaves no wrong output and no temporary file behind.
+
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output};
+
+fn ltm(args: &[&str]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_ltm"))
+        .args(args)
+        .output()
+        .expect("run ltm")
+}
+
+fn assets() -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("../assets")
+}
+
+/// A 1 MiB tmpfs mounted for the test's lifetime: a disk that fills up.
+struct SmallDisk {
+    path: PathBuf,
+    _dir: tempfile::TempDir,
+}
+
+impl SmallDisk {
+    /// Mounts the filesystem, or returns `None` where mounting is not
+    /// allowed (not root). CI runs as root, so there a failed mount fails
+    /// the test instead of skipping it.
+    fn mount() -> Option<SmallDisk> {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("small");
+        std::fs::create_dir(&path).unwrap();
+        let ok = Command::new("mount")
+            .args(["-t", "tmpfs", "-o", "size=1m", "tmpfs"])
+            .arg(&path)
+            .status()
+            .is_ok_and(|s| s.success());
+        if !ok {
+            assert!(
+                std::env::var_os("CI").is_none(),
+                "CI must be able to mount a small tmpfs for the disk-full tests"
+            );
+            eprintln!("skipped: cannot mount a tmpfs here (not root)");
+            return None;
+        }
+        Some(SmallDisk { path, _dir: dir })
+    }
+}
+
+impl Drop for SmallDisk {
+    fn drop(&mut self) {
+        let _ = Command::new("umount").arg(&self.path).status();
+    }
+}
+
+/// Checks that a run failed with a message that names the full disk, by an
+/// exit code rather than a signal.
+fn assert_disk_full_error(out: &Output, what: &str) {
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        out.status.code() == Some(1),
+        "{what}: expected exit code 1, got {:?} (a signal?): {stderr}",
+        out.status
+    );
+    assert!(
+        stderr.contains("No space left on device"),
+        "{what}: the message does not name the full disk: {stderr}"
+    );
+}
+
+fn files_in(dir: &Path) -> Vec<String> {
+    let mut v: Vec<String> = std::fs::read_dir(dir)
+        .unwrap()
+        .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+        .collect();
+    v.sort();
+    v
+}
+
+#[test]
+fn full_disk_during_import_is_an_error_and_leaves_nothing() {
+    let Some(disk) = SmallDisk::mount() else {
+        return;
+    };
+    // A (64·64, 6·8²) float32 matrix: 1.5 MiB, more than the disk holds.
+    let src = tempfile::tempdir().unwrap();
+    let npy = src.path().join("t.npy");
+    let (p, m) = (64 * 64, 6 * 8 * 8);
+    let mut dict = format!("{{'descr': '<f4', 'fortran_order': False, 'shape': ({p}, {m}), }}");
+    while (10 + dict.len() + 1) % 64 != 0 {
+        dict.push(' ');
+    }
+    dict.push('\n');
+    let mut bytes = b"\x93NUMPY\x01\x00".to_vec();
+    bytes.extend_from_slice(&(dict.len() as u16).to_le_bytes());
+    bytes.extend_from_slice(dict.as_bytes());
+    bytes.extend((0..p * m).flat_map(|i| ((i % 7) as f32 * 0.1).to_le_bytes()));
+    std::fs::write(&npy, bytes).unwrap();
+    let out = disk.path.join("t.raw");
+    let run = ltm(&[
+        "import",
+        npy.to_str().unwrap(),
+        "--width",
+        "64",
+        "--height",
+        "64",
+        "-o",
+        out.to_str().unwrap(),
+    ]);
+    assert_disk_full_error(&run, "import");
+    assert!(
+        files_in(&disk.path).is_empty(),
+        "{:?}",
+        files_in(&disk.path)
+    );
+}
+
+#[test]
+fn full_disk_during_bake_is_an_error() {
+    let Some(disk) = SmallDisk::mount() else {
+        return;
+    };
+    // 48·48 pixels × 6·8² lights × 4 bytes = 3.5 MiB of rows.
+    let out = disk.path.join("s.raw");
+    let scene = assets().join("scenes/default.toml");
+    let run = ltm(&[
+        "bake",
+        scene.to_str().unwrap(),
+        "-o",
+        out.to_str().unwrap(),
+        "--width",
+        "48",
+        "--height",
+        "48",
+        "--face-res",
+        "8",
+        "--texel-samples",
+        "1",
+    ]);
+    assert_disk_full_error(&run, "bake");
+    assert!(!out.exists(), "a bake that failed left its output");
+}

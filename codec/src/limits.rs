@@ -14,8 +14,8 @@ pub struct Limits {
 }
 
 impl Limits {
-    /// The default of [`Limits::max_alloc_bytes`]: 8 GiB.
-    pub const DEFAULT_MAX_ALLOC_BYTES: u64 = 8 << 30;
+    /// The default of [`Limits::max_alloc_bytes`]: 4 GiB.
+    pub const DEFAULT_MAX_ALLOC_BYTES: u64 = 4 << 30;
 
     /// Limits with a largest buffer of `max_alloc_bytes`.
     pub fn with_max_alloc(max_alloc_bytes: u64) -> Limits {
@@ -59,6 +59,6 @@ mod tests {
             "{e}"
         );
         assert!(l.check_alloc("table", u64::MAX, 2).is_err());
-        assert_eq!(Limits::default().max_alloc_bytes, 8 << 30);
+        assert_eq!(Limits::default().max_alloc_bytes, 4 << 30);
     }
 }

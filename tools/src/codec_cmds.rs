@@ -119,7 +119,8 @@ pub fn default_mem_budget() -> u64 {
 }
 
 pub fn compress_cmd(a: CompressArgs) -> Result<()> {
-    let raw = RawStore::open(&a.raw).with_context(|| format!("opening {}", a.raw.display()))?;
+    let raw = RawStore::open_with_limits(&a.raw, crate::limits())
+        .with_context(|| format!("opening {}", a.raw.display()))?;
     let target = match (a.terms, a.max_error) {
         (Some(n), _) => Target::Terms(n),
         (None, Some(e)) => Target::MaxError(e),
@@ -272,7 +273,8 @@ pub fn inspect(file: &LtmFile) -> Inspection {
 }
 
 pub fn inspect_cmd(a: InspectArgs) -> Result<()> {
-    let file = LtmFile::open(&a.file).with_context(|| format!("opening {}", a.file.display()))?;
+    let file = LtmFile::open_with_limits(&a.file, crate::limits())
+        .with_context(|| format!("opening {}", a.file.display()))?;
     let i = inspect(&file);
     if a.json {
         println!("{}", serde_json::to_string_pretty(&i)?);
@@ -331,8 +333,9 @@ pub struct ExportArgs {
 }
 
 pub fn export(a: ExportArgs) -> Result<()> {
-    let file = LtmFile::open(&a.file).with_context(|| format!("opening {}", a.file.display()))?;
-    export_npy(&file, &a.output, &ltm_codec::Limits::default())
+    let file = LtmFile::open_with_limits(&a.file, crate::limits())
+        .with_context(|| format!("opening {}", a.file.display()))?;
+    export_npy(&file, &a.output, crate::limits())
         .with_context(|| format!("exporting to {}", a.output.display()))?;
     eprintln!("wrote {}", a.output.display());
     Ok(())

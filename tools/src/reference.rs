@@ -56,7 +56,7 @@ pub struct ReferenceArgs {
 
 pub fn run(args: ReferenceArgs) -> anyhow::Result<()> {
     let start = Instant::now();
-    let raw = RawStore::open(&args.raw)
+    let raw = RawStore::open_with_limits(&args.raw, crate::limits())
         .with_context(|| format!("opening raw store {}", args.raw.display()))?;
     let dims = raw.dims();
     let env = EnvMap::load(&args.env)

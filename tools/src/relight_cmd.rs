@@ -64,8 +64,8 @@ pub struct RelightArgs {
 }
 
 pub fn run(a: RelightArgs) -> Result<()> {
-    let relighter =
-        Relighter::open(&a.file).with_context(|| format!("opening {}", a.file.display()))?;
+    let relighter = Relighter::open_with_limits(&a.file, crate::limits())
+        .with_context(|| format!("opening {}", a.file.display()))?;
     let env = EnvMap::load(&a.env).with_context(|| format!("loading {}", a.env.display()))?;
     let n = relighter.meta().dims.face_res() as usize;
     let light = env.to_cubemap(n, &a.rotate);

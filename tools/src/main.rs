@@ -4,6 +4,7 @@ mod bake;
 mod codec_cmds;
 mod demo;
 mod output;
+mod paths;
 mod progress;
 mod reference;
 mod relight_cmd;

@@ -89,7 +89,22 @@ enum Command {
     Report(report::ReportArgs),
 }
 
+/// Restores the default action of SIGPIPE, which the Rust runtime ignores:
+/// a command whose standard output is a closed pipe (`ltm inspect f.ltm |
+/// head -1`) then ends quietly, as Unix tools do, instead of panicking.
+#[cfg(unix)]
+fn exit_quietly_on_closed_pipe() {
+    // SAFETY: called first in `main`, before any other thread exists;
+    // setting a signal's disposition to its default only changes what the
+    // kernel does to this process on SIGPIPE, and no handler runs.
+    unsafe {
+        libc::signal(libc::SIGPIPE, libc::SIG_DFL);
+    }
+}
+
 fn main() -> ExitCode {
+    #[cfg(unix)]
+    exit_quietly_on_closed_pipe();
     let cli = Cli::parse();
     let _ = LIMITS.set(Limits::with_max_alloc(cli.max_memory));
     let result = match cli.command {

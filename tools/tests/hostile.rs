@@ -140,3 +140,60 @@ fn full_disk_during_bake_is_an_error() {
     assert_disk_full_error(&run, "bake");
     assert!(!out.exists(), "a bake that failed left its output");
 }
+
+/// Bakes and compresses a tiny matrix of the default scene into `dir`.
+fn tiny_ltm(dir: &Path) -> PathBuf {
+    let raw = dir.join("t.raw");
+    let ltm_path = dir.join("t.ltm");
+    let scene = assets().join("scenes/default.toml");
+    let out = ltm(&[
+        "bake",
+        scene.to_str().unwrap(),
+        "-o",
+        raw.to_str().unwrap(),
+        "--width",
+        "8",
+        "--height",
+        "8",
+        "--face-res",
+        "2",
+        "--texel-samples",
+        "1",
+    ]);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let out = ltm(&[
+        "compress",
+        raw.to_str().unwrap(),
+        "-o",
+        ltm_path.to_str().unwrap(),
+    ]);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    ltm_path
+}
+
+#[test]
+fn a_closed_output_pipe_ends_the_command_quietly() {
+    use std::process::Stdio;
+    let dir = tempfile::tempdir().unwrap();
+    let file = tiny_ltm(dir.path());
+    // The reading end of stdout is closed before ltm writes to it.
+    let mut child = Command::new(env!("CARGO_BIN_EXE_ltm"))
+        .args(["inspect", file.to_str().unwrap()])
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    drop(child.stdout.take());
+    let out = child.wait_with_output().unwrap();
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(stderr.is_empty(), "not quiet: {stderr}");
+    assert_ne!(out.status.code(), Some(101), "panicked");
+}

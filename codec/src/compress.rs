@@ -145,36 +145,9 @@ fn check_options(opts: &CompressOptions) -> Result<()> {
     Ok(())
 }
 
-/// Full-depth row transform of one channel-plane of a row (6 faces of n×n).
-pub fn row_forward(filter: Filter, n: usize, row: &mut [f32], work: &mut [f32]) -> Result<()> {
-    let levels = max_levels(n, n);
-    for face in row.chunks_mut(n * n) {
-        wavelet::forward(filter, face, n, n, levels, work)?;
-    }
-    Ok(())
-}
-
-/// The inverse of [`row_forward`].
-pub fn row_inverse(filter: Filter, n: usize, row: &mut [f32], work: &mut [f32]) -> Result<()> {
-    let levels = max_levels(n, n);
-    for face in row.chunks_mut(n * n) {
-        wavelet::inverse(filter, face, n, n, levels, work)?;
-    }
-    Ok(())
-}
-
-/// Row-wavelet level of column `j` (0 = a face's scaling function, then
-/// 1, 2, … from coarse to fine detail): the x axis of the paper's Fig. 8.
-pub fn row_level(n: usize, j: usize) -> u32 {
-    let i = j % (n * n);
-    let (y, x) = (i / n, i % n);
-    let m = x.max(y);
-    if m == 0 {
-        0
-    } else {
-        usize::BITS - m.leading_zeros()
-    }
-}
+/// The row transform moved to [`crate::wavelet`]; re-exported here until
+/// the compressor's callers import it from there.
+pub use crate::wavelet::{row_forward, row_inverse, row_level};
 
 /// Column groups in memory or in a temporary file: group `g` holds columns
 /// `g·G ..` as `((l·C + c)·P + p)` f32 values.

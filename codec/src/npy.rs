@@ -1,11 +1,11 @@
 //! NumPy `.npy` import into the raw store, and dense export of a decoded
 //! `.ltm` file, so that anyone can check the codec with numpy.
 
-use crate::compress::row_inverse;
 use crate::container::LtmFile;
 use crate::decode::ColumnDecoder;
 use crate::error::{Error, Result};
 use crate::raw::{Dims, RawHeader, RawWriter};
+use crate::wavelet::row_inverse;
 use std::fs::File;
 use std::io::{BufReader, BufWriter, Read, Write};
 use std::path::Path;

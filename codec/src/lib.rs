@@ -21,7 +21,10 @@ pub mod raw;
 pub mod wavelet;
 
 pub use bytes::MAX_ALLOC_BYTES;
-pub use compress::{compress, CompressOptions, CompressStats, Stage, Target, Transposed};
+pub use compress::{
+    compress, Analysis, CodeOptions, Coder, CompressOptions, CompressStats, Plan, Stage, Target,
+    TransposeOptions, Transposed,
+};
 pub use container::{LtmFile, LtmWriter, Meta, Mode, SparseColumn};
 pub use decode::ColumnDecoder;
 pub use error::{Error, Result};

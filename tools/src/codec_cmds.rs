@@ -4,10 +4,12 @@ use crate::progress;
 use anyhow::{bail, Context, Result};
 use clap::Args;
 use ltm_codec::compress::{
-    compress, row_level, CompressOptions, Stage, Target, DEFAULT_BITS, DEFAULT_MAX_ERROR,
+    compress, CodeOptions, CompressOptions, Stage, Target, TransposeOptions, DEFAULT_BITS,
+    DEFAULT_MAX_ERROR,
 };
 use ltm_codec::container::{LtmFile, Mode};
 use ltm_codec::npy::{export_npy, import_npy};
+use ltm_codec::wavelet::row_level;
 use ltm_codec::{Filter, RawStore};
 use serde::Serialize;
 use std::path::PathBuf;
@@ -121,7 +123,7 @@ pub fn default_mem_budget() -> u64 {
 pub fn compress_cmd(a: CompressArgs) -> Result<()> {
     let raw = RawStore::open(&a.raw).with_context(|| format!("opening {}", a.raw.display()))?;
     let target = match (a.terms, a.max_error) {
-        (Some(n), _) => Target::Terms(n),
+        (Some(n), _) => Target::Keep(n),
         (None, Some(e)) => Target::MaxError(e),
         (None, None) => Target::MaxError(DEFAULT_MAX_ERROR),
     };
@@ -132,15 +134,20 @@ pub fn compress_cmd(a: CompressArgs) -> Result<()> {
         .transpose()?
         .unwrap_or_else(default_mem_budget);
     let opts = CompressOptions {
-        mode: a.mode,
-        row_filter: a.row_filter,
-        col_filter: a.col_filter,
-        bits: a.bits.unwrap_or(DEFAULT_BITS),
-        raise_bits: a.bits.is_none(),
-        target,
-        mem_budget,
-        seed: a.seed,
-        ..Default::default()
+        transpose: TransposeOptions {
+            row_filter: a.row_filter,
+            mem_budget,
+            temp_dir: None,
+        },
+        code: CodeOptions {
+            mode: a.mode,
+            col_filter: a.col_filter,
+            bits: a.bits.unwrap_or(DEFAULT_BITS),
+            raise_bits: a.bits.is_none(),
+            target,
+            seed: a.seed,
+            ..Default::default()
+        },
     };
     let bar = Mutex::new((progress::bar(0, "rows"), None::<Stage>));
     let start = std::time::Instant::now();
@@ -170,11 +177,11 @@ pub fn compress_cmd(a: CompressArgs) -> Result<()> {
         stats.raw_bytes as f64 / 1e6 / secs,
         if stats.out_of_core { ", out of core" } else { "" }
     );
-    if opts.raise_bits && stats.bits > opts.bits {
+    if opts.code.raise_bits && stats.bits > opts.code.bits {
         eprintln!(
             "coded at {} bits: {} missed the target",
             stats.bits,
-            (opts.bits..stats.bits)
+            (opts.code.bits..stats.bits)
                 .step_by(2)
                 .map(|b| b.to_string())
                 .collect::<Vec<_>>()

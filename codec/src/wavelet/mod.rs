@@ -40,8 +40,9 @@ pub use dwt2::{
 use std::fmt;
 use std::str::FromStr;
 
-/// A wavelet filter of the bank.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+/// A wavelet filter of the bank (serialized by its [`Filter::name`]).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "lowercase")]
 pub enum Filter {
     /// Haar (orthonormal, 2 taps).
     Haar,

@@ -75,9 +75,21 @@ pub struct CompressArgs {
     /// at a time (up to 16) while a --max-error target is missed].
     #[arg(long, value_parser = clap::value_parser!(u32).range(2..=16))]
     pub bits: Option<u32>,
-    /// Keep the N largest coefficients of each column (the paper's rule).
-    #[arg(long, conflicts_with = "max_error")]
-    pub terms: Option<usize>,
+    /// Keep the N largest coefficients of each column (the paper's N-term
+    /// rule).
+    #[arg(long, value_name = "N", conflicts_with = "max_error")]
+    pub keep: Option<usize>,
+    /// The old name of --keep, refused with a message: `ltm relight --terms`
+    /// counts wavelet lights per frame, not coefficients per column.
+    #[arg(
+        long = "terms",
+        hide = true,
+        value_name = "N",
+        num_args = 0..=1,
+        default_missing_value = "",
+        value_parser = renamed_terms
+    )]
+    pub old_terms: Option<usize>,
     /// Target relative L2 error of the whole decoded matrix [default: 0.01].
     #[arg(long)]
     pub max_error: Option<f64>,
@@ -120,9 +132,18 @@ pub fn default_mem_budget() -> u64 {
     (total / 4).min(8 << 30)
 }
 
+/// Refuses `ltm compress --terms`, renamed to `--keep`.
+fn renamed_terms(_: &str) -> std::result::Result<usize, String> {
+    Err(
+        "`ltm compress --terms` is now `--keep N` (coefficients kept per column); \
+         `--terms` is `ltm relight`'s count of wavelet lights per frame"
+            .into(),
+    )
+}
+
 pub fn compress_cmd(a: CompressArgs) -> Result<()> {
     let raw = RawStore::open(&a.raw).with_context(|| format!("opening {}", a.raw.display()))?;
-    let target = match (a.terms, a.max_error) {
+    let target = match (a.keep, a.max_error) {
         (Some(n), _) => Target::Keep(n),
         (None, Some(e)) => Target::MaxError(e),
         (None, None) => Target::MaxError(DEFAULT_MAX_ERROR),
@@ -309,7 +330,7 @@ pub fn inspect_cmd(a: InspectArgs) -> Result<()> {
     );
     println!("  nonzeros       {}", i.nonzeros);
     if i.terms > 0 {
-        println!("  target         {} terms per column", i.terms);
+        println!("  target         {} coefficients kept per column", i.terms);
     } else {
         println!("  target error   {}", i.target_error);
     }

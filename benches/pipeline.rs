@@ -24,10 +24,10 @@
 
 use criterion::{criterion_group, criterion_main, BenchmarkId, Criterion, Throughput};
 use ltm::bake::{bake, BakeOptions, Overrides, Scene, SceneDesc};
-use ltm::codec::compress::{compress, row_forward, CompressOptions, Target};
+use ltm::codec::compress::{compress, CodeOptions, Target};
 use ltm::codec::container::{EncodedColumn, Mode};
 use ltm::codec::quant::{self, scale_groups, BandWeights};
-use ltm::codec::wavelet;
+use ltm::codec::wavelet::{self, row_forward};
 use ltm::codec::{ColumnDecoder, Dims, Filter, Meta, RawStore, SparseColumn};
 use ltm::relight::{EnvMap, Relighter, Rotation, Weighting};
 use std::path::Path;
@@ -60,13 +60,13 @@ fn bench(c: &mut Criterion) {
         .into_iter()
         .map(|mode| {
             let path = dir.path().join(format!("{}.ltm", mode.name()));
-            let opts = CompressOptions {
+            let opts = CodeOptions {
                 mode,
                 bits: 12,
                 target: Target::MaxError(0.01),
                 ..Default::default()
             };
-            compress(&raw, &path, &opts, &|_, _, _| {}).unwrap();
+            compress(&raw, &path, &opts.into(), &|_, _, _| {}).unwrap();
             (mode, Relighter::open(&path).unwrap())
         })
         .collect();
@@ -168,7 +168,7 @@ fn quantize(c: &mut Criterion) {
     const DEPTH: u32 = 4;
     const BITS: u32 = 12;
     const P: usize = W * H;
-    let opts = CompressOptions::default();
+    let opts = CodeOptions::default();
     let filter = Filter::LeGall53;
     let image = column_image(W, H, 0x5eed);
     let weights = BandWeights::new(filter, W, H, DEPTH);

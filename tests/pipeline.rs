@@ -3,7 +3,7 @@
 //! checked against the exact dense product T·L and against eq. 3.
 
 use ltm::bake::{bake, BakeOptions, Overrides, Scene, SceneDesc};
-use ltm::codec::compress::{compress, CompressOptions, Target};
+use ltm::codec::compress::{compress, CodeOptions, CompressOptions, Target, TransposeOptions};
 use ltm::codec::container::Mode;
 use ltm::codec::{Filter, RawStore};
 use ltm::relight::{reference, relative_l2, EnvMap, Relighter, Rotation, Weighting};
@@ -53,12 +53,17 @@ fn relighting_matches_the_dense_reference_and_eq3() {
         ] {
             let out = dir.path().join("scene.ltm");
             let opts = CompressOptions {
-                mode,
-                col_filter,
-                row_filter,
-                bits: 16,
-                target: Target::MaxError(2e-5),
-                ..Default::default()
+                transpose: TransposeOptions {
+                    row_filter,
+                    ..Default::default()
+                },
+                code: CodeOptions {
+                    mode,
+                    col_filter,
+                    bits: 16,
+                    target: Target::MaxError(2e-5),
+                    ..Default::default()
+                },
             };
             compress(&raw, &out, &opts, &|_, _, _| {}).unwrap();
             let relighter = Relighter::open(&out).unwrap();
@@ -101,11 +106,12 @@ fn more_terms_give_less_error_and_threads_agree() {
     compress(
         &raw,
         &out,
-        &CompressOptions {
+        &CodeOptions {
             bits: 12,
             target: Target::MaxError(0.005),
             ..Default::default()
-        },
+        }
+        .into(),
         &|_, _, _| {},
     )
     .unwrap();

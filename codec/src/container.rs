@@ -35,15 +35,18 @@ const HEADER_LEN: usize = 24;
 const DIR_ENTRY_LEN: usize = 32;
 const META_LEN: usize = 64;
 
-/// How columns were transformed.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+/// How columns were transformed (serialized by its [`Mode::name`]).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
 #[non_exhaustive]
 pub enum Mode {
     /// Rows only (Ng et al. 2003): every column at depth 0.
+    #[serde(rename = "2d")]
     TwoD,
     /// Every column to full depth.
+    #[serde(rename = "4d")]
     FourD,
     /// Each column to the depth that codes it best (Cheslack-Postava et al. 2007).
+    #[serde(rename = "adaptive")]
     Adaptive,
 }
 
@@ -447,6 +450,8 @@ impl LtmWriter {
 
     /// Appends the next column (columns are written in order `0..M`).
     pub fn push_column(&mut self, col: EncodedColumn) -> Result<()> {
+        let next = self.entries.len();
+        self.check_range(next, next + 1)?;
         let mut entry = col.entry;
         entry.offset = self.data_len;
         self.file
@@ -454,6 +459,30 @@ impl LtmWriter {
             .map_err(|e| Error::io(&self.tmp, e))?;
         self.data_len += col.bytes.len() as u64;
         self.entries.push(entry);
+        Ok(())
+    }
+
+    /// Appends columns `first..first + cols.len()`: `first` must be the
+    /// number of columns written so far, so that ranges coded apart (in
+    /// batches or shards) are written in order, each exactly once.
+    pub fn push_columns(&mut self, first: usize, cols: Vec<EncodedColumn>) -> Result<()> {
+        self.check_range(first, first.saturating_add(cols.len()))?;
+        cols.into_iter().try_for_each(|c| self.push_column(c))
+    }
+
+    /// Columns `start..end` continue the columns written so far and end
+    /// within the matrix.
+    fn check_range(&self, start: usize, end: usize) -> Result<()> {
+        let (expected, total) = (self.entries.len(), self.meta.dims.lights());
+        if start != expected || end > total {
+            return Err(Error::ColumnRange {
+                what: "ltm writer",
+                start,
+                end,
+                expected,
+                total,
+            });
+        }
         Ok(())
     }
 

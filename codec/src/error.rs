@@ -89,6 +89,35 @@ pub enum Error {
     /// Input data that cannot be encoded (NaN, infinity, wrong dtype, ...).
     #[error("invalid input: {0}")]
     Invalid(String),
+    /// Columns given out of order: a range that does not start where the
+    /// previous one ended, or that runs past the matrix's last column.
+    #[error("{what}: columns {start}..{end} are out of order (valid: a range starting at column {expected} and ending at most at {total})")]
+    ColumnRange {
+        /// Who was given the columns.
+        what: &'static str,
+        /// The first column given.
+        start: usize,
+        /// One past the last column given.
+        end: usize,
+        /// The column the range had to start at.
+        expected: usize,
+        /// The matrix's columns.
+        total: usize,
+    },
+    /// Parts that cannot be combined because they were made with different
+    /// settings (analyses of other matrices or coding options, a plan for
+    /// another analysis).
+    #[error("{what}: {field} is {found}, expected {expected}")]
+    SettingsDiffer {
+        /// What was combined.
+        what: &'static str,
+        /// The first setting that differs.
+        field: &'static str,
+        /// Its value in the part given.
+        found: String,
+        /// Its value in the part it was combined with.
+        expected: String,
+    },
 }
 
 /// `Result` with the codec's [`Error`].

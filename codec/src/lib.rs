@@ -24,7 +24,10 @@ pub mod quant;
 pub mod raw;
 pub mod wavelet;
 
-pub use compress::{compress, CompressOptions, CompressStats, Stage, Target, Transposed};
+pub use compress::{
+    compress, Analysis, CodeOptions, Coder, CompressOptions, CompressStats, Plan, Stage, Target,
+    TransposeOptions, Transposed,
+};
 pub use container::{LtmFile, LtmWriter, Meta, Mode, SparseColumn};
 pub use decode::ColumnDecoder;
 pub use dims::{Dims, LightBasis, RowLayout, MAX_FACE_RES, MAX_PIXELS, MAX_SIDE};

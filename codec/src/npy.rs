@@ -1,13 +1,13 @@
 //! NumPy `.npy` import into the raw store, and dense export of a decoded
 //! `.ltm` file, so that anyone can check the codec with numpy.
 
-use crate::compress::row_inverse;
 use crate::container::LtmFile;
 use crate::decode::ColumnDecoder;
 use crate::dims::Dims;
 use crate::error::{Error, Result};
 use crate::limits::Limits;
 use crate::raw::{RawHeader, RawWriter};
+use crate::wavelet::row_inverse;
 use std::fs::File;
 use std::io::{BufReader, BufWriter, Read, Write};
 use std::path::Path;

@@ -2,12 +2,15 @@
 //! measured error against the dense original, hard numerical cases,
 //! out-of-core transposition and hostile files.
 
-use ltm_codec::compress::{compress, CompressOptions, Target};
+use ltm_codec::compress::{
+    compress, CodeOptions, Coder, CompressOptions, Plan, Target, TransposeOptions,
+};
 use ltm_codec::container::{LtmFile, Mode};
 use ltm_codec::cubemap::{texel_direction, texel_solid_angle};
 use ltm_codec::npy::decode_matrix;
-use ltm_codec::Limits;
-use ltm_codec::{Dims, Filter, RawHeader, RawStore, RawWriter, Transposed};
+use ltm_codec::{
+    Dims, Error, Filter, Limits, LtmWriter, RawHeader, RawStore, RawWriter, Transposed,
+};
 use std::path::{Path, PathBuf};
 
 /// Writes a raw store from a dense `P × M × C` matrix.
@@ -86,12 +89,13 @@ fn every_mode_meets_its_target_and_reports_the_measured_error() {
     let raw = write_raw(dir.path(), "m.raw", dims, &t);
     for mode in [Mode::TwoD, Mode::FourD, Mode::Adaptive] {
         for (bits, target) in [(16, 0.001), (9, 0.02), (12, 0.05)] {
-            let opts = CompressOptions {
+            let opts: CompressOptions = CodeOptions {
                 mode,
                 bits,
                 target: Target::MaxError(target),
                 ..Default::default()
-            };
+            }
+            .into();
             let (out, stats) = run(dir.path(), &raw, &opts, "m.ltm");
             let file = LtmFile::open(&out).unwrap();
             let dense = decode_matrix(&file, &Limits::default()).unwrap();
@@ -138,12 +142,13 @@ fn near_lossless_at_16_bits() {
     let t = scene(dims);
     let raw = write_raw(dir.path(), "c.raw", dims, &t);
     for col_filter in Filter::ALL {
-        let opts = CompressOptions {
+        let opts: CompressOptions = CodeOptions {
             bits: 16,
             target: Target::MaxError(0.001),
             col_filter,
             ..Default::default()
-        };
+        }
+        .into();
         let (out, _) = run(dir.path(), &raw, &opts, "c.ltm");
         let dense = decode_matrix(&LtmFile::open(&out).unwrap(), &Limits::default()).unwrap();
         let err = rel_error(&dense, &t);
@@ -152,19 +157,20 @@ fn near_lossless_at_16_bits() {
 }
 
 #[test]
-fn terms_mode_keeps_at_most_n_per_column_and_adaptive_is_no_worse_than_2d() {
+fn keep_mode_keeps_at_most_n_per_column_and_adaptive_is_no_worse_than_2d() {
     let dir = tempfile::tempdir().unwrap();
     let dims = Dims::image(32, 32, 4, 1);
     let t = scene(dims);
     let raw = write_raw(dir.path(), "t.raw", dims, &t);
     let mut errors = Vec::new();
     for mode in [Mode::TwoD, Mode::Adaptive] {
-        let opts = CompressOptions {
+        let opts: CompressOptions = CodeOptions {
             mode,
             bits: 16,
-            target: Target::Terms(40),
+            target: Target::Keep(40),
             ..Default::default()
-        };
+        }
+        .into();
         let (out, _) = run(dir.path(), &raw, &opts, "t.ltm");
         let file = LtmFile::open(&out).unwrap();
         assert!(file.columns().iter().all(|c| c.nnz <= 40));
@@ -230,12 +236,13 @@ fn hard_numerical_cases_never_produce_nan() {
         let raw = write_raw(dir.path(), "h.raw", dims, &t);
         for bits in [4, 6, 8, 9, 10, 12, 16] {
             for mode in [Mode::TwoD, Mode::FourD, Mode::Adaptive] {
-                let opts = CompressOptions {
+                let opts: CompressOptions = CodeOptions {
                     mode,
                     bits,
                     target: Target::MaxError(0.05),
                     ..Default::default()
-                };
+                }
+                .into();
                 let (out, stats) = run(dir.path(), &raw, &opts, "h.ltm");
                 let dense =
                     decode_matrix(&LtmFile::open(&out).unwrap(), &Limits::default()).unwrap();
@@ -262,7 +269,7 @@ fn out_of_core_transpose_gives_the_same_file() {
     assert!(dims.raw_bytes() > 3 << 20);
     let mut opts = CompressOptions::default();
     let (a, sa) = run(dir.path(), &raw, &opts, "a.ltm");
-    opts.mem_budget = 1 << 20;
+    opts.transpose.mem_budget = 1 << 20;
     let (b, sb) = run(dir.path(), &raw, &opts, "b.ltm");
     assert!(!sa.out_of_core && sb.out_of_core);
     assert_eq!(std::fs::read(a).unwrap(), std::fs::read(b).unwrap());
@@ -270,7 +277,8 @@ fn out_of_core_transpose_gives_the_same_file() {
 
 /// One transposed matrix coded with several settings (as `ltm report`
 /// does) gives the files `compress` writes for each setting alone, in core
-/// and out of core; a setting with another row filter is refused.
+/// and out of core. The row filter is the transpose's: a filter it cannot
+/// use is refused, and every file coded from it records its filter.
 #[test]
 fn one_transpose_codes_every_setting_like_compress() {
     let dir = tempfile::tempdir().unwrap();
@@ -278,36 +286,62 @@ fn one_transpose_codes_every_setting_like_compress() {
     let raw_path = write_raw(dir.path(), "m.raw", dims, &scene(dims));
     let raw = RawStore::open(&raw_path).unwrap();
     for budget in [1u64 << 30, 1 << 20] {
-        let shared =
-            Transposed::new(&raw, Filter::Haar, budget, dir.path(), &|_, _, _| {}).unwrap();
+        let transpose = TransposeOptions {
+            mem_budget: budget,
+            temp_dir: Some(dir.path().into()),
+            ..Default::default()
+        };
+        let shared = Transposed::new(&raw, &transpose, &|_, _, _| {}).unwrap();
         assert_eq!(shared.out_of_core(), budget == 1 << 20);
         for (mode, bits, target) in [
             (Mode::Adaptive, 12, Target::MaxError(0.01)),
             (Mode::TwoD, 8, Target::MaxError(0.05)),
-            (Mode::FourD, 10, Target::Terms(7)),
+            (Mode::FourD, 10, Target::Keep(7)),
         ] {
-            let opts = CompressOptions {
+            let code = CodeOptions {
                 mode,
                 bits,
                 target,
-                mem_budget: budget,
                 ..Default::default()
+            };
+            let opts = CompressOptions {
+                transpose: transpose.clone(),
+                code: code.clone(),
             };
             let a = dir.path().join("shared.ltm");
             let b = dir.path().join("alone.ltm");
-            let sa = shared.code(&a, &opts, &|_, _, _| {}).unwrap();
+            let sa = shared.code(&a, &code, &|_, _, _| {}).unwrap();
             let sb = compress(&raw, &b, &opts, &|_, _, _| {}).unwrap();
             assert_eq!(sa.file_bytes, sb.file_bytes);
             assert_eq!(std::fs::read(&a).unwrap(), std::fs::read(&b).unwrap());
         }
-        let other = CompressOptions {
-            row_filter: Filter::D4,
-            ..Default::default()
+        let other = TransposeOptions {
+            row_filter: Filter::LeGall53,
+            ..transpose.clone()
         };
-        let err = shared
-            .code(&dir.path().join("x.ltm"), &other, &|_, _, _| {})
-            .unwrap_err();
+        let err = Transposed::new(&raw, &other, &|_, _, _| {}).err().unwrap();
         assert!(err.to_string().contains("row filter"), "{err}");
+        let d4 = TransposeOptions {
+            row_filter: Filter::D4,
+            ..transpose
+        };
+        let a = dir.path().join("d4.ltm");
+        let code = CodeOptions::default();
+        let stats = Transposed::new(&raw, &d4, &|_, _, _| {})
+            .unwrap()
+            .code(&a, &code, &|_, _, _| {})
+            .unwrap();
+        assert_eq!(LtmFile::open(&a).unwrap().meta().row_filter, Filter::D4);
+        let b = dir.path().join("d4-alone.ltm");
+        let opts = CompressOptions {
+            transpose: d4,
+            code,
+        };
+        assert_eq!(
+            compress(&raw, &b, &opts, &|_, _, _| {}).unwrap().file_bytes,
+            stats.file_bytes
+        );
+        assert_eq!(std::fs::read(&a).unwrap(), std::fs::read(&b).unwrap());
     }
 }
 
@@ -319,14 +353,15 @@ fn raise_bits_meets_a_target_that_fixed_bits_miss() {
     let dims = Dims::image(32, 24, 4, 1);
     let t = scene(dims);
     let raw = write_raw(dir.path(), "m.raw", dims, &t);
-    let mut opts = CompressOptions {
+    let mut opts: CompressOptions = CodeOptions {
         bits: 4,
         target: Target::MaxError(0.002),
         ..Default::default()
-    };
+    }
+    .into();
     let (_, fixed) = run(dir.path(), &raw, &opts, "fixed.ltm");
     assert!(!fixed.target_met && fixed.bits == 4, "{fixed:?}");
-    opts.raise_bits = true;
+    opts.code.raise_bits = true;
     let (path, raised) = run(dir.path(), &raw, &opts, "raised.ltm");
     assert!(
         raised.target_met && raised.achieved_error <= 0.002,
@@ -337,6 +372,153 @@ fn raise_bits_meets_a_target_that_fixed_bits_miss() {
     assert_eq!(file.meta().bits, raised.bits);
     let decoded = decode_matrix(&file, &Limits::default()).unwrap();
     assert!(rel_error(&decoded, &t) <= 0.002 * 1.0001);
+}
+
+/// The stages run apart, as a sharded compressor runs them: analyses of
+/// two halves merge into the analysis of the whole, one plan codes each
+/// half, and the halves written in order give the file `Transposed::code`
+/// writes (this setting meets its target at the first coding).
+#[test]
+fn stages_run_per_column_range_give_the_same_file() {
+    let dir = tempfile::tempdir().unwrap();
+    let dims = Dims::image(32, 24, 4, 3);
+    let raw = RawStore::open(&write_raw(dir.path(), "m.raw", dims, &scene(dims))).unwrap();
+    let transpose = TransposeOptions {
+        mem_budget: 1 << 20,
+        temp_dir: Some(dir.path().into()),
+        ..Default::default()
+    };
+    let t = Transposed::new(&raw, &transpose, &|_, _, _| {}).unwrap();
+    let code = CodeOptions {
+        bits: 12,
+        target: Target::MaxError(0.02),
+        ..Default::default()
+    };
+    let coder = Coder::new(&t, &code).unwrap();
+    let (m, k) = (dims.lights(), 37);
+    let whole = coder.analyze(0..m, &|_, _, _| {}).unwrap();
+    let first = coder.analyze(0..k, &|_, _, _| {}).unwrap();
+    let second = coder.analyze(k..m, &|_, _, _| {}).unwrap();
+    assert_eq!(first.clone().merge(second.clone()).unwrap(), whole);
+    assert!(second.merge(first).is_err());
+    let plan = Plan::new(&whole, code.bits, coder.budget()).unwrap();
+    let mut writer =
+        LtmWriter::create(&dir.path().join("staged.ltm"), coder.meta().clone(), None).unwrap();
+    let mut err = 0.0;
+    for range in [0..k, k..m] {
+        let coded = coder.code_columns(range, &plan).unwrap();
+        err += coded.errors.iter().sum::<f64>();
+        writer.push_columns(coded.first, coded.columns).unwrap();
+    }
+    assert!(
+        err <= coder.budget() * 1.0001,
+        "the first coding must meet the target"
+    );
+    let achieved = (err.sqrt() / t.norm()) as f32;
+    writer.finish(achieved).unwrap();
+    let stats = t
+        .code(&dir.path().join("driver.ltm"), &code, &|_, _, _| {})
+        .unwrap();
+    assert_eq!(stats.achieved_error as f32, achieved);
+    assert_eq!(
+        std::fs::read(dir.path().join("staged.ltm")).unwrap(),
+        std::fs::read(dir.path().join("driver.ltm")).unwrap()
+    );
+}
+
+/// Plans are checked against the coder, and columns against the plan and
+/// the matrix; the writer takes column ranges only in order.
+#[test]
+fn mismatched_plans_and_column_ranges_are_typed_errors() {
+    let dir = tempfile::tempdir().unwrap();
+    let dims = Dims::image(8, 6, 2, 1);
+    let raw = RawStore::open(&write_raw(dir.path(), "m.raw", dims, &scene(dims))).unwrap();
+    let t = Transposed::new(&raw, &TransposeOptions::default(), &|_, _, _| {}).unwrap();
+    let m = dims.lights();
+    let code = CodeOptions::default();
+    let coder = Coder::new(&t, &code).unwrap();
+    let analysis = coder.analyze(0..m, &|_, _, _| {}).unwrap();
+    let other_bits = Plan::new(&analysis, code.bits + 2, coder.budget()).unwrap();
+    let err = coder.code_columns(0..m, &other_bits).err().unwrap();
+    assert!(
+        matches!(err, Error::SettingsDiffer { field: "bits", .. }),
+        "{err}"
+    );
+    let err = coder.code_columns(0..m, &Plan::keep(3)).err().unwrap();
+    assert!(
+        matches!(
+            err,
+            Error::SettingsDiffer {
+                field: "target",
+                ..
+            }
+        ),
+        "{err}"
+    );
+    let part = Plan::new(
+        &analysis.for_columns(0..4).unwrap(),
+        code.bits,
+        coder.budget(),
+    )
+    .unwrap();
+    assert!(coder.code_columns(0..4, &part).is_ok());
+    assert!(coder.code_columns(2..6, &part).is_err());
+    let plan = Plan::new(&analysis, code.bits, coder.budget()).unwrap();
+    assert!(coder.code_columns(0..m + 1, &plan).is_err());
+    let fourd = Coder::new(
+        &t,
+        &CodeOptions {
+            mode: Mode::FourD,
+            ..code.clone()
+        },
+    )
+    .unwrap();
+    let err = fourd.code_columns(0..m, &plan).err().unwrap();
+    assert!(
+        matches!(err, Error::SettingsDiffer { field: "mode", .. }),
+        "{err}"
+    );
+    assert!(coder.analyze(0..m + 1, &|_, _, _| {}).is_err());
+    let keep = Coder::new(
+        &t,
+        &CodeOptions {
+            target: Target::Keep(3),
+            ..code
+        },
+    )
+    .unwrap();
+    assert!(keep.analyze(0..m, &|_, _, _| {}).is_err());
+
+    // The writer: a gap, an overlap and a range past the last column.
+    let coded = coder.code_columns(0..m, &plan).unwrap();
+    let mut cols = coded.columns.into_iter();
+    let mut writer =
+        LtmWriter::create(&dir.path().join("w.ltm"), coder.meta().clone(), None).unwrap();
+    writer
+        .push_columns(0, cols.by_ref().take(5).collect())
+        .unwrap();
+    for (first, len) in [(6, 1), (4, 1), (5, m)] {
+        let batch = coder.code_columns(0..len, &plan).unwrap().columns;
+        match writer.push_columns(first, batch).unwrap_err() {
+            Error::ColumnRange {
+                start,
+                expected,
+                total,
+                ..
+            } => {
+                assert_eq!((start, expected, total), (first, 5, m))
+            }
+            e => panic!("{e}"),
+        }
+    }
+    writer.push_columns(5, cols.collect()).unwrap();
+    let extra = coder.code_columns(0..1, &plan).unwrap().columns;
+    let err = writer.push_columns(m, extra).unwrap_err();
+    assert!(
+        err.to_string().contains(&format!("ending at most at {m}")),
+        "{err}"
+    );
+    writer.finish(0.0).unwrap();
 }
 
 /// Mutated and truncated files must give errors, never panics.

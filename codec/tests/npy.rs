@@ -1,7 +1,7 @@
 //! `.npy` import and export: round trip through the raw store and the codec,
 //! and the bad inputs that must be refused with a clear message.
 
-use ltm_codec::compress::{compress, CompressOptions, Target};
+use ltm_codec::compress::{compress, CodeOptions, Target};
 use ltm_codec::container::LtmFile;
 use ltm_codec::npy::{decode_matrix, export_npy, import_npy, read_npy_header, NpyDtype};
 use ltm_codec::Limits;
@@ -40,12 +40,12 @@ fn import_compress_export_round_trip() {
     let store = RawStore::open(&raw).unwrap();
     assert_eq!(store.rows(0..p), &t[..]);
     let ltm = dir.path().join("t.ltm");
-    let opts = CompressOptions {
+    let opts = CodeOptions {
         bits: 16,
         target: Target::MaxError(0.0005),
         ..Default::default()
     };
-    compress(&store, &ltm, &opts, &|_, _, _| {}).unwrap();
+    compress(&store, &ltm, &opts.into(), &|_, _, _| {}).unwrap();
     let out = dir.path().join("d.npy");
     let file = LtmFile::open(&ltm).unwrap();
     export_npy(&file, &out, &Limits::default()).unwrap();

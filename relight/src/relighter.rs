@@ -15,9 +15,9 @@
 use crate::error::{RelightError, Result};
 use crate::image_io::Image;
 use crate::select::{select, support_area, Weighting};
-use ltm_codec::compress::row_forward;
 use ltm_codec::container::{LtmFile, Meta};
 use ltm_codec::quant::BandWeights;
+use ltm_codec::wavelet::row_forward;
 use ltm_codec::{ColumnDecoder, Limits};
 use rayon::prelude::*;
 use std::path::Path;

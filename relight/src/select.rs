@@ -1,7 +1,7 @@
 //! Non-linear approximation of the lighting (Ng et al. 2003 §3.2): keep the
 //! N wavelet lights of highest priority under one of three rules.
 
-use ltm_codec::compress::row_level;
+use ltm_codec::wavelet::row_level;
 use std::str::FromStr;
 
 /// The priority rule for choosing wavelet lights.

@@ -4,10 +4,12 @@ use crate::progress;
 use anyhow::{bail, Context, Result};
 use clap::Args;
 use ltm_codec::compress::{
-    compress, row_level, CompressOptions, Stage, Target, DEFAULT_BITS, DEFAULT_MAX_ERROR,
+    compress, CodeOptions, CompressOptions, Stage, Target, TransposeOptions, DEFAULT_BITS,
+    DEFAULT_MAX_ERROR,
 };
 use ltm_codec::container::{LtmFile, Mode};
 use ltm_codec::npy::{export_npy, import_npy};
+use ltm_codec::wavelet::row_level;
 use ltm_codec::{Filter, RawStore};
 use serde::Serialize;
 use std::path::PathBuf;
@@ -73,9 +75,21 @@ pub struct CompressArgs {
     /// at a time (up to 16) while a --max-error target is missed].
     #[arg(long, value_parser = clap::value_parser!(u32).range(2..=16))]
     pub bits: Option<u32>,
-    /// Keep the N largest coefficients of each column (the paper's rule).
-    #[arg(long, conflicts_with = "max_error")]
-    pub terms: Option<usize>,
+    /// Keep the N largest coefficients of each column (the paper's N-term
+    /// rule).
+    #[arg(long, value_name = "N", conflicts_with = "max_error")]
+    pub keep: Option<usize>,
+    /// The old name of --keep, refused with a message: `ltm relight --terms`
+    /// counts wavelet lights per frame, not coefficients per column.
+    #[arg(
+        long = "terms",
+        hide = true,
+        value_name = "N",
+        num_args = 0..=1,
+        default_missing_value = "",
+        value_parser = renamed_terms
+    )]
+    pub old_terms: Option<usize>,
     /// Target relative L2 error of the whole decoded matrix [default: 0.01].
     #[arg(long)]
     pub max_error: Option<f64>,
@@ -118,11 +132,20 @@ pub fn default_mem_budget() -> u64 {
     (total / 4).min(8 << 30)
 }
 
+/// Refuses `ltm compress --terms`, renamed to `--keep`.
+fn renamed_terms(_: &str) -> std::result::Result<usize, String> {
+    Err(
+        "`ltm compress --terms` is now `--keep N` (coefficients kept per column); \
+         `--terms` is `ltm relight`'s count of wavelet lights per frame"
+            .into(),
+    )
+}
+
 pub fn compress_cmd(a: CompressArgs) -> Result<()> {
     let raw = RawStore::open_with_limits(&a.raw, crate::limits())
         .with_context(|| format!("opening {}", a.raw.display()))?;
-    let target = match (a.terms, a.max_error) {
-        (Some(n), _) => Target::Terms(n),
+    let target = match (a.keep, a.max_error) {
+        (Some(n), _) => Target::Keep(n),
         (None, Some(e)) => Target::MaxError(e),
         (None, None) => Target::MaxError(DEFAULT_MAX_ERROR),
     };
@@ -133,15 +156,20 @@ pub fn compress_cmd(a: CompressArgs) -> Result<()> {
         .transpose()?
         .unwrap_or_else(default_mem_budget);
     let opts = CompressOptions {
-        mode: a.mode,
-        row_filter: a.row_filter,
-        col_filter: a.col_filter,
-        bits: a.bits.unwrap_or(DEFAULT_BITS),
-        raise_bits: a.bits.is_none(),
-        target,
-        mem_budget,
-        seed: a.seed,
-        ..Default::default()
+        transpose: TransposeOptions {
+            row_filter: a.row_filter,
+            mem_budget,
+            temp_dir: None,
+        },
+        code: CodeOptions {
+            mode: a.mode,
+            col_filter: a.col_filter,
+            bits: a.bits.unwrap_or(DEFAULT_BITS),
+            raise_bits: a.bits.is_none(),
+            target,
+            seed: a.seed,
+            ..Default::default()
+        },
     };
     let bar = Mutex::new((progress::bar(0, "rows"), None::<Stage>));
     let start = std::time::Instant::now();
@@ -171,11 +199,11 @@ pub fn compress_cmd(a: CompressArgs) -> Result<()> {
         stats.raw_bytes as f64 / 1e6 / secs,
         if stats.out_of_core { ", out of core" } else { "" }
     );
-    if opts.raise_bits && stats.bits > opts.bits {
+    if opts.code.raise_bits && stats.bits > opts.code.bits {
         eprintln!(
             "coded at {} bits: {} missed the target",
             stats.bits,
-            (opts.bits..stats.bits)
+            (opts.code.bits..stats.bits)
                 .step_by(2)
                 .map(|b| b.to_string())
                 .collect::<Vec<_>>()
@@ -304,7 +332,7 @@ pub fn inspect_cmd(a: InspectArgs) -> Result<()> {
     );
     println!("  nonzeros       {}", i.nonzeros);
     if i.terms > 0 {
-        println!("  target         {} terms per column", i.terms);
+        println!("  target         {} coefficients kept per column", i.terms);
     } else {
         println!("  target error   {}", i.target_error);
     }

@@ -8,7 +8,7 @@ use crate::progress;
 use anyhow::{bail, Context, Result};
 use clap::Args;
 use ltm_bake::{bake, BakeOptions, Overrides, Scene, SceneDesc};
-use ltm_codec::compress::{compress, CompressOptions, Target};
+use ltm_codec::compress::{compress, CodeOptions, Target};
 use ltm_codec::container::Mode;
 use ltm_codec::RawStore;
 use ltm_relight::{reference, relative_l2, EnvMap, Image, Relighter, Rotation, Weighting};
@@ -120,13 +120,13 @@ pub(crate) fn bake_cached(desc: &SceneDesc, dir: &Path, label: &str) -> Result<P
 /// secant search on the target error in log-log space.
 fn compress_2d_to_size(raw: &RawStore, out: &Path, bits: u32, bytes: u64) -> Result<(u64, f64)> {
     let run = |e: f64| -> Result<(u64, f64)> {
-        let opts = CompressOptions {
+        let opts = CodeOptions {
             mode: Mode::TwoD,
             bits,
             target: Target::MaxError(e),
             ..Default::default()
         };
-        let s = compress(raw, out, &opts, &|_, _, _| {})?;
+        let s = compress(raw, out, &opts.into(), &|_, _, _| {})?;
         Ok((s.file_bytes, s.achieved_error))
     };
     let (mut e0, mut e1) = (0.05, 0.01);
@@ -170,14 +170,14 @@ pub fn run(a: DemoArgs) -> Result<()> {
 
     // 2. Compress: adaptive at the target error, 2d at the same size.
     let adaptive_path = out("scene-adaptive.ltm");
-    let opts = CompressOptions {
+    let opts = CodeOptions {
         bits: a.bits,
         target: Target::MaxError(a.max_error),
         ..Default::default()
     };
     let bar = progress::bar(0, "compress");
     let t = Instant::now();
-    let adaptive = compress(&raw, &adaptive_path, &opts, &|_, done, total| {
+    let adaptive = compress(&raw, &adaptive_path, &opts.into(), &|_, done, total| {
         bar.set_length(total);
         bar.set_position(done);
     })?;

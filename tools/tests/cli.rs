@@ -274,3 +274,76 @@ fn bad_input_exits_non_zero_with_a_message() {
     }
     assert!(!out.exists());
 }
+
+/// Writes a float32 C-order `.npy` of shape `(rows, cols)`.
+fn write_npy(path: &Path, rows: usize, cols: usize, values: &[f32]) {
+    let mut header =
+        format!("{{'descr': '<f4', 'fortran_order': False, 'shape': ({rows}, {cols}), }}");
+    while (10 + header.len() + 1) % 64 != 0 {
+        header.push(' ');
+    }
+    header.push('\n');
+    let mut bytes = b"\x93NUMPY\x01\x00".to_vec();
+    bytes.extend_from_slice(&(header.len() as u16).to_le_bytes());
+    bytes.extend_from_slice(header.as_bytes());
+    values
+        .iter()
+        .for_each(|v| bytes.extend_from_slice(&v.to_le_bytes()));
+    std::fs::write(path, bytes).unwrap();
+}
+
+/// `ltm compress --keep N` keeps N coefficients per column; the old
+/// spelling `--terms` (which `ltm relight` uses for lights per frame) is
+/// refused with a message that names `--keep`, with or without a value.
+#[test]
+fn compress_keep_and_the_renamed_terms_flag() {
+    let dir = tempfile::tempdir().unwrap();
+    let (npy, raw, out) = (
+        dir.path().join("t.npy"),
+        dir.path().join("t.raw"),
+        dir.path().join("t.ltm"),
+    );
+    let (p, m) = (4 * 3, 6 * 2 * 2);
+    let values: Vec<f32> = (0..p * m).map(|i| ((i * 7) % 13) as f32 * 0.01).collect();
+    write_npy(&npy, p, m, &values);
+    let (ok, _, stderr) = ltm(&[
+        "import",
+        npy.to_str().unwrap(),
+        "--width",
+        "4",
+        "--height",
+        "3",
+        "-o",
+        raw.to_str().unwrap(),
+    ]);
+    assert!(ok, "{stderr}");
+    let compress = |extra: &[&str]| {
+        let mut args = vec![
+            "compress",
+            raw.to_str().unwrap(),
+            "-o",
+            out.to_str().unwrap(),
+        ];
+        args.extend_from_slice(extra);
+        ltm(&args)
+    };
+    for extra in [
+        &["--terms", "5"][..],
+        &["--terms"],
+        &["--keep", "5", "--terms", "5"],
+    ] {
+        let (ok, _, stderr) = compress(extra);
+        assert!(!ok, "{extra:?} succeeded");
+        assert!(stderr.contains("--keep"), "{extra:?}: {stderr}");
+        assert!(!stderr.contains("panicked"), "{extra:?}: {stderr}");
+        assert!(!out.exists());
+    }
+    let (ok, _, stderr) = compress(&["--keep", "5"]);
+    assert!(ok, "{stderr}");
+    let (ok, stdout, stderr) = ltm(&["inspect", out.to_str().unwrap()]);
+    assert!(ok, "{stderr}");
+    assert!(
+        stdout.contains("5 coefficients kept per column"),
+        "{stdout}"
+    );
+}

@@ -14,6 +14,8 @@
 //! Any size works, odd and non-power-of-two included; an axis of length 1 is
 //! left as it is. [`forward_step`] and [`inverse_step`] are public because
 //! relighting inverts one level at a time (Cheslack-Postava et al. 2007, eq. 6).
+//! The row transform over cube faces ([`row_forward`], [`row_inverse`],
+//! [`row_level`]) is shared by the compressor and the relighter.
 //!
 //! Normalization: the lifting filters have low-pass DC gain 1 and high-pass
 //! Nyquist gain 2 (JPEG 2000's convention); the orthonormal filters preserve
@@ -25,10 +27,12 @@
 //! low-band coefficient. This keeps the transform orthonormal and gives the
 //! same band sizes as the lifting filters.
 
+mod cube;
 mod dwt2;
 mod lifting;
 mod periodic;
 
+pub use cube::{row_forward, row_inverse, row_level};
 pub use dwt2::{
     band_size, forward, forward_1d, forward_step, inverse, inverse_1d, inverse_step, max_levels,
 };
@@ -36,8 +40,9 @@ pub use dwt2::{
 use std::fmt;
 use std::str::FromStr;
 
-/// A wavelet filter of the bank.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+/// A wavelet filter of the bank (serialized by its [`Filter::name`]).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "lowercase")]
 #[non_exhaustive]
 pub enum Filter {
     /// Haar (orthonormal, 2 taps).

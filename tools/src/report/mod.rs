@@ -16,8 +16,8 @@ use crate::progress;
 use anyhow::{bail, Context, Result};
 use clap::Args;
 use ltm_bake::{Overrides, SceneDesc};
-use ltm_codec::compress::row_level;
-use ltm_codec::{CompressOptions, Mode, RawStore, Target, Transposed};
+use ltm_codec::wavelet::row_level;
+use ltm_codec::{CodeOptions, Mode, RawStore, Target, TransposeOptions, Transposed};
 use ltm_relight::{
     reference, relative_l2, EnvMap, FrameBuffers, Image, Relighter, Rotation, Weighting,
 };
@@ -251,8 +251,8 @@ fn settings(a: &ReportArgs) -> Result<Settings> {
             q,
         ),
         sh_orders: or_default(&a.sh_orders, &(2..=20).collect::<Vec<_>>(), &[2, 4, 8], q),
-        row_filter: CompressOptions::default().row_filter.to_string(),
-        col_filter: CompressOptions::default().col_filter.to_string(),
+        row_filter: TransposeOptions::default().row_filter.to_string(),
+        col_filter: CodeOptions::default().col_filter.to_string(),
         zstd_raw_level: 3,
     };
     if let Some(b) = s
@@ -482,13 +482,14 @@ pub fn run(a: ReportArgs) -> Result<()> {
         Some(v) => parse_size(v)?,
         None => default_mem_budget(),
     };
-    let base = CompressOptions {
+    let transpose = TransposeOptions {
         mem_budget,
+        temp_dir: Some(files_dir.clone()),
         ..Default::default()
     };
     let t = Instant::now();
     let bar = progress::bar(0, "transpose");
-    let transposed = Transposed::new(&raw, base.row_filter, mem_budget, &files_dir, &|_, d, n| {
+    let transposed = Transposed::new(&raw, &transpose, &|_, d, n| {
         bar.set_length(n);
         bar.set_position(d);
     })?;
@@ -515,11 +516,11 @@ pub fn run(a: ReportArgs) -> Result<()> {
     terms.dedup();
     let mut codings = Vec::new();
     for (i, &(mode, bits, err)) in plan.iter().enumerate() {
-        let opts = CompressOptions {
+        let opts = CodeOptions {
             mode,
             bits,
             target: Target::MaxError(err),
-            ..base.clone()
+            ..Default::default()
         };
         let path = files_dir.join(file_name(mode, bits, err));
         let label = format!(

@@ -1,0 +1,464 @@
+//! Steps 1 and 2 of the pipeline (Cheslack-Postava et al. 2007 §4.2, §5):
+//! every row gets the full-depth row transform over each cube face
+//! ([`row_forward`], Ng et al. 2003 §4), and blocks of transformed rows are
+//! scattered into column order, in memory when the matrix fits the memory
+//! budget, else through an unlinked temporary file. Columns are stored one
+//! after the other (`(j·C + c)·P + p`), so any range of columns is one
+//! contiguous read; the coding stages read them in batches of `group`
+//! columns, which fit half the budget.
+
+use super::analysis::BINS_PER_OCTAVE;
+use super::{Stage, TransposeOptions};
+use crate::dims::Dims;
+use crate::error::{Error, Result};
+use crate::raw::RawStore;
+use crate::wavelet::{row_forward, Filter};
+use rayon::prelude::*;
+use std::fs::File;
+use std::io;
+use std::ops::Range;
+use std::path::{Path, PathBuf};
+
+/// Bins of the depth-0 histogram of squared values built with the rows
+/// (half-octaves, bin 320 starting at 1).
+const HIST0_BINS: usize = 512;
+const HIST0_OFFSET: f64 = 320.0;
+
+/// Bin of the depth-0 histogram.
+fn hist0_bin(e: f64) -> usize {
+    ((e.log2() * BINS_PER_OCTAVE).floor() as i64 + HIST0_OFFSET as i64)
+        .clamp(0, HIST0_BINS as i64 - 1) as usize
+}
+
+/// A raw store after the row transform and the transpose (steps 1 and 2):
+/// the input of every coding setting that shares its row filter.
+pub struct Transposed<'a> {
+    raw: &'a RawStore,
+    /// The stored dimensions (1 channel when the store is monochrome RGB).
+    dims: Dims,
+    row_filter: Filter,
+    store: Store,
+    /// Columns per batch of the coding stages.
+    group: usize,
+    norm_sq: f64,
+    /// Depth-0 histogram of squared row-transformed values: (count, energy).
+    hist0: Vec<(u64, f64)>,
+    out_of_core: bool,
+}
+
+impl<'a> Transposed<'a> {
+    /// Row-transforms every row of `raw` with `opts.row_filter` and
+    /// transposes the result into columns: in memory when the matrix fits
+    /// `opts.mem_budget` bytes, else in an unlinked temporary file in
+    /// `opts.temp_dir` ([`std::env::temp_dir`] when `None`). Each raw block's
+    /// checksum is verified before its rows are used.
+    pub fn new(
+        raw: &'a RawStore,
+        opts: &TransposeOptions,
+        progress: &(dyn Fn(Stage, u64, u64) + Sync),
+    ) -> Result<Transposed<'a>> {
+        opts.validate()?;
+        let src = raw.dims();
+        let channels = if is_monochrome(raw) { 1 } else { src.channels };
+        let dims = Dims { channels, ..src };
+        let (p, m, c) = (dims.pixels(), dims.lights(), channels as usize);
+        let mem = usize::try_from(opts.mem_budget / 4).unwrap_or(usize::MAX); // in f32 values
+        let total = m * c * p;
+        let out_of_core = total > mem;
+        let store = if out_of_core {
+            let dir = opts.temp_dir.clone().unwrap_or_else(std::env::temp_dir);
+            Store::File(TempFile::create_in(&dir)?)
+        } else {
+            Store::Memory(vec![0.0; total])
+        };
+        let mut t = Transposed {
+            raw,
+            dims,
+            row_filter: opts.row_filter,
+            store,
+            // Batches of G columns × C × P values within half the budget.
+            group: (mem / 2 / (c * p)).clamp(1, m),
+            norm_sq: 0.0,
+            hist0: vec![(0, 0.0); HIST0_BINS],
+            out_of_core,
+        };
+        // Blocks of rows within a quarter of the budget.
+        t.fill((mem / 4 / (m * c)).clamp(1, p), progress)?;
+        Ok(t)
+    }
+
+    /// Transforms the rows `block` at a time, accumulates the norm and the
+    /// depth-0 histogram, and scatters them into the store.
+    fn fill(&mut self, block: usize, progress: &(dyn Fn(Stage, u64, u64) + Sync)) -> Result<()> {
+        let p = self.dims.pixels();
+        let mut tbuf = vec![0.0f32; block * self.dims.row_len()];
+        let mut verified = 0;
+        let mut p0 = 0;
+        while p0 < p {
+            let rows = p0..(p0 + block).min(p);
+            verified = self.verify_blocks(verified, rows.end)?;
+            let rbuf = self.transform_rows(rows.clone())?;
+            self.add_stats(&rbuf);
+            self.scatter(&rbuf, rows.clone(), &mut tbuf)?;
+            self.raw.release_rows(rows.clone());
+            p0 = rows.end;
+            progress(Stage::Rows, p0 as u64, p as u64);
+        }
+        Ok(())
+    }
+
+    /// Checks the CRC of every raw block from `first` that starts before row
+    /// `end`, once; returns the first block not yet checked.
+    fn verify_blocks(&self, first: usize, end: usize) -> Result<usize> {
+        let header = self.raw.header();
+        let mut b = first;
+        while b < header.block_count() && header.block_range(b).start < end {
+            self.raw.verify_block(b)?;
+            self.raw.release_rows(header.block_range(b));
+            b += 1;
+        }
+        Ok(b)
+    }
+
+    /// Row-transformed rows, channel-planar: `rbuf[(r·C + c)·M + j]`.
+    fn transform_rows(&self, rows: Range<usize>) -> Result<Vec<f32>> {
+        let (n, m) = (self.dims.face_res() as usize, self.dims.lights());
+        let (channels, src_channels) = (
+            self.dims.channels as usize,
+            self.raw.dims().channels as usize,
+        );
+        let src_rows = self.raw.rows(rows.clone());
+        let mut rbuf = vec![0.0f32; rows.len() * channels * m];
+        rbuf.par_chunks_mut(channels * m)
+            .enumerate()
+            .try_for_each_init(
+                || vec![0.0f32; n * n],
+                |work, (r, out)| -> Result<()> {
+                    let row = &src_rows[r * m * src_channels..(r + 1) * m * src_channels];
+                    for c in 0..channels {
+                        let plane = &mut out[c * m..(c + 1) * m];
+                        for (j, v) in plane.iter_mut().enumerate() {
+                            *v = row[j * src_channels + c];
+                        }
+                        row_forward(self.row_filter, n, plane, work)?;
+                    }
+                    Ok(())
+                },
+            )?;
+        Ok(rbuf)
+    }
+
+    /// Adds the rows' squared values to the norm and the depth-0 histogram:
+    /// per row, then summed in row order, so the sums are the same whatever
+    /// the thread count and block size.
+    fn add_stats(&mut self, rbuf: &[f32]) {
+        let row_len = self.dims.row_len();
+        let partial: Vec<(f64, Vec<(u64, f64)>)> = rbuf
+            .par_chunks(row_len)
+            .map(|chunk| {
+                let mut norm = 0.0f64;
+                let mut hist = vec![(0u64, 0.0f64); HIST0_BINS];
+                for v in chunk {
+                    let e = (*v as f64).powi(2);
+                    norm += e;
+                    if e > 0.0 {
+                        let bin = &mut hist[hist0_bin(e)];
+                        bin.0 += 1;
+                        bin.1 += e;
+                    }
+                }
+                (norm, hist)
+            })
+            .collect();
+        for (norm, hist) in partial {
+            self.norm_sq += norm;
+            for (a, b) in self.hist0.iter_mut().zip(hist) {
+                a.0 += b.0;
+                a.1 += b.1;
+            }
+        }
+    }
+
+    /// Transposes a block of transformed rows through `tbuf`
+    /// (`tbuf[(j·C + c)·rows + r]`) and writes each run into its column.
+    fn scatter(&mut self, rbuf: &[f32], rows: Range<usize>, tbuf: &mut [f32]) -> Result<()> {
+        let (p, m, channels) = (
+            self.dims.pixels(),
+            self.dims.lights(),
+            self.dims.channels as usize,
+        );
+        let len = rows.len();
+        tbuf[..len * m * channels]
+            .par_chunks_mut(len)
+            .enumerate()
+            .for_each(|(jc, run)| {
+                let (j, c) = (jc / channels, jc % channels);
+                for (r, v) in run.iter_mut().enumerate() {
+                    *v = rbuf[(r * channels + c) * m + j];
+                }
+            });
+        for jc in 0..m * channels {
+            self.store
+                .write(jc * p + rows.start, &tbuf[jc * len..(jc + 1) * len])?;
+        }
+        Ok(())
+    }
+
+    /// The stored dimensions (1 channel when every row is grey).
+    pub fn dims(&self) -> Dims {
+        self.dims
+    }
+
+    /// The row filter the rows were transformed with; every file coded
+    /// from this matrix records it.
+    pub fn row_filter(&self) -> Filter {
+        self.row_filter
+    }
+
+    /// The Frobenius norm of the matrix.
+    pub fn norm(&self) -> f64 {
+        self.norm_sq.sqrt()
+    }
+
+    /// Used a temporary file.
+    pub fn out_of_core(&self) -> bool {
+        self.out_of_core
+    }
+
+    /// The raw store the matrix came from.
+    pub(super) fn raw(&self) -> &'a RawStore {
+        self.raw
+    }
+
+    /// The squared Frobenius norm.
+    pub(super) fn norm_sq(&self) -> f64 {
+        self.norm_sq
+    }
+
+    /// Checks that `columns` lies within the matrix's columns.
+    pub(super) fn check_columns(&self, columns: &Range<usize>) -> Result<()> {
+        let m = self.dims.lights();
+        if columns.start > columns.end || columns.end > m {
+            return Err(Error::range(
+                "columns",
+                format!("{}..{}", columns.start, columns.end),
+                format!("a range within 0..{m}"),
+            ));
+        }
+        Ok(())
+    }
+
+    /// `columns` cut into consecutive batches that fit the memory budget.
+    pub(super) fn batches(&self, columns: Range<usize>) -> impl Iterator<Item = Range<usize>> {
+        let group = self.group;
+        columns
+            .clone()
+            .step_by(group)
+            .map(move |j| j..(j + group).min(columns.end))
+    }
+
+    /// The values of `columns`: `C × P` per column, channel-planar.
+    pub(super) fn read_columns(&self, columns: Range<usize>) -> Result<Vec<f32>> {
+        let len = self.dims.channels as usize * self.dims.pixels();
+        let mut data = vec![0.0f32; columns.len() * len];
+        self.store.read(columns.start * len, &mut data)?;
+        Ok(data)
+    }
+
+    /// The first guess τ0² of the analysis for a squared-error `budget`:
+    /// the smallest values of the depth-0 histogram are dropped while their
+    /// energy stays within half the budget.
+    pub(super) fn first_threshold(&self, budget: f64) -> f64 {
+        let mut acc = 0.0;
+        for (b, &(_, e)) in self.hist0.iter().enumerate() {
+            if acc + e > budget * 0.5 {
+                return 2f64.powf((b as f64 - HIST0_OFFSET) / BINS_PER_OCTAVE);
+            }
+            acc += e;
+        }
+        f64::MIN_POSITIVE
+    }
+}
+
+/// True when every row has equal R, G and B values.
+fn is_monochrome(raw: &RawStore) -> bool {
+    let dims = raw.dims();
+    if dims.channels != 3 {
+        return false;
+    }
+    (0..raw.header().block_count()).into_par_iter().all(|b| {
+        let range = raw.header().block_range(b);
+        let mono = raw
+            .rows(range.clone())
+            .chunks_exact(3)
+            .all(|c| c[0] == c[1] && c[1] == c[2]);
+        raw.release_rows(range);
+        mono
+    })
+}
+
+/// The transposed columns, in memory or in a temporary file, as `f32`
+/// values at `(j·C + c)·P + p`.
+enum Store {
+    Memory(Vec<f32>),
+    File(TempFile),
+}
+
+impl Store {
+    fn write(&mut self, offset: usize, values: &[f32]) -> Result<()> {
+        match self {
+            Store::Memory(v) => {
+                v[offset..offset + values.len()].copy_from_slice(values);
+                Ok(())
+            }
+            Store::File(f) => f
+                .write_all_at(bytemuck::cast_slice(values), offset as u64 * 4)
+                .map_err(|e| Error::io("transpose file", e)),
+        }
+    }
+
+    fn read(&self, offset: usize, out: &mut [f32]) -> Result<()> {
+        match self {
+            Store::Memory(v) => {
+                out.copy_from_slice(&v[offset..offset + out.len()]);
+                Ok(())
+            }
+            Store::File(f) => f
+                .read_exact_at(bytemuck::cast_slice_mut(out), offset as u64 * 4)
+                .map_err(|e| Error::io("transpose file", e)),
+        }
+    }
+}
+
+/// The temporary file of the transpose: positioned reads and writes.
+#[cfg(unix)]
+type TempFile = UnixFile;
+#[cfg(not(unix))]
+type TempFile = LockedFile;
+
+/// Unix: positioned I/O without a lock ([`std::os::unix::fs::FileExt`]); the
+/// file is unlinked as soon as it is created, so its space is freed however
+/// the process ends.
+#[cfg(unix)]
+struct UnixFile(File);
+
+#[cfg(unix)]
+impl UnixFile {
+    fn create_in(dir: &Path) -> Result<UnixFile> {
+        let (file, path) = create_new_in(dir)?;
+        let _ = std::fs::remove_file(&path);
+        Ok(UnixFile(file))
+    }
+
+    fn write_all_at(&self, bytes: &[u8], offset: u64) -> io::Result<()> {
+        std::os::unix::fs::FileExt::write_all_at(&self.0, bytes, offset)
+    }
+
+    fn read_exact_at(&self, bytes: &mut [u8], offset: u64) -> io::Result<()> {
+        std::os::unix::fs::FileExt::read_exact_at(&self.0, bytes, offset)
+    }
+}
+
+/// Other targets: seek, then read or write, under a lock. An open file may
+/// not be removable there, so it is removed when dropped (after it is
+/// closed: fields drop in declaration order).
+#[cfg_attr(unix, allow(dead_code))]
+struct LockedFile {
+    file: std::sync::Mutex<File>,
+    _path: RemovedOnDrop,
+}
+
+#[cfg_attr(unix, allow(dead_code))]
+struct RemovedOnDrop(PathBuf);
+
+impl Drop for RemovedOnDrop {
+    fn drop(&mut self) {
+        let _ = std::fs::remove_file(&self.0);
+    }
+}
+
+#[cfg_attr(unix, allow(dead_code))]
+impl LockedFile {
+    fn create_in(dir: &Path) -> Result<LockedFile> {
+        let (file, path) = create_new_in(dir)?;
+        Ok(LockedFile {
+            file: std::sync::Mutex::new(file),
+            _path: RemovedOnDrop(path),
+        })
+    }
+
+    fn locked(&self) -> io::Result<std::sync::MutexGuard<'_, File>> {
+        self.file
+            .lock()
+            .map_err(|_| io::Error::other("a thread panicked while using the file"))
+    }
+
+    fn write_all_at(&self, bytes: &[u8], offset: u64) -> io::Result<()> {
+        use io::{Seek, Write};
+        let mut f = self.locked()?;
+        f.seek(io::SeekFrom::Start(offset))?;
+        f.write_all(bytes)
+    }
+
+    fn read_exact_at(&self, bytes: &mut [u8], offset: u64) -> io::Result<()> {
+        use io::{Read, Seek};
+        let mut f = self.locked()?;
+        f.seek(io::SeekFrom::Start(offset))?;
+        f.read_exact(bytes)
+    }
+}
+
+/// Creates a new file `.ltm-transpose-PID-N.tmp` in `dir`.
+fn create_new_in(dir: &Path) -> Result<(File, PathBuf)> {
+    for attempt in 0..100u32 {
+        let path = dir.join(format!(
+            ".ltm-transpose-{}-{attempt}.tmp",
+            std::process::id()
+        ));
+        match std::fs::OpenOptions::new()
+            .read(true)
+            .write(true)
+            .create_new(true)
+            .open(&path)
+        {
+            Ok(f) => return Ok((f, path)),
+            Err(e) if e.kind() == io::ErrorKind::AlreadyExists => continue,
+            Err(e) => return Err(Error::io(path, e)),
+        }
+    }
+    Err(Error::Invalid(format!(
+        "could not create a temporary file in {}",
+        dir.display()
+    )))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The portable fallback reads back what it wrote at any offset and
+    /// removes its file when dropped; the Unix file leaves no name behind.
+    #[test]
+    fn temporary_files_read_back_and_leave_nothing() {
+        let dir = tempfile::tempdir().unwrap();
+        let locked = LockedFile::create_in(dir.path()).unwrap();
+        locked.write_all_at(&[1, 2, 3, 4], 8).unwrap();
+        locked.write_all_at(&[9, 9], 2).unwrap();
+        let mut back = [0u8; 12];
+        locked.read_exact_at(&mut back, 0).unwrap();
+        assert_eq!(back, [0, 0, 9, 9, 0, 0, 0, 0, 1, 2, 3, 4]);
+        assert!(locked.read_exact_at(&mut back, 4).is_err());
+        assert_eq!(std::fs::read_dir(dir.path()).unwrap().count(), 1);
+        drop(locked);
+        assert_eq!(std::fs::read_dir(dir.path()).unwrap().count(), 0);
+        #[cfg(unix)]
+        {
+            let file = UnixFile::create_in(dir.path()).unwrap();
+            file.write_all_at(&[5, 6], 3).unwrap();
+            let mut back = [0u8; 5];
+            file.read_exact_at(&mut back, 0).unwrap();
+            assert_eq!(back, [0, 0, 0, 5, 6]);
+            assert_eq!(std::fs::read_dir(dir.path()).unwrap().count(), 0);
+        }
+    }
+}

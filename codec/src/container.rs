@@ -17,6 +17,7 @@ use crate::dims::Dims;
 use crate::error::{Error, Result};
 use crate::limits::Limits;
 use crate::mmap;
+use crate::output::AtomicFile;
 use crate::wavelet::{max_levels, Filter};
 use memmap2::Mmap;
 use std::fs::File;
@@ -389,22 +390,16 @@ impl EncodedColumn {
     }
 }
 
-/// Streams a `.ltm` file to `PATH.tmp`, then renames it into place.
+/// Streams a `.ltm` file to a unique temporary file beside `PATH`, then
+/// renames it into place ([`AtomicFile`]).
 pub struct LtmWriter {
-    file: BufWriter<File>,
-    path: PathBuf,
+    file: BufWriter<AtomicFile>,
     tmp: PathBuf,
     meta: Meta,
     albedo: Option<Vec<u8>>,
     entries: Vec<ColumnEntry>,
     data_start: u64,
     data_len: u64,
-}
-
-fn tmp_path(path: &Path) -> PathBuf {
-    let mut s = path.as_os_str().to_owned();
-    s.push(".tmp");
-    PathBuf::from(s)
 }
 
 impl LtmWriter {
@@ -425,8 +420,8 @@ impl LtmWriter {
             }
             None => None,
         };
-        let tmp = tmp_path(path);
-        let file = File::create(&tmp).map_err(|e| Error::io(&tmp, e))?;
+        let file = AtomicFile::create(path)?;
+        let tmp = file.tmp_path().to_path_buf();
         let chunks = 3 + albedo.is_some() as u64;
         let head_len = HEADER_LEN as u64 + DIR_ENTRY_LEN as u64 * chunks + 4;
         let cols_len = (COLUMN_ENTRY_LEN * meta.dims.lights()) as u64;
@@ -434,7 +429,6 @@ impl LtmWriter {
             head_len + META_LEN as u64 + albedo.as_ref().map_or(0, |a| a.len() as u64) + cols_len;
         let mut w = LtmWriter {
             file: BufWriter::with_capacity(1 << 20, file),
-            path: path.into(),
             tmp,
             meta,
             albedo,
@@ -486,12 +480,8 @@ impl LtmWriter {
         Ok(())
     }
 
-    /// Drops the partial file.
-    pub fn abandon(self) {
-        let tmp = self.tmp.clone();
-        drop(self);
-        let _ = std::fs::remove_file(tmp);
-    }
+    /// Drops the partial file (as dropping the writer does).
+    pub fn abandon(self) {}
 
     /// Writes the tables, syncs and renames the file into place. Returns the
     /// file size.
@@ -570,10 +560,8 @@ impl LtmWriter {
             .file
             .into_inner()
             .map_err(|e| Error::io(&self.tmp, e.into_error()))?;
-        file.sync_all().map_err(io)?;
-        let size = self.data_start + self.data_len;
-        std::fs::rename(&self.tmp, &self.path).map_err(|e| Error::io(&self.path, e))?;
-        Ok(size)
+        file.commit()?;
+        Ok(self.data_start + self.data_len)
     }
 }
 

@@ -6,6 +6,7 @@ use crate::decode::ColumnDecoder;
 use crate::dims::Dims;
 use crate::error::{Error, Result};
 use crate::limits::Limits;
+use crate::output::AtomicFile;
 use crate::raw::{RawHeader, RawWriter};
 use crate::wavelet::row_inverse;
 use std::fs::File;
@@ -399,13 +400,10 @@ pub fn export_npy(file: &LtmFile, out: &Path, limits: &Limits) -> Result<()> {
         dict.push(' ');
     }
     dict.push('\n');
-    let tmp = {
-        let mut s = out.as_os_str().to_owned();
-        s.push(".tmp");
-        std::path::PathBuf::from(s)
-    };
+    let file = AtomicFile::create(out)?;
+    let tmp = file.tmp_path().to_path_buf();
     let io = |e| Error::io(&tmp, e);
-    let mut w = BufWriter::new(File::create(&tmp).map_err(io)?);
+    let mut w = BufWriter::new(file);
     w.write_all(NPY_MAGIC).map_err(io)?;
     w.write_all(&[1, 0]).map_err(io)?;
     w.write_all(&(dict.len() as u16).to_le_bytes())
@@ -414,7 +412,5 @@ pub fn export_npy(file: &LtmFile, out: &Path, limits: &Limits) -> Result<()> {
     w.write_all(bytemuck::cast_slice(&dense)).map_err(io)?;
     w.into_inner()
         .map_err(|e| Error::io(&tmp, e.into_error()))?
-        .sync_all()
-        .map_err(io)?;
-    std::fs::rename(&tmp, out).map_err(|e| Error::io(out, e))
+        .commit()
 }

@@ -1,0 +1,107 @@
+//! Output files written whole or not at all: a unique temporary file beside
+//! the final path (so that concurrent runs never share one, and the rename
+//! stays on one filesystem), synced, then renamed into place. A file
+//! dropped before [`AtomicFile::commit`] is removed, on success paths and
+//! error paths alike.
+
+use crate::error::{Error, Result};
+use std::fs::File;
+use std::path::{Path, PathBuf};
+
+/// An output being written; see the module docs.
+pub struct AtomicFile {
+    tmp: tempfile::NamedTempFile,
+    path: PathBuf,
+}
+
+impl AtomicFile {
+    /// Creates a temporary file for `path` in `path`'s folder.
+    pub fn create(path: &Path) -> Result<AtomicFile> {
+        let name = path
+            .file_name()
+            .ok_or_else(|| Error::Invalid(format!("{}: not a file path", path.display())))?;
+        let dir = path
+            .parent()
+            .filter(|d| !d.as_os_str().is_empty())
+            .unwrap_or(Path::new("."));
+        let prefix = format!(".{}.", name.to_string_lossy());
+        let mut builder = tempfile::Builder::new();
+        builder.prefix(&prefix).suffix(".tmp");
+        // Like `File::create`: readable by others unless the umask says no.
+        #[cfg(unix)]
+        builder.permissions(std::os::unix::fs::PermissionsExt::from_mode(0o666));
+        let tmp = builder.tempfile_in(dir).map_err(|e| Error::io(path, e))?;
+        Ok(AtomicFile {
+            tmp,
+            path: path.into(),
+        })
+    }
+
+    /// The open temporary file.
+    pub fn file(&mut self) -> &mut File {
+        self.tmp.as_file_mut()
+    }
+
+    /// The temporary file's path (for messages).
+    pub fn tmp_path(&self) -> &Path {
+        self.tmp.path()
+    }
+
+    /// The final path.
+    pub fn path(&self) -> &Path {
+        &self.path
+    }
+
+    /// Syncs the file and renames it to its final path.
+    pub fn commit(self) -> Result<()> {
+        self.tmp
+            .as_file()
+            .sync_all()
+            .map_err(|e| Error::io(self.tmp.path(), e))?;
+        let path = self.path;
+        self.tmp
+            .persist(&path)
+            .map_err(|e| Error::io(&path, e.error))?;
+        Ok(())
+    }
+}
+
+impl std::io::Write for AtomicFile {
+    fn write(&mut self, buf: &[u8]) -> std::io::Result<usize> {
+        self.tmp.as_file_mut().write(buf)
+    }
+
+    fn flush(&mut self) -> std::io::Result<()> {
+        self.tmp.as_file_mut().flush()
+    }
+}
+
+impl std::io::Seek for AtomicFile {
+    fn seek(&mut self, pos: std::io::SeekFrom) -> std::io::Result<u64> {
+        self.tmp.as_file_mut().seek(pos)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use std::io::Write;
+
+    #[test]
+    fn committed_files_appear_whole_and_dropped_ones_vanish() {
+        let dir = tempfile::tempdir().unwrap();
+        let out = dir.path().join("a.bin");
+        let mut a = AtomicFile::create(&out).unwrap();
+        let mut b = AtomicFile::create(&out).unwrap();
+        assert_ne!(a.tmp_path(), b.tmp_path(), "two writers share a temporary name");
+        a.file().write_all(b"first").unwrap();
+        b.file().write_all(b"second").unwrap();
+        assert!(!out.exists());
+        b.commit().unwrap();
+        assert_eq!(std::fs::read(&out).unwrap(), b"second");
+        drop(a);
+        assert_eq!(std::fs::read(&out).unwrap(), b"second");
+        let names: Vec<_> = std::fs::read_dir(dir.path()).unwrap().collect();
+        assert_eq!(names.len(), 1, "a temporary file was left behind");
+    }
+}

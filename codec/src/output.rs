@@ -93,7 +93,11 @@ mod tests {
         let out = dir.path().join("a.bin");
         let mut a = AtomicFile::create(&out).unwrap();
         let mut b = AtomicFile::create(&out).unwrap();
-        assert_ne!(a.tmp_path(), b.tmp_path(), "two writers share a temporary name");
+        assert_ne!(
+            a.tmp_path(),
+            b.tmp_path(),
+            "two writers share a temporary name"
+        );
         a.file().write_all(b"first").unwrap();
         b.file().write_all(b"second").unwrap();
         assert!(!out.exists());

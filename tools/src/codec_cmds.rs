@@ -1,5 +1,6 @@
 //! `ltm import`, `ltm compress`, `ltm inspect`, `ltm export`.
 
+use crate::paths;
 use crate::progress;
 use anyhow::{bail, Context, Result};
 use clap::Args;
@@ -34,6 +35,11 @@ pub struct ImportArgs {
 }
 
 pub fn import(a: ImportArgs) -> Result<()> {
+    let partial = paths::partial(&a.output);
+    paths::check_files(
+        &[("input", &a.npy)],
+        &[("-o", &a.output), ("its temporary file", &partial)],
+    )?;
     let bar = progress::bar(0, "import");
     let dims = import_npy(&a.npy, a.width, a.height, &a.output, &|done, total| {
         bar.set_length(total);
@@ -142,6 +148,7 @@ fn renamed_terms(_: &str) -> std::result::Result<usize, String> {
 }
 
 pub fn compress_cmd(a: CompressArgs) -> Result<()> {
+    paths::check_files(&[("input", &a.raw)], &[("-o", &a.output)])?;
     let raw = RawStore::open_with_limits(&a.raw, crate::limits())
         .with_context(|| format!("opening {}", a.raw.display()))?;
     let target = match (a.keep, a.max_error) {
@@ -361,6 +368,7 @@ pub struct ExportArgs {
 }
 
 pub fn export(a: ExportArgs) -> Result<()> {
+    paths::check_files(&[("input", &a.file)], &[("-o", &a.output)])?;
     let file = LtmFile::open_with_limits(&a.file, crate::limits())
         .with_context(|| format!("opening {}", a.file.display()))?;
     export_npy(&file, &a.output, crate::limits())

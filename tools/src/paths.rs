@@ -98,6 +98,14 @@ pub fn check_files(inputs: &[(&str, &Path)], outputs: &[(&str, &Path)]) -> Resul
     Ok(())
 }
 
+/// The temporary name a raw store is written under before it is complete
+/// (`PATH.partial`, see docs/FORMAT.md).
+pub fn partial(path: &Path) -> PathBuf {
+    let mut s = path.as_os_str().to_owned();
+    s.push(".partial");
+    PathBuf::from(s)
+}
+
 /// An output must be a file path (not a folder) in an existing folder where
 /// a file can be created.
 fn check_writable(role: &str, path: &Path) -> Result<()> {

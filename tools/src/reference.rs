@@ -55,6 +55,11 @@ pub struct ReferenceArgs {
 }
 
 pub fn run(args: ReferenceArgs) -> anyhow::Result<()> {
+    let mut outputs = vec![("-o", args.output.as_path())];
+    if let Some(png) = &args.png {
+        outputs.push(("--png", png.as_path()));
+    }
+    crate::paths::check_files(&[("input", &args.raw), ("--env", &args.env)], &outputs)?;
     let start = Instant::now();
     let raw = RawStore::open_with_limits(&args.raw, crate::limits())
         .with_context(|| format!("opening raw store {}", args.raw.display()))?;

@@ -64,6 +64,15 @@ pub struct RelightArgs {
 }
 
 pub fn run(a: RelightArgs) -> Result<()> {
+    let mut inputs = vec![("input", a.file.as_path()), ("--env", a.env.as_path())];
+    if let Some(r) = &a.reference {
+        inputs.push(("--reference", r.as_path()));
+    }
+    let mut outputs = vec![("-o", a.output.as_path())];
+    if let Some(png) = &a.png {
+        outputs.push(("--png", png.as_path()));
+    }
+    crate::paths::check_files(&inputs, &outputs)?;
     let relighter = Relighter::open_with_limits(&a.file, crate::limits())
         .with_context(|| format!("opening {}", a.file.display()))?;
     let env = EnvMap::load(&a.env).with_context(|| format!("loading {}", a.env.display()))?;

@@ -197,3 +197,96 @@ fn a_closed_output_pipe_ends_the_command_quietly() {
     assert!(stderr.is_empty(), "not quiet: {stderr}");
     assert_ne!(out.status.code(), Some(101), "panicked");
 }
+
+/// Runs `ltm` expecting a refusal whose message contains `needle`, with the
+/// listed files unchanged.
+fn assert_refused(args: &[&str], needle: &str, unchanged: &[&Path]) {
+    let before: Vec<Vec<u8>> = unchanged
+        .iter()
+        .map(|p| std::fs::read(p).unwrap())
+        .collect();
+    let out = ltm(args);
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(
+        out.status.code(),
+        Some(1),
+        "{args:?} was not refused: {stderr}"
+    );
+    assert!(stderr.contains(needle), "{args:?}: {stderr}");
+    for (p, b) in unchanged.iter().zip(before) {
+        assert_eq!(
+            std::fs::read(p).unwrap(),
+            b,
+            "{args:?} changed {}",
+            p.display()
+        );
+    }
+}
+
+#[test]
+fn an_output_that_names_an_input_or_another_output_is_refused() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let ltm_file = tiny_ltm(d);
+    let raw = d.join("t.raw");
+    let env = assets().join("envmaps/sunset.exr");
+    let env_copy = d.join("env.exr");
+    std::fs::copy(&env, &env_copy).unwrap();
+    let hard = d.join("hard.ltm");
+    std::fs::hard_link(&ltm_file, &hard).unwrap();
+    let reference = d.join("ref.exr");
+    let made = ltm(&[
+        "reference",
+        raw.to_str().unwrap(),
+        "--env",
+        env_copy.to_str().unwrap(),
+        "-o",
+        reference.to_str().unwrap(),
+    ]);
+    assert!(
+        made.status.success(),
+        "{}",
+        String::from_utf8_lossy(&made.stderr)
+    );
+    let s = |p: &Path| p.to_str().unwrap().to_string();
+    let (raw_s, ltm_s, env_s, ref_s) = (s(&raw), s(&ltm_file), s(&env_copy), s(&reference));
+    let dotted = format!("{}/./sub/../t.ltm", d.display());
+    std::fs::create_dir(d.join("sub")).unwrap();
+    let input = "refusing to overwrite an input";
+    assert_refused(&["compress", &raw_s, "-o", &raw_s], input, &[&raw]);
+    assert_refused(&["export", &ltm_s, "-o", &ltm_s], input, &[&ltm_file]);
+    assert_refused(&["export", &ltm_s, "-o", &s(&hard)], input, &[&ltm_file]);
+    assert_refused(&["export", &ltm_s, "-o", &dotted], input, &[&ltm_file]);
+    let relight = |o: &str, extra: &[&str]| {
+        let mut v = vec!["relight", &ltm_s, "--env", &env_s, "-o", o];
+        v.extend_from_slice(extra);
+        v.into_iter().map(String::from).collect::<Vec<_>>()
+    };
+    let run = |args: Vec<String>, needle: &str, unchanged: &[&Path]| {
+        let a: Vec<&str> = args.iter().map(String::as_str).collect();
+        assert_refused(&a, needle, unchanged);
+    };
+    run(relight(&env_s, &[]), input, &[&env_copy]);
+    run(
+        relight(&ref_s, &["--reference", &ref_s]),
+        input,
+        &[&reference],
+    );
+    let x = s(&d.join("x.exr"));
+    run(relight(&x, &["--png", &x]), "name the same file", &[]);
+    assert!(!d.join("x.exr").exists());
+    run(
+        vec!["reference", &raw_s, "--env", &env_s, "-o", &env_s]
+            .into_iter()
+            .map(String::from)
+            .collect(),
+        input,
+        &[&env_copy],
+    );
+    assert_refused(&["compress", &raw_s, "-o", &s(d)], "is a folder", &[]);
+    assert_refused(
+        &["compress", &raw_s, "-o", &s(&d.join("missing/t.ltm"))],
+        "does not exist",
+        &[],
+    );
+}

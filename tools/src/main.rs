@@ -6,6 +6,7 @@ mod demo;
 mod output;
 mod paths;
 mod progress;
+mod ranges;
 mod reference;
 mod relight_cmd;
 mod report;

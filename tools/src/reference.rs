@@ -49,7 +49,8 @@ pub struct ReferenceArgs {
         long,
         value_name = "EV",
         default_value_t = 0.0,
-        allow_negative_numbers = true
+        allow_negative_numbers = true,
+        value_parser = crate::ranges::exposure
     )]
     pub exposure: f32,
 }

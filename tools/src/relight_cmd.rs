@@ -49,10 +49,10 @@ pub struct RelightArgs {
     #[arg(long)]
     pub png: Option<PathBuf>,
     /// Exposure for the PNG, in stops.
-    #[arg(long, default_value_t = 0.0, allow_hyphen_values = true)]
+    #[arg(long, default_value_t = 0.0, allow_hyphen_values = true, value_parser = crate::ranges::exposure)]
     pub exposure: f32,
     /// Frames to time (the image is the same each frame; reports the median).
-    #[arg(long, default_value_t = 1)]
+    #[arg(long, default_value_t = 1, value_parser = crate::ranges::frames)]
     pub frames: usize,
     /// An exact image from `ltm reference` (same map and rotation): print the
     /// relit image's relative L2 error against it.

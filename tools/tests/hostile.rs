@@ -290,3 +290,44 @@ fn an_output_that_names_an_input_or_another_output_is_refused() {
         &[],
     );
 }
+
+#[test]
+fn two_runs_writing_one_output_do_not_collide() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    tiny_ltm(d);
+    let (raw, out) = (d.join("t.raw"), d.join("same.ltm"));
+    let spawn = |bits: &str| {
+        Command::new(env!("CARGO_BIN_EXE_ltm"))
+            .args([
+                "compress",
+                raw.to_str().unwrap(),
+                "-o",
+                out.to_str().unwrap(),
+            ])
+            .args(["--bits", bits])
+            .stdout(std::process::Stdio::null())
+            .stderr(std::process::Stdio::piped())
+            .spawn()
+            .unwrap()
+    };
+    for _ in 0..4 {
+        let (a, b) = (spawn("8"), spawn("12"));
+        for child in [a, b] {
+            let o = child.wait_with_output().unwrap();
+            assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+        }
+        // The output is one run's whole file, and nothing else is left.
+        let inspect = ltm(&["inspect", out.to_str().unwrap()]);
+        assert!(
+            inspect.status.success(),
+            "{}",
+            String::from_utf8_lossy(&inspect.stderr)
+        );
+        let left: Vec<String> = files_in(d)
+            .into_iter()
+            .filter(|f| f.ends_with(".tmp"))
+            .collect();
+        assert!(left.is_empty(), "{left:?}");
+    }
+}

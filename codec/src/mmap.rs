@@ -6,8 +6,15 @@ use memmap2::{Mmap, UncheckedAdvice};
 use std::fs::File;
 use std::io;
 
-/// Maps a whole file read-only.
+/// Maps a whole regular file read-only (a folder or a device is an error
+/// that says so, not the system's "No such device").
 pub(crate) fn map_read(file: &File) -> io::Result<Mmap> {
+    if !file.metadata()?.is_file() {
+        return Err(io::Error::new(
+            io::ErrorKind::InvalidInput,
+            "not a regular file (a folder or a device)",
+        ));
+    }
     // SAFETY: this assumes that the file is not modified or truncated while
     // it is mapped, which Rust's aliasing rules for the `&[u8]` we hand out
     // require and nothing here can enforce: a change by another process is

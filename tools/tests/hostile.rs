@@ -331,3 +331,27 @@ fn two_runs_writing_one_output_do_not_collide() {
         assert!(left.is_empty(), "{left:?}");
     }
 }
+
+#[test]
+fn a_folder_given_as_a_file_is_named_as_such() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path().to_str().unwrap();
+    let out_dir = tempfile::tempdir().unwrap();
+    let npy = out_dir.path().join("x.npy");
+    let ltm_out = out_dir.path().join("x.ltm");
+    for args in [
+        vec!["inspect", d],
+        vec!["export", d, "-o", npy.to_str().unwrap()],
+    ] {
+        let out = ltm(&args);
+        let stderr = String::from_utf8_lossy(&out.stderr);
+        assert_eq!(out.status.code(), Some(1), "{args:?}: {stderr}");
+        assert!(
+            stderr.contains("folder") && !stderr.contains("No such device"),
+            "{args:?}: {stderr}"
+        );
+    }
+    let raw = ltm(&["compress", d, "-o", ltm_out.to_str().unwrap()]);
+    let stderr = String::from_utf8_lossy(&raw.stderr);
+    assert!(stderr.contains("folder"), "{stderr}");
+}

@@ -21,7 +21,11 @@ mod limits;
 mod mmap;
 pub mod npy;
 mod output;
+/// The quantizer's internals: public only with the `benchmarks` feature.
+#[cfg(feature = "benchmarks")]
 pub mod quant;
+#[cfg(not(feature = "benchmarks"))]
+mod quant;
 pub mod raw;
 pub mod wavelet;
 
@@ -35,5 +39,6 @@ pub use dims::{Dims, LightBasis, RowLayout, MAX_FACE_RES, MAX_PIXELS, MAX_SIDE};
 pub use error::{Error, Result};
 pub use limits::Limits;
 pub use output::AtomicFile;
+pub use quant::BandWeights;
 pub use raw::{RawHeader, RawStore, RawWriter};
 pub use wavelet::Filter;

@@ -16,7 +16,7 @@ use crate::error::{RelightError, Result};
 use crate::image_io::Image;
 use crate::select::{select, support_area, Weighting};
 use ltm_codec::container::{LtmFile, Meta};
-use ltm_codec::quant::BandWeights;
+use ltm_codec::BandWeights;
 use ltm_codec::wavelet::row_forward;
 use ltm_codec::{ColumnDecoder, Limits};
 use rayon::prelude::*;

@@ -8,7 +8,7 @@
 //! ```
 //! use ltm_codec::compress::{compress, CompressOptions};
 //! use ltm_codec::{Dims, RawHeader, RawStore, RawWriter};
-//! use ltm_relight::{reference, relative_l2, EnvMap, Relighter, Rotation, Weighting};
+//! use ltm_relight::{reference, relative_l2, EnvMap, Relight, Relighter, Request, Rotation, Weighting};
 //!
 //! # fn main() -> Result<(), Box<dyn std::error::Error>> {
 //! let dir = tempfile::tempdir()?;
@@ -29,10 +29,11 @@
 //! let light = sky.to_cubemap(4, &Rotation::IDENTITY);
 //!
 //! let relighter = Relighter::open(&ltm)?;
-//! let mut buffers = relighter.buffers(); // reused frame after frame
-//! let stats = relighter.relight(&light, 50, Weighting::Transport, &mut buffers)?;
+//! let mut frame = relighter.frame(); // reused frame after frame
+//! let request = Request { terms: 50, weighting: Weighting::Transport };
+//! let stats = relighter.relight(&light, &request, &mut frame)?;
 //! let exact = reference(&raw, &light)?;
-//! println!("{} lights, error {:.4}", stats.lights, relative_l2(&buffers.image, &exact)?);
+//! println!("{} lights, error {:.4}", stats.lights, relative_l2(&frame.image, &exact)?);
 //! # Ok(())
 //! # }
 //! ```
@@ -41,6 +42,7 @@
 
 mod envmap;
 mod error;
+mod frame;
 mod image_io;
 mod reference;
 mod relighter;
@@ -48,7 +50,8 @@ mod select;
 
 pub use envmap::{EnvMap, Rotation, MAX_ENV_HEIGHT};
 pub use error::{RelightError, Result};
+pub use frame::{Frame, FrameStats, Relight, Request};
 pub use image_io::{relative_l2, Image, MAX_READ_PIXELS};
 pub use reference::{reference, reference_with_progress};
-pub use relighter::{FrameBuffers, FrameStats, Relighter};
+pub use relighter::Relighter;
 pub use select::{luminance, magnitude, select, support_area, Weighting};

@@ -19,7 +19,7 @@ use ltm_bake::{Overrides, SceneDesc};
 use ltm_codec::compress::row_level;
 use ltm_codec::{CompressOptions, Mode, RawStore, Target, Transposed};
 use ltm_relight::{
-    reference, relative_l2, EnvMap, FrameBuffers, Image, Relighter, Rotation, Weighting,
+    reference, relative_l2, EnvMap, Frame, Image, Relight, Relighter, Request, Rotation, Weighting,
 };
 use serde::{Deserialize, Serialize};
 use std::path::PathBuf;
@@ -299,7 +299,7 @@ fn median(mut v: Vec<f64>) -> f64 {
 /// and its error.
 fn measure(
     relighter: &Relighter,
-    bufs: &mut FrameBuffers,
+    bufs: &mut Frame,
     env: &Env,
     n: usize,
     weighting: Weighting,
@@ -307,8 +307,12 @@ fn measure(
 ) -> Result<RelightPoint> {
     let mut times = Vec::with_capacity(frames);
     let mut stats = Default::default();
+    let request = Request {
+        terms: n,
+        weighting,
+    };
     for _ in 0..frames {
-        stats = relighter.relight(&env.light, n, weighting, bufs)?;
+        stats = relighter.relight(&env.light, &request, bufs)?;
         times.push(stats.total().as_secs_f64());
     }
     let stats: ltm_relight::FrameStats = stats;
@@ -538,7 +542,7 @@ pub fn run(a: ReportArgs) -> Result<()> {
         let code_s = t.elapsed().as_secs_f64();
         let quality_pair = bits == s.quality_bits && err == s.quality && mode != Mode::FourD;
         let relighter = Relighter::open(&path)?;
-        let mut bufs = relighter.buffers();
+        let mut bufs = relighter.frame();
         let mut relight = Vec::new();
         let weightings: &[Weighting] = if quality_pair {
             &[Weighting::Transport, Weighting::Unweighted, Weighting::Area]

@@ -51,6 +51,10 @@ pub enum Error {
     /// Input data that cannot be encoded (NaN, infinity, wrong dtype, ...).
     #[error("invalid input: {0}")]
     Invalid(String),
+    /// A numerical method that failed on its input (a decomposition that
+    /// did not converge).
+    #[error("{what}: {detail}")]
+    Numerical { what: &'static str, detail: String },
 }
 
 /// `Result` with the codec's [`Error`].

@@ -58,6 +58,8 @@ pub struct Frame {
     pub image: Image,
     /// Buffers of the wavelet relighter.
     pub(crate) wavelet: Option<WaveletScratch>,
+    /// The lighting projected on a linear basis (RGB per basis function).
+    pub(crate) projected: Vec<[f64; 3]>,
 }
 
 impl Default for Frame {
@@ -65,6 +67,7 @@ impl Default for Frame {
         Frame {
             image: Image::new(0, 0),
             wavelet: None,
+            projected: Vec::new(),
         }
     }
 }

@@ -40,6 +40,7 @@
 
 #![forbid(unsafe_code)]
 
+mod basis;
 mod envmap;
 mod error;
 mod frame;
@@ -48,6 +49,7 @@ mod reference;
 mod relighter;
 mod select;
 
+pub use basis::BasisRelighter;
 pub use envmap::{EnvMap, Rotation, MAX_ENV_HEIGHT};
 pub use error::{RelightError, Result};
 pub use frame::{Frame, FrameStats, Relight, Request};

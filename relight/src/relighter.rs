@@ -373,6 +373,7 @@ impl Relight for Relighter {
         Frame {
             image: Image::new(w, h),
             wavelet: Some(self.scratch()),
+            ..Frame::default()
         }
     }
 

@@ -19,7 +19,8 @@ use ltm_bake::{Overrides, SceneDesc};
 use ltm_codec::compress::row_level;
 use ltm_codec::{CompressOptions, Mode, RawStore, Target, Transposed};
 use ltm_relight::{
-    reference, relative_l2, EnvMap, Frame, Image, Relight, Relighter, Request, Rotation, Weighting,
+    reference, relative_l2, BasisRelighter, EnvMap, Frame, Image, Relight, Relighter, Request,
+    Rotation, Weighting,
 };
 use serde::{Deserialize, Serialize};
 use std::path::PathBuf;
@@ -589,17 +590,23 @@ pub fn run(a: ReportArgs) -> Result<()> {
     eprintln!("baselines: zstd of the raw matrix, PCA, spherical harmonics");
     let mut base_points = vec![baselines::zstd_raw(&raw, s.zstd_raw_level)?];
     base_points.extend(baselines::pca(&raw, &s.pca_ranks, 0x6c74_6d01)?);
-    let sh = baselines::sh(&raw, &s.sh_orders)?;
-    base_points.extend(sh.points());
+    let (sh_points, sh) = baselines::sh(&raw, &s.sh_orders)?;
+    base_points.extend(sh_points);
+    let sh = BasisRelighter::sh(sh, &raw)?;
+    let mut frame = sh.frame();
     let mut sh_relight = Vec::new();
     for env in &envs {
         for &order in &s.sh_orders {
-            let image = sh.relight(&env.light, order)?;
+            let request = Request {
+                terms: order,
+                weighting: Weighting::Transport,
+            };
+            sh.relight(&env.light, &request, &mut frame)?;
             sh_relight.push(ShRelightPoint {
                 env: env.name.clone(),
                 order,
                 coefficients: order * order,
-                relit_error: relative_l2(&image, &env.exact)?,
+                relit_error: relative_l2(&frame.image, &env.exact)?,
             });
         }
     }

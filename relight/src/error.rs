@@ -45,6 +45,7 @@ impl RelightError {
         }
     }
 
+    #[cfg(any(feature = "exr", feature = "png", feature = "hdr"))]
     pub(crate) fn io(path: impl Into<PathBuf>, error: io::Error) -> Self {
         RelightError::Io {
             path: path.into(),
@@ -52,6 +53,7 @@ impl RelightError {
         }
     }
 
+    #[cfg(any(feature = "exr", feature = "png", feature = "hdr"))]
     pub(crate) fn image(path: impl Into<PathBuf>, detail: impl ToString) -> Self {
         RelightError::Image {
             path: path.into(),

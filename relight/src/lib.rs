@@ -1,9 +1,16 @@
-//! `ltm-relight`: relighting from light-transport matrices: non-linear
-//! wavelet lighting (Ng et al. 2003) and the level-recursive sparse multiply
-//! of Cheslack-Postava et al. 2007 ([`Relighter`]). Environment
-//! lighting (lat-long EXR or HDR maps, rotated and resampled exactly to the
-//! matrix's cubemap), RGB image output, and the exact dense reference
-//! `T·L` that relit images are measured against.
+//! `ltm-relight`: relighting from light-transport matrices behind one
+//! [`Relight`] trait: non-linear wavelet lighting (Ng et al. 2003) and the
+//! level-recursive sparse multiply of Cheslack-Postava et al. 2007
+//! ([`Relighter`]), and the linear PCA and spherical-harmonics bases
+//! ([`BasisRelighter`]). Environment lighting (lat-long EXR or HDR maps,
+//! rotated and resampled exactly to the matrix's cubemap), RGB image output,
+//! and the exact dense reference `T·L` that relit images are measured
+//! against.
+//!
+//! Features (all on by default): `exr` (OpenEXR maps and images), `png`
+//! (PNG output), `hdr` (Radiance HDR maps). Without them the relighting core
+//! builds alone: [`EnvMap::from_fn`] and [`EnvMap::new`] take lighting from
+//! memory.
 //!
 //! ```
 //! use ltm_codec::compress::{compress, CompressOptions};

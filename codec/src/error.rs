@@ -54,7 +54,12 @@ pub enum Error {
     /// A numerical method that failed on its input (a decomposition that
     /// did not converge).
     #[error("{what}: {detail}")]
-    Numerical { what: &'static str, detail: String },
+    Numerical {
+        /// The computation, e.g. `"PCA"`.
+        what: &'static str,
+        /// What failed, with the sizes involved.
+        detail: String,
+    },
 }
 
 /// `Result` with the codec's [`Error`].

@@ -29,7 +29,7 @@ use ltm::codec::container::{EncodedColumn, Mode};
 use ltm::codec::quant::{self, scale_groups, BandWeights};
 use ltm::codec::wavelet::{self, row_forward};
 use ltm::codec::{ColumnDecoder, Dims, Filter, Meta, RawStore, SparseColumn};
-use ltm::relight::{EnvMap, Relighter, Rotation, Weighting};
+use ltm::relight::{EnvMap, Relight, Relighter, Request, Rotation, Weighting};
 use std::path::Path;
 use std::time::Duration;
 
@@ -73,19 +73,19 @@ fn bench(c: &mut Criterion) {
 
     let mut group = c.benchmark_group("relight_frame");
     for (mode, relighter) in &relighters {
-        let mut bufs = relighter.buffers();
+        let mut bufs = relighter.frame();
         for n in [50, 200, 1000] {
+            let request = Request {
+                terms: n,
+                weighting: Weighting::Transport,
+            };
             let nnz = relighter
-                .relight(&light, n, Weighting::Transport, &mut bufs)
+                .relight(&light, &request, &mut bufs)
                 .unwrap()
                 .nonzeros;
             group.throughput(Throughput::Elements(nnz));
             group.bench_function(BenchmarkId::new(mode.name(), n), |b| {
-                b.iter(|| {
-                    relighter
-                        .relight(&light, n, Weighting::Transport, &mut bufs)
-                        .unwrap()
-                })
+                b.iter(|| relighter.relight(&light, &request, &mut bufs).unwrap())
             });
         }
     }

@@ -6,7 +6,9 @@ use ltm::bake::{bake, BakeOptions, Overrides, Scene, SceneDesc};
 use ltm::codec::compress::{compress, CodeOptions, CompressOptions, Target, TransposeOptions};
 use ltm::codec::container::Mode;
 use ltm::codec::{Filter, RawStore};
-use ltm::relight::{reference, relative_l2, EnvMap, Relighter, Rotation, Weighting};
+use ltm::relight::{
+    reference, relative_l2, EnvMap, Relight, Relighter, Request, Rotation, Weighting,
+};
 use std::path::{Path, PathBuf};
 
 fn assets() -> PathBuf {
@@ -28,6 +30,10 @@ fn bake_default(dir: &Path) -> PathBuf {
     let raw = dir.join("scene.raw");
     bake(&scene, &raw, &BakeOptions::default(), &|_| {}).unwrap();
     raw
+}
+
+fn req(terms: usize, weighting: Weighting) -> Request {
+    Request { terms, weighting }
 }
 
 fn light(n: usize, name: &str) -> Vec<[f32; 3]> {
@@ -67,9 +73,9 @@ fn relighting_matches_the_dense_reference_and_eq3() {
             };
             compress(&raw, &out, &opts, &|_, _, _| {}).unwrap();
             let relighter = Relighter::open(&out).unwrap();
-            let mut bufs = relighter.buffers();
+            let mut bufs = relighter.frame();
             relighter
-                .relight(&l, usize::MAX, Weighting::Unweighted, &mut bufs)
+                .relight(&l, &req(usize::MAX, Weighting::Unweighted), &mut bufs)
                 .unwrap();
             let err = relative_l2(&bufs.image, &exact).unwrap();
             assert!(
@@ -83,8 +89,10 @@ fn relighting_matches_the_dense_reference_and_eq3() {
                 (50, Weighting::Transport),
                 (usize::MAX, Weighting::Area),
             ] {
-                relighter.relight(&l, terms, weighting, &mut bufs).unwrap();
-                let naive = relighter.relight_naive(&l, terms, weighting).unwrap();
+                relighter
+                    .relight(&l, &req(terms, weighting), &mut bufs)
+                    .unwrap();
+                let naive = relighter.relight_naive(&l, &req(terms, weighting)).unwrap();
                 let diff = relative_l2(&bufs.image, &naive).unwrap();
                 assert!(
                     diff <= 2e-6,
@@ -116,11 +124,11 @@ fn more_terms_give_less_error_and_threads_agree() {
     )
     .unwrap();
     let relighter = Relighter::open(&out).unwrap();
-    let mut bufs = relighter.buffers();
+    let mut bufs = relighter.frame();
     let mut errors = Vec::new();
     for terms in [5, 50, 384] {
         relighter
-            .relight(&l, terms, Weighting::Transport, &mut bufs)
+            .relight(&l, &req(terms, Weighting::Transport), &mut bufs)
             .unwrap();
         errors.push(relative_l2(&bufs.image, &exact).unwrap());
     }
@@ -134,9 +142,9 @@ fn more_terms_give_less_error_and_threads_agree() {
         let hs: Vec<_> = (0..2)
             .map(|_| {
                 s.spawn(|| {
-                    let mut b = relighter.buffers();
+                    let mut b = relighter.frame();
                     relighter
-                        .relight(&l, 50, Weighting::Unweighted, &mut b)
+                        .relight(&l, &req(50, Weighting::Unweighted), &mut b)
                         .unwrap();
                     b.image
                 })
@@ -153,9 +161,9 @@ fn more_terms_give_less_error_and_threads_agree() {
             .build()
             .unwrap();
         pool.install(|| {
-            let mut b = relighter.buffers();
+            let mut b = relighter.frame();
             relighter
-                .relight(&l, 384, Weighting::Transport, &mut b)
+                .relight(&l, &req(384, Weighting::Transport), &mut b)
                 .unwrap();
             b.image
         })
@@ -171,23 +179,27 @@ fn bad_lighting_is_an_error_and_large_n_is_clamped() {
     let out = dir.path().join("scene.ltm");
     compress(&raw, &out, &CompressOptions::default(), &|_, _, _| {}).unwrap();
     let relighter = Relighter::open(&out).unwrap();
-    let mut bufs = relighter.buffers();
+    let mut bufs = relighter.frame();
     let m = relighter.lights();
     assert!(relighter
-        .relight(&vec![[1.0; 3]; m - 1], 10, Weighting::Unweighted, &mut bufs)
+        .relight(
+            &vec![[1.0; 3]; m - 1],
+            &req(10, Weighting::Unweighted),
+            &mut bufs
+        )
         .is_err());
     let mut nan = vec![[1.0; 3]; m];
     nan[3] = [f32::NAN, 0.0, 0.0];
     assert!(relighter
-        .relight(&nan, 10, Weighting::Unweighted, &mut bufs)
+        .relight(&nan, &req(10, Weighting::Unweighted), &mut bufs)
         .is_err());
     let l = vec![[0.5; 3]; m];
     let a = relighter
-        .relight(&l, m, Weighting::Unweighted, &mut bufs)
+        .relight(&l, &req(m, Weighting::Unweighted), &mut bufs)
         .unwrap();
     let img = bufs.image.clone();
     let b = relighter
-        .relight(&l, 10 * m, Weighting::Unweighted, &mut bufs)
+        .relight(&l, &req(10 * m, Weighting::Unweighted), &mut bufs)
         .unwrap();
     assert_eq!(img, bufs.image);
     assert_eq!(a.lights, b.lights);

@@ -118,6 +118,15 @@ pub enum Error {
         /// Its value in the part it was combined with.
         expected: String,
     },
+    /// A numerical method that failed on its input (a decomposition that
+    /// did not converge).
+    #[error("{what}: {detail}")]
+    Numerical {
+        /// The computation, e.g. `"PCA"`.
+        what: &'static str,
+        /// What failed, with the sizes involved.
+        detail: String,
+    },
 }
 
 /// `Result` with the codec's [`Error`].

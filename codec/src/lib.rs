@@ -4,7 +4,9 @@
 //! The codec follows Cheslack-Postava et al. 2007, "4D Compression and
 //! Relighting with High-Resolution Light Transport Matrices": rows are
 //! wavelet-transformed over each cube face (Ng et al. 2003), columns are
-//! transformed as images to an adaptively chosen depth.
+//! transformed as images to an adaptively chosen depth. The linear fits the
+//! codec is measured against, PCA ([`PcaBasis`], Eigentransport) and
+//! spherical harmonics ([`ShProjection`]), stream the raw store the same way.
 
 #![deny(unsafe_code)]
 #![warn(missing_docs)]
@@ -21,12 +23,15 @@ mod limits;
 mod mmap;
 pub mod npy;
 mod output;
+pub mod pca;
 /// The quantizer's internals: public only with the `benchmarks` feature.
 #[cfg(feature = "benchmarks")]
 pub mod quant;
 #[cfg(not(feature = "benchmarks"))]
 mod quant;
 pub mod raw;
+mod rows;
+pub mod sh;
 pub mod wavelet;
 
 pub use compress::{
@@ -39,6 +44,8 @@ pub use dims::{Dims, LightBasis, RowLayout, MAX_FACE_RES, MAX_PIXELS, MAX_SIDE};
 pub use error::{Error, Result};
 pub use limits::Limits;
 pub use output::AtomicFile;
+pub use pca::PcaBasis;
 pub use quant::BandWeights;
 pub use raw::{RawHeader, RawStore, RawWriter};
+pub use sh::{ShProjection, MAX_SH_ORDER};
 pub use wavelet::Filter;

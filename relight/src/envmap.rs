@@ -40,8 +40,10 @@
 //! at `n = 64` on one core, parallel over texel edges and parallels.
 
 use crate::error::{RelightError, Result};
+#[cfg(feature = "exr")]
 use crate::image_io::read_exr_rgb;
 use glam::{DMat3, DVec3};
+#[cfg(feature = "hdr")]
 use image::ImageDecoder;
 use ltm_codec::cubemap::{
     direction_face_point, face_point_direction, texel_index, texel_solid_angle,
@@ -49,8 +51,17 @@ use ltm_codec::cubemap::{
 use rayon::prelude::*;
 use std::f64::consts::{PI, TAU};
 use std::fmt;
+#[cfg(any(feature = "exr", feature = "hdr"))]
 use std::path::Path;
 use std::str::FromStr;
+
+/// The map files this build reads, for [`EnvMap::load`]'s message.
+#[cfg(all(feature = "exr", feature = "hdr"))]
+const READABLE_FORMATS: &str = ".exr or .hdr file";
+#[cfg(all(feature = "exr", not(feature = "hdr")))]
+const READABLE_FORMATS: &str = ".exr file (this build reads no .hdr: feature `hdr`)";
+#[cfg(all(feature = "hdr", not(feature = "exr")))]
+const READABLE_FORMATS: &str = ".hdr file (this build reads no .exr: feature `exr`)";
 
 /// Largest environment map height (the width is twice the height): a
 /// `16384 × 8192` map.
@@ -268,7 +279,9 @@ impl EnvMap {
     /// B channels, any sample type and compression) or Radiance HDR (`.hdr`,
     /// `.pic`). The shape must be `width = 2·height` with `height ≥ 2`.
     /// Negative values are clamped to 0; NaN or infinite values are an
-    /// error naming the pixel.
+    /// error naming the pixel. Each format needs its feature (`exr`, `hdr`;
+    /// both on by default).
+    #[cfg(any(feature = "exr", feature = "hdr"))]
     pub fn load(path: &Path) -> Result<EnvMap> {
         let ext = path
             .extension()
@@ -276,13 +289,16 @@ impl EnvMap {
             .map(str::to_ascii_lowercase)
             .unwrap_or_default();
         let (width, height, data) = match ext.as_str() {
+            #[cfg(feature = "exr")]
             "exr" => read_exr_rgb(path)?,
+            #[cfg(feature = "hdr")]
             "hdr" | "pic" => read_hdr(path)?,
             _ => {
                 return Err(RelightError::Invalid(format!(
-                "{}: unsupported environment map format (expected a lat-long .exr or .hdr file)",
-                path.display()
-            )))
+                    "{}: unsupported environment map format (expected a lat-long {})",
+                    path.display(),
+                    READABLE_FORMATS
+                )))
             }
         };
         EnvMap::new(width, height, data).map_err(|e| match e {
@@ -391,6 +407,7 @@ fn check_shape(width: usize, height: usize) -> Result<()> {
 
 /// Reads a Radiance HDR file as RGB f32, checking its size before
 /// allocating.
+#[cfg(feature = "hdr")]
 fn read_hdr(path: &Path) -> Result<(usize, usize, Vec<[f32; 3]>)> {
     let file = std::fs::File::open(path).map_err(|e| RelightError::io(path, e))?;
     let decoder = image::codecs::hdr::HdrDecoder::new(std::io::BufReader::new(file))

@@ -60,6 +60,7 @@ impl RelightError {
         }
     }
 
+    #[cfg(any(feature = "exr", feature = "png", feature = "hdr"))]
     pub(crate) fn io(path: impl Into<PathBuf>, error: io::Error) -> Self {
         RelightError::Io {
             path: path.into(),
@@ -67,6 +68,7 @@ impl RelightError {
         }
     }
 
+    #[cfg(any(feature = "exr", feature = "png", feature = "hdr"))]
     pub(crate) fn image(path: impl Into<PathBuf>, detail: impl ToString) -> Self {
         RelightError::Image {
             path: path.into(),

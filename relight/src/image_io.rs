@@ -1,14 +1,20 @@
-//! RGB float images: the relit frame, OpenEXR and PNG output, and the error
-//! measure used to compare a relit image with the reference.
+//! RGB float images: the relit frame, OpenEXR and PNG output (features
+//! `exr` and `png`), and the error measure used to compare a relit image
+//! with the reference.
 
 use crate::error::{RelightError, Result};
+#[cfg(feature = "exr")]
 use exr::prelude::{
     Encoding, Image as ExrImage, Layer, LayerAttributes, ReadChannels, ReadLayers,
     SpecificChannels, Vec2, WritableImage,
 };
+#[cfg(feature = "png")]
 use image::{ExtendedColorType, ImageEncoder};
+#[cfg(feature = "png")]
 use std::fs::File;
+#[cfg(feature = "png")]
 use std::io::{BufWriter, Write};
+#[cfg(any(feature = "exr", feature = "png"))]
 use std::path::{Path, PathBuf};
 
 /// Largest pixel count read from an image file (`16384 × 8192`); a larger
@@ -78,6 +84,7 @@ impl Image {
 
     /// Checks what a writer needs: a non-empty image whose pixel count
     /// matches its size and whose values are all finite.
+    #[cfg(any(feature = "exr", feature = "png"))]
     fn check_writable(&self, path: &Path) -> Result<()> {
         self.check_len()?;
         if self.width == 0 || self.height == 0 {
@@ -98,6 +105,7 @@ impl Image {
     /// Writes a 32-bit float RGB OpenEXR file (ZIP compression, lossless).
     /// The file is written to `PATH.tmp` and renamed to `PATH` when complete.
     /// Refuses images holding NaN or infinite values.
+    #[cfg(feature = "exr")]
     pub fn write_exr(&self, path: &Path) -> Result<()> {
         self.check_writable(path)?;
         let tmp = tmp_path(path);
@@ -122,6 +130,7 @@ impl Image {
     /// Writes an 8-bit sRGB PNG: each value is multiplied by `2^exposure_ev`,
     /// clamped to `[0, 1]` and encoded with the sRGB transfer function. The
     /// file is written to `PATH.tmp` and renamed to `PATH` when complete.
+    #[cfg(feature = "png")]
     pub fn write_png(&self, path: &Path, exposure_ev: f32) -> Result<()> {
         if !exposure_ev.is_finite() || exposure_ev.abs() > 64.0 {
             return Err(RelightError::range(
@@ -165,6 +174,7 @@ impl Image {
     /// Reads the first layer with R, G and B channels of an OpenEXR file,
     /// any sample type, as 32-bit floats. Values are returned as stored
     /// (NaN, infinite and negative values included).
+    #[cfg(feature = "exr")]
     pub fn read_exr(path: &Path) -> Result<Image> {
         let (width, height, data) = read_exr_rgb(path)?;
         Ok(Image {
@@ -206,6 +216,7 @@ pub fn relative_l2(a: &Image, reference: &Image) -> Result<f64> {
 }
 
 /// The sRGB encoding of a linear value, clamped to `[0, 1]`, as 8 bits.
+#[cfg(feature = "png")]
 fn srgb_8bit(v: f32) -> u8 {
     // NaN stays NaN here and becomes 0 in the saturating cast below.
     let v = v.clamp(0.0, 1.0);
@@ -218,12 +229,14 @@ fn srgb_8bit(v: f32) -> u8 {
 }
 
 /// `PATH.tmp`: where writers put a file before renaming it into place.
-pub(crate) fn tmp_path(path: &Path) -> PathBuf {
+#[cfg(any(feature = "exr", feature = "png"))]
+fn tmp_path(path: &Path) -> PathBuf {
     let mut s = path.as_os_str().to_owned();
     s.push(".tmp");
     PathBuf::from(s)
 }
 
+#[cfg(any(feature = "exr", feature = "png"))]
 fn rename(tmp: &Path, path: &Path) -> Result<()> {
     std::fs::rename(tmp, path).map_err(|e| {
         let _ = std::fs::remove_file(tmp);
@@ -233,6 +246,7 @@ fn rename(tmp: &Path, path: &Path) -> Result<()> {
 
 /// Maps an exr error to ours: operating-system failures keep their
 /// `io::Error`, everything else is a decode/encode failure.
+#[cfg(feature = "exr")]
 fn exr_error(path: &Path, e: exr::error::Error) -> RelightError {
     match e {
         exr::error::Error::Io(io) if io.kind() != std::io::ErrorKind::UnexpectedEof => {
@@ -245,6 +259,7 @@ fn exr_error(path: &Path, e: exr::error::Error) -> RelightError {
 /// Reads the first layer with R, G, B channels of an OpenEXR file:
 /// `(width, height, pixels)`, row-major from the top. The layer's size is
 /// checked against [`MAX_READ_PIXELS`] before its pixels are allocated.
+#[cfg(feature = "exr")]
 pub(crate) fn read_exr_rgb(path: &Path) -> Result<(usize, usize, Vec<[f32; 3]>)> {
     let meta = exr::meta::MetaData::read_from_file(path, false).map_err(|e| exr_error(path, e))?;
     let header = meta

@@ -1,14 +1,21 @@
-//! `ltm-relight`: relighting from light-transport matrices: non-linear
-//! wavelet lighting (Ng et al. 2003) and the level-recursive sparse multiply
-//! of Cheslack-Postava et al. 2007 ([`Relighter`]). Environment
-//! lighting (lat-long EXR or HDR maps, rotated and resampled exactly to the
-//! matrix's cubemap), RGB image output, and the exact dense reference
-//! `T·L` that relit images are measured against.
+//! `ltm-relight`: relighting from light-transport matrices behind one
+//! [`Relight`] trait: non-linear wavelet lighting (Ng et al. 2003) and the
+//! level-recursive sparse multiply of Cheslack-Postava et al. 2007
+//! ([`Relighter`]), and the linear PCA and spherical-harmonics bases
+//! ([`BasisRelighter`]). Environment lighting (lat-long EXR or HDR maps,
+//! rotated and resampled exactly to the matrix's cubemap), RGB image output,
+//! and the exact dense reference `T·L` that relit images are measured
+//! against.
+//!
+//! Features (all on by default): `exr` (OpenEXR maps and images), `png`
+//! (PNG output), `hdr` (Radiance HDR maps). Without them the relighting core
+//! builds alone: [`EnvMap::from_fn`] and [`EnvMap::new`] take lighting from
+//! memory.
 //!
 //! ```
 //! use ltm_codec::compress::{compress, CompressOptions};
 //! use ltm_codec::{Dims, RawHeader, RawStore, RawWriter};
-//! use ltm_relight::{reference, relative_l2, EnvMap, Relighter, Rotation, Weighting};
+//! use ltm_relight::{reference, relative_l2, EnvMap, Relight, Relighter, Request, Rotation, Weighting};
 //!
 //! # fn main() -> Result<(), Box<dyn std::error::Error>> {
 //! let dir = tempfile::tempdir()?;
@@ -29,26 +36,31 @@
 //! let light = sky.to_cubemap(4, &Rotation::IDENTITY);
 //!
 //! let relighter = Relighter::open(&ltm)?;
-//! let mut buffers = relighter.buffers(); // reused frame after frame
-//! let stats = relighter.relight(&light, 50, Weighting::Transport, &mut buffers)?;
+//! let mut frame = relighter.frame(); // reused frame after frame
+//! let request = Request { terms: 50, weighting: Weighting::Transport };
+//! let stats = relighter.relight(&light, &request, &mut frame)?;
 //! let exact = reference(&raw, &light)?;
-//! println!("{} lights, error {:.4}", stats.lights, relative_l2(&buffers.image, &exact)?);
+//! println!("{} lights, error {:.4}", stats.lights, relative_l2(&frame.image, &exact)?);
 //! # Ok(())
 //! # }
 //! ```
 
 #![forbid(unsafe_code)]
 
+mod basis;
 mod envmap;
 mod error;
+mod frame;
 mod image_io;
 mod reference;
 mod relighter;
 mod select;
 
+pub use basis::BasisRelighter;
 pub use envmap::{EnvMap, Rotation, MAX_ENV_HEIGHT};
 pub use error::{RelightError, Result};
+pub use frame::{Frame, FrameStats, Relight, Request};
 pub use image_io::{relative_l2, Image, MAX_READ_PIXELS};
 pub use reference::{reference, reference_with_progress};
-pub use relighter::{FrameBuffers, FrameStats, Relighter};
+pub use relighter::Relighter;
 pub use select::{luminance, magnitude, select, support_area, Weighting};

@@ -12,16 +12,17 @@
 //!    brings the planes one level up, until depth 0 (eq. 8);
 //! 4. a factored monochrome file multiplies in its albedo image.
 
-use crate::error::{RelightError, Result};
+use crate::error::Result;
+use crate::frame::{check_light, Frame, FrameStats, Relight, Request};
 use crate::image_io::Image;
 use crate::select::{select, support_area, Weighting};
 use ltm_codec::container::{LtmFile, Meta};
-use ltm_codec::BandWeights;
 use ltm_codec::wavelet::row_forward;
+use ltm_codec::BandWeights;
 use ltm_codec::{ColumnDecoder, Limits};
 use rayon::prelude::*;
 use std::path::Path;
-use std::time::{Duration, Instant};
+use std::time::Instant;
 
 /// Pixel blocks of the block index: each column records where its entries
 /// cross every block boundary, so a frame can split the multiply-add into
@@ -31,8 +32,9 @@ const BLOCKS: usize = 64;
 /// Parallel tasks per thread of the multiply-add.
 const TASKS_PER_THREAD: usize = 4;
 
-/// A compressed matrix ready to relight. Immutable and `Sync`: threads share
-/// one and each keeps its own [`FrameBuffers`].
+/// A compressed matrix ready to relight with N wavelet lights (the
+/// [`Relight`] implementation for `.ltm` files). Immutable and `Sync`:
+/// threads share one and each keeps its own [`Frame`].
 pub struct Relighter {
     file: LtmFile,
     decoder: ColumnDecoder,
@@ -53,36 +55,14 @@ pub struct Relighter {
     ones: Vec<f32>,
 }
 
-/// Reusable per-thread frame state: no allocation of image or file size per
-/// frame once created.
-pub struct FrameBuffers {
+/// The wavelet relighter's part of a [`Frame`]: sized for one file.
+pub(crate) struct WaveletScratch {
     light: Vec<[f32; 3]>,
     plane: Vec<f32>,
     work: Vec<f32>,
     planes: [Vec<f32>; 3],
     selected: Vec<u32>,
-    scratch: Vec<(f32, u32)>,
-    /// The last frame's image.
-    pub image: Image,
-}
-
-/// Where a frame's time went.
-#[derive(Clone, Copy, Debug, Default)]
-pub struct FrameStats {
-    pub light_transform: Duration,
-    pub selection: Duration,
-    pub multiply: Duration,
-    pub inverse: Duration,
-    /// Lights used (≤ N).
-    pub lights: usize,
-    /// Coefficients multiply-added.
-    pub nonzeros: u64,
-}
-
-impl FrameStats {
-    pub fn total(&self) -> Duration {
-        self.light_transform + self.selection + self.multiply + self.inverse
-    }
+    order: Vec<(f32, u32)>,
 }
 
 impl Relighter {
@@ -171,66 +151,47 @@ impl Relighter {
         &self.file
     }
 
-    /// Number of lights (cubemap texels), the largest useful N.
-    pub fn lights(&self) -> usize {
-        self.depths.len()
-    }
-
     /// Coefficients held in memory.
     pub fn nonzeros(&self) -> usize {
         self.positions.len()
     }
 
-    /// Buffers for [`Relighter::relight`].
-    pub fn buffers(&self) -> FrameBuffers {
+    /// Buffers for one frame of this file.
+    fn scratch(&self) -> WaveletScratch {
         let dims = self.meta().dims;
         let p = dims.pixels();
         let n = dims.face_res() as usize;
-        FrameBuffers {
+        WaveletScratch {
             light: vec![[0.0; 3]; dims.lights()],
             plane: vec![0.0; dims.lights()],
             work: vec![0.0; p.max(n * n)],
             planes: [vec![0.0; p], vec![0.0; p], vec![0.0; p]],
             selected: Vec::with_capacity(dims.lights()),
-            scratch: Vec::with_capacity(dims.lights()),
-            image: Image {
-                width: dims.width() as usize,
-                height: dims.height() as usize,
-                data: vec![[0.0; 3]; p],
-            },
+            order: Vec::with_capacity(dims.lights()),
         }
     }
 
-    fn check_light(&self, light: &[[f32; 3]]) -> Result<()> {
-        if light.len() != self.lights() {
-            return Err(RelightError::OutOfRange {
-                what: "cubemap lighting texels",
-                value: light.len().to_string(),
-                valid: format!(
-                    "{} (6·{}² for this file)",
-                    self.lights(),
-                    self.meta().dims.face_res()
-                ),
-            });
-        }
-        if let Some(j) = light.iter().position(|c| c.iter().any(|v| !v.is_finite())) {
-            return Err(RelightError::Invalid(format!(
-                "cubemap lighting texel {j} is NaN or infinite"
-            )));
-        }
-        Ok(())
+    /// Whether `s` was made by [`Relighter::scratch`] for a file of this
+    /// size.
+    fn fits(&self, s: &WaveletScratch) -> bool {
+        let dims = self.meta().dims;
+        let (p, n) = (dims.pixels(), dims.face_res() as usize);
+        s.light.len() == dims.lights()
+            && s.plane.len() == dims.lights()
+            && s.work.len() == p.max(n * n)
+            && s.planes.iter().all(|plane| plane.len() == p)
     }
 
-    /// Row transform of the cubemap lighting into `bufs.light`.
-    fn transform_light(&self, light: &[[f32; 3]], bufs: &mut FrameBuffers) -> Result<()> {
+    /// Row transform of the cubemap lighting into `s.light`.
+    fn transform_light(&self, light: &[[f32; 3]], s: &mut WaveletScratch) -> Result<()> {
         let meta = self.meta();
         let n = meta.dims.face_res() as usize;
         for c in 0..3 {
-            for (v, l) in bufs.plane.iter_mut().zip(light) {
+            for (v, l) in s.plane.iter_mut().zip(light) {
                 *v = l[c];
             }
-            row_forward(meta.row_filter, n, &mut bufs.plane, &mut bufs.work)?;
-            for (l, v) in bufs.light.iter_mut().zip(&bufs.plane) {
+            row_forward(meta.row_filter, n, &mut s.plane, &mut s.work)?;
+            for (l, v) in s.light.iter_mut().zip(&s.plane) {
                 l[c] = *v;
             }
         }
@@ -245,71 +206,54 @@ impl Relighter {
         }
     }
 
-    /// Relights with the `terms` most important wavelet lights (all of them
-    /// when `terms` ≥ the number of lights): `light` is the mean radiance of
-    /// each cubemap texel (6·n² RGB values). The image lands in
-    /// `bufs.image`.
-    pub fn relight(
-        &self,
-        light: &[[f32; 3]],
-        terms: usize,
-        weighting: Weighting,
-        bufs: &mut FrameBuffers,
-    ) -> Result<FrameStats> {
-        self.check_light(light)?;
-        let mut stats = FrameStats::default();
-        let t0 = Instant::now();
-        self.transform_light(light, bufs)?;
-        let t1 = Instant::now();
-        select(
-            &bufs.light,
-            self.priority_scale(weighting),
-            terms,
-            &mut bufs.scratch,
-            &mut bufs.selected,
-        );
-        // Deepest columns first (eq. 8).
-        let depths = &self.depths;
-        bufs.selected
-            .sort_unstable_by_key(|&j| (std::cmp::Reverse(depths[j as usize]), j));
-        stats.lights = bufs.selected.len();
-        let t2 = Instant::now();
-        stats.light_transform = t1 - t0;
-        stats.selection = t2 - t1;
+    /// Checks the lighting and row-transforms it into `s.light`.
+    fn prepare_light(&self, light: &[[f32; 3]], s: &mut WaveletScratch) -> Result<()> {
+        check_light(light, self.lights(), self.meta().dims.face_res())?;
+        self.transform_light(light, s)
+    }
 
+    /// Selects the requested lights from `s.light` into `s.selected`.
+    fn select_lights(&self, request: &Request, s: &mut WaveletScratch) {
+        select(
+            &s.light,
+            self.priority_scale(request.weighting),
+            request.terms,
+            &mut s.order,
+            &mut s.selected,
+        );
+    }
+
+    /// Eq. 8 on the selected lights (sorted deepest first): each depth
+    /// group is multiply-added into the planes, then one inverse column step
+    /// brings the planes a level up, to depth 0.
+    fn multiply_levels(&self, s: &mut WaveletScratch, stats: &mut FrameStats) -> Result<()> {
         let channels = self.meta().dims.channels as usize;
-        for p in bufs.planes.iter_mut() {
+        for p in s.planes.iter_mut() {
             p.fill(0.0);
         }
-        let top = bufs
-            .selected
-            .first()
-            .map_or(0, |&j| self.depths[j as usize]);
+        let top = s.selected.first().map_or(0, |&j| self.depths[j as usize]);
         let mut next = 0;
         for depth in (0..=top).rev() {
             let tm = Instant::now();
             let start = next;
-            while next < bufs.selected.len() && self.depths[bufs.selected[next] as usize] == depth {
+            while next < s.selected.len() && self.depths[s.selected[next] as usize] == depth {
                 next += 1;
             }
-            let group = &bufs.selected[start..next];
+            let group = &s.selected[start..next];
             if !group.is_empty() {
-                stats.nonzeros += self.multiply_add(group, &bufs.light, channels, &mut bufs.planes);
+                stats.nonzeros += self.multiply_add(group, &s.light, channels, &mut s.planes);
             }
             let ti = Instant::now();
             stats.multiply += ti - tm;
             if depth > 0 {
-                for plane in bufs.planes.iter_mut() {
+                for plane in s.planes.iter_mut() {
                     self.decoder
-                        .inverse_step(depth as u32, plane, &mut bufs.work)?;
+                        .inverse_step(depth as u32, plane, &mut s.work)?;
                 }
             }
             stats.inverse += ti.elapsed();
         }
-        let ti = Instant::now();
-        self.finish_image(&bufs.planes, &mut bufs.image);
-        stats.inverse += ti.elapsed();
-        Ok(stats)
+        Ok(())
     }
 
     /// Multiply-adds the columns of `group` into the planes, in parallel over
@@ -391,33 +335,21 @@ impl Relighter {
     /// The same image by eq. 3: every chosen column fully decoded with the
     /// codec's column decoder and summed — the slow reference the
     /// level-recursive path is tested against.
-    pub fn relight_naive(
-        &self,
-        light: &[[f32; 3]],
-        terms: usize,
-        weighting: Weighting,
-    ) -> Result<Image> {
-        self.check_light(light)?;
-        let mut bufs = self.buffers();
-        self.transform_light(light, &mut bufs)?;
-        select(
-            &bufs.light,
-            self.priority_scale(weighting),
-            terms,
-            &mut bufs.scratch,
-            &mut bufs.selected,
-        );
+    pub fn relight_naive(&self, light: &[[f32; 3]], request: &Request) -> Result<Image> {
+        let mut s = self.scratch();
+        self.prepare_light(light, &mut s)?;
+        self.select_lights(request, &mut s);
         let channels = self.meta().dims.channels as usize;
         let p = self.meta().dims.pixels();
         let mut plane = vec![0.0f32; p];
         let mut acc = [vec![0.0f64; p], vec![0.0f64; p], vec![0.0f64; p]];
-        for &j in &bufs.selected {
+        for &j in &s.selected {
             let col = self.file.column(j as usize)?;
             for fc in 0..channels {
-                self.decoder.decode(&col, fc, &mut plane, &mut bufs.work)?;
+                self.decoder.decode(&col, fc, &mut plane, &mut s.work)?;
                 for (c, plane_acc) in acc.iter_mut().enumerate() {
                     if channels == 1 || c == fc {
-                        let l = bufs.light[j as usize][c] as f64;
+                        let l = s.light[j as usize][c] as f64;
                         for (a, v) in plane_acc.iter_mut().zip(&plane) {
                             *a += l * *v as f64;
                         }
@@ -426,8 +358,71 @@ impl Relighter {
             }
         }
         let planes = acc.map(|a| a.into_iter().map(|v| v as f32).collect::<Vec<f32>>());
-        self.finish_image(&planes, &mut bufs.image);
-        Ok(bufs.image)
+        let (w, h) = self.size();
+        let mut image = Image::new(w, h);
+        self.finish_image(&planes, &mut image);
+        Ok(image)
+    }
+}
+
+impl Relight for Relighter {
+    /// The file's cubemap texels (its columns).
+    fn lights(&self) -> usize {
+        self.depths.len()
+    }
+
+    fn size(&self) -> (usize, usize) {
+        let dims = self.meta().dims;
+        (dims.width() as usize, dims.height() as usize)
+    }
+
+    /// Every light: larger requests are clamped to it.
+    fn max_terms(&self) -> usize {
+        self.lights()
+    }
+
+    fn frame(&self) -> Frame {
+        let (w, h) = self.size();
+        Frame {
+            image: Image::new(w, h),
+            wavelet: Some(self.scratch()),
+            ..Frame::default()
+        }
+    }
+
+    /// Relights with the `request.terms` most important wavelet lights under
+    /// `request.weighting` (all of them when `terms` ≥ the number of
+    /// lights), by eq. 8 of Cheslack-Postava et al. 2007.
+    fn relight(
+        &self,
+        light: &[[f32; 3]],
+        request: &Request,
+        frame: &mut Frame,
+    ) -> Result<FrameStats> {
+        let (w, h) = self.size();
+        frame.fit_image(w, h);
+        let s = match frame.wavelet.take() {
+            Some(s) if self.fits(&s) => frame.wavelet.insert(s),
+            _ => frame.wavelet.insert(self.scratch()),
+        };
+        let mut stats = FrameStats::default();
+        let t0 = Instant::now();
+        self.prepare_light(light, s)?;
+        let t1 = Instant::now();
+        self.select_lights(request, s);
+        // Deepest columns first (eq. 8).
+        let depths = &self.depths;
+        s.selected
+            .sort_unstable_by_key(|&j| (std::cmp::Reverse(depths[j as usize]), j));
+        stats.lights = s.selected.len();
+        let t2 = Instant::now();
+        stats.light_transform = t1 - t0;
+        stats.selection = t2 - t1;
+        self.multiply_levels(s, &mut stats)?;
+        let ti = Instant::now();
+        self.finish_image(&s.planes, &mut frame.image);
+        stats.inverse += ti.elapsed();
+        Ok(stats)
     }
 }
 

@@ -6,9 +6,13 @@ use glam::{DVec3, Vec3};
 use ltm_codec::cubemap::{
     direction_texel, face_point_direction, latlong_uv, texel_count, texel_solid_angle,
 };
-use ltm_relight::{EnvMap, Image, RelightError, Rotation};
+#[cfg(feature = "exr")]
+use ltm_relight::Image;
+use ltm_relight::{EnvMap, RelightError, Rotation};
+#[cfg(feature = "exr")]
 use std::path::{Path, PathBuf};
 
+#[cfg(feature = "exr")]
 fn asset(name: &str) -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR"))
         .join("../assets/envmaps")
@@ -190,6 +194,7 @@ fn resampling_matches_supersampled_texel_means() {
 }
 
 #[test]
+#[cfg(feature = "exr")]
 fn power_is_conserved_for_the_bundled_maps() {
     for name in ["courtyard.exr", "sunset.exr", "interior.exr"] {
         let env = EnvMap::load(&asset(name)).unwrap();
@@ -209,6 +214,7 @@ fn power_is_conserved_for_the_bundled_maps() {
 }
 
 #[test]
+#[cfg(feature = "exr")]
 fn bundled_map_loads_with_negatives_clamped() {
     // courtyard.exr stores small negative samples (lossy DWAB compression).
     let raw = Image::read_exr(&asset("courtyard.exr")).unwrap();
@@ -311,6 +317,7 @@ fn yaw_moves_a_light_from_z_to_x() {
 }
 
 #[test]
+#[cfg(feature = "exr")]
 fn full_turn_of_yaw_is_the_identity() {
     let env = EnvMap::load(&asset("sunset.exr")).unwrap();
     for n in [4usize, 16] {
@@ -424,6 +431,7 @@ fn bad_maps_are_errors() {
 
 /// Writes an RGB f32 EXR with any values (the product's writer refuses
 /// non-finite ones).
+#[cfg(all(feature = "exr", feature = "hdr"))]
 fn write_raw_exr(path: &Path, w: usize, h: usize, f: impl Fn(usize, usize) -> [f32; 3] + Sync) {
     exr::prelude::write_rgb_file(path, w, h, |x, y| {
         let p = f(x, y);
@@ -433,6 +441,7 @@ fn write_raw_exr(path: &Path, w: usize, h: usize, f: impl Fn(usize, usize) -> [f
 }
 
 #[test]
+#[cfg(all(feature = "exr", feature = "hdr"))]
 fn bad_files_are_errors() {
     let dir = tempfile::tempdir().unwrap();
     let p = |name: &str| dir.path().join(name);
@@ -488,6 +497,7 @@ fn bad_files_are_errors() {
 }
 
 #[test]
+#[cfg(feature = "hdr")]
 fn radiance_hdr_loads() {
     let dir = tempfile::tempdir().unwrap();
     let (w, h) = (64usize, 32usize);

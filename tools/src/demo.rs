@@ -11,7 +11,9 @@ use ltm_bake::{bake, BakeOptions, Overrides, Scene, SceneDesc};
 use ltm_codec::compress::{compress, CodeOptions, Target};
 use ltm_codec::container::Mode;
 use ltm_codec::RawStore;
-use ltm_relight::{reference, relative_l2, EnvMap, Image, Relighter, Rotation, Weighting};
+use ltm_relight::{
+    reference, relative_l2, EnvMap, Image, Relight, Relighter, Request, Rotation, Weighting,
+};
 use std::fmt::Write as _;
 use std::hash::{Hash, Hasher};
 use std::path::{Path, PathBuf};
@@ -213,12 +215,16 @@ pub fn run(a: DemoArgs) -> Result<()> {
         exact.write_png(&out(&format!("{name}-reference.png")), ev)?;
         let mut tiles = vec![exact];
         for (mode, relighter) in &relighters {
-            let mut bufs = relighter.buffers();
+            let mut bufs = relighter.frame();
             for &n in &n_values {
                 let mut times = Vec::new();
                 let mut stats = Default::default();
                 for _ in 0..15 {
-                    stats = relighter.relight(&light, n, Weighting::Transport, &mut bufs)?;
+                    let request = Request {
+                        terms: n,
+                        weighting: Weighting::Transport,
+                    };
+                    stats = relighter.relight(&light, &request, &mut bufs)?;
                     times.push(stats.total().as_secs_f64());
                 }
                 times.sort_by(f64::total_cmp);

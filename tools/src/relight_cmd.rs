@@ -2,7 +2,7 @@
 
 use anyhow::{bail, Context, Result};
 use clap::Args;
-use ltm_relight::{relative_l2, EnvMap, Image, Relighter, Rotation, Weighting};
+use ltm_relight::{relative_l2, EnvMap, Image, Relight, Relighter, Request, Rotation, Weighting};
 use std::path::PathBuf;
 use std::str::FromStr;
 
@@ -81,11 +81,15 @@ pub fn run(a: RelightArgs) -> Result<()> {
     if a.frames == 0 {
         bail!("--frames must be at least 1");
     }
-    let mut bufs = relighter.buffers();
+    let mut bufs = relighter.frame();
+    let request = Request {
+        terms: a.terms.0,
+        weighting: a.weighting,
+    };
     let mut times = Vec::with_capacity(a.frames);
     let mut stats = Default::default();
     for _ in 0..a.frames {
-        stats = relighter.relight(&light, a.terms.0, a.weighting, &mut bufs)?;
+        stats = relighter.relight(&light, &request, &mut bufs)?;
         times.push(stats.total());
     }
     times.sort();

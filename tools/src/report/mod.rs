@@ -19,7 +19,8 @@ use ltm_bake::{Overrides, SceneDesc};
 use ltm_codec::wavelet::row_level;
 use ltm_codec::{CodeOptions, Mode, RawStore, Target, TransposeOptions, Transposed};
 use ltm_relight::{
-    reference, relative_l2, EnvMap, FrameBuffers, Image, Relighter, Rotation, Weighting,
+    reference, relative_l2, BasisRelighter, EnvMap, Frame, Image, Relight, Relighter, Request,
+    Rotation, Weighting,
 };
 use serde::{Deserialize, Serialize};
 use std::path::PathBuf;
@@ -299,7 +300,7 @@ fn median(mut v: Vec<f64>) -> f64 {
 /// and its error.
 fn measure(
     relighter: &Relighter,
-    bufs: &mut FrameBuffers,
+    bufs: &mut Frame,
     env: &Env,
     n: usize,
     weighting: Weighting,
@@ -307,8 +308,12 @@ fn measure(
 ) -> Result<RelightPoint> {
     let mut times = Vec::with_capacity(frames);
     let mut stats = Default::default();
+    let request = Request {
+        terms: n,
+        weighting,
+    };
     for _ in 0..frames {
-        stats = relighter.relight(&env.light, n, weighting, bufs)?;
+        stats = relighter.relight(&env.light, &request, bufs)?;
         times.push(stats.total().as_secs_f64());
     }
     let stats: ltm_relight::FrameStats = stats;
@@ -539,7 +544,7 @@ pub fn run(a: ReportArgs) -> Result<()> {
         let code_s = t.elapsed().as_secs_f64();
         let quality_pair = bits == s.quality_bits && err == s.quality && mode != Mode::FourD;
         let relighter = Relighter::open(&path)?;
-        let mut bufs = relighter.buffers();
+        let mut bufs = relighter.frame();
         let mut relight = Vec::new();
         let weightings: &[Weighting] = if quality_pair {
             &[Weighting::Transport, Weighting::Unweighted, Weighting::Area]
@@ -586,17 +591,23 @@ pub fn run(a: ReportArgs) -> Result<()> {
     eprintln!("baselines: zstd of the raw matrix, PCA, spherical harmonics");
     let mut base_points = vec![baselines::zstd_raw(&raw, s.zstd_raw_level)?];
     base_points.extend(baselines::pca(&raw, &s.pca_ranks, 0x6c74_6d01)?);
-    let sh = baselines::sh(&raw, &s.sh_orders)?;
-    base_points.extend(sh.points());
+    let (sh_points, sh) = baselines::sh(&raw, &s.sh_orders)?;
+    base_points.extend(sh_points);
+    let sh = BasisRelighter::sh(sh, &raw)?;
+    let mut frame = sh.frame();
     let mut sh_relight = Vec::new();
     for env in &envs {
         for &order in &s.sh_orders {
-            let image = sh.relight(&env.light, order)?;
+            let request = Request {
+                terms: order,
+                weighting: Weighting::Transport,
+            };
+            sh.relight(&env.light, &request, &mut frame)?;
             sh_relight.push(ShRelightPoint {
                 env: env.name.clone(),
                 order,
                 coefficients: order * order,
-                relit_error: relative_l2(&image, &env.exact)?,
+                relit_error: relative_l2(&frame.image, &env.exact)?,
             });
         }
     }

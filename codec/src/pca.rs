@@ -1,0 +1,467 @@
+//! Principal components of the transport rows: the light basis of
+//! Eigentransport (Nowrouzezahrai, Simari, Kalogerakis and Fiume 2007,
+//! "Eigentransport for efficient and accurate all-frequency relighting"),
+//! in which the principal components of the transport functions form an
+//! orthonormal light basis shared by every pixel, a frame projects the
+//! lighting on it once and each pixel is a short dot product.
+//!
+//! The fit is the best rank-`K` factorisation `T ≈ T·V·Vᵀ` of the matrix
+//! itself (an uncentered PCA: Eigentransport's eq. 2 also subtracts the
+//! mean transport row, which this fit does not). Rows are (pixel, channel)
+//! pairs, so one light basis `V` (`M × K`) serves all channels. `V` comes
+//! from the randomized SVD of Halko, Martinsson and Tropp 2011 ("Finding
+//! structure with randomness", SIAM Review 53(2)): a Gaussian sketch of the
+//! row space, power iterations with re-orthonormalisation and a
+//! Rayleigh–Ritz step, each a pass over the raw store in blocks of rows
+//! (never whole in memory); the last pass is in f64.
+
+use crate::dims::Dims;
+use crate::error::{Error, Result};
+use crate::raw::RawStore;
+use crate::rows::{block_norm2, for_each_block, mix64, relative, SplitMix64, CHUNK_VALUES};
+use faer::linalg::matmul::matmul;
+use faer::{Accum, Mat, MatRef, Par, Side};
+use rayon::prelude::*;
+
+/// Extra columns of the randomized sketch beyond the rank.
+const OVERSAMPLING: usize = 10;
+/// Power iterations of the randomized SVD.
+const POWER_ITERATIONS: usize = 2;
+
+/// The first `K` principal light vectors of a transport matrix (rows =
+/// (pixel, channel) pairs, uncentered) and the error of every rank up to
+/// `K`. See the [module documentation](self).
+#[derive(Clone, Debug)]
+pub struct PcaBasis {
+    dims: Dims,
+    rank: usize,
+    /// Vector `i` is `vectors[i·M .. (i+1)·M]`.
+    vectors: Vec<f64>,
+    rank_errors: Vec<f64>,
+}
+
+impl PcaBasis {
+    /// Fits the first `rank` principal light vectors of `raw` (clamped to
+    /// `min(P·C, M)`) by a randomized SVD with a Gaussian sketch of width
+    /// `rank + 10` drawn from `seed`, two power iterations and a
+    /// Rayleigh–Ritz step: four passes over the store, whose block
+    /// checksums are verified on the first. Rows flagged all zero are
+    /// skipped. The same store, rank and seed give the same basis.
+    pub fn fit(raw: &RawStore, rank: usize, seed: u64) -> Result<PcaBasis> {
+        fit_with(raw, rank, seed, CHUNK_VALUES)
+    }
+
+    /// The dimensions of the matrix fitted.
+    pub fn dims(&self) -> Dims {
+        self.dims
+    }
+
+    /// `K`, the number of basis vectors.
+    pub fn rank(&self) -> usize {
+        self.rank
+    }
+
+    /// The orthonormal light vectors `v_i` by decreasing captured energy,
+    /// `K × M` row-major: vector `i` is `vectors()[i·M .. (i+1)·M]`.
+    pub fn vectors(&self) -> &[f64] {
+        &self.vectors
+    }
+
+    /// The rank–error curve: entry `k` (`0 ≤ k ≤ K`) is the relative
+    /// Frobenius error `‖T − T·V_k·V_kᵀ‖_F / ‖T‖_F` of the first `k`
+    /// vectors, computed in f64 over the raw rows (0 for an all-zero
+    /// matrix). Entry 0 is 1 and the curve does not increase.
+    pub fn rank_errors(&self) -> &[f64] {
+        &self.rank_errors
+    }
+
+    /// The coefficients `c_r = t_r·V` of every row `r = p·C + c` of `raw`
+    /// (a store of the fitted dimensions) on the `K` vectors, `P·C × K`
+    /// row-major, computed in f64 in one pass (checksums verified); rows
+    /// flagged all zero get zero coefficients. `T ≈ C·Vᵀ`.
+    pub fn coefficients(&self, raw: &RawStore) -> Result<Vec<f64>> {
+        let dims = raw.dims();
+        if dims != self.dims {
+            return Err(Error::Invalid(format!(
+                "PCA basis fitted to a {:?} matrix cannot project a {:?} store",
+                self.dims, dims
+            )));
+        }
+        let (m, k) = (dims.lights(), self.rank);
+        let mut out = vec![0.0f64; dims.pixels() * dims.channels as usize * k];
+        if k == 0 {
+            return Ok(out);
+        }
+        let v = MatRef::from_column_major_slice(&self.vectors, m, k);
+        let mut buf: Vec<f64> = Vec::new();
+        for_each_block(raw, CHUNK_VALUES, true, &mut buf, |blk| {
+            let mut c = Mat::<f64>::zeros(blk.rows.len(), k);
+            matmul(c.as_mut(), Accum::Replace, blk.a(), v, 1.0, Par::rayon(0));
+            for (i, &row) in blk.rows.iter().enumerate() {
+                for (a, o) in out[row * k..(row + 1) * k].iter_mut().enumerate() {
+                    *o = c[(i, a)];
+                }
+            }
+            Ok(())
+        })?;
+        Ok(out)
+    }
+}
+
+/// [`PcaBasis::fit`] with blocks of about `chunk_values` values.
+fn fit_with(raw: &RawStore, rank: usize, seed: u64, chunk_values: usize) -> Result<PcaBasis> {
+    let dims = raw.dims();
+    let m = dims.lights();
+    let full = (dims.pixels() * dims.channels as usize).min(m);
+    let rank = rank.min(full);
+    let l = (rank + OVERSAMPLING).min(full);
+    let (z, norm2) = sketch(raw, l, seed, chunk_values)?;
+    if norm2 == 0.0 || l == 0 {
+        return Ok(PcaBasis {
+            dims,
+            rank,
+            vectors: vec![0.0; rank * m],
+            rank_errors: vec![0.0; rank + 1],
+        });
+    }
+    let mut q = orthonormal_columns(&z);
+    // Power iterations Z = Aᵀ·A·Q in f32, with A scaled by a power of two
+    // near 1/‖A‖ so that the squared magnitudes stay in range.
+    let scale = 2f32.powi(-(0.5 * norm2.log2()).round().clamp(-120.0, 120.0) as i32);
+    for _ in 0..POWER_ITERATIONS {
+        q = orthonormal_columns(&power_step(raw, &q, scale, chunk_values)?);
+    }
+    let (basis, captured, norm2) = rayleigh_ritz(raw, &q, rank, chunk_values)?;
+    let mut kept = 0.0f64;
+    let mut rank_errors = vec![relative(norm2, norm2)];
+    for c in &captured {
+        kept += c;
+        rank_errors.push(relative(norm2 - kept, norm2));
+    }
+    // Column-major M × K is vector after vector.
+    let vectors = (0..rank)
+        .flat_map(|i| (0..m).map(move |j| (j, i)))
+        .map(|ij| basis[ij])
+        .collect();
+    Ok(PcaBasis {
+        dims,
+        rank,
+        vectors,
+        rank_errors,
+    })
+}
+
+/// The sketch of the row space `Z = Aᵀ·G` (`M × l`, `G` Gaussian, rows ×
+/// `l`) in one pass that verifies the store's checksums, and `‖A‖²`.
+fn sketch(raw: &RawStore, l: usize, seed: u64, chunk_values: usize) -> Result<(Mat<f32>, f64)> {
+    let mut z = Mat::<f32>::zeros(raw.dims().lights(), l);
+    let mut norm2 = 0.0f64;
+    let mut buf32: Vec<f32> = Vec::new();
+    let mut gauss: Vec<f32> = Vec::new();
+    for_each_block(raw, chunk_values, true, &mut buf32, |blk| {
+        norm2 += block_norm2(blk.data);
+        gauss.resize(blk.rows.len() * l, 0.0);
+        gauss
+            .par_chunks_mut(l.max(1))
+            .zip(blk.rows.par_iter())
+            .for_each(|(dst, &r)| gaussian_row(seed, r, dst));
+        let g = MatRef::from_row_major_slice(&gauss, blk.rows.len(), l);
+        matmul(z.as_mut(), Accum::Add, blk.at(), g, 1.0f32, Par::rayon(0));
+        Ok(())
+    })?;
+    Ok((z, norm2))
+}
+
+/// One power iteration `Z = (sA)ᵀ·(sA)·Q` in f32.
+fn power_step(raw: &RawStore, q: &Mat<f64>, scale: f32, chunk_values: usize) -> Result<Mat<f32>> {
+    let (m, l) = (q.nrows(), q.ncols());
+    let par = Par::rayon(0);
+    let q32 = Mat::<f32>::from_fn(m, l, |i, j| q[(i, j)] as f32);
+    let mut z = Mat::<f32>::zeros(m, l);
+    let mut buf32: Vec<f32> = Vec::new();
+    for_each_block(raw, chunk_values, false, &mut buf32, |blk| {
+        let mut x = Mat::<f32>::zeros(blk.rows.len(), l);
+        matmul(
+            x.as_mut(),
+            Accum::Replace,
+            blk.a(),
+            q32.as_ref(),
+            scale,
+            par,
+        );
+        matmul(z.as_mut(), Accum::Add, blk.at(), x.as_ref(), scale, par);
+        Ok(())
+    })?;
+    Ok(z)
+}
+
+/// Rayleigh–Ritz in f64: `C = A·Q` (coefficients on the orthonormal `Q`),
+/// `H = CᵀC`; its eigenvectors `W` give `V = Q·W`, and the energy row `r`
+/// keeps on `v_i` is `(c_r·w_i)²`, so `Σ_r ‖t_r − Σ_{i<k}(t_r·v_i)v_i‖²`
+/// equals `‖A‖² − Σ_{i<k} w_iᵀ·H·w_i`. Returns `V` (`M × k`), the energy
+/// captured by each vector and `‖A‖²`.
+fn rayleigh_ritz(
+    raw: &RawStore,
+    q: &Mat<f64>,
+    k: usize,
+    chunk_values: usize,
+) -> Result<(Mat<f64>, Vec<f64>, f64)> {
+    let l = q.ncols();
+    let par = Par::rayon(0);
+    let mut h = Mat::<f64>::zeros(l, l);
+    let mut norm2 = 0.0f64;
+    let mut buf64: Vec<f64> = Vec::new();
+    for_each_block(raw, chunk_values, false, &mut buf64, |blk| {
+        norm2 += block_norm2(blk.data);
+        let mut c = Mat::<f64>::zeros(blk.rows.len(), l);
+        matmul(c.as_mut(), Accum::Replace, blk.a(), q.as_ref(), 1.0, par);
+        matmul(h.as_mut(), Accum::Add, c.transpose(), c.as_ref(), 1.0, par);
+        Ok(())
+    })?;
+    let evd = h
+        .as_ref()
+        .self_adjoint_eigen(Side::Lower)
+        .map_err(|e| Error::Numerical {
+            what: "PCA",
+            detail: format!("eigendecomposition of the {l}×{l} Gram matrix failed: {e:?}"),
+        })?;
+    // Eigenvalues come in nondecreasing order: take them from the end.
+    let u = evd.U();
+    let w = Mat::<f64>::from_fn(l, k, |i, j| u[(i, l - 1 - j)]);
+    let mut hw = Mat::<f64>::zeros(l, k);
+    matmul(
+        hw.as_mut(),
+        Accum::Replace,
+        h.as_ref(),
+        w.as_ref(),
+        1.0,
+        par,
+    );
+    let captured = (0..k)
+        .map(|j| (0..l).map(|i| w[(i, j)] * hw[(i, j)]).sum())
+        .collect();
+    let mut basis = Mat::<f64>::zeros(q.nrows(), k);
+    matmul(
+        basis.as_mut(),
+        Accum::Replace,
+        q.as_ref(),
+        w.as_ref(),
+        1.0,
+        par,
+    );
+    Ok((basis, captured, norm2))
+}
+
+/// An orthonormal basis (f64) of the column space of `z` by Householder QR.
+fn orthonormal_columns(z: &Mat<f32>) -> Mat<f64> {
+    let z64 = Mat::<f64>::from_fn(z.nrows(), z.ncols(), |i, j| z[(i, j)] as f64);
+    z64.as_ref().qr().compute_thin_Q()
+}
+
+/// Row `row` of the Gaussian sketch matrix: a function of `(seed, row)`
+/// only, so the sketch does not depend on how rows are split into blocks.
+fn gaussian_row(seed: u64, row: usize, out: &mut [f32]) {
+    let mut rng = SplitMix64(mix64(seed ^ mix64(row as u64 ^ 0x6A09_E667_F3BC_C909)));
+    for pair in out.chunks_mut(2) {
+        let g = rng.gaussian_pair();
+        for (o, v) in pair.iter_mut().zip(g) {
+            *o = v as f32;
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::rows::testing::{dense, dims, frobenius2, write_raw};
+    use std::path::Path;
+
+    /// A rank-5 matrix with decaying singular values, plus Gaussian noise of
+    /// Frobenius norm about `noise`; every seventh pixel is zero.
+    fn low_rank_matrix(d: Dims, noise: f64) -> Vec<f32> {
+        let (p, m, c) = (d.pixels(), d.lights(), d.channels as usize);
+        let n = p * c;
+        let mut rng = SplitMix64(21);
+        let s = [1.0, 0.5, 0.25, 0.12, 0.06];
+        let u: Vec<Vec<f64>> = s
+            .iter()
+            .map(|_| {
+                (0..n)
+                    .map(|_| rng.gaussian_pair()[0] / (n as f64).sqrt())
+                    .collect()
+            })
+            .collect();
+        let v: Vec<Vec<f64>> = s
+            .iter()
+            .map(|_| {
+                (0..m)
+                    .map(|_| rng.gaussian_pair()[0] / (m as f64).sqrt())
+                    .collect()
+            })
+            .collect();
+        let mut t = vec![0.0f32; p * m * c];
+        let sigma = noise / ((n * m) as f64).sqrt();
+        for px in (0..p).filter(|px| px % 7 != 3) {
+            for ch in 0..c {
+                let r = px * c + ch;
+                for j in 0..m {
+                    let x: f64 = (0..5).map(|i| s[i] * u[i][r] * v[i][j]).sum();
+                    t[(px * m + j) * c + ch] = (x + sigma * rng.gaussian_pair()[0]) as f32;
+                }
+            }
+        }
+        t
+    }
+
+    #[test]
+    fn pca_matches_exact_svd_on_low_rank_matrix() {
+        let dir = tempfile::tempdir().unwrap();
+        let d = dims(16, 12, 4, 3);
+        let noise = 1e-3;
+        let t = low_rank_matrix(d, noise);
+        let raw = RawStore::open(&write_raw(dir.path(), "t.raw", d, &t, None, 10)).unwrap();
+        let basis = fit_with(&raw, 16, 1234, 2000).unwrap();
+        let a = dense(&raw);
+        let norm2 = frobenius2(a.as_ref());
+        let sv = a.as_ref().singular_values().unwrap();
+        let noise_rel = noise / norm2.sqrt();
+        let mut prev = f64::INFINITY;
+        assert_eq!((basis.rank(), basis.rank_errors().len()), (16, 17));
+        let ranks = [1, 2, 3, 4, 5, 6, 8, 16];
+        for &k in &ranks {
+            let error = basis.rank_errors()[k];
+            let exact = (sv[k..].iter().map(|s| s * s).sum::<f64>() / norm2).sqrt();
+            println!("rank {k}: {error} (exact {exact})");
+            assert!(error < prev, "error must decrease with the rank");
+            prev = error;
+            assert!(
+                error >= exact * (1.0 - 1e-9) && error <= exact * 1.03,
+                "rank {k}: {error} vs optimal {exact}"
+            );
+            if k >= 5 {
+                assert!(error < 1.5 * noise_rel, "rank {k}: {error}");
+            } else {
+                assert!(error > 10.0 * noise_rel, "rank {k}: {error}");
+            }
+        }
+
+        // The shortcut equals the error of the explicit reconstruction
+        // A·V_k·V_kᵀ, and V is orthonormal.
+        let m = d.lights();
+        let v = MatRef::from_column_major_slice(basis.vectors(), m, 16);
+        let mut vtv = Mat::<f64>::zeros(16, 16);
+        matmul(
+            vtv.as_mut(),
+            Accum::Replace,
+            v.transpose(),
+            v,
+            1.0,
+            Par::Seq,
+        );
+        for i in 0..16 {
+            for j in 0..16 {
+                let want = if i == j { 1.0 } else { 0.0 };
+                assert!((vtv[(i, j)] - want).abs() < 1e-12);
+            }
+        }
+        for &k in &ranks {
+            let vk = v.subcols(0, k);
+            let mut c = Mat::<f64>::zeros(a.nrows(), k);
+            matmul(c.as_mut(), Accum::Replace, a.as_ref(), vk, 1.0, Par::Seq);
+            let mut diff = a.clone();
+            matmul(
+                diff.as_mut(),
+                Accum::Add,
+                c.as_ref(),
+                vk.transpose(),
+                -1.0,
+                Par::Seq,
+            );
+            let explicit = (frobenius2(diff.as_ref()) / norm2).sqrt();
+            let error = basis.rank_errors()[k];
+            assert!(
+                (error - explicit).abs() <= 1e-6 * explicit,
+                "rank {k}: shortcut {error} vs explicit {explicit}"
+            );
+        }
+
+        // The coefficients are A·V, row by row (zero rows included).
+        let coefficients = basis.coefficients(&raw).unwrap();
+        let mut c = Mat::<f64>::zeros(a.nrows(), 16);
+        matmul(c.as_mut(), Accum::Replace, a.as_ref(), v, 1.0, Par::Seq);
+        assert_eq!(coefficients.len(), a.nrows() * 16);
+        for (i, got) in coefficients.iter().enumerate() {
+            let want = c[(i / 16, i % 16)];
+            assert!((got - want).abs() <= 1e-12, "{i}: {got} vs {want}");
+        }
+    }
+
+    #[test]
+    fn rank_clamped_and_full_rank_exact() {
+        let dir = tempfile::tempdir().unwrap();
+        let d = dims(4, 3, 2, 1); // 12 rows, 24 lights
+        let t = low_rank_matrix(d, 1.0);
+        let raw = RawStore::open(&write_raw(dir.path(), "t.raw", d, &t, None, 5)).unwrap();
+        let basis = PcaBasis::fit(&raw, 300, 7).unwrap();
+        assert_eq!(basis.rank(), 12);
+        assert_eq!(basis.vectors().len(), 12 * 24);
+        assert!((basis.rank_errors()[0] - 1.0).abs() < 1e-12);
+        assert!(basis.rank_errors()[12] < 1e-6);
+        assert!(basis.rank_errors().windows(2).all(|w| w[1] <= w[0]));
+        let empty = PcaBasis::fit(&raw, 0, 7).unwrap();
+        assert_eq!((empty.rank(), empty.rank_errors()), (0, &[1.0][..]));
+        assert_eq!(empty.coefficients(&raw).unwrap(), vec![0.0; 0]);
+
+        // An all-zero store, and a store of other dimensions.
+        let zero = vec![0.0f32; t.len()];
+        let raw0 = RawStore::open(&write_raw(dir.path(), "z.raw", d, &zero, None, 5)).unwrap();
+        let basis0 = PcaBasis::fit(&raw0, 4, 7).unwrap();
+        assert!(basis0.rank_errors().iter().all(|&e| e == 0.0));
+        let d2 = dims(3, 3, 2, 1);
+        let raw2 =
+            RawStore::open(&write_raw(dir.path(), "o.raw", d2, &t[..9 * 24], None, 5)).unwrap();
+        assert!(basis.coefficients(&raw2).is_err());
+    }
+
+    /// The randomized PCA errors against the exact ones (eigenvalues of the
+    /// dense Gram matrix AᵀA) on a real store with few lights
+    /// (`LTM_BASELINE_RAW`, default /tmp/e2e/default128.raw):
+    /// `cargo test --release -p ltm-codec pca -- --ignored --nocapture`.
+    #[test]
+    #[ignore]
+    fn pca_against_exact_on_store() {
+        let path = std::env::var("LTM_BASELINE_RAW").unwrap_or("/tmp/e2e/default128.raw".into());
+        let raw = RawStore::open(Path::new(&path)).unwrap();
+        let m = raw.dims().lights();
+        assert!(m <= 6144, "the dense Gram matrix needs few lights");
+        let mut gram = Mat::<f64>::zeros(m, m);
+        let mut norm2 = 0.0;
+        let mut buf: Vec<f64> = Vec::new();
+        for_each_block(&raw, CHUNK_VALUES, false, &mut buf, |blk| {
+            norm2 += block_norm2(blk.data);
+            matmul(
+                gram.as_mut(),
+                Accum::Add,
+                blk.at(),
+                blk.a(),
+                1.0,
+                Par::rayon(0),
+            );
+            Ok(())
+        })
+        .unwrap();
+        let mut eig = gram.as_ref().self_adjoint_eigenvalues(Side::Lower).unwrap();
+        eig.reverse();
+        let basis = PcaBasis::fit(&raw, 256, 1).unwrap();
+        for k in [1, 2, 4, 8, 16, 32, 64, 128, 256] {
+            let error = basis.rank_errors()[k];
+            let exact = (eig[k..].iter().sum::<f64>().max(0.0) / norm2).sqrt();
+            println!(
+                "rank {k:4}: randomized {error:.6}, exact {exact:.6}, ratio {:.5}",
+                error / exact
+            );
+            assert!(error >= exact * (1.0 - 1e-6));
+            assert!(error <= exact * 1.05);
+        }
+    }
+}

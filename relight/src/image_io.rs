@@ -10,12 +10,14 @@ use exr::prelude::{
 };
 #[cfg(feature = "png")]
 use image::{ExtendedColorType, ImageEncoder};
-#[cfg(feature = "png")]
-use std::fs::File;
-#[cfg(feature = "png")]
-use std::io::{BufWriter, Write};
 #[cfg(any(feature = "exr", feature = "png"))]
-use std::path::{Path, PathBuf};
+use ltm_codec::AtomicFile;
+#[cfg(any(feature = "exr", feature = "png"))]
+use std::io::BufWriter;
+#[cfg(feature = "png")]
+use std::io::Write;
+#[cfg(any(feature = "exr", feature = "png"))]
+use std::path::Path;
 
 /// Largest pixel count read from an image file (`16384 × 8192`); a larger
 /// header is refused before anything is allocated.
@@ -103,12 +105,14 @@ impl Image {
     }
 
     /// Writes a 32-bit float RGB OpenEXR file (ZIP compression, lossless).
-    /// The file is written to `PATH.tmp` and renamed to `PATH` when complete.
-    /// Refuses images holding NaN or infinite values.
+    /// The file is written under a unique temporary name and renamed to
+    /// `PATH` when complete ([`ltm_codec::AtomicFile`]). Refuses images
+    /// holding NaN or infinite values.
     #[cfg(feature = "exr")]
     pub fn write_exr(&self, path: &Path) -> Result<()> {
         self.check_writable(path)?;
-        let tmp = tmp_path(path);
+        let mut out = AtomicFile::create(path)?;
+        let tmp = out.tmp_path().to_path_buf();
         let width = self.width;
         let channels = SpecificChannels::rgb(|pos: Vec2<usize>| {
             let p = self.data[pos.y() * width + pos.x()];
@@ -122,9 +126,9 @@ impl Image {
         );
         ExrImage::from_layer(layer)
             .write()
-            .to_file(&tmp)
+            .to_buffered(BufWriter::new(&mut out))
             .map_err(|e| exr_error(&tmp, e))?;
-        rename(&tmp, path)
+        Ok(out.commit()?)
     }
 
     /// Writes an 8-bit sRGB PNG: each value is multiplied by `2^exposure_ev`,
@@ -152,23 +156,15 @@ impl Image {
             .iter()
             .flat_map(|p| p.map(|v| srgb_8bit(v * scale)))
             .collect();
-        let tmp = tmp_path(path);
-        let result = (|| {
-            let file = File::create(&tmp).map_err(|e| RelightError::io(&tmp, e))?;
-            let mut out = BufWriter::new(file);
-            image::codecs::png::PngEncoder::new(&mut out)
-                .write_image(&bytes, w, h, ExtendedColorType::Rgb8)
-                .map_err(|e| RelightError::image(&tmp, e))?;
-            out.flush().map_err(|e| RelightError::io(&tmp, e))?;
-            out.get_ref()
-                .sync_all()
-                .map_err(|e| RelightError::io(&tmp, e))
-        })();
-        if let Err(e) = result {
-            let _ = std::fs::remove_file(&tmp);
-            return Err(e);
-        }
-        rename(&tmp, path)
+        let mut file = AtomicFile::create(path)?;
+        let tmp = file.tmp_path().to_path_buf();
+        let mut out = BufWriter::new(&mut file);
+        image::codecs::png::PngEncoder::new(&mut out)
+            .write_image(&bytes, w, h, ExtendedColorType::Rgb8)
+            .map_err(|e| RelightError::image(&tmp, e))?;
+        out.flush().map_err(|e| RelightError::io(&tmp, e))?;
+        drop(out);
+        Ok(file.commit()?)
     }
 
     /// Reads the first layer with R, G and B channels of an OpenEXR file,
@@ -226,22 +222,6 @@ fn srgb_8bit(v: f32) -> u8 {
         1.055 * v.powf(1.0 / 2.4) - 0.055
     };
     (e * 255.0 + 0.5) as u8
-}
-
-/// `PATH.tmp`: where writers put a file before renaming it into place.
-#[cfg(any(feature = "exr", feature = "png"))]
-fn tmp_path(path: &Path) -> PathBuf {
-    let mut s = path.as_os_str().to_owned();
-    s.push(".tmp");
-    PathBuf::from(s)
-}
-
-#[cfg(any(feature = "exr", feature = "png"))]
-fn rename(tmp: &Path, path: &Path) -> Result<()> {
-    std::fs::rename(tmp, path).map_err(|e| {
-        let _ = std::fs::remove_file(tmp);
-        RelightError::io(path, e)
-    })
 }
 
 /// Maps an exr error to ours: operating-system failures keep their

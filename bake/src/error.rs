@@ -9,7 +9,7 @@ use std::path::PathBuf;
 #[non_exhaustive]
 pub enum BakeError {
     /// Reading a scene file failed (missing, unreadable).
-    #[error("{path}: {error}")]
+    #[error("{path}")]
     Io {
         /// The file.
         path: PathBuf,
@@ -19,7 +19,7 @@ pub enum BakeError {
     },
     /// Reading a mesh file failed (missing, unreadable); `field` names the
     /// scene entry, e.g. `meshes[0].path`.
-    #[error("{origin}: {field}: cannot read {path}: {error}")]
+    #[error("{origin}: {field}: cannot read {path}")]
     MeshIo {
         origin: String,
         field: String,

@@ -29,7 +29,7 @@ pub enum Error {
         need: usize,
     },
     /// Reading or writing a file failed.
-    #[error("{path}: {error}")]
+    #[error("{path}")]
     Io {
         /// The file.
         path: PathBuf,

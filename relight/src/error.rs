@@ -13,7 +13,7 @@ pub enum RelightError {
     #[error(transparent)]
     Codec(#[from] ltm_codec::Error),
     /// Reading or writing a file failed at the operating-system level.
-    #[error("{path}: {error}")]
+    #[error("{path}")]
     Io {
         /// The file.
         path: PathBuf,

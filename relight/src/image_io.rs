@@ -228,9 +228,17 @@ fn srgb_8bit(v: f32) -> u8 {
 /// `io::Error`, everything else is a decode/encode failure.
 #[cfg(feature = "exr")]
 fn exr_error(path: &Path, e: exr::error::Error) -> RelightError {
+    use std::io::ErrorKind::{IsADirectory, NotFound, PermissionDenied};
     match e {
-        exr::error::Error::Io(io) if io.kind() != std::io::ErrorKind::UnexpectedEof => {
+        exr::error::Error::Io(io)
+            if matches!(io.kind(), NotFound | PermissionDenied | IsADirectory) =>
+        {
             RelightError::io(path, io)
+        }
+        // Any other failure while reading is the file's fault (offsets or
+        // sizes that point outside it), whatever the system called it.
+        exr::error::Error::Io(io) => {
+            RelightError::image(path, format!("OpenEXR: corrupt or truncated file ({io})"))
         }
         other => RelightError::image(path, format!("OpenEXR: {other}")),
     }

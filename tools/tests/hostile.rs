@@ -355,3 +355,76 @@ fn a_folder_given_as_a_file_is_named_as_such() {
     let stderr = String::from_utf8_lossy(&raw.stderr);
     assert!(stderr.contains("folder"), "{stderr}");
 }
+
+/// A tiny, valid `.ltm` that claims 8192×8192 pixels and 6·2² lights, with
+/// every column empty: a few hundred bytes that would decode to 6.4 GB.
+fn huge_claim(dir: &Path) -> PathBuf {
+    use ltm_codec::container::{EncodedColumn, LtmWriter, Meta, Mode, SparseColumn};
+    use ltm_codec::{Dims, Filter};
+    let meta = Meta {
+        dims: Dims::image(8192, 8192, 2, 1),
+        mode: Mode::TwoD,
+        row_filter: Filter::Haar,
+        col_filter: Filter::LeGall53,
+        bits: 10,
+        seed: 0,
+        target_error: 0.01,
+        achieved_error: 0.0,
+        terms: 0,
+        norm: 1.0,
+    };
+    let path = dir.join("huge.ltm");
+    let mut w = LtmWriter::create(&path, meta, None).unwrap();
+    for _ in 0..24 {
+        w.push_column(EncodedColumn::new(&SparseColumn::default(), 1, 3))
+            .unwrap();
+    }
+    w.finish(0.0).unwrap();
+    assert!(std::fs::metadata(&path).unwrap().len() < 2000);
+    path
+}
+
+#[test]
+fn allocations_sized_by_a_file_are_bounded_by_the_memory_limit() {
+    let dir = tempfile::tempdir().unwrap();
+    let huge = huge_claim(dir.path());
+    let h = huge.to_str().unwrap();
+    let npy = dir.path().join("x.npy");
+    let exr = dir.path().join("x.exr");
+    let env = assets().join("envmaps/sunset.exr");
+    // Exit code 1 for a refused file, 2 for a bad command line.
+    let check = |args: &[&str], needle: &str| {
+        let out = ltm(args);
+        let stderr = String::from_utf8_lossy(&out.stderr);
+        let code = if needle == "out of range" { 2 } else { 1 };
+        assert_eq!(out.status.code(), Some(code), "{args:?}: {stderr}");
+        assert!(stderr.contains(needle), "{args:?}: {stderr}");
+    };
+    // 8192²·24·4 bytes = 6 GiB: over the default limit of 4 GiB.
+    check(
+        &["export", h, "-o", npy.to_str().unwrap()],
+        "needs 6442450944 bytes",
+    );
+    check(
+        &[
+            "relight",
+            h,
+            "--env",
+            env.to_str().unwrap(),
+            "-o",
+            exr.to_str().unwrap(),
+            "--max-memory",
+            "64M",
+        ],
+        "more than the limit of 67108864 bytes",
+    );
+    check(&["inspect", h, "--max-memory", "12"], "out of range");
+    assert!(!npy.exists() && !exr.exists());
+    // Within the limit the same file opens.
+    let out = ltm(&["inspect", h]);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+}

@@ -27,8 +27,11 @@ pub const MAX_READ_PIXELS: usize = 1 << 27;
 /// `data[y·width + x]`, the same order as the rows of the transport matrix.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Image {
+    /// Width in pixels.
     pub width: usize,
+    /// Height in pixels.
     pub height: usize,
+    /// `width·height` linear RGB pixels, row-major from the top.
     pub data: Vec<[f32; 3]>,
 }
 

@@ -18,6 +18,7 @@ pub enum Weighting {
 }
 
 impl Weighting {
+    /// The rule's name on the command line and in reports.
     pub fn name(self) -> &'static str {
         match self {
             Weighting::Unweighted => "unweighted",

@@ -88,6 +88,24 @@ pub(crate) fn env_maps(assets: &Path) -> Result<Vec<PathBuf>> {
     Ok(maps)
 }
 
+/// Loads every map, named by its file stem (names must be distinct: they
+/// name the outputs). Run before any long work, so that a bad map fails
+/// first.
+pub(crate) fn load_maps(paths: &[PathBuf]) -> Result<Vec<(String, EnvMap)>> {
+    let mut maps: Vec<(String, EnvMap)> = Vec::with_capacity(paths.len());
+    for path in paths {
+        let name = path
+            .file_stem()
+            .map_or("map".into(), |s| s.to_string_lossy().into_owned());
+        if maps.iter().any(|(n, _)| *n == name) {
+            bail!("two environment maps are named {name}: give maps distinct file names");
+        }
+        let map = EnvMap::load(path).with_context(|| format!("loading {}", path.display()))?;
+        maps.push((name, map));
+    }
+    Ok(maps)
+}
+
 /// Bakes `desc` into `dir/{label}-{key}.raw` unless a complete store is
 /// already there, and returns its path. The key hashes the whole description
 /// (meshes, materials, camera, sizes), so an edited or different scene is
@@ -149,6 +167,14 @@ fn compress_2d_to_size(raw: &RawStore, out: &Path, bits: u32, bytes: u64) -> Res
 
 pub fn run(a: DemoArgs) -> Result<()> {
     let assets = assets_dir(a.assets)?;
+    // Everything that can fail is checked before the bake.
+    let opts = CodeOptions {
+        bits: a.bits,
+        target: Target::MaxError(a.max_error),
+        ..Default::default()
+    };
+    opts.validate()?;
+    let maps = load_maps(&env_maps(&assets)?)?;
     std::fs::create_dir_all(&a.output)
         .with_context(|| format!("creating {}", a.output.display()))?;
     let out = |name: &str| a.output.join(name);
@@ -172,11 +198,6 @@ pub fn run(a: DemoArgs) -> Result<()> {
 
     // 2. Compress: adaptive at the target error, 2d at the same size.
     let adaptive_path = out("scene-adaptive.ltm");
-    let opts = CodeOptions {
-        bits: a.bits,
-        target: Target::MaxError(a.max_error),
-        ..Default::default()
-    };
     let bar = progress::bar(0, "compress");
     let t = Instant::now();
     let adaptive = compress(&raw, &adaptive_path, &opts.into(), &|_, done, total| {
@@ -195,7 +216,6 @@ pub fn run(a: DemoArgs) -> Result<()> {
     eprintln!("2d at the same size: {twod_bytes} bytes, error {twod_error:.4}");
 
     // 3. Relight under every map.
-    let maps = env_maps(&assets)?;
     let relighters = [
         ("adaptive", Relighter::open(&adaptive_path)?),
         ("2d", Relighter::open(&twod_path)?),
@@ -204,11 +224,8 @@ pub fn run(a: DemoArgs) -> Result<()> {
     let mut table = String::new();
     let (w, h) = (dims.width() as usize, dims.height() as usize);
     let mut sheet = Image::new(3 * w, maps.len() * h);
-    for (row, map) in maps.iter().enumerate() {
-        let name = map
-            .file_stem()
-            .map_or("map".into(), |s| s.to_string_lossy().into_owned());
-        let light = EnvMap::load(map)?.to_cubemap(dims.face_res() as usize, &Rotation::IDENTITY);
+    for (row, (name, map)) in maps.iter().enumerate() {
+        let light = map.to_cubemap(dims.face_res() as usize, &Rotation::IDENTITY);
         let exact = reference(&raw, &light)?;
         let ev = auto_exposure(&exact);
         exact.write_exr(&out(&format!("{name}-reference.exr")))?;

@@ -428,3 +428,30 @@ fn allocations_sized_by_a_file_are_bounded_by_the_memory_limit() {
         String::from_utf8_lossy(&out.stderr)
     );
 }
+
+#[test]
+fn long_commands_check_their_settings_before_any_work() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("out");
+    let o = out.to_str().unwrap();
+    let a = assets();
+    let a = a.to_str().unwrap();
+    let bad_map = dir.path().join("bad.exr");
+    std::fs::write(&bad_map, b"not an exr").unwrap();
+    let m = bad_map.to_str().unwrap();
+    for (args, needle) in [
+        (vec!["demo", "-o", o, "--assets", a, "--bits", "40"], "bits"),
+        (
+            vec!["demo", "-o", o, "--assets", a, "--max-error", "2"],
+            "error",
+        ),
+        (vec!["report", "-o", o, "--quick", "--env", m], "bad.exr"),
+        (vec!["report", "-o", o, "--quick", "--bits", "1"], "bits"),
+    ] {
+        let run = ltm(&args);
+        let stderr = String::from_utf8_lossy(&run.stderr);
+        assert_eq!(run.status.code(), Some(1), "{args:?}: {stderr}");
+        assert!(stderr.contains(needle), "{args:?}: {stderr}");
+        assert!(!out.exists(), "{args:?} started work before failing");
+    }
+}

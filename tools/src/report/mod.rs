@@ -11,7 +11,7 @@ mod page;
 pub mod plot;
 
 use crate::codec_cmds::{default_mem_budget, parse_size};
-use crate::demo::{assets_dir, bake_cached, env_maps};
+use crate::demo::{assets_dir, bake_cached, env_maps, load_maps};
 use crate::progress;
 use anyhow::{bail, Context, Result};
 use clap::Args;
@@ -19,8 +19,8 @@ use ltm_bake::{Overrides, SceneDesc};
 use ltm_codec::wavelet::row_level;
 use ltm_codec::{CodeOptions, Mode, RawStore, Target, TransposeOptions, Transposed};
 use ltm_relight::{
-    reference, relative_l2, BasisRelighter, EnvMap, Frame, Image, Relight, Relighter, Request,
-    Rotation, Weighting,
+    reference, relative_l2, BasisRelighter, Frame, Image, Relight, Relighter, Request, Rotation,
+    Weighting,
 };
 use serde::{Deserialize, Serialize};
 use std::path::PathBuf;
@@ -413,6 +413,13 @@ pub fn run(a: ReportArgs) -> Result<()> {
     }
     let start = Instant::now();
     let s = settings(&a)?;
+    // The maps are loaded before the bake, so that a bad one fails first.
+    let env_paths = if a.envs.is_empty() {
+        env_maps(&assets_dir(a.assets.clone())?)?
+    } else {
+        a.envs.clone()
+    };
+    let maps = load_maps(&env_paths)?;
     std::fs::create_dir_all(&a.output)
         .with_context(|| format!("creating {}", a.output.display()))?;
     let files_dir = a.output.join("files");
@@ -460,21 +467,9 @@ pub fn run(a: ReportArgs) -> Result<()> {
     };
 
     // 2. Lighting and the exact images.
-    let env_paths = if a.envs.is_empty() {
-        env_maps(&assets()?)?
-    } else {
-        a.envs.clone()
-    };
     let t = Instant::now();
     let mut envs = Vec::new();
-    for path in &env_paths {
-        let name = path
-            .file_stem()
-            .map_or("map".into(), |s| s.to_string_lossy().into_owned());
-        if envs.iter().any(|e: &Env| e.name == name) {
-            bail!("two environment maps are named {name}: give maps distinct file names");
-        }
-        let map = EnvMap::load(path).with_context(|| format!("loading {}", path.display()))?;
+    for (name, map) in maps {
         let light = map.to_cubemap(dims.face_res() as usize, &Rotation::IDENTITY);
         let exact = reference(&raw, &light)?;
         envs.push(Env { name, light, exact });

@@ -17,7 +17,7 @@ area-weighted integration (the mean radiance over each texel, power conserved), 
 precision: B[p] = Σ_j T[p][j]·L[j]. With a grey transport and an albedo image the result is \
 multiplied by the albedo. This is the ground truth that images relit from compressed .ltm files \
 are measured against.\n\n\
-Every block checksum of the store is verified. Outputs are written to PATH.tmp and renamed \
+Every block checksum of the store is verified. Outputs are written under a unique temporary name and renamed \
 when complete."
 )]
 pub struct ReferenceArgs {

@@ -641,230 +641,22 @@ impl LtmFile {
     /// Parses and validates a whole file held in memory: header, directory,
     /// chunk CRCs, metadata and column table (not the column payloads).
     pub fn parse(bytes: &[u8], limits: &Limits) -> Result<LtmIndex> {
-        let mut r = Reader::new(bytes, ".ltm header");
-        if r.take(8)? != MAGIC {
-            return Err(Error::corrupt(".ltm header", "bad magic bytes"));
-        }
-        let version = r.u32()?;
-        if version != VERSION {
-            return Err(Error::Version {
-                what: ".ltm",
-                found: version,
-                supported: VERSION,
-            });
-        }
-        let features = r.u32()?;
-        if features & !KNOWN_FEATURES != 0 {
-            return Err(Error::range(
-                "feature flags",
-                format!("{features:#x}"),
-                format!("a subset of {KNOWN_FEATURES:#x}"),
-            ));
-        }
-        let count = r.u32()? as usize;
-        if !(3..=4).contains(&count) {
-            return Err(Error::range("chunk count", count, "3..=4"));
-        }
-        r.u32()?;
-        let mut dir = Vec::with_capacity(count);
-        for _ in 0..count {
-            let tag: [u8; 4] = r.take(4)?.try_into().expect("4 bytes");
-            r.u32()?;
-            let (offset, len, crc) = (r.u64()?, r.u64()?, r.u32()?);
-            r.u32()?;
-            dir.push(DirEntry {
-                tag,
-                offset,
-                len,
-                crc,
-            });
-        }
-        let dir_end = r.pos();
-        let stored = r.u32()?;
-        let computed = crc32fast::hash(&bytes[..dir_end]);
-        if stored != computed {
-            return Err(Error::Crc {
-                chunk: "chunk directory".into(),
-                stored,
-                computed,
-            });
-        }
-        // Directory: known unique tags, in range, sorted, non-overlapping.
-        let mut end = r.pos() as u64;
-        for d in &dir {
-            if !matches!(&d.tag, b"META" | b"ALBD" | b"COLS" | b"DATA") {
-                return Err(Error::corrupt(
-                    "chunk directory",
-                    format!("unknown chunk tag {:?}", String::from_utf8_lossy(&d.tag)),
-                ));
-            }
-            if dir.iter().filter(|o| o.tag == d.tag).count() != 1 {
-                return Err(Error::corrupt(
-                    "chunk directory",
-                    format!(
-                        "chunk {} appears more than once",
-                        String::from_utf8_lossy(&d.tag)
-                    ),
-                ));
-            }
-            let stop = d
-                .offset
-                .checked_add(d.len)
-                .filter(|&s| s <= bytes.len() as u64);
-            match stop {
-                Some(stop) if d.offset >= end => end = stop,
-                _ => {
-                    return Err(Error::corrupt("chunk directory", format!(
-                        "chunk {} at {}+{} is out of order, overlapping or past the end of the {}-byte file",
-                        String::from_utf8_lossy(&d.tag), d.offset, d.len, bytes.len())))
-                }
-            }
-        }
-        let chunk = |tag: &[u8; 4]| -> Result<Option<&[u8]>> {
-            let Some(d) = dir.iter().find(|d| &d.tag == tag) else {
-                return Ok(None);
-            };
-            let s = &bytes[d.offset as usize..(d.offset + d.len) as usize];
-            if tag != b"DATA" {
-                let computed = crc32fast::hash(s);
-                if computed != d.crc {
-                    return Err(Error::Crc {
-                        chunk: String::from_utf8_lossy(tag).into_owned(),
-                        stored: d.crc,
-                        computed,
-                    });
-                }
-            }
-            Ok(Some(s))
-        };
+        let (features, dir) = read_directory(bytes)?;
         let missing =
             |t: &str| Error::corrupt("chunk directory", format!("required chunk {t} is missing"));
-        let meta = Meta::decode(chunk(b"META")?.ok_or_else(|| missing("META"))?)?;
-        let dims = meta.dims;
-        let albedo = match (chunk(b"ALBD")?, features & FEATURE_ALBEDO != 0) {
-            (Some(a), true) => {
-                if dims.channels != 1 || a.len() != 12 * dims.pixels() {
-                    return Err(Error::corrupt("ALBD chunk", format!("{} bytes for {} pixels and {} channels (needs 12 per pixel, 1 channel)", a.len(), dims.pixels(), dims.channels)));
-                }
-                let v: Vec<f32> = a
-                    .chunks_exact(4)
-                    .map(|c| f32::from_le_bytes(c.try_into().expect("4 bytes")))
-                    .collect();
-                if v.iter().any(|x| !x.is_finite()) {
-                    return Err(Error::corrupt(
-                        "ALBD chunk",
-                        "albedo holds NaN or infinite values",
-                    ));
-                }
-                Some(v)
-            }
-            (None, false) => None,
-            _ => {
-                return Err(Error::corrupt(
-                    "chunk directory",
-                    "ALBD chunk and albedo feature flag disagree",
-                ))
-            }
-        };
-        let cols = chunk(b"COLS")?.ok_or_else(|| missing("COLS"))?;
+        let meta = Meta::decode(chunk(bytes, &dir, b"META")?.ok_or_else(|| missing("META"))?)?;
+        let albedo = read_albedo(
+            chunk(bytes, &dir, b"ALBD")?,
+            features & FEATURE_ALBEDO != 0,
+            &meta.dims,
+        )?;
+        let cols = chunk(bytes, &dir, b"COLS")?.ok_or_else(|| missing("COLS"))?;
         let data_dir = dir
             .iter()
             .find(|d| &d.tag == b"DATA")
             .ok_or_else(|| missing("DATA"))?;
         let data = data_dir.offset as usize..(data_dir.offset + data_dir.len) as usize;
-        let entry_len = COLUMN_ENTRY_LEN;
-        if cols.len() != entry_len * dims.lights() {
-            return Err(Error::corrupt(
-                "COLS chunk",
-                format!(
-                    "{} bytes, expected {} columns × {entry_len}",
-                    cols.len(),
-                    dims.lights()
-                ),
-            ));
-        }
-        let max_depth = meta.max_depth();
-        let pixels = dims.pixels() as u64;
-        let channels = dims.channels as usize;
-        limits.check_alloc(
-            "column table",
-            dims.lights() as u64,
-            std::mem::size_of::<ColumnEntry>() as u64,
-        )?;
-        let mut columns = Vec::with_capacity(dims.lights());
-        let mut r = Reader::new(cols, "COLS chunk");
-        for j in 0..dims.lights() {
-            let (offset, stored_len, raw_len, nnz, crc, depth, enc) = (
-                r.u64()?,
-                r.u32()?,
-                r.u32()?,
-                r.u32()?,
-                r.u32()?,
-                r.u8()?,
-                r.u8()?,
-            );
-            r.u16()?;
-            let bad = |detail: String| {
-                Err(Error::corrupt(
-                    "COLS chunk",
-                    format!("column {j}: {detail}"),
-                ))
-            };
-            let encoding = match enc {
-                0 => Encoding::Empty,
-                1 => Encoding::Plain,
-                2 => Encoding::Zstd,
-                _ => return bad(format!("encoding {enc} (valid: 0 empty, 1 plain, 2 zstd)")),
-            };
-            if depth as u32 > max_depth {
-                return bad(format!("depth {depth} (valid: 0..={max_depth})"));
-            }
-            if meta.mode == Mode::TwoD && depth != 0
-                || meta.mode == Mode::FourD && depth as u32 != max_depth
-            {
-                return bad(format!("depth {depth} in a {} file", meta.mode.name()));
-            }
-            if nnz as u64 > pixels {
-                return bad(format!("{nnz} nonzeros (valid: 0..={pixels})"));
-            }
-            // A payload holds 2 bytes per scale, then 1 to 5 bytes per
-            // position and per value.
-            let scale_bytes = 2 * (depth as u64 + 1) * channels as u64;
-            let (min_raw, max_raw) = (
-                scale_bytes + nnz as u64 * (1 + channels as u64),
-                scale_bytes + nnz as u64 * 5 * (1 + channels as u64),
-            );
-            if (encoding == Encoding::Empty) != (nnz == 0)
-                || (nnz > 0 && !(min_raw..=max_raw).contains(&(raw_len as u64)))
-            {
-                return bad(format!("{nnz} nonzeros with encoding {enc} and {raw_len} payload bytes (valid: {min_raw}..={max_raw})"));
-            }
-            if encoding == Encoding::Plain && stored_len != raw_len
-                || encoding == Encoding::Empty && stored_len != 0
-            {
-                return bad(format!(
-                    "stored length {stored_len} for encoding {enc} and payload length {raw_len}"
-                ));
-            }
-            if offset
-                .checked_add(stored_len as u64)
-                .is_none_or(|e| e > data.len() as u64)
-            {
-                return bad(format!(
-                    "payload {offset}+{stored_len} outside the {}-byte DATA chunk",
-                    data.len()
-                ));
-            }
-            columns.push(ColumnEntry {
-                offset,
-                stored_len,
-                raw_len,
-                nnz,
-                crc,
-                depth,
-                encoding,
-            });
-        }
+        let columns = read_column_table(cols, &meta, data.len() as u64, limits)?;
         Ok(LtmIndex {
             meta,
             columns,
@@ -904,6 +696,263 @@ impl LtmFile {
         };
         read_column(&self.bytes[self.index.data.clone()], &self.index.meta, j, e)
     }
+}
+
+/// Reads and checks the header and the chunk directory: magic, version,
+/// known feature flags, the directory CRC, and chunks with known unique
+/// tags, in range, sorted and non-overlapping. Returns the feature flags
+/// and the directory.
+fn read_directory(bytes: &[u8]) -> Result<(u32, Vec<DirEntry>)> {
+    let mut r = Reader::new(bytes, ".ltm header");
+    if r.take(8)? != MAGIC {
+        return Err(Error::corrupt(".ltm header", "bad magic bytes"));
+    }
+    let version = r.u32()?;
+    if version != VERSION {
+        return Err(Error::Version {
+            what: ".ltm",
+            found: version,
+            supported: VERSION,
+        });
+    }
+    let features = r.u32()?;
+    if features & !KNOWN_FEATURES != 0 {
+        return Err(Error::range(
+            "feature flags",
+            format!("{features:#x}"),
+            format!("a subset of {KNOWN_FEATURES:#x}"),
+        ));
+    }
+    let count = r.u32()? as usize;
+    if !(3..=4).contains(&count) {
+        return Err(Error::range("chunk count", count, "3..=4"));
+    }
+    r.u32()?;
+    let mut dir = Vec::with_capacity(count);
+    for _ in 0..count {
+        let tag: [u8; 4] = r.take(4)?.try_into().expect("4 bytes");
+        r.u32()?;
+        let (offset, len, crc) = (r.u64()?, r.u64()?, r.u32()?);
+        r.u32()?;
+        dir.push(DirEntry {
+            tag,
+            offset,
+            len,
+            crc,
+        });
+    }
+    let dir_end = r.pos();
+    let stored = r.u32()?;
+    let computed = crc32fast::hash(&bytes[..dir_end]);
+    if stored != computed {
+        return Err(Error::Crc {
+            chunk: "chunk directory".into(),
+            stored,
+            computed,
+        });
+    }
+    check_directory(&dir, r.pos() as u64, bytes.len())?;
+    Ok((features, dir))
+}
+
+/// Directory entries: known unique tags, in range, sorted, non-overlapping,
+/// starting at or after `start` in a file of `file_len` bytes.
+fn check_directory(dir: &[DirEntry], start: u64, file_len: usize) -> Result<()> {
+    let mut end = start;
+    for d in dir {
+        let tag = String::from_utf8_lossy(&d.tag);
+        if !matches!(&d.tag, b"META" | b"ALBD" | b"COLS" | b"DATA") {
+            return Err(Error::corrupt(
+                "chunk directory",
+                format!("unknown chunk tag {tag:?}"),
+            ));
+        }
+        if dir.iter().filter(|o| o.tag == d.tag).count() != 1 {
+            return Err(Error::corrupt(
+                "chunk directory",
+                format!("chunk {tag} appears more than once"),
+            ));
+        }
+        let stop = d
+            .offset
+            .checked_add(d.len)
+            .filter(|&s| s <= file_len as u64);
+        match stop {
+            Some(stop) if d.offset >= end => end = stop,
+            _ => {
+                return Err(Error::corrupt("chunk directory", format!(
+                    "chunk {tag} at {}+{} is out of order, overlapping or past the end of the {file_len}-byte file",
+                    d.offset, d.len)))
+            }
+        }
+    }
+    Ok(())
+}
+
+/// The bytes of chunk `tag`, CRC-checked (DATA has per-column CRCs
+/// instead), or `None` when the directory has no such chunk. The directory
+/// has been checked against the file's length.
+fn chunk<'a>(bytes: &'a [u8], dir: &[DirEntry], tag: &[u8; 4]) -> Result<Option<&'a [u8]>> {
+    let Some(d) = dir.iter().find(|d| &d.tag == tag) else {
+        return Ok(None);
+    };
+    let s = &bytes[d.offset as usize..(d.offset + d.len) as usize];
+    if tag != b"DATA" {
+        let computed = crc32fast::hash(s);
+        if computed != d.crc {
+            return Err(Error::Crc {
+                chunk: String::from_utf8_lossy(tag).into_owned(),
+                stored: d.crc,
+                computed,
+            });
+        }
+    }
+    Ok(Some(s))
+}
+
+/// The ALBD chunk's albedo image: present exactly when the feature flag
+/// says so, 3 finite values per pixel, with grey transport.
+fn read_albedo(chunk: Option<&[u8]>, flagged: bool, dims: &Dims) -> Result<Option<Vec<f32>>> {
+    match (chunk, flagged) {
+        (Some(a), true) => {
+            if dims.channels != 1 || a.len() != 12 * dims.pixels() {
+                return Err(Error::corrupt(
+                    "ALBD chunk",
+                    format!(
+                        "{} bytes for {} pixels and {} channels (needs 12 per pixel, 1 channel)",
+                        a.len(),
+                        dims.pixels(),
+                        dims.channels
+                    ),
+                ));
+            }
+            let v: Vec<f32> = a
+                .chunks_exact(4)
+                .map(|c| f32::from_le_bytes(c.try_into().expect("4 bytes")))
+                .collect();
+            if v.iter().any(|x| !x.is_finite()) {
+                return Err(Error::corrupt(
+                    "ALBD chunk",
+                    "albedo holds NaN or infinite values",
+                ));
+            }
+            Ok(Some(v))
+        }
+        (None, false) => Ok(None),
+        _ => Err(Error::corrupt(
+            "chunk directory",
+            "ALBD chunk and albedo feature flag disagree",
+        )),
+    }
+}
+
+/// Reads the COLS chunk: one checked entry per column, payloads within a
+/// DATA chunk of `data_len` bytes.
+fn read_column_table(
+    cols: &[u8],
+    meta: &Meta,
+    data_len: u64,
+    limits: &Limits,
+) -> Result<Vec<ColumnEntry>> {
+    let lights = meta.dims.lights();
+    if cols.len() != COLUMN_ENTRY_LEN * lights {
+        return Err(Error::corrupt(
+            "COLS chunk",
+            format!(
+                "{} bytes, expected {lights} columns × {COLUMN_ENTRY_LEN}",
+                cols.len()
+            ),
+        ));
+    }
+    limits.check_alloc(
+        "column table",
+        lights as u64,
+        std::mem::size_of::<ColumnEntry>() as u64,
+    )?;
+    let mut columns = Vec::with_capacity(lights);
+    let mut r = Reader::new(cols, "COLS chunk");
+    for j in 0..lights {
+        let entry = ColumnEntry {
+            offset: r.u64()?,
+            stored_len: r.u32()?,
+            raw_len: r.u32()?,
+            nnz: r.u32()?,
+            crc: r.u32()?,
+            depth: r.u8()?,
+            encoding: Encoding::Empty,
+        };
+        let enc = r.u8()?;
+        r.u16()?;
+        columns.push(check_column_entry(j, entry, enc, meta, data_len)?);
+    }
+    Ok(columns)
+}
+
+/// Checks column `j`'s table entry (its encoding code `enc` still raw)
+/// against the metadata and the DATA chunk's length.
+fn check_column_entry(
+    j: usize,
+    mut e: ColumnEntry,
+    enc: u8,
+    meta: &Meta,
+    data_len: u64,
+) -> Result<ColumnEntry> {
+    let bad = |detail: String| {
+        Err(Error::corrupt(
+            "COLS chunk",
+            format!("column {j}: {detail}"),
+        ))
+    };
+    let (depth, nnz, raw_len, stored_len) = (e.depth, e.nnz, e.raw_len, e.stored_len);
+    e.encoding = match enc {
+        0 => Encoding::Empty,
+        1 => Encoding::Plain,
+        2 => Encoding::Zstd,
+        _ => return bad(format!("encoding {enc} (valid: 0 empty, 1 plain, 2 zstd)")),
+    };
+    let max_depth = meta.max_depth();
+    if depth as u32 > max_depth {
+        return bad(format!("depth {depth} (valid: 0..={max_depth})"));
+    }
+    if meta.mode == Mode::TwoD && depth != 0
+        || meta.mode == Mode::FourD && depth as u32 != max_depth
+    {
+        return bad(format!("depth {depth} in a {} file", meta.mode.name()));
+    }
+    let pixels = meta.dims.pixels() as u64;
+    if nnz as u64 > pixels {
+        return bad(format!("{nnz} nonzeros (valid: 0..={pixels})"));
+    }
+    // A payload holds 2 bytes per scale, then 1 to 5 bytes per position and
+    // per value.
+    let channels = meta.dims.channels as u64;
+    let scale_bytes = 2 * (depth as u64 + 1) * channels;
+    let (min_raw, max_raw) = (
+        scale_bytes + nnz as u64 * (1 + channels),
+        scale_bytes + nnz as u64 * 5 * (1 + channels),
+    );
+    if (e.encoding == Encoding::Empty) != (nnz == 0)
+        || (nnz > 0 && !(min_raw..=max_raw).contains(&(raw_len as u64)))
+    {
+        return bad(format!("{nnz} nonzeros with encoding {enc} and {raw_len} payload bytes (valid: {min_raw}..={max_raw})"));
+    }
+    if e.encoding == Encoding::Plain && stored_len != raw_len
+        || e.encoding == Encoding::Empty && stored_len != 0
+    {
+        return bad(format!(
+            "stored length {stored_len} for encoding {enc} and payload length {raw_len}"
+        ));
+    }
+    if e.offset
+        .checked_add(stored_len as u64)
+        .is_none_or(|end| end > data_len)
+    {
+        return bad(format!(
+            "payload {}+{stored_len} outside the {data_len}-byte DATA chunk",
+            e.offset
+        ));
+    }
+    Ok(e)
 }
 
 /// Opens a whole file held in memory and reads every column: the decoder's

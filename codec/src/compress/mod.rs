@@ -48,6 +48,7 @@ use std::path::{Path, PathBuf};
 
 /// What the coder aims for.
 #[derive(Clone, Copy, Debug, PartialEq)]
+#[non_exhaustive]
 pub enum Target {
     /// Relative L2 (Frobenius) error of the whole decoded matrix.
     MaxError(f64),
@@ -199,6 +200,7 @@ impl From<CodeOptions> for CompressOptions {
 
 /// Stages reported to the progress callback.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[non_exhaustive]
 pub enum Stage {
     /// Row transform and transpose (rows done of P).
     Rows,

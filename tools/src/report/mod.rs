@@ -23,7 +23,7 @@ use ltm_relight::{
     Weighting,
 };
 use serde::{Deserialize, Serialize};
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 use std::time::Instant;
 
 /// Arguments of `ltm report`.
@@ -402,14 +402,7 @@ fn file_name(mode: Mode, bits: u32, err: f64) -> String {
 
 pub fn run(a: ReportArgs) -> Result<()> {
     if a.replot {
-        let path = a.output.join("results.json");
-        let text = std::fs::read_to_string(&path)
-            .with_context(|| format!("reading {}", path.display()))?;
-        let results: Results = serde_json::from_str(&text)
-            .with_context(|| format!("{} is not a report's results.json", path.display()))?;
-        page::write(&a.output, &results)?;
-        eprintln!("rewrote {}", a.output.join("index.md").display());
-        return Ok(());
+        return replot(&a.output);
     }
     let start = Instant::now();
     let s = settings(&a)?;
@@ -420,47 +413,22 @@ pub fn run(a: ReportArgs) -> Result<()> {
         a.envs.clone()
     };
     let maps = load_maps(&env_paths)?;
-    std::fs::create_dir_all(&a.output)
-        .with_context(|| format!("creating {}", a.output.display()))?;
     let files_dir = a.output.join("files");
     std::fs::create_dir_all(&files_dir)
         .with_context(|| format!("creating {}", files_dir.display()))?;
-    let assets = || assets_dir(a.assets.clone());
 
     // 1. The matrix: a raw store, or a scene baked once into the output.
     let t = Instant::now();
-    let (raw_path, source) = match &a.raw {
-        Some(p) => (p.clone(), p.display().to_string()),
-        None => {
-            let size = a.size.unwrap_or(if a.quick { 32 } else { 128 });
-            let face_res = a.face_res.unwrap_or(if a.quick { 8 } else { 16 });
-            let (mut desc, source) = match &a.scene {
-                Some(p) => (SceneDesc::load(p)?, p.display().to_string()),
-                None => (
-                    SceneDesc::default_scene(&assets()?)?,
-                    "assets/scenes/default.toml".to_string(),
-                ),
-            };
-            desc.apply(&Overrides {
-                width: Some(size),
-                height: Some(size),
-                face_res: Some(face_res),
-                ..Default::default()
-            })?;
-            let path = bake_cached(&desc, &a.output, &format!("scene-{size}px-n{face_res}"))?;
-            (path, format!("{source} at {size}×{size}, n = {face_res}"))
-        }
-    };
-    let raw = RawStore::open(&raw_path)?;
+    let (raw_path, source) = matrix_source(&a)?;
+    let raw = RawStore::open_with_limits(&raw_path, crate::limits())?;
     let bake_or_open_s = t.elapsed().as_secs_f64();
     let dims = raw.dims();
-    let m = dims.lights();
     let scene = SceneInfo {
         source,
         width: dims.width(),
         height: dims.height(),
         face_res: dims.face_res(),
-        lights: m,
+        lights: dims.lights(),
         channels: dims.channels,
         raw_bytes: dims.raw_bytes(),
         has_albedo: raw.albedo().is_some(),
@@ -478,12 +446,11 @@ pub fn run(a: ReportArgs) -> Result<()> {
     eprintln!("{} exact images in {references_s:.1} s", envs.len());
 
     // 3. Row transform and transpose, once.
-    let mem_budget = match &a.mem_budget {
-        Some(v) => parse_size(v)?,
-        None => default_mem_budget(),
-    };
     let transpose = TransposeOptions {
-        mem_budget,
+        mem_budget: match &a.mem_budget {
+            Some(v) => parse_size(v)?,
+            None => default_mem_budget(),
+        },
         temp_dir: Some(files_dir.clone()),
         ..Default::default()
     };
@@ -498,85 +465,19 @@ pub fn run(a: ReportArgs) -> Result<()> {
     eprintln!("row transform and transpose in {transpose_s:.1} s");
 
     // 4. The sweep: every mode × bits × target error, plus the pair.
-    let mut plan: Vec<(Mode, u32, f64)> = Vec::new();
-    for mode in [Mode::TwoD, Mode::FourD, Mode::Adaptive] {
-        for &b in &s.bits {
-            for &e in &s.errors {
-                plan.push((mode, b, e));
-            }
-        }
-    }
-    for mode in [Mode::TwoD, Mode::Adaptive] {
-        if !plan.contains(&(mode, s.quality_bits, s.quality)) {
-            plan.push((mode, s.quality_bits, s.quality));
-        }
-    }
-    let mut terms: Vec<usize> = s.terms.iter().map(|&n| n.min(m)).collect();
-    terms.sort_unstable();
-    terms.dedup();
+    let plan = sweep(&s);
     let mut codings = Vec::new();
-    for (i, &(mode, bits, err)) in plan.iter().enumerate() {
-        let opts = CodeOptions {
-            mode,
-            bits,
-            target: Target::MaxError(err),
-            ..Default::default()
-        };
-        let path = files_dir.join(file_name(mode, bits, err));
-        let label = format!(
-            "[{}/{}] {} {bits} bits {err}",
-            i + 1,
-            plan.len(),
-            mode.name()
-        );
-        let bar = progress::bar(0, &label);
-        let t = Instant::now();
-        let stats = transposed.code(&path, &opts, &|_, d, n| {
-            bar.set_length(n);
-            bar.set_position(d);
-        })?;
-        bar.finish_and_clear();
-        let code_s = t.elapsed().as_secs_f64();
-        let quality_pair = bits == s.quality_bits && err == s.quality && mode != Mode::FourD;
-        let relighter = Relighter::open(&path)?;
-        let mut bufs = relighter.frame();
-        let mut relight = Vec::new();
-        let weightings: &[Weighting] = if quality_pair {
-            &[Weighting::Transport, Weighting::Unweighted, Weighting::Area]
-        } else {
-            &[Weighting::Transport]
-        };
-        for env in &envs {
-            for &weighting in weightings {
-                for &n in &terms {
-                    relight.push(measure(&relighter, &mut bufs, env, n, weighting, s.frames)?);
-                }
-            }
-        }
-        let coding = Coding {
-            mode: mode.name().to_string(),
-            bits,
-            target_error: err,
-            file_bytes: stats.file_bytes,
-            matrix_error: stats.achieved_error,
-            target_met: stats.target_met,
-            nonzeros: stats.nonzeros,
-            code_s,
-            depth_histogram: stats.depth_histogram.clone(),
-            depth_by_row_level: depth_by_row_level(&relighter),
-            quality_pair,
-            relight,
-        };
-        drop(relighter);
-        if !(quality_pair || a.keep_files) {
-            std::fs::remove_file(&path).with_context(|| format!("removing {}", path.display()))?;
-        }
-        eprintln!(
-            "{label}: {:.2} MB, matrix error {:.3} %, {code_s:.1} s",
-            coding.file_bytes as f64 / 1e6,
-            100.0 * coding.matrix_error
-        );
-        codings.push(coding);
+    for (i, &setting) in plan.iter().enumerate() {
+        let label = format!("[{}/{}]", i + 1, plan.len());
+        codings.push(code_and_relight(
+            &transposed,
+            setting,
+            &label,
+            &s,
+            &envs,
+            &files_dir,
+            a.keep_files,
+        )?);
     }
     let (out_of_core, matrix_norm) = (transposed.out_of_core(), transposed.norm());
     drop(transposed);
@@ -584,28 +485,7 @@ pub fn run(a: ReportArgs) -> Result<()> {
     // 5. Baselines on the same matrix.
     let t = Instant::now();
     eprintln!("baselines: zstd of the raw matrix, PCA, spherical harmonics");
-    let mut base_points = vec![baselines::zstd_raw(&raw, s.zstd_raw_level)?];
-    base_points.extend(baselines::pca(&raw, &s.pca_ranks, 0x6c74_6d01)?);
-    let (sh_points, sh) = baselines::sh(&raw, &s.sh_orders)?;
-    base_points.extend(sh_points);
-    let sh = BasisRelighter::sh(sh, &raw)?;
-    let mut frame = sh.frame();
-    let mut sh_relight = Vec::new();
-    for env in &envs {
-        for &order in &s.sh_orders {
-            let request = Request {
-                terms: order,
-                weighting: Weighting::Transport,
-            };
-            sh.relight(&env.light, &request, &mut frame)?;
-            sh_relight.push(ShRelightPoint {
-                env: env.name.clone(),
-                order,
-                coefficients: order * order,
-                relit_error: relative_l2(&frame.image, &env.exact)?,
-            });
-        }
-    }
+    let (baselines, sh_relight) = measure_baselines(&raw, &s, &envs)?;
     let baselines_s = t.elapsed().as_secs_f64();
 
     let results = Results {
@@ -618,7 +498,7 @@ pub fn run(a: ReportArgs) -> Result<()> {
         out_of_core,
         matrix_norm,
         codings,
-        baselines: base_points,
+        baselines,
         sh_relight,
         timings: Timings {
             bake_or_open_s,
@@ -635,4 +515,164 @@ pub fn run(a: ReportArgs) -> Result<()> {
         start.elapsed().as_secs_f64()
     );
     Ok(())
+}
+
+/// `--replot`: redraws the pages from a report's `results.json`.
+fn replot(output: &Path) -> Result<()> {
+    let path = output.join("results.json");
+    let text =
+        std::fs::read_to_string(&path).with_context(|| format!("reading {}", path.display()))?;
+    let results: Results = serde_json::from_str(&text)
+        .with_context(|| format!("{} is not a report's results.json", path.display()))?;
+    page::write(output, &results)?;
+    eprintln!("rewrote {}", output.join("index.md").display());
+    Ok(())
+}
+
+/// The raw store to measure and how it was made: `--raw`, or the scene
+/// (`--scene` or the default) baked once into the output folder.
+fn matrix_source(a: &ReportArgs) -> Result<(PathBuf, String)> {
+    if let Some(p) = &a.raw {
+        return Ok((p.clone(), p.display().to_string()));
+    }
+    let size = a.size.unwrap_or(if a.quick { 32 } else { 128 });
+    let face_res = a.face_res.unwrap_or(if a.quick { 8 } else { 16 });
+    let (mut desc, source) = match &a.scene {
+        Some(p) => (SceneDesc::load(p)?, p.display().to_string()),
+        None => (
+            SceneDesc::default_scene(&assets_dir(a.assets.clone())?)?,
+            "assets/scenes/default.toml".to_string(),
+        ),
+    };
+    desc.apply(&Overrides {
+        width: Some(size),
+        height: Some(size),
+        face_res: Some(face_res),
+        ..Default::default()
+    })?;
+    let path = bake_cached(&desc, &a.output, &format!("scene-{size}px-n{face_res}"))?;
+    Ok((path, format!("{source} at {size}×{size}, n = {face_res}")))
+}
+
+/// Every (mode, bits, target error) of the sweep, then the equal-quality
+/// pair (2d and adaptive at `--quality`) if the sweep lacks it.
+fn sweep(s: &Settings) -> Vec<(Mode, u32, f64)> {
+    let mut plan: Vec<(Mode, u32, f64)> = Vec::new();
+    for mode in [Mode::TwoD, Mode::FourD, Mode::Adaptive] {
+        for &b in &s.bits {
+            for &e in &s.errors {
+                plan.push((mode, b, e));
+            }
+        }
+    }
+    for mode in [Mode::TwoD, Mode::Adaptive] {
+        if !plan.contains(&(mode, s.quality_bits, s.quality)) {
+            plan.push((mode, s.quality_bits, s.quality));
+        }
+    }
+    plan
+}
+
+/// Codes one setting from the transposed matrix, relights the file under
+/// every map at every N, and removes it unless it is kept.
+fn code_and_relight(
+    transposed: &Transposed,
+    (mode, bits, err): (Mode, u32, f64),
+    counter: &str,
+    s: &Settings,
+    envs: &[Env],
+    files_dir: &Path,
+    keep_files: bool,
+) -> Result<Coding> {
+    let opts = CodeOptions {
+        mode,
+        bits,
+        target: Target::MaxError(err),
+        ..Default::default()
+    };
+    let path = files_dir.join(file_name(mode, bits, err));
+    let label = format!("{counter} {} {bits} bits {err}", mode.name());
+    let bar = progress::bar(0, &label);
+    let t = Instant::now();
+    let stats = transposed.code(&path, &opts, &|_, d, n| {
+        bar.set_length(n);
+        bar.set_position(d);
+    })?;
+    bar.finish_and_clear();
+    let code_s = t.elapsed().as_secs_f64();
+    let quality_pair = bits == s.quality_bits && err == s.quality && mode != Mode::FourD;
+    let relighter = Relighter::open_with_limits(&path, crate::limits())?;
+    let mut terms: Vec<usize> = s.terms.iter().map(|&n| n.min(relighter.lights())).collect();
+    terms.sort_unstable();
+    terms.dedup();
+    let weightings: &[Weighting] = if quality_pair {
+        &[Weighting::Transport, Weighting::Unweighted, Weighting::Area]
+    } else {
+        &[Weighting::Transport]
+    };
+    let mut bufs = relighter.frame();
+    let mut relight = Vec::new();
+    for env in envs {
+        for &weighting in weightings {
+            for &n in &terms {
+                relight.push(measure(&relighter, &mut bufs, env, n, weighting, s.frames)?);
+            }
+        }
+    }
+    let coding = Coding {
+        mode: mode.name().to_string(),
+        bits,
+        target_error: err,
+        file_bytes: stats.file_bytes,
+        matrix_error: stats.achieved_error,
+        target_met: stats.target_met,
+        nonzeros: stats.nonzeros,
+        code_s,
+        depth_histogram: stats.depth_histogram.clone(),
+        depth_by_row_level: depth_by_row_level(&relighter),
+        quality_pair,
+        relight,
+    };
+    drop(relighter);
+    if !(quality_pair || keep_files) {
+        std::fs::remove_file(&path).with_context(|| format!("removing {}", path.display()))?;
+    }
+    eprintln!(
+        "{label}: {:.2} MB, matrix error {:.3} %, {code_s:.1} s",
+        coding.file_bytes as f64 / 1e6,
+        100.0 * coding.matrix_error
+    );
+    Ok(coding)
+}
+
+/// The zstd, PCA and SH points on the same matrix, and the images relit
+/// from the SH projection under every map.
+fn measure_baselines(
+    raw: &RawStore,
+    s: &Settings,
+    envs: &[Env],
+) -> Result<(Vec<baselines::BaselinePoint>, Vec<ShRelightPoint>)> {
+    let mut points = vec![baselines::zstd_raw(raw, s.zstd_raw_level)?];
+    points.extend(baselines::pca(raw, &s.pca_ranks, 0x6c74_6d01)?);
+    let (sh_points, sh) = baselines::sh(raw, &s.sh_orders)?;
+    points.extend(sh_points);
+    let sh = BasisRelighter::sh(sh, raw)?;
+    let mut frame = sh.frame();
+    let mut sh_relight = Vec::new();
+    for env in envs {
+        for &order in &s.sh_orders {
+            let request = Request {
+                terms: order,
+                weighting: Weighting::Transport,
+            };
+            sh.relight(&env.light, &request, &mut frame)?;
+            sh_relight.push(ShRelightPoint {
+                env: env.name.clone(),
+                order,
+                coefficients: order * order,
+                relit_error: relative_l2(&frame.image, &env.exact)?,
+            });
+        }
+    }
+    Ok((points, sh_relight))
 }

@@ -39,9 +39,11 @@ use obvhs::ray::{Ray, RayHit};
 use std::collections::HashMap;
 use std::path::PathBuf;
 
-/// Largest scene extent traced (bounding-box diagonal or largest coordinate
-/// magnitude): single precision must hold it with room to spare.
+/// Largest and smallest scene extent traced (the larger of the bounding
+/// box's diagonal and its largest coordinate magnitude): single precision
+/// must hold it, scaled to trace space, with room to spare.
 const MAX_EXTENT: f64 = 1e30;
+const MIN_EXTENT: f64 = 1e-30;
 /// The scene's extent in trace space is about 2^TRACE_EXPONENT.
 const TRACE_EXPONENT: i32 = 12;
 /// Box padding, relative to the scene's extent.
@@ -204,9 +206,9 @@ impl Scene {
         );
         let (lo, hi) = (lo.as_dvec3(), hi.as_dvec3());
         let extent = (hi - lo).length().max(lo.abs().max(hi.abs()).max_element());
-        if !extent.is_finite() || extent > MAX_EXTENT {
+        if !(MIN_EXTENT..=MAX_EXTENT).contains(&extent) {
             return Err(BakeError::Geometry(format!(
-                "the scene's bounding box [{lo}, {hi}] is too large for single-precision ray tracing (valid: coordinates and extent at most {MAX_EXTENT:e})"
+                "the scene's bounding box [{lo}, {hi}] (extent {extent:e}) is out of range for single-precision ray tracing (valid: an extent, the larger of its diagonal and its largest coordinate, from {MIN_EXTENT:e} to {MAX_EXTENT:e})"
             )));
         }
         let scale = 2f64.powi(TRACE_EXPONENT - extent.log2().ceil() as i32);
@@ -292,6 +294,9 @@ impl Scene {
     /// scene's box; `None` when it misses the box.
     #[inline(always)]
     fn traced(&self, origin: DVec3, dir: DVec3) -> Option<Traced> {
+        if !origin.is_finite() || !dir.is_finite() || dir == DVec3::ZERO {
+            return None;
+        }
         let [lo, hi] = self.bounds;
         let (mut near, mut far) = (0.0f64, f64::INFINITY);
         let inv = dir.recip();

@@ -238,6 +238,24 @@ fn escapes(scene: &Scene, m: &Mesh, c: DVec3) -> Vec<String> {
             }
         }
     }
+    // From just inside the surface, near edges and corners (where shadow
+    // rays of a closed room start), towards the rest of the surface.
+    for &near in goals.iter().step_by(5) {
+        let o = c + (near - c) * (1.0 - 1e-4);
+        for d in goals
+            .iter()
+            .step_by(3)
+            .map(|&t| (t - o).normalize())
+            .chain(sphere_dirs(64))
+        {
+            if !d.is_finite() {
+                continue;
+            }
+            if !scene.occluded(o, d) || scene.intersect(o, d).is_none() {
+                bad.push(format!("from near the surface at {o} along {d}"));
+            }
+        }
+    }
     for &t in &goals {
         let n = (t - c).normalize();
         let o = t + 3.0 * r * n;
@@ -372,7 +390,7 @@ fn camera_inside_a_closed_cube_is_detected() {
 /// The same cube in a tiny and in a huge scene.
 #[test]
 fn camera_inside_is_detected_at_any_scale() {
-    for scale in [1e-4, 1e-2, 1e3, 1e6] {
+    for scale in [1e-29, 1e-4, 1e-2, 1e3, 1e6] {
         let m = cube().moved(euler([10.0, 20.0, 30.0]) * scale, DVec3::ZERO);
         let camera = format!(
             "eye = [{}, 0.0, 0.0]\ntarget = [0.0, 0.0, {}]\nfov = 40.0\nwidth = 4\nheight = 4",
@@ -386,6 +404,17 @@ fn camera_inside_is_detected_at_any_scale() {
             "scale {scale}: {msg}"
         );
     }
+    // Below single precision's range: a clear error, not a wrong bake.
+    let m = cube().moved(DMat3::IDENTITY * 1e-40, DVec3::ZERO);
+    let camera =
+        "eye = [1e-41, 0.0, 0.0]\ntarget = [0.0, 0.0, -1e-40]\nfov = 40.0\nwidth = 4\nheight = 4";
+    let (_d, r) = build(&mesh_toml(camera, ""), &[("m.obj", m.obj().as_bytes())]);
+    let (e, msg) = err(r);
+    assert!(matches!(e, BakeError::Geometry(_)), "{msg}");
+    assert!(
+        msg.contains("out of range") && msg.contains("1e-30"),
+        "{msg}"
+    );
 }
 
 // ---------------------------------------------------------------------------

@@ -9,15 +9,21 @@
 //! are in memory at once (one being computed, one queued, one being
 //! written), so memory stays bounded whatever the matrix size.
 //!
-//! Resuming: [`ltm_codec::RawWriter::create`] reopens a `PATH.partial` with
-//! the same header and keeps its blocks whose checksums verify; only the
-//! others are baked. Every row is a pure function of the scene and the row
-//! index, so a resumed bake is byte-identical to an uninterrupted one. The
-//! file is renamed to `PATH` only when every block is complete.
+//! Resuming: the raw store's header carries the scene's input identity
+//! ([`crate::identity`]: a SHA-256 of the resolved scene description, every
+//! mesh file's bytes and every setting). [`ltm_codec::RawWriter::create`]
+//! reopens a `PATH.partial` only when its identity and layout equal the
+//! new header's, and keeps its blocks whose checksums verify; only the
+//! others are baked. Every row is a pure function of those inputs and the
+//! row index, so a resumed bake is byte-identical to an uninterrupted one. A
+//! partial file from other inputs (or without an identity) is started over,
+//! and [`BakeReport::resume`] and [`BakeProgress::resume`] say why. The file
+//! is renamed to `PATH` only when every block is complete.
 
 use crate::error::{BakeError, Result};
 use crate::transport::{RowStats, Scratch, Tables};
 use crate::world::Scene;
+use ltm_codec::raw::ResumeState;
 use ltm_codec::{RawHeader, RawWriter};
 use rayon::prelude::*;
 use std::path::{Path, PathBuf};
@@ -47,6 +53,9 @@ impl Default for BakeOptions {
 /// Progress, reported after every row.
 #[derive(Clone, Copy, Debug)]
 pub struct BakeProgress {
+    /// What was done with an existing `PATH.partial` (the same in every
+    /// report of a bake): resumed, or started over and why.
+    pub resume: ResumeState,
     /// Rows baked in this run.
     pub rows_done: u64,
     /// Rows to bake in this run (resumed rows excluded).
@@ -62,19 +71,27 @@ pub struct BakeProgress {
 pub struct BakeReport {
     /// The complete raw store.
     pub path: PathBuf,
+    /// Its header.
     pub header: RawHeader,
+    /// Blocks in the store.
     pub blocks_total: usize,
     /// Blocks found complete in a `.partial` file and kept.
     pub blocks_resumed: usize,
+    /// What was done with an existing `PATH.partial`: resumed, or started
+    /// over and why ([`ResumeState`]'s `Display` says it in words).
+    pub resume: ResumeState,
+    /// Rows computed in this run (resumed ones excluded).
     pub rows_baked: u64,
+    /// Rays traced in this run.
     pub rays: RowStats,
+    /// Wall-clock time of this run.
     pub elapsed: Duration,
 }
 
 /// The raw store header for a scene: grey transport with an albedo image,
-/// or 3 channels.
+/// or 3 channels, and the scene's input identity.
 pub fn raw_header(scene: &Scene, block_bytes: u64) -> RawHeader {
-    RawHeader::new(scene.dims(), scene.channels() == 1, block_bytes)
+    RawHeader::new(scene.dims(), scene.channels() == 1, block_bytes).with_input_id(scene.input_id())
 }
 
 /// Computes whole blocks of rows.
@@ -94,6 +111,11 @@ impl<'a> BlockBaker<'a> {
                 header.has_albedo,
                 scene.dims()
             ))));
+        }
+        if header.input_id.is_some_and(|id| id != scene.input_id()) {
+            return Err(BakeError::Store(ltm_codec::Error::Invalid(
+                "raw store header carries the input identity of another scene".into(),
+            )));
         }
         Ok(BlockBaker {
             scene,
@@ -147,7 +169,8 @@ impl<'a> BlockBaker<'a> {
 }
 
 /// Bakes `scene` into the raw store `out` (through `out.partial`, resuming
-/// it when its header matches), reporting progress after every row.
+/// it when it was baked from the same inputs, else starting it over),
+/// reporting progress after every row.
 pub fn bake(
     scene: &Scene,
     out: &Path,
@@ -158,6 +181,7 @@ pub fn bake(
     let header = raw_header(scene, options.block_bytes);
     let baker = BlockBaker::new(scene, header)?;
     let mut writer = RawWriter::create(out, header)?;
+    let resume = writer.resume_state();
     let pending = writer.pending_blocks();
     let blocks_total = header.block_count();
     let rows_total: u64 = pending
@@ -170,26 +194,48 @@ pub fn bake(
         let done = rows_done.fetch_add(1, Ordering::Relaxed) + 1;
         let rays = shadow.fetch_add(s.shadow_rays, Ordering::Relaxed) + s.shadow_rays;
         progress(BakeProgress {
+            resume,
             rows_done: done,
             rows_total,
             shadow_rays: rays,
             elapsed: start.elapsed(),
         });
     };
-    let has_albedo = header.has_albedo;
+    let rays = bake_blocks(&baker, &mut writer, &pending, &on_row)?;
+    let path = writer.finish()?;
+    Ok(BakeReport {
+        path,
+        header,
+        blocks_total,
+        blocks_resumed: blocks_total - pending.len(),
+        resume,
+        rows_baked: rows_total,
+        rays,
+        elapsed: start.elapsed(),
+    })
+}
+
+/// Computes the `pending` blocks one after the other while a writer thread
+/// copies each finished one into `writer` (at most one queued).
+fn bake_blocks(
+    baker: &BlockBaker,
+    writer: &mut RawWriter,
+    pending: &[usize],
+    on_row: &(dyn Fn(RowStats) + Sync),
+) -> Result<RowStats> {
+    let has_albedo = baker.header().has_albedo;
     let mut rays = RowStats::default();
     let written: Result<()> = std::thread::scope(|s| {
         let (tx, rx) = sync_channel::<(usize, Vec<f32>, Vec<f32>)>(1);
-        let writer_ref = &mut writer;
         let handle = s.spawn(move || -> Result<()> {
             for (b, rows, albedo) in rx {
-                writer_ref.write_block(b, &rows, has_albedo.then_some(albedo.as_slice()))?;
+                writer.write_block(b, &rows, has_albedo.then_some(albedo.as_slice()))?;
             }
             Ok(())
         });
-        for &b in &pending {
+        for &b in pending {
             let (mut rows, mut albedo) = (Vec::new(), Vec::new());
-            rays += baker.compute(b, &mut rows, &mut albedo, &on_row);
+            rays += baker.compute(b, &mut rows, &mut albedo, on_row);
             if tx.send((b, rows, albedo)).is_err() {
                 break; // the writer failed; its error is returned below
             }
@@ -200,15 +246,5 @@ pub fn bake(
             Err(panic) => std::panic::resume_unwind(panic),
         }
     });
-    written?;
-    let path = writer.finish()?;
-    Ok(BakeReport {
-        path,
-        header,
-        blocks_total,
-        blocks_resumed: blocks_total - pending.len(),
-        rows_baked: rows_total,
-        rays,
-        elapsed: start.elapsed(),
-    })
+    written.map(|()| rays)
 }

@@ -21,51 +21,74 @@ pub enum BakeError {
     /// scene entry, e.g. `meshes[0].path`.
     #[error("{origin}: {field}: cannot read {path}")]
     MeshIo {
+        /// The scene file (or "command line").
         origin: String,
+        /// The scene entry naming the mesh.
         field: String,
+        /// The mesh file, resolved against the scene file's directory.
         path: PathBuf,
+        /// What the system said.
         #[source]
         error: io::Error,
     },
     /// The scene file is not valid TOML, or does not have the scene's
     /// structure (unknown or missing field, wrong type).
     #[error("{path}: {message}")]
-    SceneSyntax { path: PathBuf, message: String },
+    SceneSyntax {
+        /// The scene file.
+        path: PathBuf,
+        /// What is wrong, with line and column.
+        message: String,
+    },
     /// A scene setting outside its valid range. `origin` is the scene file,
     /// or "command line" for an override.
     #[error("{origin}: {field} = {value} is out of range (valid: {valid})")]
     OutOfRange {
+        /// The scene file, or "command line".
         origin: String,
+        /// The setting, e.g. `camera.fov` or `--face-res`.
         field: String,
+        /// Its value as given.
         value: String,
+        /// The valid range.
         valid: String,
     },
     /// A scene setting that is in range but inconsistent (an unknown
     /// material name, a camera looking along its up vector, ...).
     #[error("{origin}: {field}: {message}")]
     InvalidScene {
+        /// The scene file, or "command line".
         origin: String,
+        /// The setting, e.g. `camera.up`.
         field: String,
+        /// What is wrong, with the values involved and what is valid.
         message: String,
     },
     /// A mesh file that cannot be parsed, or whose contents are unusable
     /// (non-finite vertices, indices out of range, no triangle with area).
     #[error("{path}: malformed {format} mesh: {message}")]
     MalformedMesh {
+        /// The mesh file.
         path: PathBuf,
+        /// "OBJ", "PLY" or "unknown".
         format: &'static str,
+        /// What is wrong, naming the first offending vertex, face or line.
         message: String,
     },
-    /// The camera sits inside a closed object (or right behind a surface):
-    /// most primary rays hit the back side of a triangle.
+    /// The camera is enclosed by geometry seen from behind, as inside a
+    /// closed object: probe rays from the eye in every direction all hit a
+    /// surface, most of them its back side ([`crate::inside`]).
     #[error(
-        "the camera at eye = [{}, {}, {}] appears to be inside geometry: {:.0} % of the probe rays \
-         through the image hit the back side of a surface (limit {:.0} %); move the eye out of the object",
+        "the camera at eye = [{}, {}, {}] appears to be inside geometry: probe rays in every direction \
+         all hit a surface and {:.0} % of them its back side (limit {:.0} %); move the eye out of the object",
         eye[0], eye[1], eye[2], 100.0 * back_fraction, 100.0 * limit
     )]
     CameraInsideGeometry {
+        /// The camera's eye, world units.
         eye: [f64; 3],
+        /// Fraction of the probe rays that hit a back face.
         back_fraction: f64,
+        /// The fraction above which the camera counts as inside.
         limit: f64,
     },
     /// The scene's geometry cannot be traced safely.

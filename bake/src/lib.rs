@@ -4,10 +4,12 @@
 //!
 //! A scene is a TOML file ([`scene`]) naming OBJ/PLY meshes, quads,
 //! Lambertian and glossy materials ([`material`]), a pinhole camera and the
-//! lighting resolution. [`Scene::build`] loads it into an obvhs BVH;
-//! [`bake`] computes the rows ([`transport`] defines them precisely) in
-//! parallel blocks and writes them to `PATH.partial`, resuming an
-//! interrupted bake, then renames the file to `PATH`.
+//! lighting resolution. [`Scene::build`] loads it into a BVH traced with
+//! watertight ray/triangle intersection and checks that the camera is not
+//! inside geometry ([`inside`]); [`bake`] computes the rows ([`transport`]
+//! defines them precisely) in parallel blocks and writes them to
+//! `PATH.partial`, resuming an interrupted bake of the same inputs
+//! ([`identity`]), then renames the file to `PATH`.
 //!
 //! ```no_run
 //! use ltm_bake::{bake, BakeOptions, Scene, SceneDesc};
@@ -21,7 +23,11 @@
 #![warn(missing_docs)]
 
 mod bake;
+mod bvh;
 mod error;
+pub mod identity;
+pub mod inside;
+mod intersect;
 pub mod material;
 mod mesh;
 mod ply;
@@ -35,7 +41,9 @@ pub use bake::{
     bake, raw_header, BakeOptions, BakeProgress, BakeReport, BlockBaker, DEFAULT_BLOCK_BYTES,
 };
 pub use error::{BakeError, Result};
+pub use inside::INSIDE_LIMIT;
+pub use ltm_codec::raw::{RestartReason, ResumeState};
 pub use rows::{RowSample, RowSource};
 pub use scene::{Overrides, SceneDesc, DEFAULT_SCENE_TOML};
 pub use transport::RowStats;
-pub use world::{Camera, Hit, MeshStats, Scene, SceneStats, INSIDE_LIMIT};
+pub use world::{Camera, Hit, MeshStats, Scene, SceneStats};

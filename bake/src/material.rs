@@ -37,15 +37,25 @@ const TABLE_GRID: usize = 96;
 #[derive(Clone, Debug)]
 #[non_exhaustive]
 pub enum Material {
-    Lambert { albedo: [f64; 3] },
+    /// Lambertian: `f_r = albedo/π`.
+    Lambert {
+        /// Reflectance per RGB channel, in `[0, 1]`.
+        albedo: [f64; 3],
+    },
+    /// A Lambertian base plus a GGX specular lobe.
     Glossy(Box<Glossy>),
 }
 
 /// The glossy model; see the module docs.
 #[derive(Clone, Debug)]
 pub struct Glossy {
+    /// Reflectance of the Lambertian base per RGB channel, in `[0, 1]`.
     pub albedo: [f64; 3],
+    /// Schlick's F0 per RGB channel: the specular reflectance at normal
+    /// incidence, in `[0, 1]`.
     pub f0: [f64; 3],
+    /// GGX alpha, the width of the microfacet slope distribution, in
+    /// `[0.01, 1]`.
     pub alpha: f64,
     /// Directional albedo of the lobe for F = 1, at μ = i/(TABLE_LEN − 1).
     e_one: [f64; TABLE_LEN],

@@ -7,6 +7,7 @@
 //! naming the file and the first offending vertex or face.
 
 use crate::error::{BakeError, Result};
+use sha2::{Digest, Sha256};
 use std::io::Cursor;
 use std::path::Path;
 
@@ -19,8 +20,17 @@ pub(crate) struct RawMesh {
     pub triangles: Vec<[u32; 3]>,
 }
 
+/// A mesh file as loaded.
+pub(crate) struct Loaded {
+    pub mesh: RawMesh,
+    /// "OBJ" or "PLY".
+    pub format: &'static str,
+    /// SHA-256 of the bytes parsed (for the input identity).
+    pub digest: [u8; 32],
+}
+
 /// Reads and checks a mesh file.
-pub(crate) fn load(path: &Path) -> Result<RawMesh> {
+pub(crate) fn load(path: &Path) -> Result<Loaded> {
     let ext = path
         .extension()
         .and_then(|e| e.to_str())
@@ -48,7 +58,13 @@ pub(crate) fn load(path: &Path) -> Result<RawMesh> {
         crate::ply::parse(&bytes).map_err(bad)?
     };
     check(&mesh).map_err(bad)?;
-    Ok(mesh)
+    let mut sha = Sha256::new();
+    sha.update(&bytes);
+    Ok(Loaded {
+        mesh,
+        format,
+        digest: sha.finalize().into(),
+    })
 }
 
 fn parse_obj(bytes: &[u8]) -> std::result::Result<RawMesh, String> {

@@ -48,6 +48,7 @@
 //! ignored.
 
 use crate::error::{BakeError, Result};
+use glam::DVec3;
 use ltm_codec::{MAX_FACE_RES, MAX_PIXELS, MAX_SIDE};
 use serde::de::{self, Deserializer, SeqAccess, Visitor};
 use serde::Deserialize;
@@ -65,14 +66,28 @@ pub const MAX_SPP: u32 = 4096;
 pub const MAX_TEXEL_SAMPLES: u32 = 65536;
 /// Smallest GGX roughness (alpha).
 pub const MIN_ROUGHNESS: f64 = 0.01;
+/// Largest magnitude of a camera eye or target coordinate: rays are traced
+/// in single precision, whose spacing at 10⁹ is already 64 units.
+pub const MAX_CAMERA_COORD: f64 = 1e9;
+/// Smallest distance between camera eye and target, relative to their
+/// largest coordinate: below it the viewing direction is lost to rounding.
+pub const MIN_VIEW_DISTANCE: f64 = 1e-9;
+/// Smallest angle (radians) between camera up and the viewing direction.
+pub const MIN_UP_ANGLE: f64 = 1e-9;
 
 /// A parsed, validated scene description.
 #[derive(Clone, Debug)]
 pub struct SceneDesc {
+    /// `[camera]`: the pinhole camera whose pixels are the rows.
     pub camera: CameraDesc,
+    /// `[lighting]`: the cubemap whose texels are the columns.
     pub lighting: LightingDesc,
+    /// `[materials.NAME]`, by name (sorted; a hit's material index counts
+    /// in this order).
     pub materials: BTreeMap<String, MaterialDesc>,
+    /// `[[meshes]]`, in file order.
     pub meshes: Vec<MeshDesc>,
+    /// `[[quads]]`, in file order.
     pub quads: Vec<QuadDesc>,
     /// Directory that relative mesh paths are resolved against.
     pub base_dir: PathBuf,
@@ -98,13 +113,20 @@ struct SceneFile {
 #[derive(Clone, Debug, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct CameraDesc {
+    /// World position of the pinhole; each coordinate finite, of magnitude
+    /// at most [`MAX_CAMERA_COORD`].
     pub eye: [f64; 3],
+    /// World point at the image centre; as `eye`, and apart from it.
     pub target: [f64; 3],
+    /// World direction towards the image's top (any length; default +Y);
+    /// not parallel to `target − eye`.
     #[serde(default = "default_up")]
     pub up: [f64; 3],
-    /// Vertical field of view in degrees.
+    /// Vertical field of view in degrees, in (0, 180).
     pub fov: f64,
+    /// Image width in pixels, 1..=32768.
     pub width: u32,
+    /// Image height in pixels, 1..=32768 (width·height ≤ 2²⁶).
     pub height: u32,
     /// Pixel sub-samples averaged into each row (a box pixel filter).
     #[serde(default = "default_spp")]
@@ -128,9 +150,13 @@ pub struct LightingDesc {
 #[non_exhaustive]
 pub enum MaterialDesc {
     /// Lambertian: f_r = albedo/π.
-    Lambert { albedo: [f64; 3] },
+    Lambert {
+        /// Reflectance per RGB channel, each in `[0, 1]`.
+        albedo: [f64; 3],
+    },
     /// A Lambertian base plus a GGX specular lobe (see [`crate::material`]).
     Glossy {
+        /// Reflectance of the Lambertian base per RGB channel, in `[0, 1]`.
         albedo: [f64; 3],
         /// Schlick's F0, the specular reflectance at normal incidence.
         specular: [f64; 3],
@@ -145,15 +171,19 @@ pub enum MaterialDesc {
 pub struct MeshDesc {
     /// OBJ or PLY file, relative to the scene file.
     pub path: PathBuf,
+    /// Name of a `[materials.NAME]` table.
     pub material: String,
     /// Interpolated vertex normals (true) or flat triangle normals.
     #[serde(default = "default_true")]
     pub smooth: bool,
+    /// Scale applied first, in model units (finite, non-zero; negative
+    /// mirrors).
     #[serde(default = "default_scale")]
     pub scale: Scale,
     /// Euler angles in degrees `[rx, ry, rz]`, applied X, then Y, then Z.
     #[serde(default)]
     pub rotation: [f64; 3],
+    /// World offset applied last.
     #[serde(default)]
     pub translation: [f64; 3],
 }
@@ -163,14 +193,19 @@ pub struct MeshDesc {
 #[derive(Clone, Debug, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct QuadDesc {
+    /// World position of the rectangle's centre.
     pub center: [f64; 3],
+    /// Extent along local X and Z, world units, each > 0.
     pub size: [f64; 2],
+    /// Euler angles in degrees `[rx, ry, rz]`, applied X, then Y, then Z.
     #[serde(default)]
     pub rotation: [f64; 3],
+    /// Name of a `[materials.NAME]` table.
     pub material: String,
 }
 
-/// A uniform (`scale = 2.0`) or per-axis (`scale = [1, 2, 1]`) scale.
+/// A uniform (`scale = 2.0`) or per-axis (`scale = [1, 2, 1]`) scale: the
+/// factors along X, Y and Z.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Scale(pub [f64; 3]);
 
@@ -230,10 +265,15 @@ fn default_scale() -> Scale {
 /// Settings that override the scene file (e.g. from the command line).
 #[derive(Clone, Copy, Debug, Default)]
 pub struct Overrides {
+    /// `camera.width` (`--width`).
     pub width: Option<u32>,
+    /// `camera.height` (`--height`).
     pub height: Option<u32>,
+    /// `lighting.face_res` (`--face-res`).
     pub face_res: Option<u32>,
+    /// `lighting.texel_samples` (`--texel-samples`).
     pub texel_samples: Option<u32>,
+    /// `camera.spp` (`--spp`).
     pub spp: Option<u32>,
 }
 
@@ -322,28 +362,7 @@ impl SceneDesc {
     pub fn validate(&self) -> Result<()> {
         let o = &self.origin;
         let c = &self.camera;
-        finite3(o, "camera.eye", c.eye)?;
-        finite3(o, "camera.target", c.target)?;
-        finite3(o, "camera.up", c.up)?;
-        let fwd = sub(c.target, c.eye);
-        if norm(fwd) == 0.0 {
-            return Err(BakeError::invalid(
-                o,
-                "camera.target",
-                "equals camera.eye; the camera needs a viewing direction",
-            ));
-        }
-        let cross = cross(fwd, c.up);
-        if norm(cross) <= 1e-9 * norm(fwd) * norm(c.up) {
-            return Err(BakeError::invalid(
-                o,
-                "camera.up",
-                format!(
-                    "{:?} is zero or parallel to the viewing direction (target − eye); choose an up vector across it",
-                    c.up
-                ),
-            ));
-        }
+        validate_camera(o, c)?;
         if !(c.fov > 0.0 && c.fov < 180.0) {
             return Err(BakeError::range(
                 o,
@@ -515,6 +534,64 @@ fn toml_message(text: &str, e: &toml::de::Error) -> String {
     }
 }
 
+/// Checks the camera's placement: finite coordinates of a magnitude single
+/// precision can trace, a target apart from the eye, an up vector across
+/// the viewing direction. Each message names what is actually wrong.
+fn validate_camera(o: &str, c: &CameraDesc) -> Result<()> {
+    for (field, v) in [("camera.eye", c.eye), ("camera.target", c.target)] {
+        if !v
+            .iter()
+            .all(|x| x.is_finite() && x.abs() <= MAX_CAMERA_COORD)
+        {
+            return Err(BakeError::range(
+                o,
+                field,
+                format!("{v:?}"),
+                format!("finite coordinates of magnitude at most {MAX_CAMERA_COORD:e}, which single-precision ray tracing resolves"),
+            ));
+        }
+    }
+    finite3(o, "camera.up", c.up)?;
+    let (eye, target, up) = (DVec3::from(c.eye), DVec3::from(c.target), DVec3::from(c.up));
+    let view = target - eye;
+    if view == DVec3::ZERO {
+        return Err(BakeError::invalid(o, "camera.target", format!(
+            "{:?} equals camera.eye; the camera needs a viewing direction (valid: a target apart from the eye)",
+            c.target
+        )));
+    }
+    let size = eye.abs().max(target.abs()).max_element();
+    if view.length() < MIN_VIEW_DISTANCE * size {
+        return Err(BakeError::invalid(o, "camera.target", format!(
+            "{:?} is at a distance of {:e} from camera.eye = {:?}, too close to define a viewing direction (valid: a distance of at least {:e}, {MIN_VIEW_DISTANCE:e} × the largest coordinate)",
+            c.target, view.length(), c.eye, MIN_VIEW_DISTANCE * size
+        )));
+    }
+    if up == DVec3::ZERO {
+        return Err(BakeError::invalid(
+            o,
+            "camera.up",
+            format!(
+                "{:?} is zero (valid: a non-zero vector across the viewing direction target − eye)",
+                c.up
+            ),
+        ));
+    }
+    let sin = unit(view).cross(unit(up)).length();
+    if sin < MIN_UP_ANGLE {
+        return Err(BakeError::invalid(o, "camera.up", format!(
+            "{:?} is parallel to the viewing direction target − eye = {:?} (angle {:e} rad; valid: at least {MIN_UP_ANGLE:e} rad)",
+            c.up, view.to_array(), sin.asin()
+        )));
+    }
+    Ok(())
+}
+
+/// `v / |v|` without overflow or underflow for a finite non-zero `v`.
+fn unit(v: DVec3) -> DVec3 {
+    (v / v.abs().max_element()).normalize()
+}
+
 fn finite3(o: &str, field: &str, v: [f64; 3]) -> Result<()> {
     if v.iter().all(|x| x.is_finite()) {
         Ok(())
@@ -539,20 +616,4 @@ fn unit3(o: &str, field: &str, v: [f64; 3]) -> Result<()> {
             "each component in 0..=1",
         ))
     }
-}
-
-fn sub(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
-    [a[0] - b[0], a[1] - b[1], a[2] - b[2]]
-}
-
-fn cross(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
-    [
-        a[1] * b[2] - a[2] * b[1],
-        a[2] * b[0] - a[0] * b[2],
-        a[0] * b[1] - a[1] * b[0],
-    ]
-}
-
-fn norm(a: [f64; 3]) -> f64 {
-    (a[0] * a[0] + a[1] * a[1] + a[2] * a[2]).sqrt()
 }

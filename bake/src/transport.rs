@@ -82,7 +82,9 @@ pub const LUMINANCE: [f64; 3] = [0.2126, 0.7152, 0.0722];
 /// Rays traced for one or more rows.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub struct RowStats {
+    /// Camera rays (one per pixel sub-sample).
     pub primary_rays: u64,
+    /// Visibility rays towards the environment.
     pub shadow_rays: u64,
 }
 

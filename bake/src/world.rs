@@ -1,17 +1,21 @@
-//! The built scene: world-space triangles in an obvhs BVH, shading data,
-//! materials and the camera.
+//! The built scene: world-space triangles in a BVH, shading data, materials
+//! and the camera.
 //!
 //! Surfaces are two-sided: at a hit, the geometric normal is flipped to face
 //! the viewer and the shading normal is flipped into the same hemisphere.
 //! A triangle's front side is the counter-clockwise one (OBJ and PLY
-//! convention); it matters only for the camera-inside-geometry check.
+//! convention); it matters only for the camera-inside-geometry check
+//! ([`crate::inside`]).
 //!
-//! Camera inside geometry: [`Scene::build`] traces up to 32×32 primary rays
-//! through pixel centres spread over the image and fails when more than 90 %
-//! of them ([`INSIDE_LIMIT`]) hit the back side of a triangle. That is what a
-//! camera inside a closed, outward-wound mesh sees; the distant environment
-//! could not light such a view anyway. (An interior scene whose walls face
-//! the room is seen from the front and passes.)
+//! Tracing is watertight: rays cannot slip between triangles that share an
+//! edge or a vertex, from either side. The triangle test is Woop, Benthin,
+//! Wald 2013 ([`crate::intersect`]) on the vertices exactly as the
+//! triangles share them; the BVH ([`crate::bvh`]) has conservative boxes.
+//! Geometry is traced in single precision in a copy of world space scaled
+//! by a power of two (exact) so that the scene spans about 2¹²: obvhs's
+//! fixed ray/box tolerances then cannot drop small scenes. A ray that
+//! starts outside the scene's (padded) bounding box starts tracing where it
+//! enters it, so that a distant camera loses no precision.
 //!
 //! Degenerate triangles (after the transform, in single precision: a height
 //! below 10⁻⁵ of the longest edge, i.e. |e₁ × e₂| ≤ 10⁻¹⁰·max edge²) are
@@ -24,26 +28,26 @@
 //! unwelded seams, as in the Utah teapot, shade smoothly).
 
 use crate::error::{BakeError, Result};
+use crate::intersect::{Tri, WtRay};
 use crate::material::Material;
 use crate::mesh::{self, RawMesh};
 use crate::rows::RowSource;
 use crate::scene::{CameraDesc, SceneDesc};
 use glam::{DMat3, DVec3, Vec3A};
-use obvhs::cwbvh::builder::build_cwbvh_from_tris;
 use obvhs::cwbvh::CwBvh;
 use obvhs::ray::{Ray, RayHit};
-use obvhs::rt_triangle::RtTriangle;
-use obvhs::triangle::Triangle;
-use obvhs::BvhBuildParams;
 use std::collections::HashMap;
 use std::path::PathBuf;
-use std::time::Duration;
 
-/// Fraction of probe rays hitting back faces above which the camera is
-/// considered inside geometry.
-pub const INSIDE_LIMIT: f64 = 0.9;
-/// Deepest BVH accepted (obvhs traverses with a fixed 32-entry stack).
-const MAX_BVH_DEPTH: u32 = 24;
+/// Largest and smallest scene extent traced (the larger of the bounding
+/// box's diagonal and its largest coordinate magnitude): single precision
+/// must hold it, scaled to trace space, with room to spare.
+const MAX_EXTENT: f64 = 1e30;
+const MIN_EXTENT: f64 = 1e-30;
+/// The scene's extent in trace space is about 2^TRACE_EXPONENT.
+const TRACE_EXPONENT: i32 = 12;
+/// Box padding, relative to the scene's extent.
+const PAD: f64 = 1.0 / 16384.0;
 
 /// What was loaded, for reports.
 #[derive(Clone, Debug, Default)]
@@ -57,21 +61,32 @@ pub struct SceneStats {
 /// Per-mesh load statistics.
 #[derive(Clone, Debug)]
 pub struct MeshStats {
+    /// The mesh file, resolved against the scene file's directory.
     pub path: PathBuf,
+    /// Triangles kept (after triangulating polygons).
     pub triangles: usize,
+    /// Triangles skipped because they have (almost) no area.
     pub degenerate_skipped: usize,
 }
 
-/// Pinhole camera; see [`crate::scene::CameraDesc`].
+/// Pinhole camera; see [`crate::scene::CameraDesc`]. World space, Y up;
+/// `forward`, `right` and `up` form a right-handed orthonormal basis
+/// (`right = forward × up`).
 #[derive(Clone, Copy, Debug)]
 pub struct Camera {
+    /// The pinhole, world units.
     pub eye: DVec3,
+    /// Unit viewing direction (through the image centre).
     pub forward: DVec3,
+    /// Unit vector towards the image's right edge.
     pub right: DVec3,
+    /// Unit vector towards the image's top edge.
     pub up: DVec3,
-    /// tan(fov/2).
+    /// tan(fov/2), fov the vertical field of view.
     pub tan_half: f64,
+    /// Image width in pixels.
     pub width: u32,
+    /// Image height in pixels.
     pub height: u32,
 }
 
@@ -79,8 +94,8 @@ impl Camera {
     /// The camera of a validated description.
     pub fn new(c: &CameraDesc) -> Camera {
         let eye = DVec3::from(c.eye);
-        let forward = (DVec3::from(c.target) - eye).normalize();
-        let right = forward.cross(DVec3::from(c.up)).normalize();
+        let forward = unit(DVec3::from(c.target) - eye);
+        let right = forward.cross(unit(DVec3::from(c.up))).normalize();
         let up = right.cross(forward);
         Camera {
             eye,
@@ -105,6 +120,11 @@ impl Camera {
     }
 }
 
+/// `v / |v|` without overflow or underflow for any finite non-zero `v`.
+fn unit(v: DVec3) -> DVec3 {
+    (v / v.abs().max_element()).normalize()
+}
+
 /// Per-triangle shading data, in BVH order.
 #[derive(Clone, Copy)]
 struct Shade {
@@ -115,6 +135,7 @@ struct Shade {
 /// A surface hit.
 #[derive(Clone, Copy, Debug)]
 pub struct Hit {
+    /// The hit point, world units.
     pub point: DVec3,
     /// Unit geometric normal, facing the viewer.
     pub ng: DVec3,
@@ -122,7 +143,26 @@ pub struct Hit {
     pub ns: DVec3,
     /// True when the ray hit the triangle's back (clockwise) side.
     pub back: bool,
+    /// Index of the hit surface's material (scene materials in name order).
     pub material: usize,
+}
+
+/// Triangles and their shading data as loaded, in world space.
+#[derive(Default)]
+struct Geometry {
+    tris: Vec<Tri>,
+    shade: Vec<Shade>,
+    stats: SceneStats,
+    /// Per mesh: the SHA-256 of its file and its format.
+    files: Vec<([u8; 32], &'static str)>,
+}
+
+/// A ray ready for the BVH: in trace space, starting where the world ray
+/// enters the scene's box, `skip` world units from its origin.
+struct Traced {
+    ray: Ray,
+    wt: WtRay,
+    skip: f64,
 }
 
 /// A scene ready to trace.
@@ -132,118 +172,66 @@ pub struct Scene {
     pub(crate) texel_samples: u32,
     pub(crate) materials: Vec<Material>,
     pub(crate) channels: u32,
-    tris: Vec<RtTriangle>,
+    /// Triangles in trace space (world × `scale`), in BVH order.
+    tris: Vec<Tri>,
     shade: Vec<Shade>,
     bvh: CwBvh,
-    /// Shadow-ray origin offset along the geometric normal.
+    /// Trace space = world space × scale, a power of two.
+    scale: f64,
+    /// The padded bounding box of the geometry, world units.
+    bounds: [DVec3; 2],
+    /// Shadow-ray origin offset along the geometric normal, world units.
     pub(crate) epsilon: f64,
     stats: SceneStats,
+    input_id: [u8; 32],
 }
 
 impl Scene {
     /// Loads the meshes, builds the BVH and checks the camera placement.
     pub fn build(desc: &SceneDesc) -> Result<Scene> {
         desc.validate()?;
-        let names: Vec<&String> = desc.materials.keys().collect();
-        let materials: Vec<Material> = desc.materials.values().map(Material::new).collect();
-        let mat_index = |name: &String| names.iter().position(|n| *n == name).unwrap_or(0) as u32;
-        let mut tris: Vec<Triangle> = Vec::new();
-        let mut shade: Vec<Shade> = Vec::new();
-        let mut stats = SceneStats::default();
-        for (i, m) in desc.meshes.iter().enumerate() {
-            let path = desc.resolve(&m.path);
-            let raw = mesh::load(&path).map_err(|e| match e {
-                BakeError::Io { path, error } => BakeError::MeshIo {
-                    origin: desc.origin.clone(),
-                    field: format!("meshes[{i}].path"),
-                    path,
-                    error,
-                },
-                e => e,
-            })?;
-            let lin = rotation(m.rotation) * DMat3::from_diagonal(DVec3::from(m.scale.0));
-            let kept = add_mesh(
-                &raw,
-                lin,
-                DVec3::from(m.translation),
-                m.smooth,
-                mat_index(&m.material),
-                &mut tris,
-                &mut shade,
-            );
-            let (kept, skipped) = kept.map_err(|message| BakeError::MalformedMesh {
-                path: path.clone(),
-                format: if path
-                    .extension()
-                    .is_some_and(|e| e.eq_ignore_ascii_case("ply"))
-                {
-                    "PLY"
-                } else {
-                    "OBJ"
-                },
-                message,
-            })?;
-            stats.meshes.push(MeshStats {
-                path,
-                triangles: kept,
-                degenerate_skipped: skipped,
-            });
-        }
-        for (i, q) in desc.quads.iter().enumerate() {
-            let (hx, hz) = (0.5 * q.size[0], 0.5 * q.size[1]);
-            let raw = RawMesh {
-                positions: vec![
-                    [-hx as f32, 0.0, -hz as f32],
-                    [-hx as f32, 0.0, hz as f32],
-                    [hx as f32, 0.0, hz as f32],
-                    [hx as f32, 0.0, -hz as f32],
-                ],
-                normals: None,
-                triangles: vec![[0, 1, 2], [0, 2, 3]],
-            };
-            add_mesh(
-                &raw,
-                rotation(q.rotation),
-                DVec3::from(q.center),
-                false,
-                mat_index(&q.material),
-                &mut tris,
-                &mut shade,
-            )
-            .map_err(|m| BakeError::invalid(&desc.origin, format!("quads[{i}]"), m))?;
-        }
-        stats.triangles = tris.len();
-        let (mut lo, mut hi) = (Vec3A::splat(f32::MAX), Vec3A::splat(f32::MIN));
-        for t in &tris {
-            for v in [t.v0, t.v1, t.v2] {
-                lo = lo.min(v);
-                hi = hi.max(v);
-            }
-        }
-        let extent = ((hi - lo).length() as f64).max(lo.abs().max(hi.abs()).max_element() as f64);
-        if !extent.is_finite() || extent > 1e30 {
+        let geometry = load_geometry(desc)?;
+        let files: Vec<([u8; 32], &str)> = geometry.files.iter().map(|(d, f)| (*d, *f)).collect();
+        let input_id = crate::identity::scene_identity(desc, &files);
+        let scene = Scene::assemble(desc, geometry, input_id)?;
+        scene.check_camera()?;
+        Ok(scene)
+    }
+
+    /// Scales the geometry into trace space and builds the BVH.
+    fn assemble(desc: &SceneDesc, g: Geometry, input_id: [u8; 32]) -> Result<Scene> {
+        let (lo, hi) = g.tris.iter().flat_map(|t| t.vertices()).fold(
+            (Vec3A::splat(f32::MAX), Vec3A::splat(f32::MIN)),
+            |(lo, hi), v| (lo.min(v), hi.max(v)),
+        );
+        let (lo, hi) = (lo.as_dvec3(), hi.as_dvec3());
+        let extent = (hi - lo).length().max(lo.abs().max(hi.abs()).max_element());
+        if !(MIN_EXTENT..=MAX_EXTENT).contains(&extent) {
             return Err(BakeError::Geometry(format!(
-                "the scene's bounding box [{lo:?}, {hi:?}] is too large for single-precision ray tracing"
+                "the scene's bounding box [{lo}, {hi}] (extent {extent:e}) is out of range for single-precision ray tracing (valid: an extent, the larger of its diagonal and its largest coordinate, from {MIN_EXTENT:e} to {MAX_EXTENT:e})"
             )));
         }
-        let bvh = build_cwbvh_from_tris(
-            &tris,
-            BvhBuildParams::medium_build(),
-            &mut Duration::default(),
-        );
-        let depth = bvh_depth(&bvh);
-        if depth > MAX_BVH_DEPTH {
+        let scale = 2f64.powi(TRACE_EXPONENT - extent.log2().ceil() as i32);
+        let s = scale as f32;
+        let traced: Vec<Tri> = g
+            .tris
+            .iter()
+            .map(|t| Tri::new(t.vertices().map(|v| v * s)))
+            .collect();
+        let pad = PAD * extent;
+        let (bvh, depth) = crate::bvh::build(&traced, (pad * scale) as f32);
+        if depth > crate::bvh::MAX_DEPTH {
             return Err(BakeError::Geometry(format!(
-                "the BVH is {depth} levels deep (valid: at most {MAX_BVH_DEPTH}); the geometry is pathologically distributed"
+                "the BVH is {depth} levels deep (valid: at most {}); the scene has too many triangles",
+                crate::bvh::MAX_DEPTH
             )));
         }
         let order = &bvh.primitive_indices;
-        let rt: Vec<RtTriangle> = order
-            .iter()
-            .map(|&i| RtTriangle::from(&tris[i as usize]))
-            .collect();
-        let shade: Vec<Shade> = order.iter().map(|&i| shade[i as usize]).collect();
-        let scene = Scene {
+        let tris = order.iter().map(|&i| traced[i as usize]).collect();
+        let shade = order.iter().map(|&i| g.shade[i as usize]).collect();
+        let mut stats = g.stats;
+        stats.triangles = g.tris.len();
+        Ok(Scene {
             rows: RowSource::Camera {
                 camera: Camera::new(&desc.camera),
                 spp: desc.camera.spp,
@@ -251,20 +239,28 @@ impl Scene {
             face_res: desc.lighting.face_res,
             texel_samples: desc.lighting.texel_samples,
             channels: if desc.needs_color_transport() { 3 } else { 1 },
-            materials,
-            tris: rt,
+            materials: desc.materials.values().map(Material::new).collect(),
+            tris,
             shade,
             bvh,
+            scale,
+            bounds: [lo - 2.0 * pad, hi + 2.0 * pad],
             epsilon: 1e-5 * extent.max(1e-3),
             stats,
-        };
-        scene.check_camera()?;
-        Ok(scene)
+            input_id,
+        })
     }
 
     /// Load statistics (triangle counts, skipped degenerate triangles).
     pub fn stats(&self) -> &SceneStats {
         &self.stats
+    }
+
+    /// The input identity of this scene: a SHA-256 of everything that
+    /// determines its rows ([`crate::identity`]), stored in the raw store's
+    /// header so that only a bake of the same inputs is resumed.
+    pub fn input_id(&self) -> [u8; 32] {
+        self.input_id
     }
 
     /// What the rows are.
@@ -294,22 +290,59 @@ impl Scene {
         }
     }
 
-    /// Closest hit along a ray from `origin` in unit direction `dir`.
-    pub fn intersect(&self, origin: DVec3, dir: DVec3) -> Option<Hit> {
-        let ray = make_ray(origin, dir);
-        let mut hit = RayHit::none();
-        if !self
-            .bvh
-            .ray_traverse(ray, &mut hit, |r, id| self.tris[id].intersect(r))
-        {
+    /// The ray from `origin` along unit `dir` in trace space, clipped to the
+    /// scene's box; `None` when it misses the box.
+    #[inline(always)]
+    fn traced(&self, origin: DVec3, dir: DVec3) -> Option<Traced> {
+        if !origin.is_finite() || !dir.is_finite() || dir == DVec3::ZERO {
             return None;
         }
-        let id = hit.primitive_id as usize;
-        let tri = &self.tris[id];
-        let v0 = tri.v0.as_dvec3();
-        let v1 = v0 - tri.e1.as_dvec3();
-        let v2 = v0 + tri.e2.as_dvec3();
-        let point = origin + dir * hit.t as f64;
+        let [lo, hi] = self.bounds;
+        let (mut near, mut far) = (0.0f64, f64::INFINITY);
+        let inv = dir.recip();
+        for k in 0..3 {
+            if dir[k] == 0.0 {
+                if origin[k] < lo[k] || origin[k] > hi[k] {
+                    return None;
+                }
+                continue;
+            }
+            let (a, b) = ((lo[k] - origin[k]) * inv[k], (hi[k] - origin[k]) * inv[k]);
+            near = near.max(a.min(b));
+            far = far.min(a.max(b));
+        }
+        if near > far {
+            return None;
+        }
+        let start = ((origin + dir * near) * self.scale).as_vec3a();
+        // Negative zeros become positive: obvhs 0.4's CWBVH traversal misses
+        // everything along a direction with a `-0.0` component (its octant
+        // comes from the sign bit).
+        let d = dir.as_vec3a() + Vec3A::ZERO;
+        Some(Traced {
+            ray: Ray::new_inf(start, d),
+            wt: WtRay::new(start, d),
+            skip: near,
+        })
+    }
+
+    /// Closest hit along a ray from `origin` in unit direction `dir`.
+    pub fn intersect(&self, origin: DVec3, dir: DVec3) -> Option<Hit> {
+        let t = self.traced(origin, dir)?;
+        let mut hit = RayHit::none();
+        let found = self.bvh.ray_traverse(t.ray, &mut hit, |r, id| {
+            t.wt.hit(&self.tris[id], r.tmin, r.tmax)
+        });
+        if !found {
+            return None;
+        }
+        let dist = t.skip + hit.t as f64 / self.scale;
+        Some(self.shade_hit(hit.primitive_id as usize, origin + dir * dist, dir))
+    }
+
+    /// The hit on triangle `id` at `point`, seen along `dir`.
+    fn shade_hit(&self, id: usize, point: DVec3, dir: DVec3) -> Hit {
+        let [v0, v1, v2] = self.tris[id].vertices().map(|v| v.as_dvec3() / self.scale);
         let (e1, e2) = (v1 - v0, v2 - v0);
         let n = e1.cross(e2);
         let nn = n.length_squared();
@@ -332,60 +365,92 @@ impl Scene {
         } else {
             ns
         };
-        Some(Hit {
+        Hit {
             point,
             ng,
             ns,
             back,
             material: s.material as usize,
-        })
+        }
     }
 
-    /// True when a ray from `origin` in direction `dir` hits anything.
+    /// True when a ray from `origin` in unit direction `dir` hits anything
+    /// (any hit: the shadow query).
     pub fn occluded(&self, origin: DVec3, dir: DVec3) -> bool {
-        let ray = make_ray(origin, dir);
+        let Some(t) = self.traced(origin, dir) else {
+            return false;
+        };
         !self
             .bvh
-            .ray_traverse_miss(ray, |r, id| self.tris[id].intersect(r))
-    }
-
-    /// Probes the image with up to 32×32 pixel-centre rays and fails when
-    /// more than [`INSIDE_LIMIT`] of them hit the back side of a triangle.
-    fn check_camera(&self) -> Result<()> {
-        let Some(c) = self.camera() else {
-            return Ok(());
-        };
-        let (gx, gy) = (c.width.min(32), c.height.min(32));
-        let mut back = 0usize;
-        for j in 0..gy {
-            for i in 0..gx {
-                let x = (i as f64 + 0.5) * c.width as f64 / gx as f64;
-                let y = (j as f64 + 0.5) * c.height as f64 / gy as f64;
-                if self
-                    .intersect(c.eye, c.direction(x, y))
-                    .is_some_and(|h| h.back)
-                {
-                    back += 1;
-                }
-            }
-        }
-        let frac = back as f64 / (gx * gy) as f64;
-        if frac > INSIDE_LIMIT {
-            return Err(BakeError::CameraInsideGeometry {
-                eye: c.eye.to_array(),
-                back_fraction: frac,
-                limit: INSIDE_LIMIT,
-            });
-        }
-        Ok(())
+            .ray_traverse_miss(t.ray, |r, id| t.wt.hit(&self.tris[id], r.tmin, r.tmax))
     }
 }
 
-/// A single-precision ray. Negative zeros in the direction become positive:
-/// obvhs 0.4's CWBVH traversal misses everything along a direction with a
-/// `-0.0` component (its octant comes from the sign bit).
-fn make_ray(origin: DVec3, dir: DVec3) -> Ray {
-    Ray::new_inf(origin.as_vec3a(), dir.as_vec3a() + Vec3A::ZERO)
+/// Loads every mesh and quad of `desc` into world-space triangles.
+fn load_geometry(desc: &SceneDesc) -> Result<Geometry> {
+    let names: Vec<&String> = desc.materials.keys().collect();
+    let mat_index = |name: &String| names.iter().position(|n| *n == name).unwrap_or(0) as u32;
+    let mut g = Geometry::default();
+    for (i, m) in desc.meshes.iter().enumerate() {
+        let path = desc.resolve(&m.path);
+        let loaded = mesh::load(&path).map_err(|e| match e {
+            BakeError::Io { path, error } => BakeError::MeshIo {
+                origin: desc.origin.clone(),
+                field: format!("meshes[{i}].path"),
+                path,
+                error,
+            },
+            e => e,
+        })?;
+        let lin = rotation(m.rotation) * DMat3::from_diagonal(DVec3::from(m.scale.0));
+        let placed = Placement {
+            lin,
+            translation: DVec3::from(m.translation),
+            smooth: m.smooth,
+            material: mat_index(&m.material),
+        };
+        let (kept, skipped) =
+            placed
+                .add(&loaded.mesh, &mut g)
+                .map_err(|message| BakeError::MalformedMesh {
+                    path: path.clone(),
+                    format: loaded.format,
+                    message,
+                })?;
+        g.files.push((loaded.digest, loaded.format));
+        g.stats.meshes.push(MeshStats {
+            path,
+            triangles: kept,
+            degenerate_skipped: skipped,
+        });
+    }
+    for (i, q) in desc.quads.iter().enumerate() {
+        let placed = Placement {
+            lin: rotation(q.rotation),
+            translation: DVec3::from(q.center),
+            smooth: false,
+            material: mat_index(&q.material),
+        };
+        placed
+            .add(&quad_mesh(q.size), &mut g)
+            .map_err(|m| BakeError::invalid(&desc.origin, format!("quads[{i}]"), m))?;
+    }
+    Ok(g)
+}
+
+/// A `size[0] × size[1]` rectangle in the XZ plane, centred, facing +Y.
+fn quad_mesh(size: [f64; 2]) -> RawMesh {
+    let (hx, hz) = ((0.5 * size[0]) as f32, (0.5 * size[1]) as f32);
+    RawMesh {
+        positions: vec![
+            [-hx, 0.0, -hz],
+            [-hx, 0.0, hz],
+            [hx, 0.0, hz],
+            [hx, 0.0, -hz],
+        ],
+        normals: None,
+        triangles: vec![[0, 1, 2], [0, 2, 3]],
+    }
 }
 
 /// `Rz·Ry·Rx` for Euler angles `[rx, ry, rz]` in degrees.
@@ -395,130 +460,131 @@ pub(crate) fn rotation(deg: [f64; 3]) -> DMat3 {
         * DMat3::from_rotation_x(deg[0].to_radians())
 }
 
-/// Appends a transformed mesh; returns (triangles kept, degenerate skipped)
-/// or a message when nothing usable remains.
-fn add_mesh(
-    raw: &RawMesh,
+/// Where a mesh goes: its transform, normals mode and material.
+struct Placement {
     lin: DMat3,
     translation: DVec3,
     smooth: bool,
     material: u32,
-    tris: &mut Vec<Triangle>,
-    shade: &mut Vec<Shade>,
-) -> std::result::Result<(usize, usize), String> {
-    let world: Vec<Vec3A> = raw
-        .positions
-        .iter()
-        .map(|p| (lin * DVec3::from(p.map(f64::from)) + translation).as_vec3a())
-        .collect();
-    if let Some(i) = world.iter().position(|p| !p.is_finite()) {
-        return Err(format!(
-            "vertex {i} leaves the single-precision range after the transform"
-        ));
-    }
-    // A mirroring transform flips the winding; swap two corners to keep
-    // counter-clockwise fronts.
-    let flip = lin.determinant() < 0.0;
-    let corners = |t: &[u32; 3]| {
-        if flip {
-            [t[0], t[2], t[1]]
-        } else {
-            *t
+}
+
+impl Placement {
+    /// Appends the transformed mesh to `g`; returns (triangles kept,
+    /// degenerate skipped) or a message when nothing usable remains.
+    fn add(&self, raw: &RawMesh, g: &mut Geometry) -> std::result::Result<(usize, usize), String> {
+        let world = self.world_positions(raw)?;
+        // A mirroring transform flips the winding; swap two corners to keep
+        // counter-clockwise fronts.
+        let flip = self.lin.determinant() < 0.0;
+        let tris: Vec<[u32; 3]> = raw
+            .triangles
+            .iter()
+            .map(|t| if flip { [t[0], t[2], t[1]] } else { *t })
+            .collect();
+        let normals = self.vertex_normals(raw, &world, &tris);
+        let (mut kept, mut skipped) = (0, 0);
+        for t in &tris {
+            let Some(ng) = face_normal(&world, t) else {
+                skipped += 1;
+                continue;
+            };
+            g.tris.push(Tri::new(t.map(|i| world[i as usize])));
+            let corner = |i: u32| match &normals {
+                Some(vn) if vn[i as usize] != DVec3::ZERO && vn[i as usize].is_finite() => {
+                    vn[i as usize].as_vec3a()
+                }
+                _ => ng.as_vec3a(),
+            };
+            g.shade.push(Shade {
+                normals: t.map(corner),
+                material: self.material,
+            });
+            kept += 1;
         }
-    };
-    let face_normal = |t: &[u32; 3]| -> Option<DVec3> {
-        let [a, b, c] = t.map(|i| world[i as usize].as_dvec3());
-        let (e1, e2, e3) = (b - a, c - a, c - b);
-        let n = e1.cross(e2);
-        let longest = e1
-            .length_squared()
-            .max(e2.length_squared())
-            .max(e3.length_squared());
-        let len = n.length();
-        (len.is_finite() && len > 1e-10 * longest).then(|| n / len)
-    };
-    let normal_matrix = lin.inverse().transpose();
-    let vertex_normals: Option<Vec<DVec3>> = if !smooth {
-        None
-    } else if let Some(ns) = &raw.normals {
+        if kept == 0 {
+            return Err(format!(
+                "all {} triangles are degenerate (zero area)",
+                raw.triangles.len()
+            ));
+        }
+        Ok((kept, skipped))
+    }
+
+    /// Vertex positions in world space, rounded to single precision once
+    /// per vertex (so that triangles sharing a vertex share its bits).
+    fn world_positions(&self, raw: &RawMesh) -> std::result::Result<Vec<Vec3A>, String> {
+        let world: Vec<Vec3A> = raw
+            .positions
+            .iter()
+            .map(|p| (self.lin * DVec3::from(p.map(f64::from)) + self.translation).as_vec3a())
+            .collect();
+        match world.iter().position(|p| !p.is_finite()) {
+            Some(i) => Err(format!(
+                "vertex {i} leaves the single-precision range after the transform"
+            )),
+            None => Ok(world),
+        }
+    }
+
+    /// Per-vertex shading normals when smooth: the file's, transformed, or
+    /// area-weighted face normals welded by position; `None` when flat.
+    fn vertex_normals(
+        &self,
+        raw: &RawMesh,
+        world: &[Vec3A],
+        tris: &[[u32; 3]],
+    ) -> Option<Vec<DVec3>> {
+        if !self.smooth {
+            return None;
+        }
+        let Some(ns) = &raw.normals else {
+            return Some(welded_normals(raw, world, tris));
+        };
+        let normal_matrix = self.lin.inverse().transpose();
         Some(
             ns.iter()
                 .map(|n| (normal_matrix * DVec3::from(n.map(f64::from))).normalize_or_zero())
                 .collect(),
         )
-    } else {
-        // Weld by model-space position, accumulate area-weighted normals.
-        let mut key_of: HashMap<[u32; 3], usize> = HashMap::new();
-        let keys: Vec<usize> = raw
-            .positions
-            .iter()
-            .map(|p| {
-                let k = p.map(|v| if v == 0.0 { 0 } else { v.to_bits() });
-                let next = key_of.len();
-                *key_of.entry(k).or_insert(next)
-            })
-            .collect();
-        let mut acc = vec![DVec3::ZERO; key_of.len()];
-        for t in &raw.triangles {
-            let t = corners(t);
-            if face_normal(&t).is_none() {
-                continue;
-            }
-            let [a, b, c] = t.map(|i| world[i as usize].as_dvec3());
-            let n = (b - a).cross(c - a);
-            for i in t {
-                acc[keys[i as usize]] += n;
-            }
-        }
-        Some(keys.iter().map(|&k| acc[k].normalize_or_zero()).collect())
-    };
-    let (mut kept, mut skipped) = (0, 0);
-    for t in &raw.triangles {
-        let t = corners(t);
-        let Some(ng) = face_normal(&t) else {
-            skipped += 1;
-            continue;
-        };
-        let [v0, v1, v2] = t.map(|i| world[i as usize]);
-        tris.push(Triangle { v0, v1, v2 });
-        let normals = match &vertex_normals {
-            Some(vn) => t.map(|i| {
-                let n = vn[i as usize];
-                if n == DVec3::ZERO || !n.is_finite() {
-                    ng.as_vec3a()
-                } else {
-                    n.as_vec3a()
-                }
-            }),
-            None => [ng.as_vec3a(); 3],
-        };
-        shade.push(Shade { normals, material });
-        kept += 1;
     }
-    if kept == 0 {
-        return Err(format!(
-            "all {} triangles are degenerate (zero area)",
-            raw.triangles.len()
-        ));
-    }
-    Ok((kept, skipped))
 }
 
-/// Depth of a CWBVH (1 for a root-only tree).
-fn bvh_depth(bvh: &CwBvh) -> u32 {
-    if bvh.nodes.is_empty() {
-        return 0;
-    }
-    let mut max = 0;
-    let mut stack = vec![(0usize, 1u32)];
-    while let Some((i, d)) = stack.pop() {
-        max = max.max(d);
-        let Some(node) = bvh.nodes.get(i) else {
+/// The unit normal of triangle `t`, or `None` when it is degenerate.
+fn face_normal(world: &[Vec3A], t: &[u32; 3]) -> Option<DVec3> {
+    let [a, b, c] = t.map(|i| world[i as usize].as_dvec3());
+    let (e1, e2, e3) = (b - a, c - a, c - b);
+    let n = e1.cross(e2);
+    let longest = e1
+        .length_squared()
+        .max(e2.length_squared())
+        .max(e3.length_squared());
+    let len = n.length();
+    (len.is_finite() && len > 1e-10 * longest).then(|| n / len)
+}
+
+/// Area-weighted face normals summed over vertices welded by model-space
+/// position.
+fn welded_normals(raw: &RawMesh, world: &[Vec3A], tris: &[[u32; 3]]) -> Vec<DVec3> {
+    let mut key_of: HashMap<[u32; 3], usize> = HashMap::new();
+    let keys: Vec<usize> = raw
+        .positions
+        .iter()
+        .map(|p| {
+            let k = p.map(|v| if v == 0.0 { 0 } else { v.to_bits() });
+            let next = key_of.len();
+            *key_of.entry(k).or_insert(next)
+        })
+        .collect();
+    let mut acc = vec![DVec3::ZERO; key_of.len()];
+    for t in tris {
+        if face_normal(world, t).is_none() {
             continue;
-        };
-        for c in 0..node.imask.count_ones() as usize {
-            stack.push((node.child_base_idx as usize + c, d + 1));
+        }
+        let [a, b, c] = t.map(|i| world[i as usize].as_dvec3());
+        let n = (b - a).cross(c - a);
+        for i in t {
+            acc[keys[*i as usize]] += n;
         }
     }
-    max
+    keys.iter().map(|&k| acc[k].normalize_or_zero()).collect()
 }

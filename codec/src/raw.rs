@@ -1,20 +1,23 @@
 //! The raw transport store: the uncompressed matrix T, row-major, as `ltm
 //! bake` and `ltm import` write it and `ltm compress` reads it.
 //!
-//! One little-endian file (layout in docs/FORMAT.md):
+//! One little-endian file (layout in docs/FORMAT.md). Version 2 adds the
+//! input identity; a header is `hlen` = 64 bytes in version 1 and 96 in
+//! version 2:
 //!
 //! | offset | size | field |
 //! |---|---|---|
 //! | 0 | 8 | magic `LTMRAW\0\x01` |
-//! | 8 | 4 | version (1) |
+//! | 8 | 4 | version (1 or 2) |
 //! | 12 | 4 | flags: bit 0 = an albedo image is stored |
 //! | 16 | 4·5 | width, height, face_res, channels, block_rows |
 //! | 36 | 4 | block_count = ceil(width·height / block_rows) |
 //! | 40 | 8 | data_offset (multiple of 4096) |
 //! | 48 | 8 | albedo_offset (0 when absent) |
 //! | 56 | 4 | reserved (0) |
-//! | 60 | 4 | CRC-32 of bytes 0..60 |
-//! | 64 | 8·block_count | block table: state (1 = complete), CRC-32 of the block |
+//! | 60 | 32 | version 2 only: input identity ([`RawHeader::input_id`]) |
+//! | hlen − 4 | 4 | CRC-32 of bytes 0..hlen−4 |
+//! | hlen | 8·block_count | block table: state (1 = complete), CRC-32 of the block |
 //! | flags_offset | P | one byte per row: 1 = the row is all zero |
 //! | albedo_offset | 12·P | RGB albedo per pixel, f32 (optional) |
 //! | data_offset | 4·P·M·C | T\[p\]\[j\]\[c\], f32 |
@@ -23,10 +26,15 @@
 //! CRC covers its row flags, then its albedo values, then its data.
 //!
 //! Writing goes to `PATH.partial`, one block at a time with plain positioned
-//! writes (so that a full disk is an error, not a signal), and the
-//! file is renamed to `PATH` when every block is complete. Re-opening an
-//! interrupted `.partial` with the same header resumes: blocks marked
-//! complete whose CRC verifies are kept, the others are pending.
+//! writes (so that a full disk is an error, not a signal), and the file is
+//! renamed to `PATH` when every block is complete. A header with an input
+//! identity is written as version 2, one without as version 1.
+//! Re-opening an interrupted `.partial` resumes it only when it proves to
+//! come from the same inputs: both it and the new header carry an input
+//! identity, the identities are equal, and the layout and length match. Its
+//! blocks marked complete whose CRC verifies are then kept, the others are
+//! pending. Otherwise the file is started over, and
+//! [`RawWriter::resume_state`] says why.
 
 #[cfg(target_endian = "big")]
 compile_error!("ltm's file formats are little-endian and are mapped directly; big-endian targets are not supported");
@@ -42,8 +50,14 @@ use std::fs::{File, OpenOptions};
 use std::path::{Path, PathBuf};
 
 const MAGIC: [u8; 8] = *b"LTMRAW\0\x01";
-const VERSION: u32 = 1;
-const HEADER_LEN: u64 = 64;
+/// The newest version; version 1 (no input identity) is still read and
+/// written.
+const VERSION: u32 = 2;
+/// Header bytes of version 1 and of version 2.
+const HEADER_LEN_V1: u64 = 64;
+const HEADER_LEN_V2: u64 = 96;
+/// Bytes of an input identity.
+pub const INPUT_ID_LEN: usize = 32;
 const FLAG_ALBEDO: u32 = 1;
 const DATA_ALIGN: u64 = 4096;
 /// Bytes read at a time when a resumed block's CRC is checked.
@@ -52,17 +66,26 @@ const CRC_CHUNK: u64 = 8 << 20;
 /// Header of a raw store.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct RawHeader {
-    /// The matrix's dimensions.
+    /// Matrix dimensions: rows (pixels), lights (cubemap texels), channels.
     pub dims: Dims,
     /// Rows per block (the unit of writing, resuming and checksumming).
     pub block_rows: u32,
     /// An RGB albedo image is stored (monochrome transport factored as
     /// albedo × grey transport).
     pub has_albedo: bool,
+    /// A digest of everything that determines the rows, defined by the
+    /// writer (`ltm bake`: a SHA-256 of the resolved scene description,
+    /// every mesh file's bytes and the settings), or `None` when the writer
+    /// cannot tell (`ltm import`). A `.partial` file is resumed only when
+    /// its identity equals the writer's. Stored in version-2 files; a
+    /// header without one is written as version 1.
+    pub input_id: Option<[u8; INPUT_ID_LEN]>,
 }
 
 #[derive(Clone, Copy)]
 struct Layout {
+    /// Start of the block table: the header length.
+    table_offset: u64,
     block_count: u64,
     flags_offset: u64,
     albedo_offset: u64,
@@ -79,6 +102,33 @@ impl RawHeader {
             dims,
             block_rows,
             has_albedo,
+            input_id: None,
+        }
+    }
+
+    /// The same header with an input identity (written as version 2).
+    pub fn with_input_id(self, id: [u8; INPUT_ID_LEN]) -> RawHeader {
+        RawHeader {
+            input_id: Some(id),
+            ..self
+        }
+    }
+
+    /// The format version this header is written as: 2 with an input
+    /// identity, else 1.
+    pub fn version(&self) -> u32 {
+        if self.input_id.is_some() {
+            2
+        } else {
+            1
+        }
+    }
+
+    fn header_len(&self) -> u64 {
+        if self.input_id.is_some() {
+            HEADER_LEN_V2
+        } else {
+            HEADER_LEN_V1
         }
     }
 
@@ -100,7 +150,8 @@ impl RawHeader {
             ));
         }
         let block_count = p.div_ceil(self.block_rows as u64);
-        let flags_offset = HEADER_LEN + 8 * block_count;
+        let table_offset = self.header_len();
+        let flags_offset = table_offset + 8 * block_count;
         let albedo_offset = (flags_offset + p).next_multiple_of(64);
         let albedo_end = albedo_offset + if self.has_albedo { 12 * p } else { 0 };
         let data_offset = albedo_end.next_multiple_of(DATA_ALIGN);
@@ -110,6 +161,7 @@ impl RawHeader {
                 Error::range("raw store size", self.dims.raw_bytes(), "below 2^64 bytes")
             })?;
         Ok(Layout {
+            table_offset,
             block_count,
             flags_offset,
             albedo_offset: if self.has_albedo { albedo_offset } else { 0 },
@@ -132,7 +184,7 @@ impl RawHeader {
     fn encode(&self, layout: &Layout) -> Vec<u8> {
         let mut w = Writer::default();
         w.bytes.extend_from_slice(&MAGIC);
-        w.u32(VERSION);
+        w.u32(self.version());
         w.u32(if self.has_albedo { FLAG_ALBEDO } else { 0 });
         for v in self.dims.to_fields() {
             w.u32(v);
@@ -142,32 +194,51 @@ impl RawHeader {
         w.u64(layout.data_offset);
         w.u64(layout.albedo_offset);
         w.u32(0);
+        if let Some(id) = &self.input_id {
+            w.bytes.extend_from_slice(id);
+        }
         let crc = crc32fast::hash(&w.bytes);
         w.u32(crc);
         w.bytes
     }
 
+    /// Decodes and validates the header at the start of `bytes` (at least
+    /// its header length).
     fn decode(bytes: &[u8], path: &Path) -> Result<(RawHeader, Layout)> {
-        if bytes.len() < HEADER_LEN as usize || bytes[..8] != MAGIC {
+        if bytes.len() < 12 || bytes[..8] != MAGIC {
             return Err(Error::BadMagic {
                 path: path.into(),
                 expected: "an ltm raw transport store",
                 found: bytes[..bytes.len().min(8)].to_vec(),
             });
         }
-        let mut r = Reader::new(&bytes[..HEADER_LEN as usize], "raw store header");
-        r.take(8)?;
-        let version = r.u32()?;
-        if version != VERSION {
-            return Err(Error::Version {
-                what: "raw store",
-                found: version,
-                supported: VERSION,
-            });
+        let version = u32::from_le_bytes(bytes[8..12].try_into().expect("4 bytes"));
+        let len = match version {
+            1 => HEADER_LEN_V1,
+            2 => HEADER_LEN_V2,
+            _ => {
+                return Err(Error::Version {
+                    what: "raw store",
+                    found: version,
+                    supported: VERSION,
+                })
+            }
+        } as usize;
+        if bytes.len() < len {
+            return Err(Error::corrupt(
+                "raw store header",
+                format!(
+                    "{}: {} bytes, a version-{version} header has {len}",
+                    path.display(),
+                    bytes.len()
+                ),
+            ));
         }
+        let mut r = Reader::new(&bytes[..len], "raw store header");
+        r.take(12)?;
         let flags = r.u32()?;
-        let stored_crc = u32::from_le_bytes(bytes[60..64].try_into().expect("4 bytes"));
-        let crc = crc32fast::hash(&bytes[..60]);
+        let stored_crc = u32::from_le_bytes(bytes[len - 4..len].try_into().expect("4 bytes"));
+        let crc = crc32fast::hash(&bytes[..len - 4]);
         if crc != stored_crc {
             return Err(Error::Crc {
                 chunk: "raw store header".into(),
@@ -187,6 +258,8 @@ impl RawHeader {
             dims,
             block_rows: r.u32()?,
             has_albedo: flags & FLAG_ALBEDO != 0,
+            input_id: (version == 2)
+                .then(|| bytes[60..60 + INPUT_ID_LEN].try_into().expect("32 bytes")),
         };
         let layout = header.layout()?;
         let (block_count, data_offset, albedo_offset) = (r.u32()?, r.u64()?, r.u64()?);
@@ -199,6 +272,108 @@ impl RawHeader {
                 layout.block_count, layout.data_offset, layout.albedo_offset)));
         }
         Ok((header, layout))
+    }
+}
+
+/// What [`RawWriter::create`] did with an existing `PATH.partial`.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[non_exhaustive]
+pub enum ResumeState {
+    /// There was no partial file: a new one was started.
+    New,
+    /// The partial file comes from the same inputs: its `kept` complete
+    /// blocks (of `total`) whose CRC verifies were kept.
+    Resumed {
+        /// Blocks kept.
+        kept: usize,
+        /// Blocks in the store.
+        total: usize,
+    },
+    /// A partial file was there but could not be resumed; it was started
+    /// over.
+    Restarted(RestartReason),
+}
+
+/// Why a partial file was started over.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[non_exhaustive]
+pub enum RestartReason {
+    /// It cannot be read, or its header is not a valid raw store header.
+    Unreadable,
+    /// It or the new header has no input identity (a version-1 store, as
+    /// `ltm import` and older versions of ltm write), so the two cannot be
+    /// proven to come from the same inputs.
+    NoIdentity,
+    /// Its input identity differs: it was computed from other inputs.
+    DifferentInputs,
+    /// Same inputs, but another layout (dimensions, albedo image or block
+    /// size).
+    DifferentLayout,
+    /// Its length is not the one its header implies (truncated).
+    WrongLength,
+}
+
+impl std::fmt::Display for RestartReason {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(match self {
+            RestartReason::Unreadable => "it cannot be read as a raw store",
+            RestartReason::NoIdentity => {
+                "it records no input identity (a version-1 store, from ltm import or an older ltm), so it cannot be proven to come from the same inputs"
+            }
+            RestartReason::DifferentInputs => {
+                "it was computed from different inputs (its input identity differs: another scene description, mesh file, setting or program version)"
+            }
+            RestartReason::DifferentLayout => {
+                "it has another layout (dimensions, albedo image or block size)"
+            }
+            RestartReason::WrongLength => "its length does not match its header (truncated)",
+        })
+    }
+}
+
+impl std::fmt::Display for ResumeState {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            ResumeState::New => f.write_str("no partial file; started a new one"),
+            ResumeState::Resumed { kept, total } => {
+                write!(f, "resumed the partial file: kept {kept} of {total} blocks")
+            }
+            ResumeState::Restarted(why) => {
+                write!(f, "started the partial file over: {why}")
+            }
+        }
+    }
+}
+
+/// `Ok` when the partial file at `partial` can be resumed by a writer of
+/// `header`, else the state to report: no file, or why it is started over.
+fn probe_partial(
+    partial: &Path,
+    header: &RawHeader,
+    layout: &Layout,
+) -> std::result::Result<(), ResumeState> {
+    let restart = |why| Err(ResumeState::Restarted(why));
+    let file = match File::open(partial) {
+        Ok(f) => f,
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound => return Err(ResumeState::New),
+        Err(_) => return restart(RestartReason::Unreadable),
+    };
+    let len = file.metadata().map(|m| m.len()).unwrap_or(0);
+    let mut bytes = vec![0u8; len.min(HEADER_LEN_V2) as usize];
+    if file.read_exact_at(&mut bytes, 0).is_err() {
+        return restart(RestartReason::Unreadable);
+    }
+    let Ok((old, old_layout)) = RawHeader::decode(&bytes, partial) else {
+        return restart(RestartReason::Unreadable);
+    };
+    match (old.input_id, header.input_id) {
+        (Some(a), Some(b)) if a != b => restart(RestartReason::DifferentInputs),
+        (Some(_), Some(_)) if old != *header => restart(RestartReason::DifferentLayout),
+        (Some(_), Some(_)) if len != layout.file_len || len != old_layout.file_len => {
+            restart(RestartReason::WrongLength)
+        }
+        (Some(_), Some(_)) => Ok(()),
+        _ => restart(RestartReason::NoIdentity),
     }
 }
 
@@ -216,59 +391,71 @@ pub struct RawWriter {
     path: PathBuf,
     partial: PathBuf,
     done: Vec<bool>,
+    resume: ResumeState,
 }
 
 impl RawWriter {
-    /// Opens `PATH.partial` for writing: resumes it when its header matches
-    /// `header`, else starts a new one.
+    /// Opens `PATH.partial` for writing: resumes it when it comes from the
+    /// same inputs as `header` (see the module docs), else starts it over.
+    /// [`RawWriter::resume_state`] tells which, and why.
     pub fn create(path: &Path, header: RawHeader) -> Result<RawWriter> {
         let layout = header.layout()?;
         let partial = partial_path(path);
         let io = |e| Error::io(&partial, e);
-        let head = header.encode(&layout);
-        let mut done = vec![false; layout.block_count as usize];
-        let resumable = match File::open(&partial) {
-            Ok(f) => {
-                let mut existing = vec![0u8; HEADER_LEN as usize];
-                f.read_exact_at(&mut existing, 0).is_ok()
-                    && existing == head
-                    && f.metadata().map(|m| m.len()).ok() == Some(layout.file_len)
-            }
-            Err(_) => false,
-        };
+        let probe = probe_partial(&partial, &header, &layout);
         let file = OpenOptions::new()
             .read(true)
             .write(true)
             .create(true)
-            .truncate(!resumable)
+            .truncate(probe.is_err())
             .open(&partial)
             .map_err(io)?;
+        let total = layout.block_count as usize;
         let mut writer = RawWriter {
             file,
             header,
             path: path.into(),
             partial: partial.clone(),
             layout,
-            done: Vec::new(),
+            done: vec![false; total],
+            resume: ResumeState::New,
         };
-        if resumable {
-            let mut table = vec![0u8; 8 * done.len()];
-            writer
-                .file
-                .read_exact_at(&mut table, HEADER_LEN)
-                .map_err(io)?;
-            for (b, entry) in table.chunks_exact(8).enumerate() {
-                if entry[..4] == 1u32.to_le_bytes() {
-                    let stored = u32::from_le_bytes(entry[4..8].try_into().expect("4 bytes"));
-                    done[b] = writer.block_crc(b)? == stored;
-                }
+        match probe {
+            Ok(()) => {
+                writer.done = writer.verified_blocks()?;
+                let kept = writer.done.iter().filter(|&&d| d).count();
+                writer.resume = ResumeState::Resumed { kept, total };
             }
-        } else {
-            writer.file.set_len(layout.file_len).map_err(io)?;
-            writer.file.write_all_at(&head, 0).map_err(io)?;
+            Err(state) => {
+                writer.file.set_len(layout.file_len).map_err(io)?;
+                writer
+                    .file
+                    .write_all_at(&header.encode(&layout), 0)
+                    .map_err(io)?;
+                writer.resume = state;
+            }
         }
-        writer.done = done;
         Ok(writer)
+    }
+
+    /// What was done with an existing `PATH.partial`: started anew, resumed
+    /// (with the blocks kept), or started over (and why).
+    pub fn resume_state(&self) -> ResumeState {
+        self.resume
+    }
+
+    /// The blocks of a resumed file marked complete whose CRC verifies.
+    fn verified_blocks(&self) -> Result<Vec<bool>> {
+        let mut table = vec![0u8; 8 * self.layout.block_count as usize];
+        self.file
+            .read_exact_at(&mut table, self.layout.table_offset)
+            .map_err(|e| Error::io(&self.partial, e))?;
+        let mut done = Vec::with_capacity(table.len() / 8);
+        for (b, entry) in table.chunks_exact(8).enumerate() {
+            let stored = u32::from_le_bytes(entry[4..8].try_into().expect("4 bytes"));
+            done.push(entry[..4] == 1u32.to_le_bytes() && self.block_crc(b)? == stored);
+        }
+        Ok(done)
     }
 
     /// The header being written.
@@ -371,7 +558,7 @@ impl RawWriter {
         let mut entry = 1u32.to_le_bytes().to_vec();
         entry.extend_from_slice(&h.finalize().to_le_bytes());
         self.file
-            .write_all_at(&entry, HEADER_LEN + 8 * b as u64)
+            .write_all_at(&entry, self.layout.table_offset + 8 * b as u64)
             .map_err(io)?;
         self.done[b] = true;
         Ok(())
@@ -460,7 +647,7 @@ impl RawStore {
             ));
         }
         limits.check_alloc("raw store block table", layout.block_count, 8)?;
-        let table = &map[HEADER_LEN as usize..layout.flags_offset as usize];
+        let table = &map[layout.table_offset as usize..layout.flags_offset as usize];
         if let Some(b) = table
             .chunks_exact(8)
             .position(|e| e[..4] != 1u32.to_le_bytes())
@@ -531,7 +718,7 @@ impl RawStore {
         }
         let data = self.rows(range.clone());
         h.update(bytemuck::cast_slice(data));
-        let entry = &self.map[HEADER_LEN as usize + 8 * b..][..8];
+        let entry = &self.map[self.layout.table_offset as usize + 8 * b..][..8];
         let stored = u32::from_le_bytes(entry[4..8].try_into().expect("4 bytes"));
         let computed = h.finalize();
         if stored != computed {
@@ -555,5 +742,125 @@ impl RawStore {
         let row_bytes = self.header.dims.row_len() * 4;
         let start = self.layout.data_offset as usize + range.start * row_bytes;
         mmap::release(&self.map, start, range.len() * row_bytes);
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn header(block_bytes: u64) -> RawHeader {
+        RawHeader::new(Dims::image(6, 5, 2, 1), true, block_bytes)
+    }
+
+    fn fill(w: &mut RawWriter, blocks: &[usize], value: f32) {
+        let h = *w.header();
+        for &b in blocks {
+            let n = h.block_range(b).len();
+            w.write_block(
+                b,
+                &vec![value; n * h.dims.row_len()],
+                Some(&vec![0.5; 3 * n]),
+            )
+            .unwrap();
+        }
+    }
+
+    /// A version-2 store keeps its identity; a header without one is
+    /// written as version 1, as before, and both open.
+    #[test]
+    fn identity_round_trips_and_version_1_stays() {
+        let dir = tempfile::tempdir().unwrap();
+        for (name, h) in [
+            ("v1.raw", header(200)),
+            ("v2.raw", header(200).with_input_id([7; 32])),
+        ] {
+            let path = dir.path().join(name);
+            let mut w = RawWriter::create(&path, h).unwrap();
+            fill(&mut w, &(0..h.block_count()).collect::<Vec<_>>(), 1.0);
+            w.finish().unwrap();
+            let bytes = std::fs::read(&path).unwrap();
+            assert_eq!(
+                u32::from_le_bytes(bytes[8..12].try_into().unwrap()),
+                h.version()
+            );
+            let store = RawStore::open(&path).unwrap();
+            assert_eq!(*store.header(), h);
+            for b in 0..h.block_count() {
+                store.verify_block(b).unwrap();
+            }
+            assert_eq!(store.row(29)[0], 1.0);
+            // A truncated header is an error, not a panic.
+            let cut = dir.path().join("cut.raw");
+            std::fs::write(&cut, &bytes[..70]).unwrap();
+            assert!(RawStore::open(&cut).is_err());
+        }
+    }
+
+    /// A partial file is resumed only with the same identity and layout;
+    /// otherwise it is started over, and the writer says why.
+    #[test]
+    fn resume_needs_the_same_identity() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("s.raw");
+        let partial = dir.path().join("s.raw.partial");
+        let (a, b) = (
+            header(200).with_input_id([1; 32]),
+            header(200).with_input_id([2; 32]),
+        );
+        let w = RawWriter::create(&path, a).unwrap();
+        assert_eq!(w.resume_state(), ResumeState::New);
+        let mut w = w;
+        fill(&mut w, &[0, 2], 3.0);
+        drop(w);
+        let state = |h: RawHeader| RawWriter::create(&path, h).unwrap().resume_state();
+        let total = a.block_count();
+        assert_eq!(state(a), ResumeState::Resumed { kept: 2, total });
+        assert_eq!(
+            RawWriter::create(&path, a).unwrap().pending_blocks().len(),
+            total - 2
+        );
+        let restarted = |why| ResumeState::Restarted(why);
+        assert_eq!(state(b), restarted(RestartReason::DifferentInputs));
+        assert_eq!(state(a), restarted(RestartReason::DifferentInputs));
+        // Started over: nothing of the old file is kept.
+        assert_eq!(state(a), ResumeState::Resumed { kept: 0, total });
+        let mut w = RawWriter::create(&path, a).unwrap();
+        fill(&mut w, &[1], 3.0);
+        drop(w);
+        let other_blocks = RawHeader {
+            block_rows: a.block_rows + 1,
+            ..a
+        };
+        assert_eq!(
+            state(other_blocks),
+            restarted(RestartReason::DifferentLayout)
+        );
+        let mut w = RawWriter::create(&path, a).unwrap();
+        fill(&mut w, &[1], 3.0);
+        drop(w);
+        assert_eq!(
+            state(RawHeader {
+                input_id: None,
+                ..a
+            }),
+            restarted(RestartReason::NoIdentity)
+        );
+        // Now a version-1 partial: no identity to compare.
+        assert_eq!(state(a), restarted(RestartReason::NoIdentity));
+        let mut w = RawWriter::create(&path, a).unwrap();
+        fill(&mut w, &[1], 3.0);
+        drop(w);
+        let len = std::fs::metadata(&partial).unwrap().len();
+        std::fs::OpenOptions::new()
+            .write(true)
+            .open(&partial)
+            .unwrap()
+            .set_len(len - 1)
+            .unwrap();
+        assert_eq!(state(a), restarted(RestartReason::WrongLength));
+        std::fs::write(&partial, b"not a raw store").unwrap();
+        assert_eq!(state(a), restarted(RestartReason::Unreadable));
+        assert!(state(a).to_string().contains("kept 0 of"));
     }
 }

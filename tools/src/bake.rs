@@ -3,7 +3,7 @@
 use crate::progress;
 use anyhow::Context;
 use clap::Args;
-use ltm_bake::{bake, BakeOptions, Overrides, Scene, SceneDesc};
+use ltm_bake::{bake, BakeOptions, Overrides, ResumeState, Scene, SceneDesc};
 use std::path::PathBuf;
 
 /// Arguments of `ltm bake`.
@@ -16,7 +16,10 @@ so that the pixel's radiance is Σ_j T[p][j]·L[j]. Scenes whose materials are a
 are stored as one grey channel plus an RGB albedo image; scenes with glossy materials as 3 \
 channels.\n\n\
 The store is written to RAW.partial and renamed to RAW when complete. Re-running the same \
-command after an interruption resumes: completed blocks whose checksums verify are kept.\n\n\
+command after an interruption resumes: completed blocks whose checksums verify are kept. \
+RAW.partial is resumed only when it was baked from the same inputs: its header holds a \
+SHA-256 of the resolved scene description (after these options), every mesh file's bytes and \
+the ltm version; after any change the bake starts over and says why.\n\n\
 The scene file format is described in the ltm-bake crate (module `scene`); \
 assets/scenes/default.toml is an example."
 )]
@@ -41,6 +44,21 @@ pub struct BakeArgs {
     /// Pixel sub-samples, averaged with a box filter (overrides camera.spp).
     #[arg(long, value_name = "K")]
     pub spp: Option<u32>,
+}
+
+/// What became of an existing `RAW.partial`, for the user; `None` when
+/// there was none.
+fn resume_message(state: &ResumeState, partial: &str) -> Option<String> {
+    match state {
+        ResumeState::New => None,
+        ResumeState::Resumed { kept, total } => Some(format!(
+            "resuming {partial}: kept {kept} of {total} blocks baked from the same inputs"
+        )),
+        ResumeState::Restarted(why) => Some(format!(
+            "not resuming {partial}: {why}; baking from scratch"
+        )),
+        _ => Some(format!("{partial}: {state}")),
+    }
 }
 
 pub fn run(args: BakeArgs) -> anyhow::Result<()> {
@@ -81,11 +99,16 @@ pub fn run(args: BakeArgs) -> anyhow::Result<()> {
     );
     let bar = progress::bar(dims.pixels() as u64, "bake");
     let options = BakeOptions::default();
+    let partial = format!("{}.partial", args.output.display());
     let result = bake(&scene, &args.output, &options, &|p| {
         // The bar counts all rows; resumed ones are complete already.
         bar.set_position(dims.pixels() as u64 - p.rows_total + p.rows_done);
         if p.rows_done == 1 {
             bar.reset_eta();
+            if let Some(line) = resume_message(&p.resume, &partial) {
+                // Printed even when the bar is hidden (stderr not a terminal).
+                bar.suspend(|| eprintln!("{line}"));
+            }
         }
         let secs = p.elapsed.as_secs_f64().max(1e-9);
         bar.set_message(format!("{:.1} Mray/s", p.shadow_rays as f64 / secs / 1e6));
@@ -93,13 +116,11 @@ pub fn run(args: BakeArgs) -> anyhow::Result<()> {
     bar.finish_and_clear();
     let report = result.with_context(|| format!("baking {}", args.scene.display()))?;
     let secs = report.elapsed.as_secs_f64().max(1e-9);
-    if report.blocks_resumed > 0 {
-        eprintln!(
-            "resumed {} of {} blocks from {}.partial",
-            report.blocks_resumed,
-            report.blocks_total,
-            report.path.display()
-        );
+    if report.rows_baked == 0 {
+        // No row was baked, so no progress report printed this.
+        if let Some(line) = resume_message(&report.resume, &partial) {
+            eprintln!("{line}");
+        }
     }
     eprintln!(
         "baked {} rows in {:.1} s: {:.0} rows/s, {:.2} M shadow rays/s ({} shadow rays) -> {}",

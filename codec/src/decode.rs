@@ -7,6 +7,11 @@ use crate::error::{Error, Result};
 use crate::quant::{decode_scale, levels, scale_groups, BandWeights};
 use crate::wavelet::{self, band_size};
 
+/// Scales above this are dequantized in f64: `q·s` in f32 could overflow
+/// (`|q| < 2^15`). The encoder never writes one (its matrices have norms of
+/// at most 2^100), so its files decode with the f32 product.
+const F64_SCALE: f32 = (1u128 << 100) as f32;
+
 /// Decoding state for one file's column filter and image size.
 pub struct ColumnDecoder {
     meta: Meta,
@@ -17,6 +22,14 @@ pub struct ColumnDecoder {
 }
 
 impl ColumnDecoder {
+    /// The largest decoded column value [`ColumnDecoder::decode`] returns,
+    /// 2^112 ≈ 5.2e33: a file the encoder writes holds a matrix of norm at
+    /// most 2^100 ([`MAX_NORM`](crate::compress::MAX_NORM)), and no value
+    /// of a column exceeds the norm, so larger values come only from a
+    /// crafted file. Below this bound the inverse row transform of any
+    /// decoded row stays finite.
+    pub const MAX_DECODED: f32 = (1u128 << 112) as f32;
+
     /// Precomputes the band weights and scale groups of `meta`'s column
     /// filter and image size at every depth.
     pub fn new(meta: &Meta) -> ColumnDecoder {
@@ -53,7 +66,15 @@ impl ColumnDecoder {
             .get(group * channels + channel)
             .copied()
             .unwrap_or(0);
-        col.values[k * channels + channel] as f32 * decode_scale(code) / levels(self.meta.bits)
+        let (q, s) = (
+            col.values[k * channels + channel] as f32,
+            decode_scale(code),
+        );
+        if s <= F64_SCALE {
+            q * s / levels(self.meta.bits)
+        } else {
+            (q as f64 * s as f64 / levels(self.meta.bits) as f64) as f32
+        }
     }
 
     /// Undoes the band weights of depth `depth` on a plane of weighted
@@ -84,6 +105,8 @@ impl ColumnDecoder {
 
     /// Decodes channel `channel` of a column into `plane` (overwritten), in
     /// the row-wavelet lighting basis. `work` needs `width·height` values.
+    /// A column that decodes to a value beyond [`ColumnDecoder::MAX_DECODED`] (or not a
+    /// number) is an error: only a crafted file holds one.
     pub fn decode(
         &self,
         col: &SparseColumn,
@@ -112,6 +135,16 @@ impl ColumnDecoder {
         for level in (1..=col.depth).rev() {
             self.inverse_step(level, plane, work)?;
         }
-        Ok(())
+        match plane
+            .iter()
+            .find(|v| v.is_nan() || v.abs() > Self::MAX_DECODED)
+        {
+            Some(v) => Err(Error::range(
+                "decoded column value",
+                format!("{v:.3e} (depth {}, channel {channel})", col.depth),
+                format!("at most {:.3e} = 2^112 in magnitude: files of matrices within the codec's range stay below 2^100", Self::MAX_DECODED),
+            )),
+            None => Ok(()),
+        }
     }
 }

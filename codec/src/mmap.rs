@@ -9,12 +9,7 @@ use std::io;
 /// Maps a whole regular file read-only (a folder or a device is an error
 /// that says so, not the system's "No such device").
 pub(crate) fn map_read(file: &File) -> io::Result<Mmap> {
-    if !file.metadata()?.is_file() {
-        return Err(io::Error::new(
-            io::ErrorKind::InvalidInput,
-            "not a regular file (a folder or a device)",
-        ));
-    }
+    check_regular(file)?;
     // SAFETY: this assumes that the file is not modified or truncated while
     // it is mapped, which Rust's aliasing rules for the `&[u8]` we hand out
     // require and nothing here can enforce: a change by another process is
@@ -25,6 +20,18 @@ pub(crate) fn map_read(file: &File) -> io::Result<Mmap> {
     // run. Readers still validate what they read (sizes, offsets, CRCs), so
     // a file that was complete but wrong gives an error.
     unsafe { Mmap::map(file) }
+}
+
+/// An input must be a regular file: a folder or a device is an error that
+/// says so.
+pub(crate) fn check_regular(file: &File) -> io::Result<()> {
+    if !file.metadata()?.is_file() {
+        return Err(io::Error::new(
+            io::ErrorKind::InvalidInput,
+            "not a regular file (a folder or a device)",
+        ));
+    }
+    Ok(())
 }
 
 /// Tells the kernel it may drop the pages of `map[offset..offset + len]`

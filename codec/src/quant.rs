@@ -200,3 +200,35 @@ impl BandWeights {
         self.maps.len() as u32 - 1
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Every stored scale is a finite positive f32 (subnormal at the bottom,
+    /// below `f32::MAX` at the top), and any positive f32 up to the largest
+    /// scale gets a code whose scale covers it.
+    #[test]
+    fn scales_never_overflow_or_underflow() {
+        for e in 1..=u16::MAX {
+            let s = decode_scale(e);
+            assert!(s.is_finite() && s > 0.0, "code {e}: {s}");
+            // The code of a stored scale covers it, one step up at most
+            // (decoding rounds to the nearest f32).
+            let back = encode_scale(s);
+            assert!(back >= e && back - e <= 1 && decode_scale(back) >= s, "{e}");
+        }
+        assert_eq!(encode_scale(0.0), 0);
+        for s in [
+            f32::from_bits(1),
+            f32::MIN_POSITIVE,
+            1e-30,
+            1.0,
+            1e30,
+            decode_scale(u16::MAX),
+        ] {
+            let e = encode_scale(s);
+            assert!(e >= 1 && decode_scale(e) >= s, "{s}: code {e}");
+        }
+    }
+}

@@ -14,11 +14,11 @@
 //! | 36 | 4 | block_count = ceil(width·height / block_rows) |
 //! | 40 | 8 | data_offset (multiple of 4096) |
 //! | 48 | 8 | albedo_offset (0 when absent) |
-//! | 56 | 4 | reserved (0) |
+//! | 56 | 4 | reserved, 0 (a reader refuses any other value) |
 //! | 60 | 32 | version 2 only: input identity ([`RawHeader::input_id`]) |
 //! | hlen − 4 | 4 | CRC-32 of bytes 0..hlen−4 |
-//! | hlen | 8·block_count | block table: state (1 = complete), CRC-32 of the block |
-//! | flags_offset | P | one byte per row: 1 = the row is all zero |
+//! | hlen | 8·block_count | block table: state (0 = pending, 1 = complete), CRC-32 of the block |
+//! | flags_offset | P | one byte per row: 1 = the row is all zero, else 0 |
 //! | albedo_offset | 12·P | RGB albedo per pixel, f32 (optional) |
 //! | data_offset | 4·P·M·C | T\[p\]\[j\]\[c\], f32 |
 //!
@@ -35,6 +35,14 @@
 //! blocks marked complete whose CRC verifies are then kept, the others are
 //! pending. Otherwise the file is started over, and
 //! [`RawWriter::resume_state`] says why.
+//!
+//! Reading ([`RawStore`]) trusts nothing: a file with the magic but shorter
+//! than its header implies is reported as truncated with both sizes; the
+//! reserved field must be 0, every block state 1 (0 = never completed, any
+//! other value is refused), every row flag 0 or 1 and every albedo value
+//! finite. Row data is read with positioned reads ([`RawStore::read_rows`])
+//! and trusted only once its block is verified: its CRC, finite values, and
+//! every row flagged zero really zero ([`BlockVerifier`]).
 
 #[cfg(target_endian = "big")]
 compile_error!("ltm's file formats are little-endian and are mapped directly; big-endian targets are not supported");
@@ -47,7 +55,10 @@ use crate::limits::Limits;
 use crate::mmap;
 use memmap2::Mmap;
 use std::fs::{File, OpenOptions};
+use std::io;
+use std::ops::Range;
 use std::path::{Path, PathBuf};
+use std::time::SystemTime;
 
 const MAGIC: [u8; 8] = *b"LTMRAW\0\x01";
 /// The newest version; version 1 (no input identity) is still read and
@@ -60,7 +71,7 @@ const HEADER_LEN_V2: u64 = 96;
 pub const INPUT_ID_LEN: usize = 32;
 const FLAG_ALBEDO: u32 = 1;
 const DATA_ALIGN: u64 = 4096;
-/// Bytes read at a time when a resumed block's CRC is checked.
+/// Bytes read at a time when a block's CRC is checked.
 const CRC_CHUNK: u64 = 8 << 20;
 
 /// Header of a raw store.
@@ -202,16 +213,11 @@ impl RawHeader {
         w.bytes
     }
 
-    /// Decodes and validates the header at the start of `bytes` (at least
-    /// its header length).
-    fn decode(bytes: &[u8], path: &Path) -> Result<(RawHeader, Layout)> {
-        if bytes.len() < 12 || bytes[..8] != MAGIC {
-            return Err(Error::BadMagic {
-                path: path.into(),
-                expected: "an ltm raw transport store",
-                found: bytes[..bytes.len().min(8)].to_vec(),
-            });
-        }
+    /// Decodes and checks a header from the first bytes of a file of
+    /// `file_len` bytes (`bytes` holds `min(file_len, HEADER_LEN_V2)` of
+    /// them).
+    fn decode(bytes: &[u8], file_len: u64, path: &Path) -> Result<(RawHeader, Layout)> {
+        check_magic(bytes, file_len, path)?;
         let version = u32::from_le_bytes(bytes[8..12].try_into().expect("4 bytes"));
         let len = match version {
             1 => HEADER_LEN_V1,
@@ -226,11 +232,10 @@ impl RawHeader {
         } as usize;
         if bytes.len() < len {
             return Err(Error::corrupt(
-                "raw store header",
+                "raw store",
                 format!(
-                    "{}: {} bytes, a version-{version} header has {len}",
-                    path.display(),
-                    bytes.len()
+                    "{}: truncated: the file is {file_len} bytes, shorter than its {len}-byte version-{version} header",
+                    path.display()
                 ),
             ));
         }
@@ -251,6 +256,14 @@ impl RawHeader {
                 "raw store flags",
                 format!("{flags:#x}"),
                 "bit 0 only",
+            ));
+        }
+        let reserved = u32::from_le_bytes(bytes[56..60].try_into().expect("4 bytes"));
+        if reserved != 0 {
+            return Err(Error::range(
+                "raw store reserved field (header offset 56)",
+                format!("{reserved:#x}"),
+                "0",
             ));
         }
         let dims = Dims::read_fields(&mut r)?;
@@ -363,7 +376,7 @@ fn probe_partial(
     if file.read_exact_at(&mut bytes, 0).is_err() {
         return restart(RestartReason::Unreadable);
     }
-    let Ok((old, old_layout)) = RawHeader::decode(&bytes, partial) else {
+    let Ok((old, old_layout)) = RawHeader::decode(&bytes, len, partial) else {
         return restart(RestartReason::Unreadable);
     };
     match (old.input_id, header.input_id) {
@@ -375,6 +388,36 @@ fn probe_partial(
         (Some(_), Some(_)) => Ok(()),
         _ => restart(RestartReason::NoIdentity),
     }
+}
+
+/// The file starts with the magic and holds a whole header: a file whose
+/// bytes are the magic (or a prefix of it) but shorter than the header is
+/// reported as truncated, not as another kind of file.
+fn check_magic(bytes: &[u8], file_len: u64, path: &Path) -> Result<()> {
+    let n = bytes.len().min(8);
+    if file_len == 0 {
+        return Err(Error::corrupt(
+            "raw store",
+            format!("{}: the file is empty (0 bytes)", path.display()),
+        ));
+    }
+    if bytes[..n] != MAGIC[..n] {
+        return Err(Error::BadMagic {
+            path: path.into(),
+            expected: "an ltm raw transport store",
+            found: bytes[..n].to_vec(),
+        });
+    }
+    if file_len < HEADER_LEN_V1 {
+        return Err(Error::corrupt(
+            "raw store",
+            format!(
+                "{}: truncated: the file is {file_len} bytes, shorter than the {HEADER_LEN_V1}-byte header",
+                path.display()
+            ),
+        ));
+    }
+    Ok(())
 }
 
 fn partial_path(path: &Path) -> PathBuf {
@@ -525,6 +568,14 @@ impl RawWriter {
                 "block {b} holds NaN or infinite values"
             )));
         }
+        if let Some((i, v)) = albedo
+            .into_iter()
+            .flatten()
+            .enumerate()
+            .find(|(_, v)| !v.is_finite())
+        {
+            return Err(non_finite_albedo(range.start + i / 3, i % 3, *v));
+        }
         let io = |e| Error::io(&self.partial, e);
         let mut h = crc32fast::Hasher::new();
         let flags: Vec<u8> = rows
@@ -614,18 +665,85 @@ impl RawWriter {
     }
 }
 
-/// A raw store opened for reading (memory-mapped).
+/// The error for a non-finite albedo value of pixel `p`, channel `c`.
+fn non_finite_albedo(p: usize, c: usize, v: f32) -> Error {
+    Error::range(
+        "raw store albedo value",
+        format!("{v} (pixel {p}, channel {c})"),
+        "finite",
+    )
+}
+
+/// A file's length and modification time, taken at open and compared after
+/// a run to detect a change of the input while it was read.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+struct Stamp {
+    len: u64,
+    modified: Option<SystemTime>,
+}
+
+impl Stamp {
+    fn of(file: &File, path: &Path) -> Result<Stamp> {
+        let m = file.metadata().map_err(|e| Error::io(path, e))?;
+        Ok(Stamp {
+            len: m.len(),
+            modified: m.modified().ok(),
+        })
+    }
+}
+
+/// Reads `buf.len()` bytes at `offset` of `file`; a file that ends too early
+/// (truncated since it was opened) is an error that says so.
+fn read_at(file: &File, path: &Path, buf: &mut [u8], offset: u64) -> Result<()> {
+    file.read_exact_at(buf, offset).map_err(|e| {
+        if e.kind() != io::ErrorKind::UnexpectedEof {
+            return Error::io(path, e);
+        }
+        let now = file
+            .metadata()
+            .map_or_else(|_| "unknown".into(), |m| m.len().to_string());
+        let end = offset + buf.len() as u64;
+        Error::io(
+            path,
+            io::Error::new(
+                e.kind(),
+                format!("bytes {offset}..{end} lie past the end of the file (now {now} bytes): it was truncated while being read"),
+            ),
+        )
+    })
+}
+
+/// A raw store opened for reading.
+///
+/// Opening validates the header and reads the block table, the row flags
+/// and the albedo image into memory with positioned reads, checking every
+/// field: block states 0 or 1 (and every block complete), row flags 0 or 1,
+/// finite albedo values. Row data is read on demand, either with
+/// [`RawStore::read_rows`] (positioned reads: a file truncated meanwhile is
+/// an error; what the compressor uses) or with [`RawStore::rows`] (a memory
+/// map: no copy, but a file truncated while mapped raises SIGBUS). Data is
+/// trusted only once its block is verified ([`RawStore::verify_block`],
+/// [`BlockVerifier`]) against the block table read at open.
 pub struct RawStore {
+    file: File,
     map: Mmap,
     header: RawHeader,
     layout: Layout,
     path: PathBuf,
+    /// CRC of every block, from the block table.
+    block_crcs: Vec<u32>,
+    /// One byte per row: 1 = flagged all zero.
+    flags: Vec<u8>,
+    albedo: Option<Vec<f32>>,
+    stamp: Stamp,
 }
 
 impl RawStore {
-    /// Opens and validates a raw store: header CRC, dimensions, file length
-    /// and completeness of every block. Block CRCs are checked by
-    /// [`RawStore::verify_block`]. Uses the default [`Limits`].
+    /// Opens and validates a raw store: header CRC, reserved fields,
+    /// dimensions, file length, block table (every block complete), row
+    /// flags and albedo values. Block CRCs, finite values and rows flagged
+    /// zero are checked by [`RawStore::verify_block`] or a
+    /// [`BlockVerifier`]. Uses the default [`Limits`].
     pub fn open(path: &Path) -> Result<RawStore> {
         Self::open_with_limits(path, &Limits::default())
     }
@@ -633,35 +751,27 @@ impl RawStore {
     /// [`RawStore::open`] with the given limits.
     pub fn open_with_limits(path: &Path, limits: &Limits) -> Result<RawStore> {
         let file = File::open(path).map_err(|e| Error::io(path, e))?;
+        mmap::check_regular(&file).map_err(|e| Error::io(path, e))?;
+        let stamp = Stamp::of(&file, path)?;
+        let mut head = vec![0u8; stamp.len.min(HEADER_LEN_V2) as usize];
+        read_at(&file, path, &mut head, 0)?;
+        let (header, layout) = RawHeader::decode(&head, stamp.len, path)?;
+        check_length(stamp.len, layout.file_len, path)?;
+        let block_crcs = read_block_table(&file, path, &layout, limits)?;
+        let flags = read_flags(&file, path, &header, &layout, limits)?;
+        let albedo = read_albedo(&file, path, &header, &layout, limits)?;
         let map = mmap::map_read(&file).map_err(|e| Error::io(path, e))?;
-        let (header, layout) = RawHeader::decode(&map, path)?;
-        if map.len() as u64 != layout.file_len {
-            return Err(Error::corrupt(
-                "raw store",
-                format!(
-                    "{}: file is {} bytes, the header implies {}",
-                    path.display(),
-                    map.len(),
-                    layout.file_len
-                ),
-            ));
-        }
-        limits.check_alloc("raw store block table", layout.block_count, 8)?;
-        let table = &map[layout.table_offset as usize..layout.flags_offset as usize];
-        if let Some(b) = table
-            .chunks_exact(8)
-            .position(|e| e[..4] != 1u32.to_le_bytes())
-        {
-            return Err(Error::corrupt(
-                "raw store",
-                format!("{}: block {b} was never completed", path.display()),
-            ));
-        }
+        check_length(map.len() as u64, layout.file_len, path)?;
         Ok(RawStore {
+            file,
             map,
             header,
             layout,
             path: path.into(),
+            block_crcs,
+            flags,
+            albedo,
+            stamp,
         })
     }
 
@@ -680,68 +790,340 @@ impl RawStore {
         &self.path
     }
 
-    /// Rows `range` as one slice of `range.len() · M · C` values.
-    pub fn rows(&self, range: std::ops::Range<usize>) -> &[f32] {
+    /// Reads rows `range` into `out` (resized to `range.len() · M · C`
+    /// values) with positioned reads: a file truncated since it was opened
+    /// gives an [`Error::Io`] that says so, never a signal. The values are
+    /// as stored; a [`BlockVerifier`] checks them.
+    pub fn read_rows(&self, range: Range<usize>, out: &mut Vec<f32>) -> Result<()> {
+        let p = self.header.dims.pixels();
+        if range.start > range.end || range.end > p {
+            return Err(Error::range(
+                "raw store rows",
+                format!("{}..{}", range.start, range.end),
+                format!("a range within 0..{p}"),
+            ));
+        }
+        let row_len = self.header.dims.row_len();
+        self.read_values(range.start * row_len..range.end * row_len, out)
+    }
+
+    /// Reads the values `range` of the data (`p·M·C + j·C + c`), which must
+    /// lie within it, into `out` (resized), with positioned reads.
+    pub(crate) fn read_values(&self, range: Range<usize>, out: &mut Vec<f32>) -> Result<()> {
+        out.truncate(range.len());
+        out.resize(range.len(), 0.0);
+        let offset = self.layout.data_offset + range.start as u64 * 4;
+        read_at(
+            &self.file,
+            &self.path,
+            bytemuck::cast_slice_mut(out),
+            offset,
+        )
+    }
+
+    /// Rows `range` as one slice of `range.len() · M · C` values, from the
+    /// memory map. Truncating the file while it is mapped raises SIGBUS on
+    /// access: [`RawStore::read_rows`] is the safe way to read.
+    pub fn rows(&self, range: Range<usize>) -> &[f32] {
         let row_bytes = self.header.dims.row_len() * 4;
         let start = self.layout.data_offset as usize + range.start * row_bytes;
         bytemuck::cast_slice(&self.map[start..start + range.len() * row_bytes])
     }
 
-    /// Row `p`: M·C values, channel-interleaved.
+    /// Row `p`: M·C values, channel-interleaved (memory-mapped, as
+    /// [`RawStore::rows`]).
     pub fn row(&self, p: usize) -> &[f32] {
         self.rows(p..p + 1)
     }
 
-    /// True when row `p` is flagged all zero (e.g. a background pixel).
+    /// True when row `p` is flagged all zero (e.g. a background pixel). The
+    /// flag is checked against the row's values when its block is verified
+    /// ([`RawStore::verify_block`]): trust it only after that.
     pub fn is_zero_row(&self, p: usize) -> bool {
-        self.map[self.layout.flags_offset as usize + p] == 1
+        self.flags.get(p) == Some(&1)
     }
 
-    /// The RGB albedo image (3 values per pixel), if stored.
+    /// The RGB albedo image (3 finite values per pixel), if stored.
     pub fn albedo(&self) -> Option<&[f32]> {
-        self.header.has_albedo.then(|| {
-            let start = self.layout.albedo_offset as usize;
-            bytemuck::cast_slice(&self.map[start..start + 12 * self.header.dims.pixels()])
-        })
+        self.albedo.as_deref()
     }
 
-    /// Recomputes block `b`'s CRC and checks it against the block table, and
-    /// that its values are finite.
+    /// Checks block `b`: its CRC against the block table, that its values
+    /// are finite and that every row flagged zero is zero. Reads it with
+    /// positioned reads, 8 MiB at a time.
     pub fn verify_block(&self, b: usize) -> Result<()> {
+        if b >= self.block_crcs.len() {
+            return Err(Error::range(
+                "block index",
+                b,
+                format!("0..{}", self.block_crcs.len()),
+            ));
+        }
         let range = self.header.block_range(b);
-        let mut h = crc32fast::Hasher::new();
-        let f0 = self.layout.flags_offset as usize;
-        h.update(&self.map[f0 + range.start..f0 + range.end]);
-        if self.header.has_albedo {
-            let a0 = self.layout.albedo_offset as usize;
-            h.update(&self.map[a0 + 12 * range.start..a0 + 12 * range.end]);
+        let step = (CRC_CHUNK as usize / (self.header.dims.row_len() * 4)).max(1);
+        let mut verifier = BlockVerifier::new(self, range.start);
+        let mut buf = Vec::new();
+        for start in range.clone().step_by(step) {
+            let rows = start..(start + step).min(range.end);
+            self.read_rows(rows.clone(), &mut buf)?;
+            verifier.feed(rows.start, &buf)?;
         }
-        let data = self.rows(range.clone());
-        h.update(bytemuck::cast_slice(data));
-        let entry = &self.map[self.layout.table_offset as usize + 8 * b..][..8];
-        let stored = u32::from_le_bytes(entry[4..8].try_into().expect("4 bytes"));
-        let computed = h.finalize();
-        if stored != computed {
-            return Err(Error::Crc {
-                chunk: format!("raw store block {b} (rows {}..{})", range.start, range.end),
-                stored,
-                computed,
-            });
+        Ok(())
+    }
+
+    /// A [`BlockVerifier`] for reading every row in order from row 0.
+    pub fn verifier(&self) -> BlockVerifier<'_> {
+        BlockVerifier::new(self, 0)
+    }
+
+    /// Checks that the file still has the length and modification time it
+    /// had when it was opened: a run that read it fails rather than write
+    /// an output from an input that changed meanwhile.
+    pub fn check_unchanged(&self) -> Result<()> {
+        let now = Stamp::of(&self.file, &self.path)?;
+        if now == self.stamp {
+            return Ok(());
         }
-        if data.iter().any(|v| !v.is_finite()) {
+        let detail = if now.len != self.stamp.len {
+            format!(
+                "its length went from {} to {} bytes",
+                self.stamp.len, now.len
+            )
+        } else {
+            "its modification time changed".into()
+        };
+        Err(Error::io(
+            &self.path,
+            io::Error::other(format!(
+                "the file changed while it was read ({detail}); no output is written from a changed input"
+            )),
+        ))
+    }
+
+    /// Lets the kernel drop the mapped pages of rows `range` from this
+    /// process (they stay readable), bounding resident memory on long scans
+    /// through [`RawStore::rows`].
+    pub fn release_rows(&self, range: Range<usize>) {
+        let row_bytes = self.header.dims.row_len() * 4;
+        let start = self.layout.data_offset as usize + range.start * row_bytes;
+        mmap::release(&self.map, start, range.len() * row_bytes);
+    }
+
+    /// The first problem of row `p`'s values: a non-finite value, or a value
+    /// other than 0 in a row flagged zero.
+    fn check_row(&self, p: usize, row: &[f32]) -> Result<()> {
+        let c = self.header.dims.channels as usize;
+        if let Some(i) = row.iter().position(|v| !v.is_finite()) {
+            return Err(Error::range(
+                "raw store value",
+                format!("{} (row {p}, column {}, channel {})", row[i], i / c, i % c),
+                "finite",
+            ));
+        }
+        if self.is_zero_row(p) {
+            if let Some(i) = row.iter().position(|&v| v != 0.0) {
+                return Err(Error::corrupt(
+                    "raw store",
+                    format!(
+                        "{}: row {p} is flagged all zero but holds {} at column {}, channel {}",
+                        self.path.display(),
+                        row[i],
+                        i / c,
+                        i % c
+                    ),
+                ));
+            }
+        }
+        Ok(())
+    }
+}
+
+/// The file is exactly as long as the header implies.
+fn check_length(len: u64, expected: u64, path: &Path) -> Result<()> {
+    if len == expected {
+        return Ok(());
+    }
+    let what = if len < expected { "truncated: " } else { "" };
+    Err(Error::corrupt(
+        "raw store",
+        format!(
+            "{}: {what}the file is {len} bytes, the header implies {expected}",
+            path.display()
+        ),
+    ))
+}
+
+/// The block table: every state must be 1 (complete); returns the CRCs.
+fn read_block_table(
+    file: &File,
+    path: &Path,
+    layout: &Layout,
+    limits: &Limits,
+) -> Result<Vec<u32>> {
+    let len = limits.check_alloc("raw store block table", layout.block_count, 8)?;
+    let mut table = vec![0u8; len];
+    read_at(file, path, &mut table, layout.table_offset)?;
+    let entry =
+        |e: &[u8], k: usize| u32::from_le_bytes(e[4 * k..4 * k + 4].try_into().expect("4 bytes"));
+    table
+        .chunks_exact(8)
+        .enumerate()
+        .map(|(b, e)| match entry(e, 0) {
+            1 => Ok(entry(e, 1)),
+            0 => Err(Error::corrupt(
+                "raw store",
+                format!(
+                    "{}: block {b} was never completed (state 0)",
+                    path.display()
+                ),
+            )),
+            s => Err(Error::range(
+                "raw store block state",
+                format!("{s} (block {b})"),
+                "0 (pending) or 1 (complete)",
+            )),
+        })
+        .collect()
+}
+
+/// The row flags: every byte 0 or 1.
+fn read_flags(
+    file: &File,
+    path: &Path,
+    header: &RawHeader,
+    layout: &Layout,
+    limits: &Limits,
+) -> Result<Vec<u8>> {
+    let len = limits.check_alloc("raw store row flags", header.dims.pixels() as u64, 1)?;
+    let mut flags = vec![0u8; len];
+    read_at(file, path, &mut flags, layout.flags_offset)?;
+    if let Some(p) = flags.iter().position(|&f| f > 1) {
+        return Err(Error::range(
+            "raw store row flag",
+            format!("{} (row {p})", flags[p]),
+            "0 (not known to be zero) or 1 (all zero)",
+        ));
+    }
+    Ok(flags)
+}
+
+/// The albedo image, if stored: every value finite.
+fn read_albedo(
+    file: &File,
+    path: &Path,
+    header: &RawHeader,
+    layout: &Layout,
+    limits: &Limits,
+) -> Result<Option<Vec<f32>>> {
+    if !header.has_albedo {
+        return Ok(None);
+    }
+    let len = limits.check_alloc("raw store albedo image", header.dims.pixels() as u64, 12)?;
+    let mut albedo = vec![0.0f32; len / 4];
+    read_at(
+        file,
+        path,
+        bytemuck::cast_slice_mut(&mut albedo),
+        layout.albedo_offset,
+    )?;
+    if let Some(i) = albedo.iter().position(|v| !v.is_finite()) {
+        return Err(non_finite_albedo(i / 3, i % 3, albedo[i]));
+    }
+    Ok(Some(albedo))
+}
+
+/// Checks raw blocks as their rows are read in order: each block's CRC
+/// against the block table read at open, that its values are finite and
+/// that every row flagged zero is zero. A block is checked when its last
+/// row is fed; the first problem of a block is reported after its CRC.
+pub struct BlockVerifier<'a> {
+    store: &'a RawStore,
+    next_row: usize,
+    hasher: crc32fast::Hasher,
+    problem: Option<Error>,
+}
+
+impl<'a> BlockVerifier<'a> {
+    fn new(store: &'a RawStore, first_row: usize) -> BlockVerifier<'a> {
+        BlockVerifier {
+            store,
+            next_row: first_row,
+            hasher: crc32fast::Hasher::new(),
+            problem: None,
+        }
+    }
+
+    /// Feeds whole rows from row `first` (`values`: M·C values per row),
+    /// which must follow the rows fed so far, and checks every block whose
+    /// last row is among them.
+    pub fn feed(&mut self, first: usize, values: &[f32]) -> Result<()> {
+        let (p, row_len) = (self.store.dims().pixels(), self.store.dims().row_len());
+        let rows = values.len() / row_len;
+        if first != self.next_row || !values.len().is_multiple_of(row_len) || first + rows > p {
             return Err(Error::Invalid(format!(
-                "raw store block {b} holds NaN or infinite values"
+                "raw store verification: {} values from row {first} are not whole rows following row {} within 0..{p}",
+                values.len(),
+                self.next_row
+            )));
+        }
+        for (k, row) in values.chunks_exact(row_len).enumerate() {
+            self.row(first + k, row)?;
+        }
+        Ok(())
+    }
+
+    /// Checks that every row of the store has been fed.
+    pub fn finish(self) -> Result<()> {
+        let p = self.store.dims().pixels();
+        if self.next_row != p {
+            return Err(Error::Invalid(format!(
+                "raw store verification stopped at row {} of {p}",
+                self.next_row
             )));
         }
         Ok(())
     }
 
-    /// Lets the kernel drop the mapped pages of rows `range` from this
-    /// process (they stay readable), bounding resident memory on long scans.
-    pub fn release_rows(&self, range: std::ops::Range<usize>) {
-        let row_bytes = self.header.dims.row_len() * 4;
-        let start = self.layout.data_offset as usize + range.start * row_bytes;
-        mmap::release(&self.map, start, range.len() * row_bytes);
+    fn row(&mut self, p: usize, row: &[f32]) -> Result<()> {
+        let header = self.store.header();
+        let b = p / header.block_rows as usize;
+        let range = header.block_range(b);
+        if p == range.start {
+            self.start_block(range.clone());
+        }
+        self.hasher.update(bytemuck::cast_slice(row));
+        if self.problem.is_none() {
+            self.problem = self.store.check_row(p, row).err();
+        }
+        self.next_row = p + 1;
+        if self.next_row == range.end {
+            return self.end_block(b, range);
+        }
+        Ok(())
+    }
+
+    /// Starts block `rows`' CRC with its row flags and albedo values.
+    fn start_block(&mut self, rows: Range<usize>) {
+        self.hasher = crc32fast::Hasher::new();
+        self.problem = None;
+        self.hasher.update(&self.store.flags[rows.clone()]);
+        if let Some(a) = &self.store.albedo {
+            self.hasher
+                .update(bytemuck::cast_slice(&a[3 * rows.start..3 * rows.end]));
+        }
+    }
+
+    fn end_block(&mut self, b: usize, rows: Range<usize>) -> Result<()> {
+        let computed = std::mem::replace(&mut self.hasher, crc32fast::Hasher::new()).finalize();
+        let stored = self.store.block_crcs[b];
+        if stored != computed {
+            return Err(Error::Crc {
+                chunk: format!("raw store block {b} (rows {}..{})", rows.start, rows.end),
+                stored,
+                computed,
+            });
+        }
+        self.problem.take().map_or(Ok(()), Err)
     }
 }
 

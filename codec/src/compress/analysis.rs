@@ -129,11 +129,12 @@ pub struct Analysis {
     columns: Range<usize>,
     /// Count per bin, at `((j − start)·D + d)·BINS + b`.
     counts: Vec<u32>,
-    /// Energy (sum of squared magnitudes) per bin, same layout.
-    energies: Vec<f32>,
+    /// Energy (sum of squared magnitudes) per bin, same layout, in f64: the
+    /// squares of f32 values span 2^-298 to 2^256.
+    energies: Vec<f64>,
     /// Per column and depth, `(j − start)·D + d`: Σ over nonzero positions
     /// of their scale group's squared peak magnitude.
-    peak_sq: Vec<f32>,
+    peak_sq: Vec<f64>,
     /// Per column and depth: nonzero positions.
     nonzeros: Vec<u32>,
 }
@@ -144,8 +145,8 @@ struct Unchecked {
     settings: AnalysisSettings,
     columns: Range<usize>,
     counts: Vec<u32>,
-    energies: Vec<f32>,
-    peak_sq: Vec<f32>,
+    energies: Vec<f64>,
+    peak_sq: Vec<f64>,
     nonzeros: Vec<u32>,
 }
 
@@ -183,6 +184,14 @@ impl TryFrom<Unchecked> for Analysis {
                 "analysis",
                 "statistics do not match the column range",
             ));
+        }
+        if let Some(v) = u
+            .energies
+            .iter()
+            .chain(&u.peak_sq)
+            .find(|v| !(**v >= 0.0 && v.is_finite()))
+        {
+            return Err(Error::range("analysis energy", v, "finite and ≥ 0"));
         }
         Ok(Analysis {
             settings: u.settings,
@@ -273,7 +282,7 @@ impl Analysis {
 
     /// Histogram (counts, energies) and quantizer statistics (Σ squared
     /// peaks, nonzeros) of column `j` at the candidate depth of index `di`.
-    pub(super) fn stats(&self, j: usize, di: usize) -> (&[u32], &[f32], (f32, u32)) {
+    pub(super) fn stats(&self, j: usize, di: usize) -> (&[u32], &[f64], (f64, u32)) {
         let k = (j - self.columns.start) * self.settings.depth_count() + di;
         (
             &self.counts[k * BINS..(k + 1) * BINS],
@@ -286,8 +295,8 @@ impl Analysis {
 /// One column's statistics at every candidate depth.
 struct ColumnStats {
     counts: Vec<u32>,
-    energies: Vec<f32>,
-    peak_sq: Vec<f32>,
+    energies: Vec<f64>,
+    peak_sq: Vec<f64>,
     nonzeros: Vec<u32>,
 }
 
@@ -366,21 +375,21 @@ pub(super) fn depth_stats(
     depth: u32,
     tau0_sq: f64,
     counts: &mut [u32],
-    energies: &mut [f32],
-) -> (f32, u32) {
-    let mut peak = vec![(0.0f32, 0u32); depth as usize + 1];
+    energies: &mut [f64],
+) -> (f64, u32) {
+    let mut peak = vec![(0.0f64, 0u32); depth as usize + 1];
     for (i, &group) in groups.iter().enumerate() {
         let e = energy(i);
         if e > 0.0 {
             let bin = bin_of(e, tau0_sq);
             counts[bin] += 1;
-            energies[bin] += e as f32;
+            energies[bin] += e;
             let g = &mut peak[group as usize];
-            g.0 = g.0.max(e.sqrt() as f32);
+            g.0 = g.0.max(e);
             g.1 += 1;
         }
     }
-    let qsum = peak.iter().map(|(s, n)| s * s * *n as f32).sum::<f32>();
+    let qsum = peak.iter().map(|(e, n)| e * *n as f64).sum::<f64>();
     let nonzero = peak.iter().map(|(_, n)| n).sum::<u32>();
     (qsum, nonzero)
 }
@@ -410,8 +419,8 @@ pub(super) mod tests {
             let nd = a.settings.depth_count();
             a.push(ColumnStats {
                 counts: (0..nd * BINS).map(|k| (j * 1000 + k) as u32).collect(),
-                energies: (0..nd * BINS).map(|k| (j + k) as f32 * 0.5).collect(),
-                peak_sq: (0..nd).map(|d| (j + d) as f32).collect(),
+                energies: (0..nd * BINS).map(|k| (j + k) as f64 * 0.5).collect(),
+                peak_sq: (0..nd).map(|d| (j + d) as f64).collect(),
                 nonzeros: (0..nd).map(|d| (j * 10 + d) as u32).collect(),
             });
         }
@@ -483,5 +492,18 @@ pub(super) mod tests {
         let mut v: serde_json::Value = serde_json::from_str(&json).unwrap();
         v["settings"]["tau0_sq"] = 0.0.into();
         assert!(serde_json::from_value::<Analysis>(v).is_err());
+        let mut v: serde_json::Value = serde_json::from_str(&json).unwrap();
+        v["energies"][3] = (-1.0).into();
+        let err = serde_json::from_value::<Analysis>(v)
+            .unwrap_err()
+            .to_string();
+        assert!(err.contains("energy = -1"), "{err}");
+        let mut v: serde_json::Value = serde_json::from_str(&json).unwrap();
+        v["peak_sq"][0] = 1e300.into();
+        v["energies"][0] = 1e300.into();
+        assert!(
+            serde_json::from_value::<Analysis>(v).is_ok(),
+            "f64 holds any squared f32"
+        );
     }
 }

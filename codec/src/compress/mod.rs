@@ -38,7 +38,7 @@ mod transpose;
 pub use analysis::{Analysis, AnalysisSettings};
 pub use code::{CodedColumns, Coder};
 pub use plan::Plan;
-pub use transpose::Transposed;
+pub use transpose::{Transposed, MAX_NORM, MIN_NONZERO_RMS};
 
 use crate::container::{LtmWriter, Mode};
 use crate::error::{Error, Result};
@@ -302,12 +302,14 @@ fn code_at_bits(
     progress: &(dyn Fn(Stage, u64, u64) + Sync),
 ) -> Result<CompressStats> {
     let budget = coder.budget();
-    let mut effective = budget;
+    let (mut effective, mut max_tau_sq) = (budget, f64::INFINITY);
     let mut coding = 1;
     loop {
         let plan = match (analysis, coder.options().target) {
             (_, Target::Keep(n)) => Plan::keep(n),
-            (Some(a), Target::MaxError(_)) => Plan::new(a, coder.options().bits, effective)?,
+            (Some(a), Target::MaxError(_)) => {
+                Plan::below(a, coder.options().bits, effective, max_tau_sq)?
+            }
             (None, Target::MaxError(_)) => {
                 return Err(Error::Invalid("a target error needs an analysis".into()))
             }
@@ -316,11 +318,16 @@ fn code_at_bits(
         let missed = err > budget * 1.0001;
         if missed && plan.tau_sq() > 0.0 && coding < MAX_CODINGS {
             effective *= 0.9 * budget / err;
+            max_tau_sq = plan.tau_sq() * 0.9 * budget / err;
             writer.abandon();
             coding += 1;
             continue;
         }
         stats.target_met = analysis.is_none() || !missed;
+        if let Err(e) = coder.transposed().raw().check_unchanged() {
+            writer.abandon();
+            return Err(e);
+        }
         stats.file_bytes = writer.finish(stats.achieved_error as f32)?;
         return Ok(stats);
     }

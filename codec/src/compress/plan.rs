@@ -46,6 +46,19 @@ impl Plan {
     /// quantization bits. When no threshold fits, τ = 0 and every column
     /// keeps every nonzero value.
     pub fn new(analysis: &Analysis, bits: u32, budget: f64) -> Result<Plan> {
+        Plan::below(analysis, bits, budget, f64::INFINITY)
+    }
+
+    /// [`Plan::new`] with a threshold τ² below `max_tau_sq`: a re-coding
+    /// after a miss lowers τ even where the estimate does not move it (the
+    /// estimated error is flat over a gap in the histogram, while the
+    /// coder's depth choices, which weigh error by 1/τ², depend on τ).
+    pub(super) fn below(
+        analysis: &Analysis,
+        bits: u32,
+        budget: f64,
+        max_tau_sq: f64,
+    ) -> Result<Plan> {
         if !(2..=16).contains(&bits) {
             return Err(Error::range("bits", bits, "2..=16"));
         }
@@ -53,16 +66,21 @@ impl Plan {
             return Err(Error::range("error budget", budget, "finite and ≥ 0"));
         }
         let q = levels(bits) as f64;
-        let mut fallback = Vec::new();
+        let mut fallback = None;
+        let tau0_sq = analysis.settings().tau0_sq;
         for b in (0..BINS).rev() {
+            let tau_sq = bin_threshold(b, tau0_sq);
+            if tau_sq >= max_tau_sq {
+                continue;
+            }
             let (err, choice) = choose(analysis, b, q);
             if err <= budget {
-                let tau_sq = bin_threshold(b, analysis.settings().tau0_sq);
                 return Ok(Plan::threshold(analysis, bits, tau_sq, choice));
             }
-            fallback = choice;
+            fallback = Some(choice);
         }
-        Ok(Plan::threshold(analysis, bits, 0.0, fallback))
+        let choice = fallback.unwrap_or_else(|| choose(analysis, 0, q).1);
+        Ok(Plan::threshold(analysis, bits, 0.0, choice))
     }
 
     fn threshold(analysis: &Analysis, bits: u32, tau_sq: f64, choice: Vec<[u32; 2]>) -> Plan {
@@ -151,20 +169,20 @@ fn choose(analysis: &Analysis, b: usize, q: f64) -> (f64, Vec<[u32; 2]>) {
 /// magnitude per channel.
 pub(super) fn estimate(
     counts: &[u32],
-    energies: &[f32],
-    quant: (f32, u32),
+    energies: &[f64],
+    quant: (f64, u32),
     channels: usize,
     q: f64,
     b: usize,
 ) -> (f64, f64) {
-    let mut dropped: f64 = energies[..b].iter().map(|&e| e as f64).sum();
+    let mut dropped: f64 = energies[..b].iter().sum();
     let (qsum, nonzero) = quant;
-    let step = (qsum as f64 / nonzero.max(1) as f64).sqrt() / q;
+    let step = (qsum / nonzero.max(1) as f64).sqrt() / q;
     let mut kept = 0.0;
     for (&count, &energy) in counts[b..].iter().zip(&energies[b..]).filter(|x| *x.0 > 0) {
-        let x = (energy as f64 / count as f64 / channels as f64).sqrt();
+        let x = (energy / count as f64 / channels as f64).sqrt();
         match quantization_error(x, step) {
-            None => dropped += energy as f64,
+            None => dropped += energy,
             Some(per_value) => {
                 kept += count as f64;
                 dropped += count as f64 * channels as f64 * per_value;
@@ -195,17 +213,17 @@ mod tests {
 
     /// One channel; one scale group of peak 4 over 4 values: Δ = 4/Q, and
     /// Q = 1 at 2 bits, so Δ = 4.
-    const QUANT: (f32, u32) = (4.0 * 4.0 * 4.0, 4);
+    const QUANT: (f64, u32) = (4.0 * 4.0 * 4.0, 4);
 
     /// Bins by hand: bin 0 one value of 1 (dropped, x < Δ/2), bin 1 one value
     /// of 3 (kept, 3·(4 − 3) = 3), bin 2 two values of 4 (kept, Δ²/6 each),
     /// bin 3 empty, bin 4 one value of 10 (Δ²/6).
-    fn bins() -> (Vec<u32>, Vec<f32>) {
+    fn bins() -> (Vec<u32>, Vec<f64>) {
         let mut counts = vec![0u32; BINS];
-        let mut energies = vec![0.0f32; BINS];
-        for (b, n, x) in [(0, 1, 1.0f32), (1, 1, 3.0), (2, 2, 4.0), (4, 1, 10.0)] {
+        let mut energies = vec![0.0f64; BINS];
+        for (b, n, x) in [(0, 1, 1.0f64), (1, 1, 3.0), (2, 2, 4.0), (4, 1, 10.0)] {
             counts[b] = n;
-            energies[b] = n as f32 * x * x;
+            energies[b] = n as f64 * x * x;
         }
         (counts, energies)
     }
@@ -267,7 +285,7 @@ mod tests {
             })
             .collect();
         let groups = vec![0u8; p];
-        let (mut counts, mut energies) = (vec![0u32; BINS], vec![0.0f32; BINS]);
+        let (mut counts, mut energies) = (vec![0u32; BINS], vec![0.0f64; BINS]);
         let energy = |i: usize| (coefs[i] as f64).powi(2);
         let quant = depth_stats(energy, &groups, 0, tau0_sq, &mut counts, &mut energies);
         for bits in [4, 6, 9] {

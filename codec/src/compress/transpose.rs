@@ -11,7 +11,7 @@ use super::analysis::BINS_PER_OCTAVE;
 use super::{Stage, TransposeOptions};
 use crate::dims::Dims;
 use crate::error::{Error, Result};
-use crate::raw::RawStore;
+use crate::raw::{BlockVerifier, RawStore};
 use crate::wavelet::{row_forward, Filter};
 use rayon::prelude::*;
 use std::fs::File;
@@ -20,14 +20,37 @@ use std::ops::Range;
 use std::path::{Path, PathBuf};
 
 /// Bins of the depth-0 histogram of squared values built with the rows
-/// (half-octaves, bin 320 starting at 1).
-const HIST0_BINS: usize = 512;
-const HIST0_OFFSET: f64 = 320.0;
+/// (half-octaves, bin 600 starting at 1): from 2^-300, below the square of
+/// the smallest f32, to 2^211, above the square of [`MAX_NORM`].
+const HIST0_BINS: usize = 1024;
+const HIST0_OFFSET: f64 = 600.0;
 
-/// Bin of the depth-0 histogram.
+/// Bytes read at a time by the monochrome check.
+const MONO_READ_BYTES: usize = 4 << 20;
+
+/// Bytes of raw rows read at a time by the row pass (at least one row).
+const ROW_READ_BYTES: usize = 8 << 20;
+
+/// The largest Frobenius norm of a matrix the codec stores, 2^100 ≈ 1.3e30.
+/// No wavelet coefficient exceeds the norm by more than the column
+/// filter's small gain, so every f32 value of the encoder and of the
+/// decoders — the product `q·s` of dequantization at 16 bits included —
+/// stays below 2^120, far from overflow.
+pub const MAX_NORM: f64 = (1u128 << 100) as f64;
+
+/// The smallest root mean square of a matrix's nonzero values the codec
+/// stores, 2^-120 ≈ 7.5e-37. Below 2^-126, f32 numbers are subnormal and
+/// rounded to multiples of 2^-149: from this root mean square on, the
+/// rounding of the row and column transforms, which the coder cannot
+/// measure, stays below f32's rounding of ordinary values (2^-24 of the
+/// norm), so the measured error is the error of the file.
+pub const MIN_NONZERO_RMS: f64 = f64::from_bits((1023 - 120) << 52);
+
+/// Bin of the depth-0 histogram (clamped in f64: no integer overflow for
+/// any `e`, infinity included).
 fn hist0_bin(e: f64) -> usize {
-    ((e.log2() * BINS_PER_OCTAVE).floor() as i64 + HIST0_OFFSET as i64)
-        .clamp(0, HIST0_BINS as i64 - 1) as usize
+    ((e.log2() * BINS_PER_OCTAVE).floor() + HIST0_OFFSET).clamp(0.0, HIST0_BINS as f64 - 1.0)
+        as usize
 }
 
 /// A raw store after the row transform and the transpose (steps 1 and 2):
@@ -59,7 +82,7 @@ impl<'a> Transposed<'a> {
     ) -> Result<Transposed<'a>> {
         opts.validate()?;
         let src = raw.dims();
-        let channels = if is_monochrome(raw) { 1 } else { src.channels };
+        let channels = if is_monochrome(raw)? { 1 } else { src.channels };
         let dims = Dims { channels, ..src };
         let (p, m, c) = (dims.pixels(), dims.lights(), channels as usize);
         let mem = usize::try_from(opts.mem_budget / 4).unwrap_or(usize::MAX); // in f32 values
@@ -82,53 +105,68 @@ impl<'a> Transposed<'a> {
             hist0: vec![(0, 0.0); HIST0_BINS],
             out_of_core,
         };
-        // Blocks of rows within a quarter of the budget.
+        // Blocks of rows within a quarter of the budget (raw rows are read
+        // 8 MiB at a time).
         t.fill((mem / 4 / (m * c)).clamp(1, p), progress)?;
         Ok(t)
     }
 
-    /// Transforms the rows `block` at a time, accumulates the norm and the
-    /// depth-0 histogram, and scatters them into the store.
+    /// Reads the rows `block` at a time (positioned reads, each raw block
+    /// verified as its rows go by), checks that the matrix lies within the
+    /// codec's range, transforms the rows, accumulates the norm and the
+    /// depth-0 histogram, and scatters them into the store. Fails if the
+    /// raw store changed meanwhile.
     fn fill(&mut self, block: usize, progress: &(dyn Fn(Stage, u64, u64) + Sync)) -> Result<()> {
         let p = self.dims.pixels();
         let mut tbuf = vec![0.0f32; block * self.dims.row_len()];
-        let mut verified = 0;
+        let mut reader = RowReader {
+            verifier: self.raw.verifier(),
+            range: RangeCheck::default(),
+            src: Vec::new(),
+        };
         let mut p0 = 0;
         while p0 < p {
             let rows = p0..(p0 + block).min(p);
-            verified = self.verify_blocks(verified, rows.end)?;
-            let rbuf = self.transform_rows(rows.clone())?;
+            let rbuf = self.read_transformed(rows.clone(), &mut reader)?;
             self.add_stats(&rbuf);
             self.scatter(&rbuf, rows.clone(), &mut tbuf)?;
-            self.raw.release_rows(rows.clone());
             p0 = rows.end;
             progress(Stage::Rows, p0 as u64, p as u64);
         }
-        Ok(())
+        reader.verifier.finish()?;
+        reader.range.check()?;
+        self.raw.check_unchanged()
     }
 
-    /// Checks the CRC of every raw block from `first` that starts before row
-    /// `end`, once; returns the first block not yet checked.
-    fn verify_blocks(&self, first: usize, end: usize) -> Result<usize> {
-        let header = self.raw.header();
-        let mut b = first;
-        while b < header.block_count() && header.block_range(b).start < end {
-            self.raw.verify_block(b)?;
-            self.raw.release_rows(header.block_range(b));
-            b += 1;
+    /// Rows `rows`, row-transformed and channel-planar:
+    /// `rbuf[(r·C + c)·M + j]`. They are read a few MiB at a time, and each
+    /// piece is verified, range-checked and transformed while it is in the
+    /// cache.
+    fn read_transformed(&self, rows: Range<usize>, reader: &mut RowReader) -> Result<Vec<f32>> {
+        let (p, out_len) = (self.dims.pixels(), self.dims.row_len());
+        let src_len = self.raw.dims().row_len();
+        let step = (ROW_READ_BYTES / (src_len * 4)).max(1);
+        let mut rbuf = vec![0.0f32; rows.len() * out_len];
+        for start in rows.clone().step_by(step) {
+            let piece = start..(start + step).min(rows.end);
+            self.raw.read_rows(piece.clone(), &mut reader.src)?;
+            reader.verifier.feed(piece.start, &reader.src)?;
+            reader.range.add(&reader.src, src_len);
+            reader.range.check_norm(piece.end, p)?;
+            let at = (piece.start - rows.start) * out_len;
+            self.transform_rows(&reader.src, &mut rbuf[at..at + piece.len() * out_len])?;
         }
-        Ok(b)
+        Ok(rbuf)
     }
 
-    /// Row-transformed rows, channel-planar: `rbuf[(r·C + c)·M + j]`.
-    fn transform_rows(&self, rows: Range<usize>) -> Result<Vec<f32>> {
+    /// Row-transforms the raw rows `src_rows` into `rbuf`, channel-planar:
+    /// `rbuf[(r·C + c)·M + j]`.
+    fn transform_rows(&self, src_rows: &[f32], rbuf: &mut [f32]) -> Result<()> {
         let (n, m) = (self.dims.face_res() as usize, self.dims.lights());
         let (channels, src_channels) = (
             self.dims.channels as usize,
             self.raw.dims().channels as usize,
         );
-        let src_rows = self.raw.rows(rows.clone());
-        let mut rbuf = vec![0.0f32; rows.len() * channels * m];
         rbuf.par_chunks_mut(channels * m)
             .enumerate()
             .try_for_each_init(
@@ -144,8 +182,7 @@ impl<'a> Transposed<'a> {
                     }
                     Ok(())
                 },
-            )?;
-        Ok(rbuf)
+            )
     }
 
     /// Adds the rows' squared values to the norm and the depth-0 histogram:
@@ -153,28 +190,18 @@ impl<'a> Transposed<'a> {
     /// the thread count and block size.
     fn add_stats(&mut self, rbuf: &[f32]) {
         let row_len = self.dims.row_len();
-        let partial: Vec<(f64, Vec<(u64, f64)>)> = rbuf
+        let partial: Vec<RowStats> = rbuf
             .par_chunks(row_len)
-            .map(|chunk| {
-                let mut norm = 0.0f64;
-                let mut hist = vec![(0u64, 0.0f64); HIST0_BINS];
-                for v in chunk {
-                    let e = (*v as f64).powi(2);
-                    norm += e;
-                    if e > 0.0 {
-                        let bin = &mut hist[hist0_bin(e)];
-                        bin.0 += 1;
-                        bin.1 += e;
-                    }
-                }
-                (norm, hist)
-            })
+            .map_init(
+                || vec![(0u64, 0.0f64); HIST0_BINS],
+                |hist, chunk| row_stats(chunk, hist),
+            )
             .collect();
-        for (norm, hist) in partial {
+        for (norm, bins) in partial {
             self.norm_sq += norm;
-            for (a, b) in self.hist0.iter_mut().zip(hist) {
-                a.0 += b.0;
-                a.1 += b.1;
+            for (b, count, energy) in bins {
+                self.hist0[b].0 += count;
+                self.hist0[b].1 += energy;
             }
         }
     }
@@ -280,21 +307,139 @@ impl<'a> Transposed<'a> {
     }
 }
 
-/// True when every row has equal R, G and B values.
-fn is_monochrome(raw: &RawStore) -> bool {
+/// A row's squared norm and its nonzero bins of the depth-0 histogram as
+/// (bin, count, energy).
+type RowStats = (f64, Vec<(usize, u64, f64)>);
+
+/// The [`RowStats`] of `row`, accumulated in `hist` (all zero before and
+/// after).
+fn row_stats(row: &[f32], hist: &mut [(u64, f64)]) -> RowStats {
+    let mut norm = 0.0f64;
+    let mut touched = Vec::new();
+    for v in row {
+        let e = (*v as f64).powi(2);
+        norm += e;
+        if e > 0.0 {
+            let b = hist0_bin(e);
+            if hist[b].0 == 0 {
+                touched.push(b);
+            }
+            hist[b].0 += 1;
+            hist[b].1 += e;
+        }
+    }
+    let bins = touched
+        .into_iter()
+        .map(|b| {
+            let (count, energy) = std::mem::take(&mut hist[b]);
+            (b, count, energy)
+        })
+        .collect();
+    (norm, bins)
+}
+
+/// The state of the row pass's reads: the block verifier, the range check
+/// and the read buffer.
+struct RowReader<'a> {
+    verifier: BlockVerifier<'a>,
+    range: RangeCheck,
+    src: Vec<f32>,
+}
+
+/// True when every row has equal R, G and B values: the rows are read a
+/// few MiB at a time with positioned reads, in parallel, until one that is
+/// not grey.
+fn is_monochrome(raw: &RawStore) -> Result<bool> {
     let dims = raw.dims();
     if dims.channels != 3 {
-        return false;
+        return Ok(false);
     }
-    (0..raw.header().block_count()).into_par_iter().all(|b| {
-        let range = raw.header().block_range(b);
-        let mono = raw
-            .rows(range.clone())
-            .chunks_exact(3)
-            .all(|c| c[0] == c[1] && c[1] == c[2]);
-        raw.release_rows(range);
-        mono
-    })
+    let (len, step) = (dims.pixels() * dims.row_len(), MONO_READ_BYTES / 12 * 3);
+    let found = (0..len.div_ceil(step))
+        .into_par_iter()
+        .map_init(Vec::<f32>::new, |buf, k| {
+            let values = k * step..((k + 1) * step).min(len);
+            match raw.read_values(values, buf) {
+                Err(e) => Some(Err(e)),
+                Ok(()) => {
+                    let grey = buf.chunks_exact(3).all(|c| c[0] == c[1] && c[1] == c[2]);
+                    (!grey).then_some(Ok(()))
+                }
+            }
+        })
+        .find_any(Option::is_some)
+        .flatten();
+    match found {
+        Some(Err(e)) => Err(e),
+        Some(Ok(())) => Ok(false),
+        None => Ok(true),
+    }
+}
+
+/// The checks of a matrix's range from its raw values: Σv² (in f64, exact
+/// enough for any f32) and the count of nonzero values, summed per row and
+/// then in row order.
+#[derive(Default)]
+struct RangeCheck {
+    sum_sq: f64,
+    nonzeros: u64,
+}
+
+impl RangeCheck {
+    /// Adds whole rows of `row_len` values.
+    fn add(&mut self, rows: &[f32], row_len: usize) {
+        let per_row: Vec<(f64, u64)> = rows
+            .par_chunks(row_len)
+            .map(|row| {
+                row.iter()
+                    .filter(|v| **v != 0.0)
+                    .fold((0.0, 0), |(s, n), &v| (s + (v as f64).powi(2), n + 1))
+            })
+            .collect();
+        for (s, n) in per_row {
+            self.sum_sq += s;
+            self.nonzeros += n;
+        }
+    }
+
+    /// The norm of the first `rows` rows of `total` is at most
+    /// [`MAX_NORM`] (so that every row-transformed value is finite). An
+    /// infinite or NaN value is the block verifier's to report, with its
+    /// place, when its block ends.
+    fn check_norm(&self, rows: usize, total: usize) -> Result<()> {
+        let norm = self.sum_sq.sqrt();
+        if norm.is_finite() && norm > MAX_NORM {
+            let value = if rows < total {
+                format!("{norm:.3e} or more (rows 0..{rows} of {total} alone)")
+            } else {
+                format!("{norm:.3e}")
+            };
+            return Err(Error::range(
+                "matrix norm (Frobenius)",
+                value,
+                format!("at most {MAX_NORM:.3e} = 2^100, beyond which f32 wavelet coefficients overflow: scale the matrix down"),
+            ));
+        }
+        Ok(())
+    }
+
+    /// A zero matrix, or a norm of at most [`MAX_NORM`] with a root mean
+    /// square of the nonzero values of at least [`MIN_NONZERO_RMS`].
+    fn check(&self) -> Result<()> {
+        if self.nonzeros == 0 {
+            return Ok(());
+        }
+        self.check_norm(1, 1)?;
+        let rms = (self.sum_sq / self.nonzeros as f64).sqrt();
+        if rms < MIN_NONZERO_RMS {
+            return Err(Error::range(
+                "root mean square of the nonzero matrix values",
+                format!("{rms:.3e}"),
+                format!("at least {MIN_NONZERO_RMS:.3e} = 2^-120, below which f32 arithmetic loses precision to subnormal numbers: scale the matrix up"),
+            ));
+        }
+        Ok(())
+    }
 }
 
 /// The transposed columns, in memory or in a temporary file, as `f32`

@@ -60,12 +60,17 @@ pub fn reference_with_progress(
         .try_for_each(|(b, pixels)| -> Result<()> {
             raw.verify_block(b)?;
             let rows = header.block_range(b);
+            // Positioned reads, not the map: an input truncated meanwhile is
+            // an error, not SIGBUS.
+            let mut block = Vec::new();
+            raw.read_rows(rows.clone(), &mut block)?;
+            let row_len = dims.row_len();
             pixels.par_iter_mut().enumerate().for_each(|(i, out)| {
                 let p = rows.start + i;
                 if raw.is_zero_row(p) {
                     return;
                 }
-                let row = raw.row(p);
+                let row = &block[i * row_len..(i + 1) * row_len];
                 let mut sum = if channels == 3 {
                     dot_rgb(row, &light)
                 } else {
@@ -78,11 +83,11 @@ pub fn reference_with_progress(
                 }
                 *out = sum.map(|v| v as f32);
             });
-            raw.release_rows(rows.clone());
             let now = done.fetch_add(rows.len(), Ordering::Relaxed) + rows.len();
             progress(now, total);
             Ok(())
         })?;
+    raw.check_unchanged()?;
     if let Some((x, y)) = image.first_non_finite() {
         return Err(RelightError::Invalid(format!(
             "reference pixel ({x}, {y}) is not finite: the product T·L (or the albedo) exceeds the f32 range"

@@ -24,7 +24,7 @@ use crate::error::{BakeError, Result};
 use crate::transport::{RowStats, Scratch, Tables};
 use crate::world::Scene;
 use ltm_codec::raw::ResumeState;
-use ltm_codec::{RawHeader, RawWriter};
+use ltm_codec::{RawHeader, RawWriter, Surface, SurfacePoint};
 use rayon::prelude::*;
 use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicU64, Ordering};
@@ -89,9 +89,23 @@ pub struct BakeReport {
 }
 
 /// The raw store header for a scene: grey transport with an albedo image,
-/// or 3 channels, and the scene's input identity.
+/// or 3 channels, per-row surface data, and the scene's input identity.
 pub fn raw_header(scene: &Scene, block_bytes: u64) -> RawHeader {
-    RawHeader::new(scene.dims(), scene.channels() == 1, block_bytes).with_input_id(scene.input_id())
+    RawHeader::new(scene.dims(), scene.channels() == 1, block_bytes)
+        .with_input_id(scene.input_id())
+        .with_surface()
+}
+
+/// The surface data of every row of `scene` (see
+/// [`ltm_codec::Surface`]): for image rows each pixel centre's first hit,
+/// for texture rows each texel's point on the mesh.
+pub fn row_surface(scene: &Scene) -> Result<Surface> {
+    let rows = scene.dims().pixels();
+    let points: Vec<SurfacePoint> = (0..rows)
+        .into_par_iter()
+        .map(|p| scene.rows().surface_point(scene, p))
+        .collect();
+    Surface::new(points).map_err(BakeError::Store)
 }
 
 /// Computes whole blocks of rows.
@@ -180,7 +194,7 @@ pub fn bake(
     let start = Instant::now();
     let header = raw_header(scene, options.block_bytes);
     let baker = BlockBaker::new(scene, header)?;
-    let mut writer = RawWriter::create(out, header)?;
+    let mut writer = RawWriter::create_with_surface(out, header, Some(&row_surface(scene)?))?;
     let resume = writer.resume_state();
     let pending = writer.pending_blocks();
     let blocks_total = header.block_count();

@@ -94,6 +94,16 @@ pub enum BakeError {
     /// The scene's geometry cannot be traced safely.
     #[error("scene geometry: {0}")]
     Geometry(String),
+    /// The receiver of a texture-space bake cannot be parameterized.
+    #[error("{path}: {parameterization} parameterization: {message}")]
+    Parameterization {
+        /// The receiver's mesh file.
+        path: PathBuf,
+        /// `uv` or `sphere`.
+        parameterization: &'static str,
+        /// What is wrong.
+        message: String,
+    },
     /// Writing the raw store failed.
     #[error(transparent)]
     Store(#[from] ltm_codec::Error),

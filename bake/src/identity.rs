@@ -95,6 +95,16 @@ pub(crate) fn scene_identity(desc: &SceneDesc, meshes: &[([u8; 32], &str)]) -> [
         f.f64s(&q.rotation);
         f.str(&q.material);
     }
+    if let Some(t) = &desc.texture {
+        // Absent for image bakes, whose identities are unchanged.
+        f.str("texture");
+        f.count(t.mesh);
+        f.u32(t.size);
+        f.str(t.parameterization.name());
+        f.u32(t.spp);
+        f.u32(t.dilate);
+        f.bool(t.diffuse_only);
+    }
     f.0.finalize().into()
 }
 

@@ -34,11 +34,14 @@ mod ply;
 mod rows;
 pub mod sampling;
 pub mod scene;
+mod sphere;
+pub mod texture;
 pub mod transport;
 mod world;
 
 pub use bake::{
-    bake, raw_header, BakeOptions, BakeProgress, BakeReport, BlockBaker, DEFAULT_BLOCK_BYTES,
+    bake, raw_header, row_surface, BakeOptions, BakeProgress, BakeReport, BlockBaker,
+    DEFAULT_BLOCK_BYTES,
 };
 pub use error::{BakeError, Result};
 pub use inside::INSIDE_LIMIT;
@@ -46,4 +49,5 @@ pub use ltm_codec::raw::{RestartReason, ResumeState};
 pub use rows::{RowSample, RowSource};
 pub use scene::{Overrides, SceneDesc, DEFAULT_SCENE_TOML};
 pub use transport::RowStats;
+pub use texture::{TexelMap, TexelStats};
 pub use world::{Camera, Hit, MeshStats, Scene, SceneStats};

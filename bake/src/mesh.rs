@@ -17,6 +17,9 @@ pub(crate) struct RawMesh {
     pub positions: Vec<[f32; 3]>,
     /// Per-vertex normals, when the file has them.
     pub normals: Option<Vec<[f32; 3]>>,
+    /// Per-vertex texture coordinates `(u, v)`, `v` up, when the file has
+    /// them (OBJ `vt`, PLY `s,t` or `u,v`).
+    pub uvs: Option<Vec<[f32; 2]>>,
     pub triangles: Vec<[u32; 3]>,
 }
 
@@ -86,6 +89,8 @@ fn parse_obj(bytes: &[u8]) -> std::result::Result<RawMesh, String> {
     let mut out = RawMesh::default();
     let mut normals: Vec<[f32; 3]> = Vec::new();
     let mut all_have_normals = true;
+    let mut uvs: Vec<[f32; 2]> = Vec::new();
+    let mut all_have_uvs = true;
     for model in &models {
         let m = &model.mesh;
         let base = out.positions.len();
@@ -102,6 +107,11 @@ fn parse_obj(bytes: &[u8]) -> std::result::Result<RawMesh, String> {
             normals.extend(m.normals.chunks_exact(3).map(|n| [n[0], n[1], n[2]]));
         } else {
             all_have_normals = false;
+        }
+        if m.texcoords.len() == 2 * count {
+            uvs.extend(m.texcoords.chunks_exact(2).map(|t| [t[0], t[1]]));
+        } else {
+            all_have_uvs = false;
         }
         for t in m.indices.chunks_exact(3) {
             let mut tri = [0u32; 3];
@@ -120,6 +130,9 @@ fn parse_obj(bytes: &[u8]) -> std::result::Result<RawMesh, String> {
     }
     if all_have_normals && !normals.is_empty() {
         out.normals = Some(normals);
+    }
+    if all_have_uvs && !uvs.is_empty() {
+        out.uvs = Some(uvs);
     }
     Ok(out)
 }
@@ -153,6 +166,17 @@ fn check(m: &RawMesh) -> std::result::Result<(), String> {
             "triangle {f} has vertex indices {:?}, out of range (the file has {n} vertices, indices from 0)",
             m.triangles[f]
         ));
+    }
+    if let Some(uv) = &m.uvs {
+        if uv.len() != n {
+            return Err(format!("{} texture coordinates for {n} vertices", uv.len()));
+        }
+        if let Some(i) = uv.iter().position(|t| !t.iter().all(|v| v.is_finite())) {
+            return Err(format!(
+                "the texture coordinates of vertex {i} are not finite {:?}",
+                uv[i]
+            ));
+        }
     }
     if m.triangles.is_empty() {
         return Err("the file holds no faces".into());

@@ -1,7 +1,9 @@
 //! A small PLY reader: `format ascii 1.0` and `format binary_little_endian
 //! 1.0`, all scalar types, list properties, any elements (those other than
 //! `vertex` and `face` are read and skipped). It takes `vertex` properties
-//! `x, y, z` (and `nx, ny, nz` when all three are present) and the `face`
+//! `x, y, z` (and `nx, ny, nz` when all three are present; texture
+//! coordinates from the first pair present of `s, t`, `u, v`,
+//! `texture_u, texture_v` and `texture_s, texture_t`) and the `face`
 //! list `vertex_indices` (or `vertex_index`); polygons are fanned into
 //! triangles.
 //!
@@ -136,6 +138,10 @@ pub(crate) fn parse(bytes: &[u8]) -> Result<RawMesh, String> {
                     (Some(a), Some(b), Some(c)) => Some([a, b, c]),
                     _ => None,
                 };
+                let uv = [("s", "t"), ("u", "v"), ("texture_u", "texture_v"), ("texture_s", "texture_t")]
+                    .iter()
+                    .find_map(|(a, b)| Some([idx(a)?, idx(b)?]));
+                let mut uvs = Vec::with_capacity(if uv.is_some() { el.count } else { 0 });
                 mesh.positions.reserve(el.count);
                 let mut vals = vec![0.0f64; el.props.len()];
                 let mut ns = Vec::with_capacity(if normals.is_some() { el.count } else { 0 });
@@ -157,9 +163,15 @@ pub(crate) fn parse(bytes: &[u8]) -> Result<RawMesh, String> {
                     if let Some([a, b, c]) = normals {
                         ns.push([vals[a] as f32, vals[b] as f32, vals[c] as f32]);
                     }
+                    if let Some([a, b]) = uv {
+                        uvs.push([vals[a] as f32, vals[b] as f32]);
+                    }
                 }
                 if normals.is_some() {
                     mesh.normals = Some(ns);
+                }
+                if uv.is_some() {
+                    mesh.uvs = Some(uvs);
                 }
             }
             "face" => {

@@ -37,7 +37,21 @@
 //! size = [8.0, 8.0]         # extent along local X and Z
 //! rotation = [0.0, 0.0, 0.0]  # optional, Euler angles in degrees
 //! material = "clay"
+//!
+//! [texture]                 # optional: bake texels of a mesh, not camera pixels
+//! mesh = 0                  # index into [[meshes]] of the receiver
+//! size = 256                # texture side S, 1..=4096: S² rows
+//! parameterization = "uv"   # "uv" (the mesh's own texture coordinates) or "sphere"
+//! spp = 4                   # optional, sub-samples per texel over its footprint, default 4
+//! dilate = 2                # optional, texels charts are grown by (uv), 0..=8, default 2
+//! diffuse_only = false      # optional: bake a glossy receiver's Lambertian base
 //! ```
+//!
+//! With `[texture]`, row `k` is texel `k` of an `S × S` texture over the
+//! mesh (see `ltm_codec::RowLayout::Texture`); the camera is then only the
+//! default view and is not baked. The receiver must be Lambertian (a
+//! texture is view-independent) unless `diffuse_only = true`; every other
+//! mesh and quad still casts shadows.
 //!
 //! Transforms map a model point `p` to `translation + R·(scale ⊙ p)` with
 //! `R = Rz(rz)·Ry(ry)·Rx(rx)` for `rotation = [rx, ry, rz]`: the rotation
@@ -49,7 +63,7 @@
 
 use crate::error::{BakeError, Result};
 use glam::DVec3;
-use ltm_codec::{MAX_FACE_RES, MAX_PIXELS, MAX_SIDE};
+use ltm_codec::{Parameterization, MAX_FACE_RES, MAX_PIXELS, MAX_SIDE, MAX_TEXTURE_SIZE};
 use serde::de::{self, Deserializer, SeqAccess, Visitor};
 use serde::Deserialize;
 use std::collections::BTreeMap;
@@ -89,6 +103,9 @@ pub struct SceneDesc {
     pub meshes: Vec<MeshDesc>,
     /// `[[quads]]`, in file order.
     pub quads: Vec<QuadDesc>,
+    /// `[texture]`: bake the texels of a mesh instead of the camera's
+    /// pixels.
+    pub texture: Option<TextureDesc>,
     /// Directory that relative mesh paths are resolved against.
     pub base_dir: PathBuf,
     /// Where the description came from, for messages.
@@ -106,6 +123,48 @@ struct SceneFile {
     meshes: Vec<MeshDesc>,
     #[serde(default)]
     quads: Vec<QuadDesc>,
+    texture: Option<TextureDesc>,
+}
+
+/// A texture-space bake: the rows are the texels of a texture over one
+/// mesh.
+#[derive(Clone, Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct TextureDesc {
+    /// Index of the receiving mesh in `[[meshes]]`.
+    pub mesh: usize,
+    /// Texture side S (1..=[`ltm_codec::MAX_TEXTURE_SIZE`]).
+    pub size: u32,
+    /// How the mesh is laid out over the square: `"uv"` or `"sphere"`.
+    #[serde(deserialize_with = "parameterization")]
+    pub parameterization: Parameterization,
+    /// Sub-samples per texel, spread over its footprint on the surface.
+    #[serde(default = "default_texel_spp")]
+    pub spp: u32,
+    /// Texels that charts are grown by (`uv` only), so that filtered
+    /// lookups near a chart's edge do not read empty texels.
+    #[serde(default = "default_dilate")]
+    pub dilate: u32,
+    /// Bake only the Lambertian base of a glossy receiver.
+    #[serde(default)]
+    pub diffuse_only: bool,
+}
+
+/// Largest chart dilation in texels.
+pub const MAX_DILATE: u32 = 8;
+
+fn parameterization<'de, D: Deserializer<'de>>(
+    d: D,
+) -> std::result::Result<Parameterization, D::Error> {
+    let s = String::deserialize(d)?;
+    s.parse().map_err(de::Error::custom)
+}
+
+fn default_texel_spp() -> u32 {
+    4
+}
+fn default_dilate() -> u32 {
+    2
 }
 
 /// Pinhole camera. Pixel `(x, y)` (row `y` counted from the top) is row
@@ -298,6 +357,7 @@ impl SceneDesc {
             materials: file.materials,
             meshes: file.meshes,
             quads: file.quads,
+            texture: file.texture,
             base_dir: base_dir.to_path_buf(),
             origin: name.display().to_string(),
         };
@@ -474,6 +534,49 @@ impl SceneDesc {
                 }
             }
         }
+        self.validate_texture()
+    }
+
+    fn validate_texture(&self) -> Result<()> {
+        let Some(t) = &self.texture else {
+            return Ok(());
+        };
+        let o = &self.origin;
+        if t.mesh >= self.meshes.len() {
+            return Err(BakeError::range(
+                o,
+                "texture.mesh",
+                t.mesh,
+                format!("an index into [[meshes]], 0..{}", self.meshes.len()),
+            ));
+        }
+        if t.size == 0 || t.size > MAX_TEXTURE_SIZE {
+            return Err(BakeError::range(
+                o,
+                "texture.size",
+                t.size,
+                format!("1..={MAX_TEXTURE_SIZE}"),
+            ));
+        }
+        if t.spp == 0 || t.spp > MAX_SPP {
+            return Err(BakeError::range(o, "texture.spp", t.spp, format!("1..={MAX_SPP}")));
+        }
+        if t.dilate > MAX_DILATE {
+            return Err(BakeError::range(
+                o,
+                "texture.dilate",
+                t.dilate,
+                format!("0..={MAX_DILATE}"),
+            ));
+        }
+        let material = &self.meshes[t.mesh].material;
+        if matches!(self.materials.get(material), Some(MaterialDesc::Glossy { .. })) && !t.diffuse_only {
+            return Err(BakeError::invalid(
+                o,
+                "texture.mesh",
+                format!("the receiver's material \"{material}\" is glossy, but a texture is view-independent and holds only Lambertian reflection; use a lambert material, or set texture.diffuse_only = true to bake its Lambertian base"),
+            ));
+        }
         Ok(())
     }
 
@@ -508,6 +611,9 @@ impl SceneDesc {
     /// True when some mesh or quad uses a glossy material, so that the
     /// transport needs 3 channels.
     pub fn needs_color_transport(&self) -> bool {
+        if self.texture.is_some() {
+            return false; // the receiver's Lambertian albedo; others only shadow
+        }
         let used = self
             .meshes
             .iter()

@@ -33,7 +33,10 @@ use crate::material::Material;
 use crate::mesh::{self, RawMesh};
 use crate::rows::RowSource;
 use crate::scene::{CameraDesc, SceneDesc};
-use glam::{DMat3, DVec3, Vec3A};
+use crate::texture::{SurfaceMesh, TexelMap};
+use glam::{DMat3, DVec2, DVec3, Vec3A};
+use ltm_codec::Parameterization;
+use std::sync::Arc;
 use obvhs::cwbvh::CwBvh;
 use obvhs::ray::{Ray, RayHit};
 use std::collections::HashMap;
@@ -155,6 +158,8 @@ struct Geometry {
     stats: SceneStats,
     /// Per mesh: the SHA-256 of its file and its format.
     files: Vec<([u8; 32], &'static str)>,
+    /// The receiver of a texture-space bake, as placed.
+    receiver: Option<SurfaceMesh>,
 }
 
 /// A ray ready for the BVH: in trace space, starting where the world ray
@@ -194,7 +199,9 @@ impl Scene {
         let files: Vec<([u8; 32], &str)> = geometry.files.iter().map(|(d, f)| (*d, *f)).collect();
         let input_id = crate::identity::scene_identity(desc, &files);
         let scene = Scene::assemble(desc, geometry, input_id)?;
-        scene.check_camera()?;
+        if scene.camera().is_some() {
+            scene.check_camera()?;
+        }
         Ok(scene)
     }
 
@@ -231,11 +238,31 @@ impl Scene {
         let shade = order.iter().map(|&i| g.shade[i as usize]).collect();
         let mut stats = g.stats;
         stats.triangles = g.tris.len();
-        Ok(Scene {
-            rows: RowSource::Camera {
+        let rows = match (&desc.texture, g.receiver) {
+            (Some(t), Some(receiver)) => {
+                let path = desc.resolve(&desc.meshes[t.mesh].path);
+                let map = match t.parameterization {
+                    Parameterization::Uv => TexelMap::from_uv(receiver, t.size, t.dilate),
+                    Parameterization::Sphere => TexelMap::from_sphere(receiver, t.size),
+                    p => Err(format!("the {} parameterization is not supported", p.name())),
+                }
+                .map_err(|message| BakeError::Parameterization {
+                    path,
+                    parameterization: t.parameterization.name(),
+                    message,
+                })?;
+                RowSource::Texture {
+                    map: Arc::new(map),
+                    spp: t.spp,
+                }
+            }
+            _ => RowSource::Camera {
                 camera: Camera::new(&desc.camera),
                 spp: desc.camera.spp,
             },
+        };
+        Ok(Scene {
+            rows,
             face_res: desc.lighting.face_res,
             texel_samples: desc.lighting.texel_samples,
             channels: if desc.needs_color_transport() { 3 } else { 1 },
@@ -268,10 +295,19 @@ impl Scene {
         &self.rows
     }
 
-    /// The camera whose pixels are the rows.
+    /// The camera whose pixels are the rows (`None` for texture rows).
     pub fn camera(&self) -> Option<&Camera> {
         match &self.rows {
             RowSource::Camera { camera, .. } => Some(camera),
+            RowSource::Texture { .. } => None,
+        }
+    }
+
+    /// The texture-space layout of the rows (`None` for camera rows).
+    pub fn texel_map(&self) -> Option<&TexelMap> {
+        match &self.rows {
+            RowSource::Texture { map, .. } => Some(map),
+            RowSource::Camera { .. } => None,
         }
     }
 
@@ -417,6 +453,9 @@ fn load_geometry(desc: &SceneDesc) -> Result<Geometry> {
                     format: loaded.format,
                     message,
                 })?;
+        if desc.texture.as_ref().is_some_and(|t| t.mesh == i) {
+            g.receiver = Some(placed.surface_mesh(&loaded.mesh)?);
+        }
         g.files.push((loaded.digest, loaded.format));
         g.stats.meshes.push(MeshStats {
             path,
@@ -449,6 +488,7 @@ fn quad_mesh(size: [f64; 2]) -> RawMesh {
             [hx, 0.0, -hz],
         ],
         normals: None,
+        uvs: None,
         triangles: vec![[0, 1, 2], [0, 2, 3]],
     }
 }
@@ -508,6 +548,48 @@ impl Placement {
             ));
         }
         Ok((kept, skipped))
+    }
+
+    /// The mesh as a texture-space bake's receiver: world positions, shading
+    /// normals, the triangles [`Placement::add`] keeps, texture coordinates.
+    fn surface_mesh(&self, raw: &RawMesh) -> Result<SurfaceMesh> {
+        let world = self
+            .world_positions(raw)
+            .map_err(|e| BakeError::Geometry(format!("texture receiver: {e}")))?;
+        let flip = self.lin.determinant() < 0.0;
+        let tris: Vec<[u32; 3]> = raw
+            .triangles
+            .iter()
+            .map(|t| if flip { [t[0], t[2], t[1]] } else { *t })
+            .collect();
+        let normals = self
+            .vertex_normals(raw, &world, &tris)
+            .unwrap_or_else(|| vec![DVec3::ZERO; world.len()]);
+        let kept: Vec<[u32; 3]> = tris
+            .iter()
+            .filter(|t| face_normal(&world, t).is_some())
+            .copied()
+            .collect();
+        let degenerate_triangles: Vec<[u32; 3]> = tris
+            .iter()
+            .filter(|t| face_normal(&world, t).is_none())
+            .copied()
+            .collect();
+        Ok(SurfaceMesh {
+            degenerate_triangles,
+            positions: world.iter().map(|p| p.as_dvec3()).collect(),
+            normals: normals
+                .into_iter()
+                .map(|n| if n.is_finite() { n } else { DVec3::ZERO })
+                .collect(),
+            degenerate: tris.len() - kept.len(),
+            triangles: kept,
+            uvs: raw
+                .uvs
+                .as_ref()
+                .map(|uv| uv.iter().map(|t| DVec2::new(t[0] as f64, t[1] as f64)).collect()),
+            material: self.material as usize,
+        })
     }
 
     /// Vertex positions in world space, rounded to single precision once

@@ -89,7 +89,8 @@ fn resumed_bake_is_byte_identical() {
     let resumed = dir.path().join("resumed.raw");
     let partial = dir.path().join("resumed.raw.partial");
     {
-        let mut w = RawWriter::create(&resumed, header).unwrap();
+        let surface = ltm_bake::row_surface(&scene).unwrap();
+        let mut w = RawWriter::create_with_surface(&resumed, header, Some(&surface)).unwrap();
         let baker = BlockBaker::new(&scene, header).unwrap();
         let (mut rows, mut albedo) = (Vec::new(), Vec::new());
         for b in [0, 1, 3] {

@@ -696,7 +696,8 @@ const BLOCK: BakeOptions = BakeOptions {
 fn interrupt(scene: &Scene, out: &Path) {
     let header = raw_header(scene, BLOCK.block_bytes);
     assert!(header.block_count() >= 5);
-    let mut w = RawWriter::create(out, header).unwrap();
+    let surface = ltm_bake::row_surface(scene).unwrap();
+    let mut w = RawWriter::create_with_surface(out, header, Some(&surface)).unwrap();
     let baker = BlockBaker::new(scene, header).unwrap();
     let (mut rows, mut albedo) = (Vec::new(), Vec::new());
     let n = header.block_count();
@@ -898,6 +899,7 @@ fn partial_without_identity_is_started_over() {
     let header = raw_header(&scene, BLOCK.block_bytes);
     let anonymous = RawHeader {
         input_id: None,
+        has_surface: false,
         ..header
     };
     {

@@ -3,8 +3,12 @@
 //!
 //! ```text
 //! header (24 bytes) | chunk directory (32 bytes × count) | directory CRC
-//! META | ALBD (optional) | COLS (column table) | DATA (column payloads)
+//! META | ALBD (optional) | SURF (optional) | COLS (column table) | DATA (column payloads)
 //! ```
+//!
+//! Version 2 adds feature 4 and chunk `SURF`: the row layout (image pixels
+//! or texture texels) and per-row surface data ([`Surface`]). Version-1
+//! files (features 1 at most) are still read.
 //!
 //! Every chunk has a CRC-32 in the directory, except DATA whose columns
 //! each have their own CRC in the column table. The directory is validated
@@ -18,6 +22,7 @@ use crate::error::{Error, Result};
 use crate::limits::Limits;
 use crate::mmap;
 use crate::output::AtomicFile;
+use crate::surface::Surface;
 use crate::wavelet::{max_levels, Filter};
 use memmap2::Mmap;
 use std::fs::File;
@@ -28,10 +33,15 @@ use std::sync::Arc;
 /// File magic: `\x89LTM\r\n\x1a\n`.
 pub const MAGIC: [u8; 8] = *b"\x89LTM\r\n\x1a\n";
 /// Format version this build writes and reads.
-pub const VERSION: u32 = 1;
+pub const VERSION: u32 = 2;
 /// Feature flag: an RGB albedo image is stored (chunk ALBD).
 pub const FEATURE_ALBEDO: u32 = 1;
-const KNOWN_FEATURES: u32 = FEATURE_ALBEDO;
+/// Feature flag (version 2): the row layout and per-row surface data are
+/// stored (chunk SURF).
+pub const FEATURE_SURFACE: u32 = 4;
+const KNOWN_FEATURES: u32 = FEATURE_ALBEDO | FEATURE_SURFACE;
+/// The features a version-1 file may have.
+const KNOWN_FEATURES_V1: u32 = FEATURE_ALBEDO;
 const HEADER_LEN: usize = 24;
 const DIR_ENTRY_LEN: usize = 32;
 const META_LEN: usize = 64;
@@ -397,6 +407,7 @@ pub struct LtmWriter {
     tmp: PathBuf,
     meta: Meta,
     albedo: Option<Vec<u8>>,
+    surface: Option<Vec<u8>>,
     entries: Vec<ColumnEntry>,
     data_start: u64,
     data_len: u64,
@@ -406,7 +417,27 @@ impl LtmWriter {
     /// Starts a file for `meta`, with an optional albedo image (3 values per
     /// pixel).
     pub fn create(path: &Path, meta: Meta, albedo: Option<&[f32]>) -> Result<LtmWriter> {
+        Self::create_with_surface(path, meta, albedo, None)
+    }
+
+    /// [`LtmWriter::create`] with per-row surface data (chunk SURF), which
+    /// also records the row layout of `meta.dims`. A texture layout needs
+    /// it.
+    pub fn create_with_surface(
+        path: &Path,
+        meta: Meta,
+        albedo: Option<&[f32]>,
+        surface: Option<&Surface>,
+    ) -> Result<LtmWriter> {
         meta.dims.validate()?;
+        if let Some(s) = surface {
+            s.check_rows(&meta.dims)?;
+        } else if meta.dims.rows.is_texture() {
+            return Err(Error::Invalid(
+                "a texture-space .ltm file needs its surface data".into(),
+            ));
+        }
+        let surface = surface.map(|s| s.encode_chunk(&meta.dims.rows));
         let albedo = match albedo {
             Some(a) if a.len() == 3 * meta.dims.pixels() => {
                 Some(bytemuck::cast_slice::<f32, u8>(a).to_vec())
@@ -422,16 +453,20 @@ impl LtmWriter {
         };
         let file = AtomicFile::create(path)?;
         let tmp = file.tmp_path().to_path_buf();
-        let chunks = 3 + albedo.is_some() as u64;
+        let chunks = 3 + albedo.is_some() as u64 + surface.is_some() as u64;
         let head_len = HEADER_LEN as u64 + DIR_ENTRY_LEN as u64 * chunks + 4;
         let cols_len = (COLUMN_ENTRY_LEN * meta.dims.lights()) as u64;
-        let data_start =
-            head_len + META_LEN as u64 + albedo.as_ref().map_or(0, |a| a.len() as u64) + cols_len;
+        let data_start = head_len
+            + META_LEN as u64
+            + albedo.as_ref().map_or(0, |a| a.len() as u64)
+            + surface.as_ref().map_or(0, |a| a.len() as u64)
+            + cols_len;
         let mut w = LtmWriter {
             file: BufWriter::with_capacity(1 << 20, file),
             tmp,
             meta,
             albedo,
+            surface,
             entries: Vec::new(),
             data_start,
             data_len: 0,
@@ -510,6 +545,9 @@ impl LtmWriter {
         if let Some(a) = self.albedo.take() {
             chunks.push((b"ALBD", a));
         }
+        if let Some(s) = self.surface.take() {
+            chunks.push((b"SURF", s));
+        }
         chunks.push((b"COLS", cols.bytes));
         let head_len = HEADER_LEN + DIR_ENTRY_LEN * (chunks.len() + 1) + 4;
         let mut dir = Vec::new();
@@ -533,11 +571,11 @@ impl LtmWriter {
         let mut head = Writer::default();
         head.bytes.extend_from_slice(&MAGIC);
         head.u32(VERSION);
-        head.u32(if chunks.iter().any(|(t, _)| *t == b"ALBD") {
-            FEATURE_ALBEDO
-        } else {
-            0
-        });
+        let has = |tag: &[u8; 4]| chunks.iter().any(|(t, _)| *t == tag);
+        head.u32(
+            if has(b"ALBD") { FEATURE_ALBEDO } else { 0 }
+                | if has(b"SURF") { FEATURE_SURFACE } else { 0 },
+        );
         head.u32(dir.len() as u32);
         head.u32(0);
         for d in &dir {
@@ -591,6 +629,9 @@ pub struct LtmIndex {
     pub columns: Vec<ColumnEntry>,
     /// The RGB albedo image (chunk ALBD), if stored.
     pub albedo: Option<Vec<f32>>,
+    /// The per-row surface data (chunk SURF), if stored; its row layout is
+    /// in `meta.dims.rows`.
+    pub surface: Option<Surface>,
     /// Where the column payloads (chunk DATA) lie in the file.
     pub data: std::ops::Range<usize>,
 }
@@ -644,12 +685,31 @@ impl LtmFile {
         let (features, dir) = read_directory(bytes)?;
         let missing =
             |t: &str| Error::corrupt("chunk directory", format!("required chunk {t} is missing"));
-        let meta = Meta::decode(chunk(bytes, &dir, b"META")?.ok_or_else(|| missing("META"))?)?;
+        let mut meta =
+            Meta::decode(chunk(bytes, &dir, b"META")?.ok_or_else(|| missing("META"))?)?;
         let albedo = read_albedo(
             chunk(bytes, &dir, b"ALBD")?,
             features & FEATURE_ALBEDO != 0,
             &meta.dims,
         )?;
+        let surface = match (
+            chunk(bytes, &dir, b"SURF")?,
+            features & FEATURE_SURFACE != 0,
+        ) {
+            (Some(c), true) => {
+                let (rows, surface) = Surface::decode_chunk(c, &meta.dims, limits)?;
+                meta.dims.rows = rows;
+                meta.dims.validate()?;
+                Some(surface)
+            }
+            (None, false) => None,
+            _ => {
+                return Err(Error::corrupt(
+                    "chunk directory",
+                    "SURF chunk and surface feature flag disagree",
+                ))
+            }
+        };
         let cols = chunk(bytes, &dir, b"COLS")?.ok_or_else(|| missing("COLS"))?;
         let data_dir = dir
             .iter()
@@ -661,6 +721,7 @@ impl LtmFile {
             meta,
             columns,
             albedo,
+            surface,
             data,
         })
     }
@@ -678,6 +739,13 @@ impl LtmFile {
     /// The albedo image (3 values per pixel), if stored.
     pub fn albedo(&self) -> Option<&[f32]> {
         self.index.albedo.as_deref()
+    }
+
+    /// The per-row surface data (chunk SURF), if stored: for a
+    /// texture-space file the geometry image (texel points, normals, valid
+    /// mask), for an image-space one each pixel's first hit.
+    pub fn surface(&self) -> Option<&Surface> {
+        self.index.surface.as_ref()
     }
 
     /// File size in bytes.
@@ -708,24 +776,28 @@ fn read_directory(bytes: &[u8]) -> Result<(u32, Vec<DirEntry>)> {
         return Err(Error::corrupt(".ltm header", "bad magic bytes"));
     }
     let version = r.u32()?;
-    if version != VERSION {
-        return Err(Error::Version {
-            what: ".ltm",
-            found: version,
-            supported: VERSION,
-        });
-    }
+    let known = match version {
+        1 => KNOWN_FEATURES_V1,
+        VERSION => KNOWN_FEATURES,
+        _ => {
+            return Err(Error::Version {
+                what: ".ltm",
+                found: version,
+                supported: VERSION,
+            })
+        }
+    };
     let features = r.u32()?;
-    if features & !KNOWN_FEATURES != 0 {
+    if features & !known != 0 {
         return Err(Error::range(
             "feature flags",
-            format!("{features:#x}"),
-            format!("a subset of {KNOWN_FEATURES:#x}"),
+            format!("{features:#x} (version {version})"),
+            format!("a subset of {known:#x}"),
         ));
     }
     let count = r.u32()? as usize;
-    if !(3..=4).contains(&count) {
-        return Err(Error::range("chunk count", count, "3..=4"));
+    if !(3..=5).contains(&count) {
+        return Err(Error::range("chunk count", count, "3..=5"));
     }
     r.u32()?;
     let mut dir = Vec::with_capacity(count);
@@ -761,7 +833,7 @@ fn check_directory(dir: &[DirEntry], start: u64, file_len: usize) -> Result<()> 
     let mut end = start;
     for d in dir {
         let tag = String::from_utf8_lossy(&d.tag);
-        if !matches!(&d.tag, b"META" | b"ALBD" | b"COLS" | b"DATA") {
+        if !matches!(&d.tag, b"META" | b"ALBD" | b"SURF" | b"COLS" | b"DATA") {
             return Err(Error::corrupt(
                 "chunk directory",
                 format!("unknown chunk tag {tag:?}"),

@@ -14,6 +14,8 @@ use crate::error::{Error, Result};
 pub const MAX_SIDE: u32 = 1 << 15;
 /// Largest row count P.
 pub const MAX_PIXELS: u64 = 1 << 26;
+/// Largest texture side S of a texture-space bake.
+pub const MAX_TEXTURE_SIZE: u32 = 4096;
 /// Largest cubemap face resolution n.
 pub const MAX_FACE_RES: u32 = 1024;
 
@@ -31,6 +33,65 @@ pub enum RowLayout {
         /// Image height in pixels.
         height: u32,
     },
+    /// One row per texel of a `size × size` texture over a mesh (a texture-
+    /// space bake): row `k` = texel `(k mod size, k div size)`, v down. The
+    /// texel's surface point and normal are in the file's surface data
+    /// ([`crate::Surface`]); texels outside the mesh are invalid rows.
+    Texture {
+        /// Texture side S in texels.
+        size: u32,
+        /// How the mesh was laid out over the square.
+        parameterization: Parameterization,
+    },
+}
+
+/// How a mesh is laid out over a texture's square (docs/FORMAT.md codes).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+#[non_exhaustive]
+pub enum Parameterization {
+    /// The mesh's own texture coordinates (charts), code 1.
+    Uv,
+    /// A spherical parameterization of a closed genus-0 mesh unfolded
+    /// through the octahedron (a geometry image, Praun & Hoppe 2003), code 2.
+    Sphere,
+}
+
+impl Parameterization {
+    /// The code stored in files: 1 = uv, 2 = sphere.
+    pub fn code(self) -> u32 {
+        match self {
+            Parameterization::Uv => 1,
+            Parameterization::Sphere => 2,
+        }
+    }
+
+    /// The parameterization of a stored code, if known.
+    pub fn from_code(c: u32) -> Option<Parameterization> {
+        [Parameterization::Uv, Parameterization::Sphere]
+            .into_iter()
+            .find(|p| p.code() == c)
+    }
+
+    /// Its name in scene files and reports: `uv` or `sphere`.
+    pub fn name(self) -> &'static str {
+        match self {
+            Parameterization::Uv => "uv",
+            Parameterization::Sphere => "sphere",
+        }
+    }
+}
+
+impl std::str::FromStr for Parameterization {
+    type Err = String;
+    fn from_str(s: &str) -> std::result::Result<Parameterization, String> {
+        match s {
+            "uv" => Ok(Parameterization::Uv),
+            "sphere" => Ok(Parameterization::Sphere),
+            _ => Err(format!(
+                "unknown parameterization '{s}' (expected uv or sphere)"
+            )),
+        }
+    }
 }
 
 impl RowLayout {
@@ -38,6 +99,7 @@ impl RowLayout {
     pub fn width(&self) -> u32 {
         match *self {
             RowLayout::Image { width, .. } => width,
+            RowLayout::Texture { size, .. } => size,
         }
     }
 
@@ -45,12 +107,57 @@ impl RowLayout {
     pub fn height(&self) -> u32 {
         match *self {
             RowLayout::Image { height, .. } => height,
+            RowLayout::Texture { size, .. } => size,
         }
     }
 
     /// Number of rows P.
     pub fn rows(&self) -> usize {
         self.width() as usize * self.height() as usize
+    }
+
+    /// True for the texels of a texture ([`RowLayout::Texture`]).
+    pub fn is_texture(&self) -> bool {
+        matches!(self, RowLayout::Texture { .. })
+    }
+
+    /// The code stored in files: 0 = image, 1 = texture.
+    pub(crate) fn code(&self) -> u32 {
+        match self {
+            RowLayout::Image { .. } => 0,
+            RowLayout::Texture { .. } => 1,
+        }
+    }
+
+    /// The layout of stored codes over a `width × height` grid, checked:
+    /// a texture is square and names a known parameterization; an image
+    /// has parameterization code 0.
+    pub(crate) fn from_codes(
+        layout: u32,
+        parameterization: u32,
+        width: u32,
+        height: u32,
+    ) -> Result<RowLayout> {
+        match (layout, parameterization) {
+            (0, 0) => Ok(RowLayout::Image { width, height }),
+            (0, p) => Err(Error::range("parameterization of image rows", p, "0")),
+            (1, p) => {
+                let parameterization = Parameterization::from_code(p)
+                    .ok_or_else(|| Error::range("parameterization", p, "1 (uv) or 2 (sphere)"))?;
+                if width != height {
+                    return Err(Error::range(
+                        "texture height",
+                        height,
+                        format!("equal to its width {width}"),
+                    ));
+                }
+                Ok(RowLayout::Texture {
+                    size: width,
+                    parameterization,
+                })
+            }
+            (l, _) => Err(Error::range("row layout", l, "0 (image) or 1 (texture)")),
+        }
     }
 }
 
@@ -106,6 +213,24 @@ impl Dims {
         }
     }
 
+    /// The dimensions of an `size × size` texture over a mesh laid out by
+    /// `parameterization`, lit by a cubemap of face resolution `face_res`.
+    pub fn texture(
+        size: u32,
+        parameterization: Parameterization,
+        face_res: u32,
+        channels: u32,
+    ) -> Dims {
+        Dims {
+            rows: RowLayout::Texture {
+                size,
+                parameterization,
+            },
+            lights: LightBasis::Cubemap { n: face_res },
+            channels,
+        }
+    }
+
     /// Width of the row grid.
     pub fn width(&self) -> u32 {
         self.rows.width()
@@ -126,6 +251,15 @@ impl Dims {
         for (what, v) in [("width", self.width()), ("height", self.height())] {
             if v == 0 || v > MAX_SIDE {
                 return Err(Error::range(what, v, format!("1..={MAX_SIDE}")));
+            }
+        }
+        if let RowLayout::Texture { size, .. } = self.rows {
+            if size > MAX_TEXTURE_SIZE {
+                return Err(Error::range(
+                    "texture size",
+                    size,
+                    format!("1..={MAX_TEXTURE_SIZE}"),
+                ));
             }
         }
         if self.pixels() as u64 > MAX_PIXELS {
@@ -199,6 +333,21 @@ mod tests {
         assert_eq!((d.pixels(), d.lights(), d.row_len()), (15, 96, 288));
         assert_eq!(d.raw_bytes(), 15 * 288 * 4);
         assert_eq!(d.to_fields(), [5, 3, 4, 3]);
+    }
+
+    #[test]
+    fn texture_layout_codes_round_trip() {
+        let d = Dims::texture(8, Parameterization::Sphere, 4, 1);
+        assert_eq!((d.width(), d.height(), d.pixels()), (8, 8, 64));
+        assert!(d.rows.is_texture() && d.validate().is_ok());
+        let back = RowLayout::from_codes(d.rows.code(), 2, 8, 8).unwrap();
+        assert_eq!(back, d.rows);
+        assert_eq!(RowLayout::from_codes(0, 0, 5, 3).unwrap(), RowLayout::Image { width: 5, height: 3 });
+        for (l, p, w, h) in [(1, 2, 8, 4), (1, 0, 8, 8), (1, 3, 8, 8), (0, 1, 8, 8), (2, 0, 8, 8)] {
+            assert!(RowLayout::from_codes(l, p, w, h).is_err(), "{l} {p} {w} {h}");
+        }
+        assert_eq!("uv".parse::<Parameterization>(), Ok(Parameterization::Uv));
+        assert!("cube".parse::<Parameterization>().is_err());
     }
 
     #[test]

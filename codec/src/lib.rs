@@ -32,6 +32,7 @@ mod quant;
 pub mod raw;
 mod rows;
 pub mod sh;
+mod surface;
 pub mod wavelet;
 
 pub use compress::{
@@ -40,7 +41,10 @@ pub use compress::{
 };
 pub use container::{LtmFile, LtmWriter, Meta, Mode, SparseColumn};
 pub use decode::ColumnDecoder;
-pub use dims::{Dims, LightBasis, RowLayout, MAX_FACE_RES, MAX_PIXELS, MAX_SIDE};
+pub use dims::{
+    Dims, LightBasis, Parameterization, RowLayout, MAX_FACE_RES, MAX_PIXELS, MAX_SIDE,
+    MAX_TEXTURE_SIZE,
+};
 pub use error::{Error, Result};
 pub use limits::Limits;
 pub use output::AtomicFile;
@@ -48,4 +52,5 @@ pub use pca::PcaBasis;
 pub use quant::BandWeights;
 pub use raw::{RawHeader, RawStore, RawWriter};
 pub use sh::{ShProjection, MAX_SH_ORDER};
+pub use surface::{Surface, SurfacePoint, SURFACE_RECORD_LEN};
 pub use wavelet::Filter;

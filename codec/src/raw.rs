@@ -2,24 +2,28 @@
 //! bake` and `ltm import` write it and `ltm compress` reads it.
 //!
 //! One little-endian file (layout in docs/FORMAT.md). Version 2 adds the
-//! input identity; a header is `hlen` = 64 bytes in version 1 and 96 in
-//! version 2:
+//! input identity, version 3 the row layout and per-row surface data
+//! ([`Surface`]); a header is `hlen` = 64 bytes in version 1, 96 in version
+//! 2 and 112 in version 3:
 //!
 //! | offset | size | field |
 //! |---|---|---|
 //! | 0 | 8 | magic `LTMRAW\0\x01` |
-//! | 8 | 4 | version (1 or 2) |
-//! | 12 | 4 | flags: bit 0 = an albedo image is stored |
+//! | 8 | 4 | version (1, 2 or 3) |
+//! | 12 | 4 | flags: bit 0 = an albedo image is stored, bit 1 = surface data (exactly in version 3) |
 //! | 16 | 4·5 | width, height, face_res, channels, block_rows |
 //! | 36 | 4 | block_count = ceil(width·height / block_rows) |
 //! | 40 | 8 | data_offset (multiple of 4096) |
 //! | 48 | 8 | albedo_offset (0 when absent) |
 //! | 56 | 4 | reserved, 0 (a reader refuses any other value) |
-//! | 60 | 32 | version 2 only: input identity ([`RawHeader::input_id`]) |
+//! | 60 | 32 | version 2 and 3: input identity ([`RawHeader::input_id`]; all zero in version 3 = none) |
+//! | 92 | 8 | version 3: surface_offset |
+//! | 100 | 4·2 | version 3: row layout (0 image, 1 texture), parameterization (0 none, 1 uv, 2 sphere) |
 //! | hlen − 4 | 4 | CRC-32 of bytes 0..hlen−4 |
 //! | hlen | 8·block_count | block table: state (0 = pending, 1 = complete), CRC-32 of the block |
 //! | flags_offset | P | one byte per row: 1 = the row is all zero, else 0 |
 //! | albedo_offset | 12·P | RGB albedo per pixel, f32 (optional) |
+//! | surface_offset | 28·P + 4 | version 3: surface record per row, then the CRC-32 of the records |
 //! | data_offset | 4·P·M·C | T\[p\]\[j\]\[c\], f32 |
 //!
 //! A block is `block_rows` consecutive rows (the last may be shorter); its
@@ -53,6 +57,7 @@ use crate::error::{Error, Result};
 use crate::fileio::PositionedIo as _;
 use crate::limits::Limits;
 use crate::mmap;
+use crate::surface::{Surface, SURFACE_RECORD_LEN};
 use memmap2::Mmap;
 use std::fs::{File, OpenOptions};
 use std::io;
@@ -63,13 +68,15 @@ use std::time::SystemTime;
 const MAGIC: [u8; 8] = *b"LTMRAW\0\x01";
 /// The newest version; version 1 (no input identity) is still read and
 /// written.
-const VERSION: u32 = 2;
-/// Header bytes of version 1 and of version 2.
+const VERSION: u32 = 3;
+/// Header bytes of versions 1, 2 and 3.
 const HEADER_LEN_V1: u64 = 64;
 const HEADER_LEN_V2: u64 = 96;
+const HEADER_LEN_V3: u64 = 112;
 /// Bytes of an input identity.
 pub const INPUT_ID_LEN: usize = 32;
 const FLAG_ALBEDO: u32 = 1;
+const FLAG_SURFACE: u32 = 2;
 const DATA_ALIGN: u64 = 4096;
 /// Bytes read at a time when a block's CRC is checked.
 const CRC_CHUNK: u64 = 8 << 20;
@@ -91,6 +98,9 @@ pub struct RawHeader {
     /// its identity equals the writer's. Stored in version-2 files; a
     /// header without one is written as version 1.
     pub input_id: Option<[u8; INPUT_ID_LEN]>,
+    /// Per-row surface data ([`Surface`]) is stored (version 3). Texture
+    /// rows ([`crate::RowLayout::Texture`]) always have it.
+    pub has_surface: bool,
 }
 
 #[derive(Clone, Copy)]
@@ -100,6 +110,8 @@ struct Layout {
     block_count: u64,
     flags_offset: u64,
     albedo_offset: u64,
+    /// Start of the surface records (0 when absent).
+    surface_offset: u64,
     data_offset: u64,
     file_len: u64,
 }
@@ -114,6 +126,15 @@ impl RawHeader {
             block_rows,
             has_albedo,
             input_id: None,
+            has_surface: dims.rows.is_texture(),
+        }
+    }
+
+    /// The same header with per-row surface data (written as version 3).
+    pub fn with_surface(self) -> RawHeader {
+        RawHeader {
+            has_surface: true,
+            ..self
         }
     }
 
@@ -125,10 +146,12 @@ impl RawHeader {
         }
     }
 
-    /// The format version this header is written as: 2 with an input
-    /// identity, else 1.
+    /// The format version this header is written as: 3 with surface data,
+    /// else 2 with an input identity, else 1.
     pub fn version(&self) -> u32 {
-        if self.input_id.is_some() {
+        if self.has_surface {
+            3
+        } else if self.input_id.is_some() {
             2
         } else {
             1
@@ -136,10 +159,10 @@ impl RawHeader {
     }
 
     fn header_len(&self) -> u64 {
-        if self.input_id.is_some() {
-            HEADER_LEN_V2
-        } else {
-            HEADER_LEN_V1
+        match self.version() {
+            3 => HEADER_LEN_V3,
+            2 => HEADER_LEN_V2,
+            _ => HEADER_LEN_V1,
         }
     }
 
@@ -150,6 +173,11 @@ impl RawHeader {
                 "channels with an albedo image",
                 self.dims.channels,
                 "1",
+            ));
+        }
+        if self.dims.rows.is_texture() && !self.has_surface {
+            return Err(Error::Invalid(
+                "a texture-space raw store must carry surface data".into(),
             ));
         }
         let p = self.dims.pixels() as u64;
@@ -165,7 +193,14 @@ impl RawHeader {
         let flags_offset = table_offset + 8 * block_count;
         let albedo_offset = (flags_offset + p).next_multiple_of(64);
         let albedo_end = albedo_offset + if self.has_albedo { 12 * p } else { 0 };
-        let data_offset = albedo_end.next_multiple_of(DATA_ALIGN);
+        let surface_offset = albedo_end.next_multiple_of(64);
+        let surface_end = surface_offset
+            + if self.has_surface {
+                SURFACE_RECORD_LEN as u64 * p + 4
+            } else {
+                0
+            };
+        let data_offset = surface_end.next_multiple_of(DATA_ALIGN);
         let file_len = data_offset
             .checked_add(self.dims.raw_bytes())
             .ok_or_else(|| {
@@ -176,6 +211,7 @@ impl RawHeader {
             block_count,
             flags_offset,
             albedo_offset: if self.has_albedo { albedo_offset } else { 0 },
+            surface_offset: if self.has_surface { surface_offset } else { 0 },
             data_offset,
             file_len,
         })
@@ -196,7 +232,10 @@ impl RawHeader {
         let mut w = Writer::default();
         w.bytes.extend_from_slice(&MAGIC);
         w.u32(self.version());
-        w.u32(if self.has_albedo { FLAG_ALBEDO } else { 0 });
+        w.u32(
+            if self.has_albedo { FLAG_ALBEDO } else { 0 }
+                | if self.has_surface { FLAG_SURFACE } else { 0 },
+        );
         for v in self.dims.to_fields() {
             w.u32(v);
         }
@@ -207,6 +246,18 @@ impl RawHeader {
         w.u32(0);
         if let Some(id) = &self.input_id {
             w.bytes.extend_from_slice(id);
+        } else if self.has_surface {
+            w.bytes.extend_from_slice(&[0; INPUT_ID_LEN]);
+        }
+        if self.has_surface {
+            w.u64(layout.surface_offset);
+            w.u32(self.dims.rows.code());
+            w.u32(match self.dims.rows {
+                crate::RowLayout::Texture {
+                    parameterization, ..
+                } => parameterization.code(),
+                _ => 0,
+            });
         }
         let crc = crc32fast::hash(&w.bytes);
         w.u32(crc);
@@ -214,7 +265,7 @@ impl RawHeader {
     }
 
     /// Decodes and checks a header from the first bytes of a file of
-    /// `file_len` bytes (`bytes` holds `min(file_len, HEADER_LEN_V2)` of
+    /// `file_len` bytes (`bytes` holds `min(file_len, HEADER_LEN_V3)` of
     /// them).
     fn decode(bytes: &[u8], file_len: u64, path: &Path) -> Result<(RawHeader, Layout)> {
         check_magic(bytes, file_len, path)?;
@@ -222,6 +273,7 @@ impl RawHeader {
         let len = match version {
             1 => HEADER_LEN_V1,
             2 => HEADER_LEN_V2,
+            3 => HEADER_LEN_V3,
             _ => {
                 return Err(Error::Version {
                     what: "raw store",
@@ -251,11 +303,16 @@ impl RawHeader {
                 computed: crc,
             });
         }
-        if flags & !FLAG_ALBEDO != 0 {
+        let allowed = if version == 3 {
+            FLAG_ALBEDO | FLAG_SURFACE
+        } else {
+            FLAG_ALBEDO
+        };
+        if flags & !allowed != 0 || (version == 3) != (flags & FLAG_SURFACE != 0) {
             return Err(Error::range(
                 "raw store flags",
-                format!("{flags:#x}"),
-                "bit 0 only",
+                format!("{flags:#x} (version {version})"),
+                "bit 0, and bit 1 exactly in version 3",
             ));
         }
         let reserved = u32::from_le_bytes(bytes[56..60].try_into().expect("4 bytes"));
@@ -266,16 +323,39 @@ impl RawHeader {
                 "0",
             ));
         }
-        let dims = Dims::read_fields(&mut r)?;
+        let mut dims = Dims::read_fields(&mut r)?;
+        let word = |at: usize| u32::from_le_bytes(bytes[at..at + 4].try_into().expect("4 bytes"));
+        if version == 3 {
+            dims.rows =
+                crate::RowLayout::from_codes(word(100), word(104), dims.width(), dims.height())?;
+        }
+        let id: [u8; INPUT_ID_LEN] = bytes[60..60 + INPUT_ID_LEN.min(len - 60)]
+            .iter()
+            .copied()
+            .chain(std::iter::repeat(0))
+            .take(INPUT_ID_LEN)
+            .collect::<Vec<u8>>()
+            .try_into()
+            .expect("32 bytes");
         let header = RawHeader {
             dims,
             block_rows: r.u32()?,
             has_albedo: flags & FLAG_ALBEDO != 0,
-            input_id: (version == 2)
-                .then(|| bytes[60..60 + INPUT_ID_LEN].try_into().expect("32 bytes")),
+            input_id: (version == 2 || (version == 3 && id != [0; INPUT_ID_LEN])).then_some(id),
+            has_surface: version == 3,
         };
         let layout = header.layout()?;
         let (block_count, data_offset, albedo_offset) = (r.u32()?, r.u64()?, r.u64()?);
+        let surface_offset = if version == 3 {
+            u64::from_le_bytes(bytes[92..100].try_into().expect("8 bytes"))
+        } else {
+            0
+        };
+        if surface_offset != layout.surface_offset {
+            return Err(Error::corrupt("raw store header", format!(
+                "surface_offset {surface_offset} disagrees with the dimensions (expected {})",
+                layout.surface_offset)));
+        }
         if block_count as u64 != layout.block_count
             || data_offset != layout.data_offset
             || albedo_offset != layout.albedo_offset
@@ -372,7 +452,7 @@ fn probe_partial(
         Err(_) => return restart(RestartReason::Unreadable),
     };
     let len = file.metadata().map(|m| m.len()).unwrap_or(0);
-    let mut bytes = vec![0u8; len.min(HEADER_LEN_V2) as usize];
+    let mut bytes = vec![0u8; len.min(HEADER_LEN_V3) as usize];
     if file.read_exact_at(&mut bytes, 0).is_err() {
         return restart(RestartReason::Unreadable);
     }
@@ -442,7 +522,33 @@ impl RawWriter {
     /// same inputs as `header` (see the module docs), else starts it over.
     /// [`RawWriter::resume_state`] tells which, and why.
     pub fn create(path: &Path, header: RawHeader) -> Result<RawWriter> {
+        Self::create_with_surface(path, header, None)
+    }
+
+    /// [`RawWriter::create`] for a header with surface data: `surface`
+    /// (one point per row) must be given exactly when
+    /// [`RawHeader::has_surface`]. It is written at once, on a resumed file
+    /// too (it is a function of the same inputs).
+    pub fn create_with_surface(
+        path: &Path,
+        header: RawHeader,
+        surface: Option<&Surface>,
+    ) -> Result<RawWriter> {
         let layout = header.layout()?;
+        match surface {
+            Some(s) => s.check_rows(&header.dims)?,
+            None if header.has_surface => {
+                return Err(Error::Invalid(
+                    "the raw store header has surface data but none was given".into(),
+                ))
+            }
+            None => {}
+        }
+        if surface.is_some() && !header.has_surface {
+            return Err(Error::Invalid(
+                "surface data given for a raw store header without it".into(),
+            ));
+        }
         let partial = partial_path(path);
         let io = |e| Error::io(&partial, e);
         let probe = probe_partial(&partial, &header, &layout);
@@ -477,6 +583,15 @@ impl RawWriter {
                     .map_err(io)?;
                 writer.resume = state;
             }
+        }
+        if let Some(s) = surface {
+            let mut bytes = s.encode_records();
+            let crc = crc32fast::hash(&bytes);
+            bytes.extend_from_slice(&crc.to_le_bytes());
+            writer
+                .file
+                .write_all_at(&bytes, layout.surface_offset)
+                .map_err(io)?;
         }
         Ok(writer)
     }
@@ -624,6 +739,18 @@ impl RawWriter {
         t: &[f32],
         albedo: Option<&[f32]>,
     ) -> Result<PathBuf> {
+        Self::write_dense_with_surface(path, header, t, albedo, None)
+    }
+
+    /// [`RawWriter::write_dense`] with per-row surface data (see
+    /// [`RawWriter::create_with_surface`]).
+    pub fn write_dense_with_surface(
+        path: &Path,
+        header: RawHeader,
+        t: &[f32],
+        albedo: Option<&[f32]>,
+        surface: Option<&Surface>,
+    ) -> Result<PathBuf> {
         let (p, row) = (header.dims.pixels(), header.dims.row_len());
         if t.len() != p * row {
             return Err(Error::BufferTooSmall {
@@ -639,7 +766,7 @@ impl RawWriter {
                 need: if header.has_albedo { 3 * p } else { 0 },
             });
         }
-        let mut w = RawWriter::create(path, header)?;
+        let mut w = RawWriter::create_with_surface(path, header, surface)?;
         for b in 0..header.block_count() {
             let r = header.block_range(b);
             let a = albedo.map(|a| &a[3 * r.start..3 * r.end]);
@@ -735,6 +862,7 @@ pub struct RawStore {
     /// One byte per row: 1 = flagged all zero.
     flags: Vec<u8>,
     albedo: Option<Vec<f32>>,
+    surface: Option<Surface>,
     stamp: Stamp,
 }
 
@@ -753,13 +881,14 @@ impl RawStore {
         let file = File::open(path).map_err(|e| Error::io(path, e))?;
         mmap::check_regular(&file).map_err(|e| Error::io(path, e))?;
         let stamp = Stamp::of(&file, path)?;
-        let mut head = vec![0u8; stamp.len.min(HEADER_LEN_V2) as usize];
+        let mut head = vec![0u8; stamp.len.min(HEADER_LEN_V3) as usize];
         read_at(&file, path, &mut head, 0)?;
         let (header, layout) = RawHeader::decode(&head, stamp.len, path)?;
         check_length(stamp.len, layout.file_len, path)?;
         let block_crcs = read_block_table(&file, path, &layout, limits)?;
         let flags = read_flags(&file, path, &header, &layout, limits)?;
         let albedo = read_albedo(&file, path, &header, &layout, limits)?;
+        let surface = read_surface(&file, path, &header, &layout, limits)?;
         let map = mmap::map_read(&file).map_err(|e| Error::io(path, e))?;
         check_length(map.len() as u64, layout.file_len, path)?;
         Ok(RawStore {
@@ -771,6 +900,7 @@ impl RawStore {
             block_crcs,
             flags,
             albedo,
+            surface,
             stamp,
         })
     }
@@ -846,6 +976,12 @@ impl RawStore {
     /// The RGB albedo image (3 finite values per pixel), if stored.
     pub fn albedo(&self) -> Option<&[f32]> {
         self.albedo.as_deref()
+    }
+
+    /// The per-row surface data (version 3), if stored: CRC-checked, one
+    /// valid point (finite, unit normal) or all-zero record per row.
+    pub fn surface(&self) -> Option<&Surface> {
+        self.surface.as_ref()
     }
 
     /// Checks block `b`: its CRC against the block table, that its values
@@ -1005,6 +1141,38 @@ fn read_flags(
         ));
     }
     Ok(flags)
+}
+
+/// The surface data, if stored: size checked against the limits, CRC and
+/// every record checked.
+fn read_surface(
+    file: &File,
+    path: &Path,
+    header: &RawHeader,
+    layout: &Layout,
+    limits: &Limits,
+) -> Result<Option<Surface>> {
+    if !header.has_surface {
+        return Ok(None);
+    }
+    let rows = header.dims.pixels();
+    let len = limits.check_alloc(
+        "raw store surface data",
+        rows as u64,
+        SURFACE_RECORD_LEN as u64,
+    )?;
+    let mut bytes = vec![0u8; len + 4];
+    read_at(file, path, &mut bytes, layout.surface_offset)?;
+    let stored = u32::from_le_bytes(bytes[len..].try_into().expect("4 bytes"));
+    let computed = crc32fast::hash(&bytes[..len]);
+    if stored != computed {
+        return Err(Error::Crc {
+            chunk: "raw store surface data".into(),
+            stored,
+            computed,
+        });
+    }
+    Surface::decode_records(&bytes[..len], rows).map(Some)
 }
 
 /// The albedo image, if stored: every value finite.
@@ -1177,6 +1345,63 @@ mod tests {
             std::fs::write(&cut, &bytes[..70]).unwrap();
             assert!(RawStore::open(&cut).is_err());
         }
+    }
+
+    fn surface(rows: usize) -> Surface {
+        Surface::new(
+            (0..rows)
+                .map(|p| {
+                    if p % 3 == 1 {
+                        crate::SurfacePoint::INVALID
+                    } else {
+                        crate::SurfacePoint::new([p as f32, -1.0, 2.5], [0.0, 1.0, 0.0])
+                    }
+                })
+                .collect(),
+        )
+        .unwrap()
+    }
+
+    /// Version 3 stores the row layout and the surface data, with or
+    /// without an identity; a texture layout needs surface data.
+    #[test]
+    fn surface_and_row_layout_round_trip() {
+        let dir = tempfile::tempdir().unwrap();
+        let tex = Dims::texture(6, crate::Parameterization::Sphere, 2, 1);
+        let plain = RawHeader::new(tex, true, 200);
+        assert!(plain.has_surface && plain.version() == 3);
+        for (name, h) in [
+            ("tex.raw", plain),
+            ("tex-id.raw", plain.with_input_id([9; 32])),
+            ("img.raw", header(200).with_surface()),
+        ] {
+            let path = dir.path().join(name);
+            let s = surface(h.dims.pixels());
+            assert!(RawWriter::create(&path, h).is_err());
+            let mut w = RawWriter::create_with_surface(&path, h, Some(&s)).unwrap();
+            fill(&mut w, &(0..h.block_count()).collect::<Vec<_>>(), 2.0);
+            w.finish().unwrap();
+            let store = RawStore::open(&path).unwrap();
+            assert_eq!(*store.header(), h, "{name}");
+            assert_eq!(store.surface(), Some(&s));
+            assert_eq!(store.row(7)[0], 2.0);
+            // Any flipped bit of the surface section is caught by its CRC.
+            let mut bytes = std::fs::read(&path).unwrap();
+            let at = u64::from_le_bytes(bytes[92..100].try_into().unwrap()) as usize;
+            bytes[at + 5] ^= 1;
+            let bad = dir.path().join("bad.raw");
+            std::fs::write(&bad, &bytes).unwrap();
+            let e = RawStore::open(&bad).err().unwrap().to_string();
+            assert!(e.contains("surface"), "{e}");
+        }
+        let wrong = surface(7);
+        assert!(RawWriter::create_with_surface(&dir.path().join("w.raw"), plain, Some(&wrong)).is_err());
+        assert!(RawWriter::create_with_surface(&dir.path().join("w.raw"), header(200), Some(&surface(30))).is_err());
+        let no_surface = RawHeader {
+            has_surface: false,
+            ..plain
+        };
+        assert!(RawWriter::create(&dir.path().join("w.raw"), no_surface).is_err());
     }
 
     /// A partial file is resumed only with the same identity and layout;

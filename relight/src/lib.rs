@@ -7,6 +7,10 @@
 //! and the exact dense reference `T·L` that relit images are measured
 //! against.
 //!
+//! A texture-space file (rows = texels of a mesh's texture) relights into
+//! its relit texture, which [`TexturedMesh::render`] then draws on the mesh
+//! from any [`ViewCamera`], with no new relight per view.
+//!
 //! Features (all on by default): `exr` (OpenEXR maps and images), `png`
 //! (PNG output), `hdr` (Radiance HDR maps). Without them the relighting core
 //! builds alone: [`EnvMap::from_fn`] and [`EnvMap::new`] take lighting from
@@ -55,6 +59,7 @@ mod frame;
 mod image_io;
 mod reference;
 mod relighter;
+mod render;
 mod select;
 
 pub use basis::BasisRelighter;
@@ -64,4 +69,5 @@ pub use frame::{Frame, FrameStats, Relight, Request};
 pub use image_io::{relative_l2, Image, MAX_READ_PIXELS};
 pub use reference::{reference, reference_with_progress};
 pub use relighter::Relighter;
+pub use render::{TexturedMesh, ViewCamera, MAX_SUPERSAMPLE, MAX_VIEW_SIDE, SEAM_FACTOR};
 pub use select::{luminance, magnitude, select, support_area, Weighting};

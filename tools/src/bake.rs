@@ -9,7 +9,8 @@ use std::path::PathBuf;
 /// Arguments of `ltm bake`.
 #[derive(Args)]
 #[command(
-    after_long_help = "Each row is a pixel of the camera image (row p = y·width + x, y from the top); each column \
+    after_long_help = "Each row is a pixel of the camera image (row p = y·width + x, y from the top), or with a \
+[texture] section in the scene a texel of an S×S texture over one mesh (row k = y·S + x); each column \
 is a texel of a 6·n² cubemap of distant lighting (OpenGL face order, world Y up). Entry \
 T[p][j] is the light reflected to the camera through pixel p from texel j per unit radiance, \
 so that the pixel's radiance is Σ_j T[p][j]·L[j]. Scenes whose materials are all Lambertian \
@@ -82,10 +83,28 @@ pub fn run(args: BakeArgs) -> anyhow::Result<()> {
         }
     }
     let dims = scene.dims();
+    if let Some(map) = scene.texel_map() {
+        let st = map.stats();
+        let stretch = match (st.stretch_mean, st.stretch_max) {
+            (Some(m), Some(x)) => format!(", L2 stretch mean {m:.3} max {x:.3}, {} flipped triangles", st.flipped_triangles),
+            _ => String::new(),
+        };
+        eprintln!(
+            "texture {}² ({}): {} valid texels ({:.1} %), {:.4e} texels per unit area, {} zero-area triangles skipped{stretch}; parameterized in {:.2} s",
+            st.size,
+            map.parameterization().name(),
+            st.valid_texels,
+            100.0 * st.valid_texels as f64 / (st.size as f64 * st.size as f64),
+            st.texels_per_area,
+            st.skipped_triangles,
+            st.seconds
+        );
+    }
     eprintln!(
-        "baking {} × {} pixels × {} lights ({}×{} faces) × {} channel{}{}: {:.2} GB, {} triangles, {} texel samples, {} pixel samples",
+        "baking {} × {} {} × {} lights ({}×{} faces) × {} channel{}{}: {:.2} GB, {} triangles, {} texel samples, {} samples per row",
         dims.width(),
         dims.height(),
+        if dims.rows.is_texture() { "texels" } else { "pixels" },
         dims.lights(),
         dims.face_res(),
         dims.face_res(),
@@ -95,7 +114,7 @@ pub fn run(args: BakeArgs) -> anyhow::Result<()> {
         dims.raw_bytes() as f64 / 1e9,
         scene.stats().triangles,
         desc.lighting.texel_samples,
-        desc.camera.spp,
+        scene.rows().samples_per_row(),
     );
     let bar = progress::bar(dims.pixels() as u64, "bake");
     let options = BakeOptions::default();

@@ -9,6 +9,7 @@ mod progress;
 mod ranges;
 mod reference;
 mod relight_cmd;
+mod render_cmd;
 mod report;
 
 use clap::{Parser, Subcommand};
@@ -81,8 +82,12 @@ enum Command {
     Inspect(codec_cmds::InspectArgs),
     /// Decode an .ltm file to a dense NumPy matrix.
     Export(codec_cmds::ExportArgs),
-    /// Relight a compressed matrix under an environment map.
+    /// Relight a compressed matrix under an environment map (an image, or
+    /// for a texture-space matrix the relit texture).
     Relight(relight_cmd::RelightArgs),
+    /// Relight a texture-space matrix and draw the relit mesh from any
+    /// camera (or an orbit of cameras).
+    Render(render_cmd::RenderArgs),
     /// Compute the exact relit image T·L from a raw store (the ground truth).
     Reference(reference::ReferenceArgs),
     /// Measure size, speed and error over a sweep of settings; write
@@ -116,6 +121,7 @@ fn main() -> ExitCode {
         Command::Inspect(args) => codec_cmds::inspect_cmd(args),
         Command::Export(args) => codec_cmds::export(args),
         Command::Relight(args) => relight_cmd::run(args),
+        Command::Render(args) => render_cmd::run(args),
         Command::Reference(args) => reference::run(args),
         Command::Report(args) => report::run(args),
     };

@@ -343,7 +343,12 @@ fn write_columns(
 ) -> Result<(LtmWriter, CompressStats, f64)> {
     let t = coder.transposed();
     let m = t.dims().lights();
-    let mut writer = LtmWriter::create(out, coder.meta().clone(), t.raw().albedo())?;
+    let mut writer = LtmWriter::create_with_surface(
+        out,
+        coder.meta().clone(),
+        t.raw().albedo(),
+        t.raw().surface(),
+    )?;
     let mut stats = CompressStats {
         raw_bytes: t.raw().dims().raw_bytes(),
         channels: t.dims().channels,

@@ -1,0 +1,229 @@
+//! `ltm render`: relight a texture-space file once and draw the relit mesh
+//! from one camera or an orbit of cameras.
+
+use crate::relight_cmd::Terms;
+use anyhow::{bail, Context, Result};
+use clap::Args;
+use glam::DVec3;
+use ltm_relight::{
+    EnvMap, Relight, Relighter, Request, Rotation, TexturedMesh, ViewCamera, Weighting,
+    MAX_SUPERSAMPLE,
+};
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+
+/// Most views `--views` may draw.
+pub const MAX_VIEWS: usize = 3600;
+
+/// Arguments of `ltm render`.
+#[derive(Args)]
+pub struct RenderArgs {
+    /// A compressed texture-space matrix (baked with a `[texture]` section).
+    pub file: PathBuf,
+    /// Environment map: lat-long (width = 2·height) EXR or Radiance .hdr.
+    #[arg(long)]
+    pub env: PathBuf,
+    /// Wavelet lights per frame (non-linear approximation), or `all`.
+    #[arg(long, default_value = "200")]
+    pub terms: Terms,
+    /// Priority of wavelet lights (as for `ltm relight`).
+    #[arg(long, default_value = "unweighted")]
+    pub weighting: Weighting,
+    /// Rotate the lighting: yaw,pitch,roll in degrees.
+    #[arg(long, default_value = "0,0,0", allow_hyphen_values = true)]
+    pub rotate: Rotation,
+    /// Camera position x,y,z (world units of the bake).
+    #[arg(long, allow_hyphen_values = true, value_parser = vec3)]
+    pub camera: DVec3,
+    /// Point at the image centre x,y,z.
+    #[arg(long, allow_hyphen_values = true, value_parser = vec3)]
+    pub target: DVec3,
+    /// Direction towards the image's top x,y,z.
+    #[arg(long, default_value = "0,1,0", allow_hyphen_values = true, value_parser = vec3)]
+    pub up: DVec3,
+    /// Vertical field of view in degrees, in (0, 180).
+    #[arg(long, default_value_t = 35.0)]
+    pub fov: f64,
+    /// View size WxH in pixels.
+    #[arg(long, default_value = "512x512", value_parser = size)]
+    pub size: (u32, u32),
+    /// Samples per pixel side (antialiased edges): 1 to 8.
+    #[arg(long, default_value_t = 3)]
+    pub supersample: u32,
+    /// Draw an orbit of this many views about the target (around the up
+    /// axis) from one relight; outputs are numbered VIEW-000.exr, ...
+    #[arg(long, default_value_t = 1, value_parser = views)]
+    pub views: usize,
+    /// Output view, linear RGB EXR.
+    #[arg(short, long)]
+    pub output: PathBuf,
+    /// Also write a tone-mapped sRGB PNG (numbered like the EXR for orbits).
+    #[arg(long)]
+    pub png: Option<PathBuf>,
+    /// Exposure for the PNG, in stops.
+    #[arg(long, default_value_t = 0.0, allow_hyphen_values = true, value_parser = crate::ranges::exposure)]
+    pub exposure: f32,
+    /// Also write the relit texture (EXR).
+    #[arg(long)]
+    pub texture: Option<PathBuf>,
+    /// Print one JSON line with the settings and timings.
+    #[arg(long)]
+    pub json: bool,
+}
+
+/// Parses `x,y,z` with finite components.
+fn vec3(s: &str) -> std::result::Result<DVec3, String> {
+    let v: Vec<f64> = s
+        .split(',')
+        .map(|t| t.trim().parse::<f64>())
+        .collect::<std::result::Result<_, _>>()
+        .map_err(|_| format!("'{s}' is not x,y,z"))?;
+    match v[..] {
+        [x, y, z] if v.iter().all(|c| c.is_finite()) => Ok(DVec3::new(x, y, z)),
+        [_, _, _] => Err(format!("'{s}' has a component that is not finite")),
+        _ => Err(format!("'{s}' is not x,y,z (three numbers)")),
+    }
+}
+
+/// Parses `WxH`.
+fn size(s: &str) -> std::result::Result<(u32, u32), String> {
+    let (w, h) = s
+        .split_once(['x', 'X'])
+        .ok_or_else(|| format!("'{s}' is not WxH"))?;
+    let p = |t: &str| t.trim().parse::<u32>().map_err(|_| format!("'{s}' is not WxH"));
+    let (w, h) = (p(w)?, p(h)?);
+    let max = ltm_relight::MAX_VIEW_SIDE;
+    if !(1..=max).contains(&w) || !(1..=max).contains(&h) {
+        return Err(format!("'{s}' is out of range (valid: sides 1..={max})"));
+    }
+    Ok((w, h))
+}
+
+fn views(s: &str) -> std::result::Result<usize, String> {
+    match s.parse::<usize>() {
+        Ok(n) if (1..=MAX_VIEWS).contains(&n) => Ok(n),
+        _ => Err(format!("'{s}' is out of range (valid: 1..={MAX_VIEWS})")),
+    }
+}
+
+/// `PATH` for one view, `PATH` with `-NNN` before the extension for orbits.
+fn numbered(path: &Path, k: usize, count: usize) -> PathBuf {
+    if count == 1 {
+        return path.to_path_buf();
+    }
+    let stem = path.file_stem().unwrap_or_default().to_string_lossy();
+    let name = match path.extension() {
+        Some(e) => format!("{stem}-{k:03}.{}", e.to_string_lossy()),
+        None => format!("{stem}-{k:03}"),
+    };
+    path.with_file_name(name)
+}
+
+pub fn run(a: RenderArgs) -> Result<()> {
+    if !(1..=MAX_SUPERSAMPLE).contains(&a.supersample) {
+        bail!(
+            "--supersample {} is out of range (valid: 1..={MAX_SUPERSAMPLE})",
+            a.supersample
+        );
+    }
+    let camera = ViewCamera {
+        eye: a.camera,
+        target: a.target,
+        up: a.up,
+        fov: a.fov,
+        width: a.size.0,
+        height: a.size.1,
+    };
+    camera.validate()?;
+    let mut names: Vec<PathBuf> = (0..a.views).map(|k| numbered(&a.output, k, a.views)).collect();
+    if let Some(png) = &a.png {
+        names.extend((0..a.views).map(|k| numbered(png, k, a.views)));
+    }
+    names.extend(a.texture.clone());
+    let outputs: Vec<(&str, &Path)> = names.iter().map(|p| ("output", p.as_path())).collect();
+    crate::paths::check_files(
+        &[("input", a.file.as_path()), ("--env", a.env.as_path())],
+        &outputs,
+    )?;
+    let relighter = Relighter::open_with_limits(&a.file, crate::limits())
+        .with_context(|| format!("opening {}", a.file.display()))?;
+    let mesh = TexturedMesh::from_file(relighter.file())
+        .with_context(|| format!("{}", a.file.display()))?;
+    let env = EnvMap::load(&a.env).with_context(|| format!("loading {}", a.env.display()))?;
+    let light = env.to_cubemap(relighter.meta().dims.face_res() as usize, &a.rotate);
+    let mut frame = relighter.frame();
+    let request = Request {
+        terms: a.terms.0,
+        weighting: a.weighting,
+    };
+    let stats = relighter.relight(&light, &request, &mut frame)?;
+    if let Some(t) = &a.texture {
+        frame
+            .image
+            .write_exr(t)
+            .with_context(|| format!("writing {}", t.display()))?;
+    }
+    let mut render_ms = Vec::with_capacity(a.views);
+    for k in 0..a.views {
+        let view = camera.orbit(k, a.views);
+        mesh.check_outside(view.eye)?;
+        let start = Instant::now();
+        let image = mesh.render(&frame.image, &view, a.supersample)?;
+        render_ms.push(start.elapsed().as_secs_f64() * 1e3);
+        let out = numbered(&a.output, k, a.views);
+        image
+            .write_exr(&out)
+            .with_context(|| format!("writing {}", out.display()))?;
+        if let Some(png) = &a.png {
+            let p = numbered(png, k, a.views);
+            image
+                .write_png(&p, a.exposure)
+                .with_context(|| format!("writing {}", p.display()))?;
+        }
+    }
+    render_ms.sort_by(f64::total_cmp);
+    let median = render_ms[render_ms.len() / 2];
+    let relight_ms = stats.total().as_secs_f64() * 1e3;
+    if a.json {
+        let line = serde_json::json!({
+            "file": a.file,
+            "terms": a.terms.0.min(relighter.lights()),
+            "views": a.views,
+            "width": a.size.0,
+            "height": a.size.1,
+            "triangles": mesh.triangle_count(),
+            "relight_ms": relight_ms,
+            "render_ms_median": median,
+        });
+        println!("{line}");
+    }
+    eprintln!(
+        "relit the {}² texture in {relight_ms:.3} ms ({} lights); drew {} view(s) of {} triangles, {median:.3} ms each (median); wrote {}",
+        mesh.size(),
+        stats.lights,
+        a.views,
+        mesh.triangle_count(),
+        numbered(&a.output, 0, a.views).display()
+    );
+    Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn values_are_parsed_and_checked() {
+        assert_eq!(vec3("1,-2.5, 3").unwrap(), DVec3::new(1.0, -2.5, 3.0));
+        for bad in ["1,2", "1,2,3,4", "nan,0,0", "1,x,2", "inf,0,0"] {
+            assert!(vec3(bad).is_err(), "{bad}");
+        }
+        assert_eq!(size("640x480"), Ok((640, 480)));
+        for bad in ["0x10", "10", "10x", "99999x2"] {
+            assert!(size(bad).is_err(), "{bad}");
+        }
+        assert_eq!(numbered(Path::new("a/v.exr"), 3, 8), Path::new("a/v-003.exr"));
+        assert_eq!(numbered(Path::new("v.exr"), 0, 1), Path::new("v.exr"));
+        assert!(views("0").is_err() && views("3601").is_err() && views("4").is_ok());
+    }
+}

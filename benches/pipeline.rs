@@ -300,7 +300,10 @@ fn multiply_add(c: &mut Criterion) {
     let mut group = c.benchmark_group("multiply_add");
     for (name, path) in &files {
         let relighter = Relighter::open(path).unwrap();
-        let light = env.to_cubemap(relighter.meta().dims.face_res() as usize, &Rotation::IDENTITY);
+        let light = env.to_cubemap(
+            relighter.meta().dims.face_res() as usize,
+            &Rotation::IDENTITY,
+        );
         let entry_bytes = 2 * (relighter.meta().dims.channels as u64 + 1);
         let mut frame = relighter.frame();
         for n in [200, 1000, 5000] {
@@ -308,12 +311,20 @@ fn multiply_add(c: &mut Criterion) {
                 terms: n,
                 weighting: Weighting::Transport,
             };
-            let nnz = relighter.relight(&light, &request, &mut frame).unwrap().nonzeros;
+            let nnz = relighter
+                .relight(&light, &request, &mut frame)
+                .unwrap()
+                .nonzeros;
             group.throughput(Throughput::Bytes(nnz * entry_bytes));
             group.bench_function(BenchmarkId::new(name.as_str(), n), |b| {
                 b.iter_custom(|iters| {
                     (0..iters)
-                        .map(|_| relighter.relight(&light, &request, &mut frame).unwrap().multiply)
+                        .map(|_| {
+                            relighter
+                                .relight(&light, &request, &mut frame)
+                                .unwrap()
+                                .multiply
+                        })
                         .sum()
                 })
             });

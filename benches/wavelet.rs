@@ -61,7 +61,13 @@ fn rgb_inverse(c: &mut Criterion) {
     let levels = max_levels(S, S);
     let planes: Vec<Vec<f32>> = (0..3).map(|k| image(7 + k)[..S * S].to_vec()).collect();
     let pixels: Vec<f32> = (0..S * S * 4)
-        .map(|i| if i % 4 == 3 { 0.0 } else { planes[i % 4][i / 4] })
+        .map(|i| {
+            if i % 4 == 3 {
+                0.0
+            } else {
+                planes[i % 4][i / 4]
+            }
+        })
         .collect();
     let mut work = vec![0.0; 4 * S * S];
     let mut group = c.benchmark_group("rgb_inverse_256");
@@ -85,8 +91,7 @@ fn rgb_inverse(c: &mut Criterion) {
                 inter.copy_from_slice(&pixels);
                 for level in (0..levels).rev() {
                     let (w, h) = wavelet::band_size(S, S, level);
-                    wavelet::inverse_step_lanes(filter, &mut inter, S, w, h, 4, &mut work)
-                        .unwrap();
+                    wavelet::inverse_step_lanes(filter, &mut inter, S, w, h, 4, &mut work).unwrap();
                 }
             })
         });

@@ -375,7 +375,14 @@ fn interleaved_inverse_steps_match_single_images_bit_for_bit() {
         seed
     };
     for filter in Filter::ALL {
-        for (stride, w, h) in [(1, 1, 1), (7, 5, 3), (9, 9, 9), (16, 16, 1), (13, 1, 7), (300, 300, 257)] {
+        for (stride, w, h) in [
+            (1, 1, 1),
+            (7, 5, 3),
+            (9, 9, 9),
+            (16, 16, 1),
+            (13, 1, 7),
+            (300, 300, 257),
+        ] {
             for lanes in 1..=4 {
                 let images: Vec<Vec<f32>> = (0..lanes)
                     .map(|_| {
@@ -384,7 +391,11 @@ fn interleaved_inverse_steps_match_single_images_bit_for_bit() {
                                 let r = next();
                                 let mag = 10f32.powf((r % 1100) as f32 / 100.0 - 6.0);
                                 let v = if r % 7 == 0 { 0.0 } else { mag };
-                                if r & (1 << 20) != 0 { -v } else { v }
+                                if r & (1 << 20) != 0 {
+                                    -v
+                                } else {
+                                    v
+                                }
                             })
                             .collect()
                     })

@@ -23,8 +23,8 @@
 
 use crate::error::{RelightError, Result};
 use ltm_codec::container::{LtmFile, Meta, SparseColumn};
-use ltm_codec::BandWeights;
 use ltm_codec::wavelet::band_size;
+use ltm_codec::BandWeights;
 use ltm_codec::ColumnDecoder;
 use rayon::prelude::*;
 
@@ -110,9 +110,7 @@ impl Bands {
     fn new(meta: &Meta) -> Bands {
         let (w, h) = (meta.dims.width() as usize, meta.dims.height() as usize);
         let bw = BandWeights::new(meta.col_filter, w, h, meta.max_depth());
-        let maps: Vec<Vec<u8>> = (0..=meta.max_depth())
-            .map(|d| band_map(w, h, d))
-            .collect();
+        let maps: Vec<Vec<u8>> = (0..=meta.max_depth()).map(|d| band_map(w, h, d)).collect();
         let weights = maps
             .iter()
             .enumerate()
@@ -436,7 +434,8 @@ mod file_tests {
                 let meta = file.meta().clone();
                 let decoder = ColumnDecoder::new(&meta);
                 let arena = Arena::build(&file, &decoder).unwrap();
-                let weights = BandWeights::new(meta.col_filter, w as usize, h as usize, meta.max_depth());
+                let weights =
+                    BandWeights::new(meta.col_filter, w as usize, h as usize, meta.max_depth());
                 let l = arena.layout;
                 for j in 0..meta.dims.lights() {
                     let col = file.column(j).unwrap();
@@ -453,8 +452,7 @@ mod file_tests {
                         assert!(o[block] as usize <= k && k < o[block + 1] as usize);
                         for c in 0..3 {
                             let fc = if channels == 1 { 0 } else { c };
-                            let old = decoder.dequantize(&col, k, fc)
-                                / weights.map(col.depth)[i];
+                            let old = decoder.dequantize(&col, k, fc) / weights.map(col.depth)[i];
                             let new = arena.value(j, k, c);
                             assert!(
                                 (new - old).abs() <= 4.0 * f32::EPSILON * old.abs(),
@@ -479,7 +477,10 @@ mod file_tests {
                     let naive = relighter.relight_naive(&light, &request).unwrap();
                     assert!(frame.image.first_non_finite().is_none());
                     let diff = crate::relative_l2(&frame.image, &naive).unwrap();
-                    assert!(diff <= 2e-6, "{w}x{h}x{channels} {bits} bits N={terms}: {diff}");
+                    assert!(
+                        diff <= 2e-6,
+                        "{w}x{h}x{channels} {bits} bits N={terms}: {diff}"
+                    );
                 }
             }
         }

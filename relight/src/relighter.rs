@@ -95,7 +95,11 @@ impl Relighter {
         // Entries, held twice while the columns are gathered.
         let entry_bytes = 2 * Arena::entry_bytes(dims.channels as usize) as u64;
         limits.check_alloc("relighting arena", nonzeros, entry_bytes)?;
-        limits.check_alloc("frame image planes", dims.pixels() as u64, 4 * LANES as u64 * 2)?;
+        limits.check_alloc(
+            "frame image planes",
+            dims.pixels() as u64,
+            4 * LANES as u64 * 2,
+        )?;
         let n = dims.face_res() as usize;
         let decoder = ColumnDecoder::new(&meta);
         let arena = Arena::build(&file, &decoder)?;

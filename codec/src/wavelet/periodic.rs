@@ -179,7 +179,6 @@ pub(crate) fn inverse_1d_lanes<const L: usize>(
     }
 }
 
-
 /// Vertical analysis: `src` holds `h` compact rows of `w`; the bands are
 /// written to `dst` (rows of `stride`), low rows first.
 pub(crate) fn forward_rows(

@@ -83,3 +83,49 @@ fn reused_light_transform_matches_a_fresh_frame_and_changes_are_seen() {
         image(&r, &a, 40, &mut r.frame())
     );
 }
+
+/// Mutated files (CRCs repaired, so the mutations reach the structure and
+/// the column payloads) are refused at open or relight to finite images:
+/// the arena's band factors and `i16` values never panic or give NaN.
+#[test]
+fn mutated_files_never_panic_or_give_nan() {
+    let dir = tempfile::tempdir().unwrap();
+    let r = relighter(dir.path());
+    let good = std::fs::read(dir.path().join("t.ltm")).unwrap();
+    let light: Vec<[f32; 3]> = (0..r.lights()).map(|j| [1.0, j as f32, 0.5]).collect();
+    let request = Request {
+        terms: usize::MAX,
+        weighting: Weighting::Transport,
+    };
+    let limits = ltm_codec::Limits::default();
+    let mut seed = 0x2545_f491_4f6c_dd1du64;
+    let (mut opened, mut relit) = (0, 0);
+    for _ in 0..400 {
+        let mut bytes = good.clone();
+        for _ in 0..1 + seed % 3 {
+            seed ^= seed << 13;
+            seed ^= seed >> 7;
+            seed ^= seed << 17;
+            let at = (seed >> 8) as usize % bytes.len();
+            bytes[at] = match seed % 4 {
+                0 => 0xff,
+                1 => 0,
+                _ => bytes[at] ^ (1 << (seed >> 40) % 8),
+            };
+        }
+        ltm_codec::container::repair_checksums(&mut bytes);
+        let Ok(file) = ltm_codec::LtmFile::from_bytes(bytes, &limits) else {
+            continue;
+        };
+        opened += 1;
+        let Ok(r) = Relighter::new(file, &limits) else {
+            continue;
+        };
+        let mut frame = r.frame();
+        if r.relight(&light, &request, &mut frame).is_ok() {
+            relit += 1;
+            assert!(frame.image.first_non_finite().is_none());
+        }
+    }
+    assert!(opened > 0 && relit > 0, "{opened} opened, {relit} relit");
+}

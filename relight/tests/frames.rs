@@ -110,7 +110,7 @@ fn mutated_files_never_panic_or_give_nan() {
             bytes[at] = match seed % 4 {
                 0 => 0xff,
                 1 => 0,
-                _ => bytes[at] ^ (1 << (seed >> 40) % 8),
+                _ => bytes[at] ^ (1 << ((seed >> 40) % 8)),
             };
         }
         ltm_codec::container::repair_checksums(&mut bytes);

@@ -252,9 +252,100 @@ fn quantize(c: &mut Criterion) {
     g.finish();
 }
 
+/// The multiply-add against the machine's streaming bound, in one run:
+/// - `multiply_add/MODE/N`: the multiply-add part of relighting frames of
+///   `LTM_BENCH_LTM` (a `.ltm` file, e.g. the default scene at 256²; without
+///   it, 2d and adaptive files of the 64×64 scene made here), timed from the
+///   frames' own split; throughput in bytes of arena entries streamed (8 per
+///   RGB coefficient, 4 per grey one), so bytes ÷ 8 is coefficients;
+/// - `multiply_add/stream_probe`: a parallel read of a 256 MiB buffer of
+///   `u64` (summed), the streaming bound those bytes are compared with.
+fn multiply_add(c: &mut Criterion) {
+    use rayon::prelude::*;
+    let dir = tempfile::tempdir().unwrap();
+    let files: Vec<(String, std::path::PathBuf)> = match std::env::var_os("LTM_BENCH_LTM") {
+        Some(path) => vec![("file".into(), path.into())],
+        None => {
+            let assets = Path::new(env!("CARGO_MANIFEST_DIR")).join("assets");
+            let mut desc = SceneDesc::default_scene(&assets).unwrap();
+            desc.apply(&Overrides {
+                width: Some(64),
+                height: Some(64),
+                face_res: Some(16),
+                ..Default::default()
+            })
+            .unwrap();
+            let raw_path = dir.path().join("scene.raw");
+            let scene = Scene::build(&desc).unwrap();
+            bake(&scene, &raw_path, &BakeOptions::default(), &|_| {}).unwrap();
+            let raw = RawStore::open(&raw_path).unwrap();
+            [Mode::TwoD, Mode::Adaptive]
+                .into_iter()
+                .map(|mode| {
+                    let path = dir.path().join(format!("{}.ltm", mode.name()));
+                    let opts = CodeOptions {
+                        mode,
+                        bits: 12,
+                        target: Target::MaxError(0.01),
+                        ..Default::default()
+                    };
+                    compress(&raw, &path, &opts.into(), &|_, _, _| {}).unwrap();
+                    (mode.name().to_string(), path)
+                })
+                .collect()
+        }
+    };
+    let assets = Path::new(env!("CARGO_MANIFEST_DIR")).join("assets");
+    let env = EnvMap::load(&assets.join("envmaps/interior.exr")).unwrap();
+    let mut group = c.benchmark_group("multiply_add");
+    for (name, path) in &files {
+        let relighter = Relighter::open(path).unwrap();
+        let light = env.to_cubemap(
+            relighter.meta().dims.face_res() as usize,
+            &Rotation::IDENTITY,
+        );
+        let entry_bytes = 2 * (relighter.meta().dims.channels as u64 + 1);
+        let mut frame = relighter.frame();
+        for n in [200, 1000, 5000] {
+            let request = Request {
+                terms: n,
+                weighting: Weighting::Transport,
+            };
+            let nnz = relighter
+                .relight(&light, &request, &mut frame)
+                .unwrap()
+                .nonzeros;
+            group.throughput(Throughput::Bytes(nnz * entry_bytes));
+            group.bench_function(BenchmarkId::new(name.as_str(), n), |b| {
+                b.iter_custom(|iters| {
+                    (0..iters)
+                        .map(|_| {
+                            relighter
+                                .relight(&light, &request, &mut frame)
+                                .unwrap()
+                                .multiply
+                        })
+                        .sum()
+                })
+            });
+        }
+    }
+    let probe: Vec<u64> = (0..(256u64 << 20) / 8).collect();
+    group.throughput(Throughput::Bytes(8 * probe.len() as u64));
+    group.bench_function("stream_probe", |b| {
+        b.iter(|| {
+            probe
+                .par_chunks(1 << 16)
+                .map(|c| c.iter().fold(0u64, |a, &v| a.wrapping_add(v)))
+                .reduce(|| 0, u64::wrapping_add)
+        })
+    });
+    group.finish();
+}
+
 criterion_group! {
     name = benches;
     config = Criterion::default().sample_size(20);
-    targets = bench, quantize
+    targets = bench, quantize, multiply_add
 }
 criterion_main!(benches);

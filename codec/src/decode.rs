@@ -77,6 +77,31 @@ impl ColumnDecoder {
         }
     }
 
+    /// The dequantization step `s/Q` of scale group `group`, channel
+    /// `channel` of `col` (0 for a group the column does has no scale for),
+    /// in f64: [`ColumnDecoder::dequantize`] is `q · step / weight` up to
+    /// rounding.
+    pub fn step(&self, col: &SparseColumn, group: usize, channel: usize) -> f64 {
+        let channels = self.meta.dims.channels as usize;
+        let code = col
+            .scale_codes
+            .get(group * channels + channel)
+            .copied()
+            .unwrap_or(0);
+        decode_scale(code) as f64 / levels(self.meta.bits) as f64
+    }
+
+    /// The scale group ([`crate::quant`]'s `scale_groups`: 0 the low band,
+    /// `k` the detail bands of level `k`) of `position` in a column at
+    /// `depth` (0 for a depth or position out of range).
+    pub fn scale_group(&self, depth: u32, position: usize) -> u8 {
+        self.groups
+            .get(depth as usize)
+            .and_then(|g| g.get(position))
+            .copied()
+            .unwrap_or(0)
+    }
+
     /// Undoes the band weights of depth `depth` on a plane of weighted
     /// coefficients.
     pub fn unweight(&self, depth: u32, plane: &mut [f32]) {
@@ -101,6 +126,32 @@ impl ColumnDecoder {
         );
         let (bw, bh) = band_size(w, h, level - 1);
         wavelet::inverse_step(self.meta.col_filter, plane, w, bw, bh, work)
+    }
+
+    /// [`ColumnDecoder::inverse_step`] on `lanes` interleaved planes at once
+    /// (bit-identical to stepping each alone); `work` needs `lanes ·
+    /// width · height` values.
+    pub fn inverse_step_lanes(
+        &self,
+        level: u32,
+        planes: &mut [f32],
+        lanes: usize,
+        work: &mut [f32],
+    ) -> Result<()> {
+        let max = self.meta.max_depth();
+        if level == 0 || level > max {
+            return Err(Error::range(
+                "inverse step level",
+                level,
+                format!("1..={max}"),
+            ));
+        }
+        let (w, h) = (
+            self.meta.dims.width() as usize,
+            self.meta.dims.height() as usize,
+        );
+        let (bw, bh) = band_size(w, h, level - 1);
+        wavelet::inverse_step_lanes(self.meta.col_filter, planes, w, bw, bh, lanes, work)
     }
 
     /// Decodes channel `channel` of a column into `plane` (overwritten), in

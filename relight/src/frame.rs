@@ -73,6 +73,15 @@ impl Default for Frame {
 }
 
 impl Frame {
+    /// Makes the next frame transform its lighting even if it is the same
+    /// as the last frame's (a frame under unchanged lighting otherwise reuses
+    /// the transform); for timing a new light.
+    pub fn forget_light(&mut self) {
+        if let Some(s) = &mut self.wavelet {
+            s.forget_light();
+        }
+    }
+
     /// Makes `image` a `width × height` image, reallocating only when its
     /// size differs.
     pub(crate) fn fit_image(&mut self, width: usize, height: usize) {

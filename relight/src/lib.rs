@@ -49,14 +49,16 @@
 //! # }
 //! ```
 
-#![forbid(unsafe_code)]
+#![deny(unsafe_code)]
 #![warn(missing_docs)]
 
+mod arena;
 mod basis;
 mod envmap;
 mod error;
 mod frame;
 mod image_io;
+mod kernel;
 mod reference;
 mod relighter;
 mod render;

@@ -1,36 +1,38 @@
 //! The relighter: environment lighting → image from a compressed matrix
 //! (Cheslack-Postava et al. 2007 §4.5, eq. 6–8, Fig. 6).
 //!
-//! At open, every column is decoded once to an in-memory arena of
-//! `(position, value)` pairs whose values already carry the quantizer scale
-//! and the inverse band weight, so a frame is a stream of multiply-adds.
-//! Per frame:
-//! 1. the cubemap lighting gets the file's row transform;
+//! At open, every column is decoded once to the compact arena
+//! ([`crate::arena`]: quantized `i16` values and a band-and-offset code, 8
+//! bytes per RGB coefficient, 4 per grey one, with one factor per column,
+//! band and channel that carries the quantizer step and the inverse band
+//! weight). Per frame:
+//! 1. the cubemap lighting gets the file's row transform (kept in the frame:
+//!    a frame under the same lighting, e.g. when only N changes, reuses it);
 //! 2. the N lights of highest priority are chosen ([`select`]);
-//! 3. they are grouped by their column's depth, deepest first; each group is
-//!    multiply-added into the image planes, then one inverse column step
-//!    brings the planes one level up, until depth 0 (eq. 8);
+//! 3. they are grouped by their column's depth, deepest first; each group's
+//!    band factors are multiplied by its lights, its coefficients
+//!    multiply-added into one image of interleaved `[r, g, b, 0]` pixels
+//!    ([`crate::kernel`]), then one inverse column step of all three
+//!    channels at once brings the image one level up, until depth 0 (eq. 8);
 //! 4. a factored monochrome file multiplies in its albedo image.
 
+use crate::arena::Arena;
 use crate::error::Result;
 use crate::frame::{check_light, Frame, FrameStats, Relight, Request};
 use crate::image_io::Image;
+use crate::kernel::Kernel;
 use crate::select::{select, support_area, Weighting};
 use ltm_codec::container::{LtmFile, Meta};
 use ltm_codec::wavelet::row_forward;
-use ltm_codec::BandWeights;
 use ltm_codec::{ColumnDecoder, Limits};
 use rayon::prelude::*;
 use std::path::Path;
 use std::time::Instant;
 
-/// Pixel blocks of the block index: each column records where its entries
-/// cross every block boundary, so a frame can split the multiply-add into
-/// pixel ranges of equal work (deep columns crowd into the first blocks,
-/// where the coarse bands are) without searching.
-const BLOCKS: usize = 64;
 /// Parallel tasks per thread of the multiply-add.
 const TASKS_PER_THREAD: usize = 4;
+/// Lanes of an interleaved pixel: red, green, blue and a zero.
+const LANES: usize = 4;
 
 /// A compressed matrix ready to relight with N wavelet lights (the
 /// [`Relight`] implementation for `.ltm` files). Immutable and `Sync`:
@@ -38,19 +40,11 @@ const TASKS_PER_THREAD: usize = 4;
 pub struct Relighter {
     file: LtmFile,
     decoder: ColumnDecoder,
-    /// Column `j`'s coefficients are `starts[j]..starts[j + 1]`.
-    starts: Vec<usize>,
-    positions: Vec<u32>,
-    /// `channels` values per coefficient, ready to multiply by the light.
-    values: Vec<f32>,
-    /// Pixels per block of the block index (the last block may be shorter).
-    block_pixels: usize,
-    /// Column `j`'s entries in block `b` are `starts[j] + block_index[j·(BLOCKS
-    /// + 1) + b] ..` up to the next boundary's offset.
-    block_index: Vec<u32>,
-    depths: Vec<u8>,
-    /// Per light: the transport-weighted and area-weighted priority scales.
-    norms: Vec<f32>,
+    /// Every column, decoded once ([`crate::arena`]).
+    arena: Arena,
+    /// The multiply-add kernel this CPU runs best.
+    kernel: Kernel,
+    /// Per light: the area-weighted priority scales, and ones.
     areas: Vec<f32>,
     ones: Vec<f32>,
 }
@@ -60,9 +54,23 @@ pub(crate) struct WaveletScratch {
     light: Vec<[f32; 3]>,
     plane: Vec<f32>,
     work: Vec<f32>,
-    planes: [Vec<f32>; 3],
+    /// The image being summed, pixels interleaved `[r, g, b, 0]`.
+    pixels: Vec<[f32; LANES]>,
     selected: Vec<u32>,
     order: Vec<(f32, u32)>,
+    /// Light tables of the current depth group, and each column's first.
+    tables: Vec<[f32; 4]>,
+    table_starts: Vec<usize>,
+    /// The cubemap lighting `light` was transformed from (empty when none):
+    /// a frame under the same lighting reuses the transform.
+    last_light: Vec<[f32; 3]>,
+}
+
+impl WaveletScratch {
+    /// Drops the remembered lighting ([`crate::Frame::forget_light`]).
+    pub(crate) fn forget_light(&mut self) {
+        self.last_light.clear();
+    }
 }
 
 impl Relighter {
@@ -84,61 +92,25 @@ impl Relighter {
         let meta = file.meta().clone();
         let dims = meta.dims;
         let nonzeros: u64 = file.columns().iter().map(|c| c.nnz as u64).sum();
-        // Positions and values, held twice while the columns are gathered.
-        let entry_bytes = 2 * (4 + 4 * dims.channels as u64);
+        // Entries, held twice while the columns are gathered.
+        let entry_bytes = 2 * Arena::entry_bytes(dims.channels as usize) as u64;
         limits.check_alloc("relighting arena", nonzeros, entry_bytes)?;
-        limits.check_alloc("frame image planes", dims.pixels() as u64, 4 * 6)?;
-        let (w, h) = (dims.width() as usize, dims.height() as usize);
-        let channels = dims.channels as usize;
+        limits.check_alloc(
+            "frame image planes",
+            dims.pixels() as u64,
+            4 * LANES as u64 * 2,
+        )?;
         let n = dims.face_res() as usize;
-        let weights = BandWeights::new(meta.col_filter, w, h, meta.max_depth());
         let decoder = ColumnDecoder::new(&meta);
-        let decoded: Vec<(Vec<u32>, Vec<f32>, u8, f32)> = (0..dims.lights())
-            .into_par_iter()
-            .map(|j| -> Result<_> {
-                let col = file.column(j)?;
-                let map = weights.map(col.depth);
-                let mut values = Vec::with_capacity(col.values.len());
-                let mut norm_sq = 0.0f64;
-                for (k, &i) in col.indices.iter().enumerate() {
-                    for c in 0..channels {
-                        let weighted = decoder.dequantize(&col, k, c);
-                        norm_sq += (weighted as f64).powi(2);
-                        values.push(weighted / map[i as usize]);
-                    }
-                }
-                Ok((col.indices, values, col.depth as u8, norm_sq.sqrt() as f32))
-            })
-            .collect::<Result<_>>()?;
-        let total: usize = decoded.iter().map(|d| d.0.len()).sum();
-        let block_pixels = dims.pixels().div_ceil(BLOCKS).max(1);
-        let mut r = Relighter {
-            block_pixels,
-            block_index: Vec::with_capacity(decoded.len() * (BLOCKS + 1)),
+        let arena = Arena::build(&file, &decoder)?;
+        Ok(Relighter {
             decoder,
-            starts: Vec::with_capacity(decoded.len() + 1),
-            positions: Vec::with_capacity(total),
-            values: Vec::with_capacity(total * channels),
-            depths: Vec::with_capacity(decoded.len()),
-            norms: Vec::with_capacity(decoded.len()),
+            arena,
+            kernel: Kernel::detect(),
             areas: (0..dims.lights()).map(|j| support_area(n, j)).collect(),
             ones: vec![1.0; dims.lights()],
             file,
-        };
-        r.starts.push(0);
-        for (pos, val, depth, norm) in decoded {
-            // Positions are sorted (the container stores them as gaps).
-            r.block_index.extend(
-                (0..=BLOCKS)
-                    .map(|b| pos.partition_point(|&i| (i as usize) < b * block_pixels) as u32),
-            );
-            r.positions.extend_from_slice(&pos);
-            r.values.extend_from_slice(&val);
-            r.starts.push(r.positions.len());
-            r.depths.push(depth);
-            r.norms.push(norm);
-        }
-        Ok(r)
+        })
     }
 
     /// The file's metadata.
@@ -153,7 +125,17 @@ impl Relighter {
 
     /// Coefficients held in memory.
     pub fn nonzeros(&self) -> usize {
-        self.positions.len()
+        self.arena.nonzeros()
+    }
+
+    /// Bytes of the in-memory arena (coefficients, block index, band
+    /// factors).
+    pub fn arena_bytes(&self) -> usize {
+        let a = &self.arena;
+        2 * a.entries.len()
+            + 4 * a.block_index.len()
+            + 16 * a.factors.len()
+            + 8 * (a.starts.len() + a.factor_starts.len())
     }
 
     /// Buffers for one frame of this file.
@@ -164,10 +146,13 @@ impl Relighter {
         WaveletScratch {
             light: vec![[0.0; 3]; dims.lights()],
             plane: vec![0.0; dims.lights()],
-            work: vec![0.0; p.max(n * n)],
-            planes: [vec![0.0; p], vec![0.0; p], vec![0.0; p]],
+            work: vec![0.0; (LANES * p).max(n * n)],
+            pixels: vec![[0.0; LANES]; p],
             selected: Vec::with_capacity(dims.lights()),
             order: Vec::with_capacity(dims.lights()),
+            tables: Vec::new(),
+            table_starts: Vec::new(),
+            last_light: Vec::new(),
         }
     }
 
@@ -178,8 +163,8 @@ impl Relighter {
         let (p, n) = (dims.pixels(), dims.face_res() as usize);
         s.light.len() == dims.lights()
             && s.plane.len() == dims.lights()
-            && s.work.len() == p.max(n * n)
-            && s.planes.iter().all(|plane| plane.len() == p)
+            && s.work.len() == (LANES * p).max(n * n)
+            && s.pixels.len() == p
     }
 
     /// Row transform of the cubemap lighting into `s.light`.
@@ -201,15 +186,29 @@ impl Relighter {
     fn priority_scale(&self, weighting: Weighting) -> &[f32] {
         match weighting {
             Weighting::Unweighted => &self.ones,
-            Weighting::Transport => &self.norms,
+            Weighting::Transport => &self.arena.norms,
             Weighting::Area => &self.areas,
         }
     }
 
-    /// Checks the lighting and row-transforms it into `s.light`.
+    /// Checks the lighting and row-transforms it into `s.light`, unless
+    /// `s.light` already holds the transform of the same lighting (bit for
+    /// bit): a viewer that changes only N reuses it.
     fn prepare_light(&self, light: &[[f32; 3]], s: &mut WaveletScratch) -> Result<()> {
+        let same = s.last_light.len() == light.len()
+            && s.last_light.iter().zip(light).all(|(a, b)| {
+                a[0].to_bits() == b[0].to_bits()
+                    && a[1].to_bits() == b[1].to_bits()
+                    && a[2].to_bits() == b[2].to_bits()
+            });
+        if same {
+            return Ok(());
+        }
+        s.last_light.clear();
         check_light(light, self.lights(), self.meta().dims.face_res())?;
-        self.transform_light(light, s)
+        self.transform_light(light, s)?;
+        s.last_light.extend_from_slice(light);
+        Ok(())
     }
 
     /// Selects the requested lights from `s.light` into `s.selected`.
@@ -224,53 +223,59 @@ impl Relighter {
     }
 
     /// Eq. 8 on the selected lights (sorted deepest first): each depth
-    /// group is multiply-added into the planes, then one inverse column step
-    /// brings the planes a level up, to depth 0.
+    /// group is multiply-added into the pixels, then one inverse column step
+    /// of all three interleaved channels brings them a level up, to depth 0.
     fn multiply_levels(&self, s: &mut WaveletScratch, stats: &mut FrameStats) -> Result<()> {
-        let channels = self.meta().dims.channels as usize;
-        for p in s.planes.iter_mut() {
-            p.fill(0.0);
-        }
-        let top = s.selected.first().map_or(0, |&j| self.depths[j as usize]);
+        s.pixels.fill([0.0; LANES]);
+        let depths = &self.arena.depths;
+        let top = s.selected.first().map_or(0, |&j| depths[j as usize]);
         let mut next = 0;
         for depth in (0..=top).rev() {
             let tm = Instant::now();
             let start = next;
-            while next < s.selected.len() && self.depths[s.selected[next] as usize] == depth {
+            while next < s.selected.len() && depths[s.selected[next] as usize] == depth {
                 next += 1;
             }
             let group = &s.selected[start..next];
             if !group.is_empty() {
-                stats.nonzeros += self.multiply_add(group, &s.light, channels, &mut s.planes);
+                self.arena
+                    .light_tables(group, &s.light, &mut s.tables, &mut s.table_starts);
+                stats.nonzeros +=
+                    self.multiply_add(group, &s.tables, &s.table_starts, &mut s.pixels);
             }
             let ti = Instant::now();
             stats.multiply += ti - tm;
             if depth > 0 {
-                for plane in s.planes.iter_mut() {
-                    self.decoder
-                        .inverse_step(depth as u32, plane, &mut s.work)?;
-                }
+                self.decoder.inverse_step_lanes(
+                    depth as u32,
+                    s.pixels.as_flattened_mut(),
+                    LANES,
+                    &mut s.work,
+                )?;
             }
             stats.inverse += ti.elapsed();
         }
         Ok(())
     }
 
-    /// Multiply-adds the columns of `group` into the planes, in parallel over
-    /// pixel ranges of about equal work (from the block index; each pixel is
-    /// summed by one task in group order, so the image does not depend on
-    /// the split). Returns the coefficients used.
+    /// Multiply-adds the columns of `group` (with their light tables) into
+    /// the pixels, in parallel over pixel ranges of about equal work (from
+    /// the block index; each pixel is summed by one task in group order, so
+    /// the image does not depend on the split). Returns the coefficients
+    /// used.
     fn multiply_add(
         &self,
         group: &[u32],
-        light: &[[f32; 3]],
-        channels: usize,
-        planes: &mut [Vec<f32>; 3],
+        tables: &[[f32; 4]],
+        table_starts: &[usize],
+        pixels: &mut [[f32; LANES]],
     ) -> u64 {
-        let offsets = |j: u32| &self.block_index[j as usize * (BLOCKS + 1)..][..BLOCKS + 1];
-        let mut work = [0u64; BLOCKS];
+        let arena = &self.arena;
+        let layout = arena.layout;
+        let blocks = layout.blocks;
+        let mut work = vec![0u64; blocks];
         for &j in group {
-            for (w, o) in work.iter_mut().zip(offsets(j).windows(2)) {
+            for (w, o) in work.iter_mut().zip(arena.offsets(j as usize).windows(2)) {
                 *w += u64::from(o[1] - o[0]);
             }
         }
@@ -287,43 +292,44 @@ impl Relighter {
                 (first, acc) = (b + 1, 0);
             }
         }
-        if first < BLOCKS {
-            ranges.push(first..BLOCKS);
+        if first < blocks {
+            ranges.push(first..blocks);
         }
-        // Disjoint plane slices, one set per range.
-        let p = planes[0].len();
-        let [r, g, b] = planes;
-        let (mut r, mut g, mut b) = (&mut r[..], &mut g[..], &mut b[..]);
+        // Disjoint pixel slices, one per range.
+        let p = pixels.len();
+        let mut rest = pixels;
         let mut parts = Vec::with_capacity(ranges.len());
         let mut lo = 0;
         for range in ranges {
-            let hi = (range.end * self.block_pixels).min(p).max(lo);
-            let (r0, r1) = r.split_at_mut(hi - lo);
-            let (g0, g1) = g.split_at_mut(hi - lo);
-            let (b0, b1) = b.split_at_mut(hi - lo);
-            parts.push((range, lo as u32, r0, g0, b0));
-            (r, g, b, lo) = (r1, g1, b1, hi);
+            let hi = (range.end * layout.block_pixels).min(p).max(lo);
+            let (part, tail) = rest.split_at_mut(hi - lo);
+            parts.push((range, part));
+            (rest, lo) = (tail, hi);
         }
-        parts.into_par_iter().for_each(|(range, lo, r, g, b)| {
-            for &j in group {
-                let (s, o) = (self.starts[j as usize], offsets(j));
-                let (a, z) = (s + o[range.start] as usize, s + o[range.end] as usize);
-                let pos = &self.positions[a..z];
-                let l = light[j as usize];
-                if channels == 1 {
-                    multiply_add_grey(pos, &self.values[a..z], lo, l, r, g, b);
-                } else {
-                    multiply_add_rgb(pos, &self.values[3 * a..3 * z], lo, l, r, g, b);
+        let (channels, kernel) = (arena.channels, self.kernel);
+        parts.into_par_iter().for_each(|(range, part)| {
+            for (k, &j) in group.iter().enumerate() {
+                let j = j as usize;
+                let table = &tables[table_starts[k]..][..arena.factors(j).len()];
+                for b in range.clone() {
+                    let entries = arena.entries(j, b, b + 1);
+                    if entries.is_empty() {
+                        continue;
+                    }
+                    let from = (b - range.start) * layout.block_pixels;
+                    let to = (from + layout.block_pixels).min(part.len());
+                    let block = &mut part[from..to];
+                    kernel.run(channels, entries, table, layout.shift, block);
                 }
             }
         });
         used
     }
 
-    fn finish_image(&self, planes: &[Vec<f32>; 3], image: &mut Image) {
+    fn finish_image(&self, pixels: &[[f32; LANES]], image: &mut Image) {
         let albedo = self.file.albedo();
-        for (p, px) in image.data.iter_mut().enumerate() {
-            *px = [planes[0][p], planes[1][p], planes[2][p]];
+        for (p, (px, v)) in image.data.iter_mut().zip(pixels).enumerate() {
+            *px = [v[0], v[1], v[2]];
             if let Some(a) = albedo {
                 for (c, v) in px.iter_mut().enumerate() {
                     *v *= a[3 * p + c];
@@ -357,10 +363,12 @@ impl Relighter {
                 }
             }
         }
-        let planes = acc.map(|a| a.into_iter().map(|v| v as f32).collect::<Vec<f32>>());
+        let pixels: Vec<[f32; LANES]> = (0..p)
+            .map(|i| [acc[0][i] as f32, acc[1][i] as f32, acc[2][i] as f32, 0.0])
+            .collect();
         let (w, h) = self.size();
         let mut image = Image::new(w, h);
-        self.finish_image(&planes, &mut image);
+        self.finish_image(&pixels, &mut image);
         Ok(image)
     }
 }
@@ -368,7 +376,7 @@ impl Relighter {
 impl Relight for Relighter {
     /// The file's cubemap texels (its columns).
     fn lights(&self) -> usize {
-        self.depths.len()
+        self.arena.depths.len()
     }
 
     fn size(&self) -> (usize, usize) {
@@ -411,7 +419,7 @@ impl Relight for Relighter {
         let t1 = Instant::now();
         self.select_lights(request, s);
         // Deepest columns first (eq. 8).
-        let depths = &self.depths;
+        let depths = &self.arena.depths;
         s.selected
             .sort_unstable_by_key(|&j| (std::cmp::Reverse(depths[j as usize]), j));
         stats.lights = s.selected.len();
@@ -420,47 +428,8 @@ impl Relight for Relighter {
         stats.selection = t2 - t1;
         self.multiply_levels(s, &mut stats)?;
         let ti = Instant::now();
-        self.finish_image(&s.planes, &mut frame.image);
+        self.finish_image(&s.pixels, &mut frame.image);
         stats.inverse += ti.elapsed();
         Ok(stats)
-    }
-}
-
-/// `plane_c[pos − lo] += light_c · value` for a grey column: the scalar
-/// reference kernel of the multiply-add.
-#[inline]
-fn multiply_add_grey(
-    pos: &[u32],
-    val: &[f32],
-    lo: u32,
-    l: [f32; 3],
-    r: &mut [f32],
-    g: &mut [f32],
-    b: &mut [f32],
-) {
-    for (&i, &v) in pos.iter().zip(val) {
-        let i = (i - lo) as usize;
-        r[i] += l[0] * v;
-        g[i] += l[1] * v;
-        b[i] += l[2] * v;
-    }
-}
-
-/// The same for an RGB column (3 values per coefficient).
-#[inline]
-fn multiply_add_rgb(
-    pos: &[u32],
-    val: &[f32],
-    lo: u32,
-    l: [f32; 3],
-    r: &mut [f32],
-    g: &mut [f32],
-    b: &mut [f32],
-) {
-    for (&i, v) in pos.iter().zip(val.chunks_exact(3)) {
-        let i = (i - lo) as usize;
-        r[i] += l[0] * v[0];
-        g[i] += l[1] * v[1];
-        b[i] += l[2] * v[2];
     }
 }

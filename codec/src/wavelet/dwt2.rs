@@ -139,6 +139,13 @@ fn inverse_row(filter: Filter, bands: &[f32], out: &mut [f32]) {
     }
 }
 
+fn inverse_row_lanes<const L: usize>(filter: Filter, bands: &[[f32; L]], out: &mut [[f32; L]]) {
+    match filter.kind() {
+        Kind::Periodic(t) => periodic::inverse_1d_lanes(t, bands, out),
+        Kind::Lifting(s) => lifting::inverse_1d_lanes(s, bands, out),
+    }
+}
+
 /// One forward step on the top-left `w` × `h` region of `data` (rows
 /// `stride` apart): rows are split into low | high halves (if `w >= 2`),
 /// then columns (if `h >= 2`). `work` needs `w · h` values.
@@ -187,22 +194,45 @@ pub fn inverse_step(
     h: usize,
     work: &mut [f32],
 ) -> Result<()> {
-    check_region(data, stride, w, h, work)?;
-    let parallel = w * h >= PARALLEL_MIN;
-    let work = &mut work[..w * h];
-    // Vertical: data rows -> work rows. Lifting leaves them in band order
-    // (low rows, then high rows); `signal_row` maps back.
+    inverse_step_lanes(filter, data, stride, w, h, 1, work)
+}
+
+/// [`inverse_step`] on `lanes` interleaved images at once: pixel `(x, y)` of
+/// image `c` is `data[(y·stride + x)·lanes + c]` (`stride` and `w` count
+/// pixels). Every image gets exactly the arithmetic [`inverse_step`] would
+/// give it alone, so the results are bit-identical; the vertical pass runs
+/// once over all lanes, the horizontal one per row and lane. `work` needs
+/// `w · h · lanes` values.
+pub fn inverse_step_lanes(
+    filter: Filter,
+    data: &mut [f32],
+    stride: usize,
+    w: usize,
+    h: usize,
+    lanes: usize,
+    work: &mut [f32],
+) -> Result<()> {
+    if lanes == 0 {
+        return Err(Error::range("interleaved lanes", lanes, "at least 1"));
+    }
+    check_region(data, stride * lanes, w * lanes, h, work)?;
+    let parallel = w * h >= PARALLEL_MIN / lanes;
+    let (wl, sl) = (w * lanes, stride * lanes);
+    let work = &mut work[..wl * h];
+    // Vertical: data rows -> work rows. Each sample of a row is filtered on
+    // its own, so the lanes need no special care. Lifting leaves the rows in
+    // band order (low rows, then high rows); `signal_row` maps back.
     let mut band_order = false;
     if h >= 2 {
         match filter.kind() {
-            Kind::Periodic(t) => periodic::inverse_rows(t, data, stride, work, w, h, parallel),
+            Kind::Periodic(t) => periodic::inverse_rows(t, data, sl, work, wl, h, parallel),
             Kind::Lifting(s) => {
-                lifting::inverse_rows(s, data, stride, work, w, h, parallel);
+                lifting::inverse_rows(s, data, sl, work, wl, h, parallel);
                 band_order = true;
             }
         }
     } else {
-        work[..w].copy_from_slice(&data[..w]);
+        work[..wl].copy_from_slice(&data[..wl]);
     }
     let ns = h.div_ceil(2);
     let signal_row = |k: usize| {
@@ -214,19 +244,42 @@ pub fn inverse_step(
             k
         }
     };
-    // Horizontal: work rows -> data rows.
-    let src = Rows::new(work, w, w, h);
+    // Horizontal: work rows -> data rows, lane by lane.
+    let src = Rows::new(work, wl, wl, h);
     let src = src.view();
-    let mut dst = Rows::new(data, stride, w, h);
+    let mut dst = Rows::new(data, sl, wl, h);
     for_each_row(&mut dst, parallel, |k, out| {
         let bands = src.row(signal_row(k));
-        if w >= 2 {
-            inverse_row(filter, bands, out)
-        } else {
+        if w < 2 {
             out.copy_from_slice(bands)
+        } else if lanes == 1 {
+            inverse_row(filter, bands, out)
+        } else if lanes == 4 {
+            inverse_row_lanes::<4>(filter, bands.as_chunks().0, out.as_chunks_mut().0)
+        } else if lanes == 3 {
+            inverse_row_lanes::<3>(filter, bands.as_chunks().0, out.as_chunks_mut().0)
+        } else {
+            LANE_ROWS.with_borrow_mut(|buf| {
+                buf.resize(2 * w, 0.0);
+                let (lane, done) = buf.split_at_mut(w);
+                for c in 0..lanes {
+                    for (l, b) in lane.iter_mut().zip(bands[c..].iter().step_by(lanes)) {
+                        *l = *b;
+                    }
+                    inverse_row(filter, lane, done);
+                    for (o, d) in out[c..].iter_mut().step_by(lanes).zip(done.iter()) {
+                        *o = *d;
+                    }
+                }
+            })
         }
     });
     Ok(())
+}
+
+thread_local! {
+    /// One lane's row and its synthesis, per thread, for [`inverse_step_lanes`].
+    static LANE_ROWS: std::cell::RefCell<Vec<f32>> = const { std::cell::RefCell::new(Vec::new()) };
 }
 
 fn check_levels(width: usize, height: usize, levels: u32) -> Result<()> {

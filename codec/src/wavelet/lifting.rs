@@ -120,6 +120,48 @@ pub(crate) fn inverse_1d(scheme: &Scheme, bands: &[f32], out: &mut [f32]) {
     }
 }
 
+/// [`inverse_1d`] on `L` interleaved signals at once: each lane gets the
+/// same f32 operations in the same order, so the same bits.
+pub(crate) fn inverse_1d_lanes<const L: usize>(
+    scheme: &Scheme,
+    bands: &[[f32; L]],
+    out: &mut [[f32; L]],
+) {
+    let n = bands.len();
+    let ns = n.div_ceil(2);
+    let (low, high) = bands.split_at(ns);
+    for (i, l) in low.iter().enumerate() {
+        out[2 * i] = l.map(|v| v / scheme.low_scale);
+    }
+    for (i, h) in high.iter().enumerate() {
+        out[2 * i + 1] = h.map(|v| v / scheme.high_scale);
+    }
+    let last_even = 2 * (ns - 1);
+    let last_odd = 2 * (n / 2) - 1;
+    let lift = |x: &mut [f32; L], c: f32, a: [f32; L], b: [f32; L]| {
+        for ((x, a), b) in x.iter_mut().zip(a).zip(b) {
+            *x -= c * (a + b);
+        }
+    };
+    for step in scheme.steps.iter().rev() {
+        match *step {
+            Step::Predict(c) => {
+                for k in (1..n).step_by(2) {
+                    let (a, b) = (out[k - 1], out[(k + 1).min(last_even)]);
+                    lift(&mut out[k], c, a, b);
+                }
+            }
+            Step::Update(c) => {
+                for k in (0..n).step_by(2) {
+                    let left = if k == 0 { 1 } else { k - 1 };
+                    let (a, b) = (out[left], out[(k + 1).min(last_odd)]);
+                    lift(&mut out[k], c, a, b);
+                }
+            }
+        }
+    }
+}
+
 // ---- Vertical: one sample per image row, applied to whole rows ----
 
 fn axpy2(dst: &mut [f32], c: f32, a: &[f32], b: &[f32]) {

@@ -34,7 +34,8 @@ mod periodic;
 
 pub use cube::{row_forward, row_inverse, row_level};
 pub use dwt2::{
-    band_size, forward, forward_1d, forward_step, inverse, inverse_1d, inverse_step, max_levels,
+    band_size, forward, forward_1d, forward_step, inverse, inverse_1d, inverse_step,
+    inverse_step_lanes, max_levels,
 };
 
 use std::fmt;

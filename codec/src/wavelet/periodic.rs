@@ -146,6 +146,39 @@ pub(crate) fn inverse_1d(dec_lo: &[f64], bands: &[f32], out: &mut [f32]) {
     }
 }
 
+/// [`inverse_1d`] on `L` interleaved signals at once: each lane gets the
+/// same f32 operations in the same order, so the same bits.
+pub(crate) fn inverse_1d_lanes<const L: usize>(
+    dec_lo: &[f64],
+    bands: &[[f32; L]],
+    out: &mut [[f32; L]],
+) {
+    let taps = Taps::new(dec_lo);
+    let n = bands.len();
+    let m = n & !1;
+    let ns = n.div_ceil(2);
+    let inner = interior(&taps, m);
+    let half = taps.len / 2;
+    out[..m].fill([0.0; L]);
+    for o in 0..m / 2 {
+        let (a, d) = (bands[o], bands[ns + o]);
+        for j in 0..taps.len {
+            let k = if inner.contains(&o) {
+                2 * o + half - j
+            } else {
+                taps.src(o, j, m)
+            };
+            let (cl, ch) = (taps.lo[j], taps.hi[j]);
+            for ((x, a), d) in out[k].iter_mut().zip(a).zip(d) {
+                *x += cl * a + ch * d;
+            }
+        }
+    }
+    if n % 2 == 1 {
+        out[n - 1] = bands[m / 2];
+    }
+}
+
 /// Vertical analysis: `src` holds `h` compact rows of `w`; the bands are
 /// written to `dst` (rows of `stride`), low rows first.
 pub(crate) fn forward_rows(

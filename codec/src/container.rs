@@ -14,6 +14,7 @@
 
 use crate::bytes::{Reader, Writer};
 use crate::dims::Dims;
+use crate::empty::EmptyRows;
 use crate::error::{Error, Result};
 use crate::limits::Limits;
 use crate::mmap;
@@ -27,11 +28,17 @@ use std::sync::Arc;
 
 /// File magic: `\x89LTM\r\n\x1a\n`.
 pub const MAGIC: [u8; 8] = *b"\x89LTM\r\n\x1a\n";
-/// Format version this build writes and reads.
-pub const VERSION: u32 = 1;
+/// Format version this build writes. It reads versions 1 and 2: version 2
+/// adds the empty-row mask ([`FEATURE_EMPTY_ROWS`]); a version-1 file has
+/// none (no row is known to be empty).
+pub const VERSION: u32 = 2;
 /// Feature flag: an RGB albedo image is stored (chunk ALBD).
 pub const FEATURE_ALBEDO: u32 = 1;
-const KNOWN_FEATURES: u32 = FEATURE_ALBEDO;
+/// Feature flag (version 2): the mask of all-zero rows is stored (chunk
+/// EMPT); decoders output exactly 0 in those rows.
+pub const FEATURE_EMPTY_ROWS: u32 = 2;
+/// The feature flags a reader of each version knows, by version − 1.
+const KNOWN_FEATURES: [u32; 2] = [FEATURE_ALBEDO, FEATURE_ALBEDO | FEATURE_EMPTY_ROWS];
 const HEADER_LEN: usize = 24;
 const DIR_ENTRY_LEN: usize = 32;
 const META_LEN: usize = 64;
@@ -397,6 +404,7 @@ pub struct LtmWriter {
     tmp: PathBuf,
     meta: Meta,
     albedo: Option<Vec<u8>>,
+    empty_rows: Option<Vec<u8>>,
     entries: Vec<ColumnEntry>,
     data_start: u64,
     data_len: u64,
@@ -406,7 +414,29 @@ impl LtmWriter {
     /// Starts a file for `meta`, with an optional albedo image (3 values per
     /// pixel).
     pub fn create(path: &Path, meta: Meta, albedo: Option<&[f32]>) -> Result<LtmWriter> {
+        LtmWriter::create_with(path, meta, albedo, None)
+    }
+
+    /// [`LtmWriter::create`] with the mask of all-zero rows (stored when it
+    /// has any).
+    pub fn create_with(
+        path: &Path,
+        meta: Meta,
+        albedo: Option<&[f32]>,
+        empty_rows: Option<&EmptyRows>,
+    ) -> Result<LtmWriter> {
         meta.dims.validate()?;
+        let empty_rows = match empty_rows {
+            Some(e) if e.rows() != meta.dims.pixels() => {
+                return Err(Error::BufferTooSmall {
+                    what: "empty-row mask",
+                    len: e.rows(),
+                    need: meta.dims.pixels(),
+                })
+            }
+            Some(e) if e.count() > 0 => Some(e.as_bytes().to_vec()),
+            _ => None,
+        };
         let albedo = match albedo {
             Some(a) if a.len() == 3 * meta.dims.pixels() => {
                 Some(bytemuck::cast_slice::<f32, u8>(a).to_vec())
@@ -422,16 +452,18 @@ impl LtmWriter {
         };
         let file = AtomicFile::create(path)?;
         let tmp = file.tmp_path().to_path_buf();
-        let chunks = 3 + albedo.is_some() as u64;
+        let chunks = 3 + albedo.is_some() as u64 + empty_rows.is_some() as u64;
         let head_len = HEADER_LEN as u64 + DIR_ENTRY_LEN as u64 * chunks + 4;
         let cols_len = (COLUMN_ENTRY_LEN * meta.dims.lights()) as u64;
+        let optional = |c: &Option<Vec<u8>>| c.as_ref().map_or(0, |a| a.len() as u64);
         let data_start =
-            head_len + META_LEN as u64 + albedo.as_ref().map_or(0, |a| a.len() as u64) + cols_len;
+            head_len + META_LEN as u64 + optional(&albedo) + optional(&empty_rows) + cols_len;
         let mut w = LtmWriter {
             file: BufWriter::with_capacity(1 << 20, file),
             tmp,
             meta,
             albedo,
+            empty_rows,
             entries: Vec::new(),
             data_start,
             data_len: 0,
@@ -507,8 +539,14 @@ impl LtmWriter {
         }
         let meta = self.meta.encode();
         let mut chunks: Vec<(&[u8; 4], Vec<u8>)> = vec![(b"META", meta)];
+        let mut features = 0;
         if let Some(a) = self.albedo.take() {
             chunks.push((b"ALBD", a));
+            features |= FEATURE_ALBEDO;
+        }
+        if let Some(e) = self.empty_rows.take() {
+            chunks.push((b"EMPT", e));
+            features |= FEATURE_EMPTY_ROWS;
         }
         chunks.push((b"COLS", cols.bytes));
         let head_len = HEADER_LEN + DIR_ENTRY_LEN * (chunks.len() + 1) + 4;
@@ -533,11 +571,7 @@ impl LtmWriter {
         let mut head = Writer::default();
         head.bytes.extend_from_slice(&MAGIC);
         head.u32(VERSION);
-        head.u32(if chunks.iter().any(|(t, _)| *t == b"ALBD") {
-            FEATURE_ALBEDO
-        } else {
-            0
-        });
+        head.u32(features);
         head.u32(dir.len() as u32);
         head.u32(0);
         for d in &dir {
@@ -591,6 +625,8 @@ pub struct LtmIndex {
     pub columns: Vec<ColumnEntry>,
     /// The RGB albedo image (chunk ALBD), if stored.
     pub albedo: Option<Vec<f32>>,
+    /// The mask of all-zero rows (chunk EMPT), if stored.
+    pub empty_rows: Option<EmptyRows>,
     /// Where the column payloads (chunk DATA) lie in the file.
     pub data: std::ops::Range<usize>,
 }
@@ -650,6 +686,11 @@ impl LtmFile {
             features & FEATURE_ALBEDO != 0,
             &meta.dims,
         )?;
+        let empty_rows = read_empty_rows(
+            chunk(bytes, &dir, b"EMPT")?,
+            features & FEATURE_EMPTY_ROWS != 0,
+            &meta.dims,
+        )?;
         let cols = chunk(bytes, &dir, b"COLS")?.ok_or_else(|| missing("COLS"))?;
         let data_dir = dir
             .iter()
@@ -661,6 +702,7 @@ impl LtmFile {
             meta,
             columns,
             albedo,
+            empty_rows,
             data,
         })
     }
@@ -678,6 +720,11 @@ impl LtmFile {
     /// The albedo image (3 values per pixel), if stored.
     pub fn albedo(&self) -> Option<&[f32]> {
         self.index.albedo.as_deref()
+    }
+
+    /// The mask of all-zero rows, if stored (a version-1 file has none).
+    pub fn empty_rows(&self) -> Option<&EmptyRows> {
+        self.index.empty_rows.as_ref()
     }
 
     /// File size in bytes.
@@ -708,7 +755,7 @@ fn read_directory(bytes: &[u8]) -> Result<(u32, Vec<DirEntry>)> {
         return Err(Error::corrupt(".ltm header", "bad magic bytes"));
     }
     let version = r.u32()?;
-    if version != VERSION {
+    if !(1..=VERSION).contains(&version) {
         return Err(Error::Version {
             what: ".ltm",
             found: version,
@@ -716,16 +763,18 @@ fn read_directory(bytes: &[u8]) -> Result<(u32, Vec<DirEntry>)> {
         });
     }
     let features = r.u32()?;
-    if features & !KNOWN_FEATURES != 0 {
+    let known = KNOWN_FEATURES[version as usize - 1];
+    if features & !known != 0 {
         return Err(Error::range(
             "feature flags",
             format!("{features:#x}"),
-            format!("a subset of {KNOWN_FEATURES:#x}"),
+            format!("a subset of {known:#x} in version {version}"),
         ));
     }
     let count = r.u32()? as usize;
-    if !(3..=4).contains(&count) {
-        return Err(Error::range("chunk count", count, "3..=4"));
+    let most = 3 + known.count_ones() as usize;
+    if !(3..=most).contains(&count) {
+        return Err(Error::range("chunk count", count, format!("3..={most}")));
     }
     r.u32()?;
     let mut dir = Vec::with_capacity(count);
@@ -761,7 +810,7 @@ fn check_directory(dir: &[DirEntry], start: u64, file_len: usize) -> Result<()> 
     let mut end = start;
     for d in dir {
         let tag = String::from_utf8_lossy(&d.tag);
-        if !matches!(&d.tag, b"META" | b"ALBD" | b"COLS" | b"DATA") {
+        if !matches!(&d.tag, b"META" | b"ALBD" | b"EMPT" | b"COLS" | b"DATA") {
             return Err(Error::corrupt(
                 "chunk directory",
                 format!("unknown chunk tag {tag:?}"),
@@ -842,6 +891,19 @@ fn read_albedo(chunk: Option<&[u8]>, flagged: bool, dims: &Dims) -> Result<Optio
         _ => Err(Error::corrupt(
             "chunk directory",
             "ALBD chunk and albedo feature flag disagree",
+        )),
+    }
+}
+
+/// The EMPT chunk's mask of all-zero rows: present exactly when the feature
+/// flag says so, one bit per row.
+fn read_empty_rows(chunk: Option<&[u8]>, flagged: bool, dims: &Dims) -> Result<Option<EmptyRows>> {
+    match (chunk, flagged) {
+        (Some(e), true) => Ok(Some(EmptyRows::from_bytes(e, dims.pixels())?)),
+        (None, false) => Ok(None),
+        _ => Err(Error::corrupt(
+            "chunk directory",
+            "EMPT chunk and empty-row feature flag disagree",
         )),
     }
 }

@@ -92,7 +92,7 @@ impl Relighter {
         let channels = dims.channels as usize;
         let n = dims.face_res() as usize;
         let weights = BandWeights::new(meta.col_filter, w, h, meta.max_depth());
-        let decoder = ColumnDecoder::new(&meta);
+        let decoder = ColumnDecoder::for_file(&file);
         let decoded: Vec<(Vec<u32>, Vec<f32>, u8, f32)> = (0..dims.lights())
             .into_par_iter()
             .map(|j| -> Result<_> {
@@ -327,6 +327,15 @@ impl Relighter {
             if let Some(a) = albedo {
                 for (c, v) in px.iter_mut().enumerate() {
                     *v *= a[3 * p + c];
+                }
+            }
+        }
+        // Empty rows (open sky) are exactly 0, not the column transform's
+        // spill from their neighbours.
+        if let Some(e) = self.file.empty_rows() {
+            for (p, px) in image.data.iter_mut().enumerate() {
+                if e.is_empty_row(p) {
+                    *px = [0.0; 3];
                 }
             }
         }

@@ -74,7 +74,7 @@ impl EmptyRows {
                 format!("{} bytes for {rows} rows (needs {need})", bytes.len()),
             ));
         }
-        if rows % 8 != 0 && bytes[need - 1] >> (rows % 8) != 0 {
+        if !rows.is_multiple_of(8) && bytes[need - 1] >> (rows % 8) != 0 {
             return Err(Error::corrupt(
                 "EMPT chunk",
                 format!("bits set past row {rows} in the last byte"),

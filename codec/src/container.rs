@@ -18,6 +18,7 @@
 
 use crate::bytes::{Reader, Writer};
 use crate::dims::Dims;
+use crate::empty::EmptyRows;
 use crate::error::{Error, Result};
 use crate::limits::Limits;
 use crate::mmap;
@@ -32,16 +33,23 @@ use std::sync::Arc;
 
 /// File magic: `\x89LTM\r\n\x1a\n`.
 pub const MAGIC: [u8; 8] = *b"\x89LTM\r\n\x1a\n";
-/// Format version this build writes and reads.
+/// Format version this build writes. It reads versions 1 and 2; version 2
+/// adds the empty-row mask ([`FEATURE_EMPTY_ROWS`]) and the row layout with
+/// per-row surface data ([`FEATURE_SURFACE`]). A version-1 file has neither.
 pub const VERSION: u32 = 2;
 /// Feature flag: an RGB albedo image is stored (chunk ALBD).
 pub const FEATURE_ALBEDO: u32 = 1;
+/// Feature flag (version 2): the mask of all-zero rows is stored (chunk
+/// EMPT); decoders output exactly 0 in those rows.
+pub const FEATURE_EMPTY_ROWS: u32 = 2;
 /// Feature flag (version 2): the row layout and per-row surface data are
 /// stored (chunk SURF).
 pub const FEATURE_SURFACE: u32 = 4;
-const KNOWN_FEATURES: u32 = FEATURE_ALBEDO | FEATURE_SURFACE;
-/// The features a version-1 file may have.
-const KNOWN_FEATURES_V1: u32 = FEATURE_ALBEDO;
+/// The feature flags a reader of each version knows, by version − 1.
+const KNOWN_FEATURES: [u32; 2] = [
+    FEATURE_ALBEDO,
+    FEATURE_ALBEDO | FEATURE_EMPTY_ROWS | FEATURE_SURFACE,
+];
 const HEADER_LEN: usize = 24;
 const DIR_ENTRY_LEN: usize = 32;
 const META_LEN: usize = 64;
@@ -400,6 +408,15 @@ impl EncodedColumn {
     }
 }
 
+/// The optional chunks of a new `.ltm` file beside its albedo image.
+#[derive(Clone, Copy, Debug, Default)]
+pub struct OptionalChunks<'a> {
+    /// Per-row surface data (chunk SURF); required for a texture layout.
+    pub surface: Option<&'a Surface>,
+    /// The mask of all-zero rows (chunk EMPT); stored when it has any.
+    pub empty_rows: Option<&'a EmptyRows>,
+}
+
 /// Streams a `.ltm` file to a unique temporary file beside `PATH`, then
 /// renames it into place ([`AtomicFile`]).
 pub struct LtmWriter {
@@ -408,6 +425,7 @@ pub struct LtmWriter {
     meta: Meta,
     albedo: Option<Vec<u8>>,
     surface: Option<Vec<u8>>,
+    empty_rows: Option<Vec<u8>>,
     entries: Vec<ColumnEntry>,
     data_start: u64,
     data_len: u64,
@@ -417,27 +435,39 @@ impl LtmWriter {
     /// Starts a file for `meta`, with an optional albedo image (3 values per
     /// pixel).
     pub fn create(path: &Path, meta: Meta, albedo: Option<&[f32]>) -> Result<LtmWriter> {
-        Self::create_with_surface(path, meta, albedo, None)
+        LtmWriter::create_with(path, meta, albedo, OptionalChunks::default())
     }
 
-    /// [`LtmWriter::create`] with per-row surface data (chunk SURF), which
-    /// also records the row layout of `meta.dims`. A texture layout needs
-    /// it.
-    pub fn create_with_surface(
+    /// [`LtmWriter::create`] with the optional chunks: per-row surface data
+    /// (chunk SURF, which also records the row layout of `meta.dims`; a
+    /// texture layout needs it) and the mask of all-zero rows (chunk EMPT,
+    /// stored when it has any).
+    pub fn create_with(
         path: &Path,
         meta: Meta,
         albedo: Option<&[f32]>,
-        surface: Option<&Surface>,
+        extra: OptionalChunks<'_>,
     ) -> Result<LtmWriter> {
         meta.dims.validate()?;
-        if let Some(s) = surface {
+        if let Some(s) = extra.surface {
             s.check_rows(&meta.dims)?;
         } else if meta.dims.rows.is_texture() {
             return Err(Error::Invalid(
                 "a texture-space .ltm file needs its surface data".into(),
             ));
         }
-        let surface = surface.map(|s| s.encode_chunk(&meta.dims.rows));
+        let surface = extra.surface.map(|s| s.encode_chunk(&meta.dims.rows));
+        let empty_rows = match extra.empty_rows {
+            Some(e) if e.rows() != meta.dims.pixels() => {
+                return Err(Error::BufferTooSmall {
+                    what: "empty-row mask",
+                    len: e.rows(),
+                    need: meta.dims.pixels(),
+                })
+            }
+            Some(e) if e.count() > 0 => Some(e.as_bytes().to_vec()),
+            _ => None,
+        };
         let albedo = match albedo {
             Some(a) if a.len() == 3 * meta.dims.pixels() => {
                 Some(bytemuck::cast_slice::<f32, u8>(a).to_vec())
@@ -453,13 +483,18 @@ impl LtmWriter {
         };
         let file = AtomicFile::create(path)?;
         let tmp = file.tmp_path().to_path_buf();
-        let chunks = 3 + albedo.is_some() as u64 + surface.is_some() as u64;
+        let chunks = 3
+            + albedo.is_some() as u64
+            + empty_rows.is_some() as u64
+            + surface.is_some() as u64;
         let head_len = HEADER_LEN as u64 + DIR_ENTRY_LEN as u64 * chunks + 4;
         let cols_len = (COLUMN_ENTRY_LEN * meta.dims.lights()) as u64;
+        let optional = |c: &Option<Vec<u8>>| c.as_ref().map_or(0, |a| a.len() as u64);
         let data_start = head_len
             + META_LEN as u64
-            + albedo.as_ref().map_or(0, |a| a.len() as u64)
-            + surface.as_ref().map_or(0, |a| a.len() as u64)
+            + optional(&albedo)
+            + optional(&empty_rows)
+            + optional(&surface)
             + cols_len;
         let mut w = LtmWriter {
             file: BufWriter::with_capacity(1 << 20, file),
@@ -467,6 +502,7 @@ impl LtmWriter {
             meta,
             albedo,
             surface,
+            empty_rows,
             entries: Vec::new(),
             data_start,
             data_len: 0,
@@ -542,11 +578,18 @@ impl LtmWriter {
         }
         let meta = self.meta.encode();
         let mut chunks: Vec<(&[u8; 4], Vec<u8>)> = vec![(b"META", meta)];
+        let mut features = 0;
         if let Some(a) = self.albedo.take() {
             chunks.push((b"ALBD", a));
+            features |= FEATURE_ALBEDO;
+        }
+        if let Some(e) = self.empty_rows.take() {
+            chunks.push((b"EMPT", e));
+            features |= FEATURE_EMPTY_ROWS;
         }
         if let Some(s) = self.surface.take() {
             chunks.push((b"SURF", s));
+            features |= FEATURE_SURFACE;
         }
         chunks.push((b"COLS", cols.bytes));
         let head_len = HEADER_LEN + DIR_ENTRY_LEN * (chunks.len() + 1) + 4;
@@ -571,11 +614,7 @@ impl LtmWriter {
         let mut head = Writer::default();
         head.bytes.extend_from_slice(&MAGIC);
         head.u32(VERSION);
-        let has = |tag: &[u8; 4]| chunks.iter().any(|(t, _)| *t == tag);
-        head.u32(
-            if has(b"ALBD") { FEATURE_ALBEDO } else { 0 }
-                | if has(b"SURF") { FEATURE_SURFACE } else { 0 },
-        );
+        head.u32(features);
         head.u32(dir.len() as u32);
         head.u32(0);
         for d in &dir {
@@ -632,6 +671,8 @@ pub struct LtmIndex {
     /// The per-row surface data (chunk SURF), if stored; its row layout is
     /// in `meta.dims.rows`.
     pub surface: Option<Surface>,
+    /// The mask of all-zero rows (chunk EMPT), if stored.
+    pub empty_rows: Option<EmptyRows>,
     /// Where the column payloads (chunk DATA) lie in the file.
     pub data: std::ops::Range<usize>,
 }
@@ -710,6 +751,11 @@ impl LtmFile {
                 ))
             }
         };
+        let empty_rows = read_empty_rows(
+            chunk(bytes, &dir, b"EMPT")?,
+            features & FEATURE_EMPTY_ROWS != 0,
+            &meta.dims,
+        )?;
         let cols = chunk(bytes, &dir, b"COLS")?.ok_or_else(|| missing("COLS"))?;
         let data_dir = dir
             .iter()
@@ -722,6 +768,7 @@ impl LtmFile {
             columns,
             albedo,
             surface,
+            empty_rows,
             data,
         })
     }
@@ -746,6 +793,11 @@ impl LtmFile {
     /// mask), for an image-space one each pixel's first hit.
     pub fn surface(&self) -> Option<&Surface> {
         self.index.surface.as_ref()
+    }
+
+    /// The mask of all-zero rows, if stored (a version-1 file has none).
+    pub fn empty_rows(&self) -> Option<&EmptyRows> {
+        self.index.empty_rows.as_ref()
     }
 
     /// File size in bytes.
@@ -776,28 +828,26 @@ fn read_directory(bytes: &[u8]) -> Result<(u32, Vec<DirEntry>)> {
         return Err(Error::corrupt(".ltm header", "bad magic bytes"));
     }
     let version = r.u32()?;
-    let known = match version {
-        1 => KNOWN_FEATURES_V1,
-        VERSION => KNOWN_FEATURES,
-        _ => {
-            return Err(Error::Version {
-                what: ".ltm",
-                found: version,
-                supported: VERSION,
-            })
-        }
-    };
+    if !(1..=VERSION).contains(&version) {
+        return Err(Error::Version {
+            what: ".ltm",
+            found: version,
+            supported: VERSION,
+        });
+    }
     let features = r.u32()?;
+    let known = KNOWN_FEATURES[version as usize - 1];
     if features & !known != 0 {
         return Err(Error::range(
             "feature flags",
-            format!("{features:#x} (version {version})"),
-            format!("a subset of {known:#x}"),
+            format!("{features:#x}"),
+            format!("a subset of {known:#x} in version {version}"),
         ));
     }
     let count = r.u32()? as usize;
-    if !(3..=5).contains(&count) {
-        return Err(Error::range("chunk count", count, "3..=5"));
+    let most = 3 + known.count_ones() as usize;
+    if !(3..=most).contains(&count) {
+        return Err(Error::range("chunk count", count, format!("3..={most}")));
     }
     r.u32()?;
     let mut dir = Vec::with_capacity(count);
@@ -833,7 +883,7 @@ fn check_directory(dir: &[DirEntry], start: u64, file_len: usize) -> Result<()> 
     let mut end = start;
     for d in dir {
         let tag = String::from_utf8_lossy(&d.tag);
-        if !matches!(&d.tag, b"META" | b"ALBD" | b"SURF" | b"COLS" | b"DATA") {
+        if !matches!(&d.tag, b"META" | b"ALBD" | b"EMPT" | b"SURF" | b"COLS" | b"DATA") {
             return Err(Error::corrupt(
                 "chunk directory",
                 format!("unknown chunk tag {tag:?}"),
@@ -914,6 +964,19 @@ fn read_albedo(chunk: Option<&[u8]>, flagged: bool, dims: &Dims) -> Result<Optio
         _ => Err(Error::corrupt(
             "chunk directory",
             "ALBD chunk and albedo feature flag disagree",
+        )),
+    }
+}
+
+/// The EMPT chunk's mask of all-zero rows: present exactly when the feature
+/// flag says so, one bit per row.
+fn read_empty_rows(chunk: Option<&[u8]>, flagged: bool, dims: &Dims) -> Result<Option<EmptyRows>> {
+    match (chunk, flagged) {
+        (Some(e), true) => Ok(Some(EmptyRows::from_bytes(e, dims.pixels())?)),
+        (None, false) => Ok(None),
+        _ => Err(Error::corrupt(
+            "chunk directory",
+            "EMPT chunk and empty-row feature flag disagree",
         )),
     }
 }

@@ -1,8 +1,10 @@
 //! Column decoding, shared by the encoder's error measurements, export and
 //! relighting: dequantize into a column image in the Mallat layout of the
-//! column's depth, undo the band weights, then inverse steps.
+//! column's depth, undo the band weights, then inverse steps, then the
+//! file's empty rows set to 0.
 
-use crate::container::{Meta, SparseColumn};
+use crate::container::{LtmFile, Meta, SparseColumn};
+use crate::empty::EmptyRows;
 use crate::error::{Error, Result};
 use crate::quant::{decode_scale, levels, scale_groups, BandWeights};
 use crate::wavelet::{self, band_size};
@@ -19,6 +21,8 @@ pub struct ColumnDecoder {
     inv_weights: Vec<Vec<f32>>,
     /// Scale group per position, per depth.
     groups: Vec<Vec<u8>>,
+    /// Rows decoded as exactly 0.
+    empty_rows: Option<EmptyRows>,
 }
 
 impl ColumnDecoder {
@@ -45,7 +49,26 @@ impl ColumnDecoder {
             meta: meta.clone(),
             inv_weights,
             groups,
+            empty_rows: None,
         }
+    }
+
+    /// The decoder of an opened file: [`ColumnDecoder::new`] with the
+    /// file's empty-row mask.
+    pub fn for_file(file: &LtmFile) -> ColumnDecoder {
+        ColumnDecoder::new(file.meta()).with_empty_rows(file.empty_rows().cloned())
+    }
+
+    /// Sets the rows [`ColumnDecoder::decode`] outputs as exactly 0 (a mask
+    /// of another size than the file's rows is ignored).
+    pub fn with_empty_rows(mut self, empty_rows: Option<EmptyRows>) -> ColumnDecoder {
+        self.empty_rows = empty_rows.filter(|e| e.rows() == self.meta.dims.pixels());
+        self
+    }
+
+    /// The rows decoded as exactly 0, if any mask is set.
+    pub fn empty_rows(&self) -> Option<&EmptyRows> {
+        self.empty_rows.as_ref()
     }
 
     /// Adds `gain ×` channel `channel` of `col`, dequantized (still weighted),
@@ -155,7 +178,7 @@ impl ColumnDecoder {
     }
 
     /// Decodes channel `channel` of a column into `plane` (overwritten), in
-    /// the row-wavelet lighting basis. `work` needs `width·height` values.
+    /// the row-wavelet lighting basis, with the empty rows exactly 0. `work` needs `width·height` values.
     /// A column that decodes to a value beyond [`ColumnDecoder::MAX_DECODED`] (or not a
     /// number) is an error: only a crafted file holds one.
     pub fn decode(
@@ -185,6 +208,9 @@ impl ColumnDecoder {
         self.unweight(col.depth, plane);
         for level in (1..=col.depth).rev() {
             self.inverse_step(level, plane, work)?;
+        }
+        if let Some(e) = &self.empty_rows {
+            e.zero(plane);
         }
         match plane
             .iter()

@@ -17,6 +17,7 @@ pub mod container;
 pub mod cubemap;
 mod decode;
 mod dims;
+mod empty;
 mod error;
 mod fileio;
 mod limits;
@@ -39,12 +40,13 @@ pub use compress::{
     compress, Analysis, CodeOptions, Coder, CompressOptions, CompressStats, Plan, Stage, Target,
     TransposeOptions, Transposed,
 };
-pub use container::{LtmFile, LtmWriter, Meta, Mode, SparseColumn};
+pub use container::{LtmFile, LtmWriter, Meta, Mode, OptionalChunks, SparseColumn};
 pub use decode::ColumnDecoder;
 pub use dims::{
     Dims, LightBasis, Parameterization, RowLayout, MAX_FACE_RES, MAX_PIXELS, MAX_SIDE,
     MAX_TEXTURE_SIZE,
 };
+pub use empty::EmptyRows;
 pub use error::{Error, Result};
 pub use limits::Limits;
 pub use output::AtomicFile;

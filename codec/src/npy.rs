@@ -357,7 +357,7 @@ pub fn decode_matrix(file: &LtmFile, limits: &Limits) -> Result<Vec<f32>> {
     limits.check_alloc("dense decoded matrix", dims.raw_bytes() / 4, 4)?;
     let (p, m, c) = (dims.pixels(), dims.lights(), dims.channels as usize);
     let n = dims.face_res() as usize;
-    let decoder = ColumnDecoder::new(meta);
+    let decoder = ColumnDecoder::for_file(file);
     let mut dense = vec![0.0f32; p * m * c];
     let mut plane = vec![0.0f32; p];
     let mut work = vec![0.0f32; p.max(n * n)];

@@ -16,7 +16,7 @@ pub fn decode_through_public_api(bytes: &[u8]) {
         return;
     };
     let dims = file.meta().dims;
-    let decoder = ColumnDecoder::new(file.meta());
+    let decoder = ColumnDecoder::for_file(&file);
     let small = dims.pixels() <= 1 << 12;
     let mut plane = vec![0.0f32; if small { dims.pixels() } else { 0 }];
     let mut work = plane.clone();

@@ -101,7 +101,7 @@ impl Relighter {
             4 * LANES as u64 * 2,
         )?;
         let n = dims.face_res() as usize;
-        let decoder = ColumnDecoder::new(&meta);
+        let decoder = ColumnDecoder::for_file(&file);
         let arena = Arena::build(&file, &decoder)?;
         Ok(Relighter {
             decoder,
@@ -333,6 +333,15 @@ impl Relighter {
             if let Some(a) = albedo {
                 for (c, v) in px.iter_mut().enumerate() {
                     *v *= a[3 * p + c];
+                }
+            }
+        }
+        // Empty rows (open sky) are exactly 0, not the column transform's
+        // spill from their neighbours.
+        if let Some(e) = self.file.empty_rows() {
+            for (p, px) in image.data.iter_mut().enumerate() {
+                if e.is_empty_row(p) {
+                    *px = [0.0; 3];
                 }
             }
         }

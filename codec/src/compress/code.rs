@@ -9,13 +9,13 @@
 //! error.
 
 use super::analysis::{candidate_depths, AnalysisSettings};
-use super::plan::{Plan, Rule};
+use super::plan::{quantization_error, ErrorCurve, Plan, Rule};
 use super::{CodeOptions, Target, Transposed};
 use crate::container::{EncodedColumn, Meta, SparseColumn};
 use crate::decode::ColumnDecoder;
 use crate::dims::Dims;
 use crate::error::{Error, Result};
-use crate::quant::{quantize, scale_groups, BandWeights};
+use crate::quant::{decode_scale, levels, quantize, scale_groups, BandWeights};
 use crate::wavelet::{self, max_levels};
 use rayon::prelude::*;
 use std::ops::Range;
@@ -51,11 +51,17 @@ pub struct CodedColumns {
     pub columns: Vec<EncodedColumn>,
     /// The measured squared error of each column.
     pub errors: Vec<f64>,
+    /// How each column's error would change with the threshold (threshold
+    /// plans with τ > 0 only; else empty). Merged in column order, they give
+    /// the same sums however the columns were split into ranges.
+    pub curves: Vec<ErrorCurve>,
 }
 
 /// Buffers of one worker: weighted coefficients, a decoded plane, scratch.
 struct Buffers {
     coefs: Vec<f32>,
+    /// The weighted coefficients of the best depth so far.
+    best: Vec<f32>,
     plane: Vec<f32>,
     work: Vec<f32>,
 }
@@ -101,7 +107,8 @@ impl<'t> Coder<'t> {
             depths: candidate_depths(opts.mode, max_depth),
             weights: BandWeights::new(opts.col_filter, w, h, max_depth),
             groups: (0..=max_depth).map(|d| scale_groups(w, h, d)).collect(),
-            decoder: ColumnDecoder::new(&meta),
+            decoder: ColumnDecoder::new(&meta)
+                .with_empty_rows(Some(transposed.empty_rows().clone())),
             meta,
         })
     }
@@ -199,24 +206,27 @@ impl<'t> Coder<'t> {
             first: columns.start,
             columns: Vec::with_capacity(columns.len()),
             errors: Vec::with_capacity(columns.len()),
+            curves: Vec::new(),
         };
         for batch in self.transposed.batches(columns) {
             let data = self.transposed.read_columns(batch.clone())?;
-            let coded: Vec<(EncodedColumn, f64)> = data
+            let coded: Vec<(EncodedColumn, f64, Option<ErrorCurve>)> = data
                 .par_chunks(channels * p)
                 .enumerate()
                 .map_init(
                     || Buffers {
                         coefs: vec![0.0; channels * p],
+                        best: vec![0.0; channels * p],
                         plane: vec![0.0; p],
                         work: vec![0.0; p],
                     },
                     |bufs, (l, planes)| self.code_column(batch.start + l, planes, plan, bufs),
                 )
                 .collect::<Result<_>>()?;
-            for (col, err) in coded {
+            for (col, err, curve) in coded {
                 out.columns.push(col);
                 out.errors.push(err);
+                out.curves.extend(curve);
             }
         }
         Ok(out)
@@ -268,7 +278,7 @@ impl<'t> Coder<'t> {
         planes: &[f32],
         plan: &Plan,
         bufs: &mut Buffers,
-    ) -> Result<(EncodedColumn, f64)> {
+    ) -> Result<(EncodedColumn, f64, Option<ErrorCurve>)> {
         let mut best: Option<Candidate> = None;
         for d in self.tries(j, plan) {
             self.weighted(planes, d, &mut bufs.coefs, &mut bufs.work)?;
@@ -280,14 +290,66 @@ impl<'t> Coder<'t> {
                 .is_none_or(|b| self.better(&candidate, b, plan.tau_sq()))
             {
                 best = Some(candidate);
+                std::mem::swap(&mut bufs.coefs, &mut bufs.best);
             }
         }
         let best = best.ok_or_else(|| Error::Invalid(format!("column {j}: no depth to try")))?;
+        let curve = match plan.rule() {
+            Rule::Above(tau_sq) if tau_sq > 0.0 => {
+                Some(self.error_curve(&best.col, &bufs.best, tau_sq))
+            }
+            _ => None,
+        };
         let channels = self.channels();
         let encoded = best
             .encoded
             .unwrap_or_else(|| EncodedColumn::new(&best.col, channels, self.opts.zstd_level));
-        Ok((encoded, best.err))
+        Ok((encoded, best.err, curve))
+    }
+
+    /// The [`ErrorCurve`] of a coded column around `tau_sq`: `coefs` are its
+    /// weighted coefficients at its depth, `col` what was stored of them.
+    fn error_curve(&self, col: &SparseColumn, coefs: &[f32], tau_sq: f64) -> ErrorCurve {
+        let (channels, p) = (self.channels(), self.dims.pixels());
+        let groups = &self.groups[col.depth as usize];
+        let q = levels(self.opts.bits) as f64;
+        let mut curve = ErrorCurve::new(tau_sq);
+        let mut next = 0;
+        for i in 0..p {
+            let e = self.energy(coefs, i);
+            if e <= 0.0 {
+                continue;
+            }
+            let stored = col.indices.get(next) == Some(&(i as u32));
+            if stored {
+                let k = next;
+                next += 1;
+                let coded: f64 = (0..channels)
+                    .map(|c| {
+                        let d = self.decoder.dequantize(col, k, c) as f64;
+                        (coefs[c * p + i] as f64 - d).powi(2)
+                    })
+                    .sum();
+                curve.add_kept(e, coded);
+            } else if e < tau_sq {
+                let g = groups[i] as usize;
+                let coded: f64 = (0..channels)
+                    .map(|c| {
+                        let u = (coefs[c * p + i] as f64).abs();
+                        let code = col.scale_codes.get(g * channels + c).copied().unwrap_or(0);
+                        let step = decode_scale(code) as f64 / q;
+                        match quantization_error(u, step) {
+                            Some(qe) if step > 0.0 => qe,
+                            _ => u * u,
+                        }
+                    })
+                    .sum();
+                curve.add_dropped(e, coded);
+            } else {
+                curve.add_quantized_away(e);
+            }
+        }
+        curve
     }
 
     /// The depths column `j` tries: for a threshold plan, the two best by
@@ -295,6 +357,7 @@ impl<'t> Coder<'t> {
     /// estimate ranks least reliably; every candidate depth for a term count.
     fn tries(&self, j: usize, plan: &Plan) -> Vec<u32> {
         match plan.choice(j) {
+            Some(choice) if plan.fixed_depths() => vec![choice[0]],
             Some(choice) => {
                 let mut t = choice.to_vec();
                 t.extend([self.depths[0], self.depths[self.depths.len() - 1]]);

@@ -24,9 +24,10 @@
 //!    the one with the lowest measured cost (zstd-coded bytes plus
 //!    error/τ²) is kept; the measured errors give the file's error.
 //!
-//! [`Transposed::code`] drives stages 3–5: when the measured error misses
-//! the target, the budget shrinks by the miss and the columns are planned
-//! and coded again (at most 8 codings); when the bits are too few for the
+//! [`Transposed::code`] drives stages 3–5: when the measured error lands
+//! outside `[0.97·E, E]`, the plan's error estimate is calibrated by the
+//! measured error and the columns are planned and coded once more (a
+//! further re-coding only if that one exceeds E); when the bits are too few for the
 //! target and [`CodeOptions::raise_bits`] is set, it codes again with 2 more
 //! bits. [`compress`] runs the whole pipeline.
 
@@ -37,10 +38,10 @@ mod transpose;
 
 pub use analysis::{Analysis, AnalysisSettings};
 pub use code::{CodedColumns, Coder};
-pub use plan::Plan;
+pub use plan::{ErrorCurve, Plan};
 pub use transpose::{Transposed, MAX_NORM, MIN_NONZERO_RMS};
 
-use crate::container::{LtmWriter, Mode};
+use crate::container::{LtmWriter, Mode, OptionalChunks};
 use crate::error::{Error, Result};
 use crate::raw::RawStore;
 use crate::wavelet::Filter;
@@ -65,9 +66,19 @@ pub const DEFAULT_MAX_ERROR: f64 = 0.01;
 /// [`CodeOptions::raise_bits`] finds.
 pub const DEFAULT_BITS: u32 = 10;
 
-/// Most codings of one file at one bit count: the first, then re-codings
-/// with a smaller budget while the measured error misses the target.
+/// Most codings of one file at one bit count: the first, the calibrated
+/// one, then re-codings with a smaller budget while the measured error
+/// still misses the target.
 const MAX_CODINGS: u32 = 8;
+
+/// A file asked for the relative error E lands in `[TARGET_LOW·E, E]`
+/// (measured), unless the bits' quantization floor or the matrix itself
+/// keeps the error below it.
+pub const TARGET_LOW: f64 = 0.97;
+
+/// The relative error a coding aims at, as a fraction of the target: the
+/// middle of `[TARGET_LOW, 1]`.
+pub const TARGET_AIM: f64 = 0.985;
 
 /// Settings of the row transform and transpose ([`Transposed::new`]).
 #[derive(Clone, Debug)]
@@ -230,6 +241,9 @@ pub struct CompressStats {
     pub bits: u32,
     /// Used a temporary file for the transpose.
     pub out_of_core: bool,
+    /// Codings at the file's bits (1, or 2 when the first missed
+    /// `[TARGET_LOW·E, E]`; more only when the calibrated one missed too).
+    pub codings: u32,
     /// The measured error meets the target (always true for a term count).
     /// A miss means the quantization error of `bits` alone is near the
     /// target: more bits are needed.
@@ -290,11 +304,15 @@ impl Transposed<'_> {
     }
 }
 
-/// The error-feedback loop at the coder's bits: plan, code every column;
-/// while the measured error misses the target, shrink the budget by the
-/// miss and plan and code again. The analysis estimates errors from band
-/// weights and the coder measures them; bits that are too few for the
-/// target give a floor no threshold can pass, hence the limit.
+/// The error-feedback loop at the coder's bits. The first coding follows
+/// the plan for [`TARGET_AIM`]·E; when its measured error lands outside
+/// [[`TARGET_LOW`]·E, E], the plan's estimate is calibrated by the
+/// measured error (their ratio) and the columns are planned again, with a
+/// threshold interpolated between histogram bins, and coded once more.
+/// Only when that still misses E (rare: the calibration holds between
+/// nearby thresholds) does the budget shrink by the miss, up to
+/// [`MAX_CODINGS`]; bits that are too few for the target give a floor no
+/// threshold can pass, hence the limit.
 fn code_at_bits(
     coder: &Coder,
     out: &Path,
@@ -302,28 +320,34 @@ fn code_at_bits(
     progress: &(dyn Fn(Stage, u64, u64) + Sync),
 ) -> Result<CompressStats> {
     let budget = coder.budget();
-    let (mut effective, mut max_tau_sq) = (budget, f64::INFINITY);
+    let (aim, low) = (budget * TARGET_AIM.powi(2), budget * TARGET_LOW.powi(2));
+    let bits = coder.options().bits;
+    let mut plan = match (analysis, coder.options().target) {
+        (_, Target::Keep(n)) => Plan::keep(n),
+        (Some(a), Target::MaxError(_)) => Plan::new(a, bits, aim)?,
+        (None, Target::MaxError(_)) => {
+            return Err(Error::Invalid("a target error needs an analysis".into()))
+        }
+    };
     let mut coding = 1;
     loop {
-        let plan = match (analysis, coder.options().target) {
-            (_, Target::Keep(n)) => Plan::keep(n),
-            (Some(a), Target::MaxError(_)) => {
-                Plan::below(a, coder.options().bits, effective, max_tau_sq)?
-            }
-            (None, Target::MaxError(_)) => {
-                return Err(Error::Invalid("a target error needs an analysis".into()))
-            }
-        };
-        let (writer, mut stats, err) = write_columns(coder, out, &plan, progress)?;
+        let (writer, mut stats, coded) = write_columns(coder, out, &plan, progress)?;
+        let err = coded.err;
         let missed = err > budget * 1.0001;
-        if missed && plan.tau_sq() > 0.0 && coding < MAX_CODINGS {
-            effective *= 0.9 * budget / err;
-            max_tau_sq = plan.tau_sq() * 0.9 * budget / err;
+        let next = match analysis {
+            Some(a) if coding < MAX_CODINGS && (missed || err < low) => {
+                replan(a, &plan, &coded, bits, aim, coding, missed)?
+            }
+            _ => None,
+        };
+        if let Some(next) = next {
+            plan = next;
             writer.abandon();
             coding += 1;
             continue;
         }
         stats.target_met = analysis.is_none() || !missed;
+        stats.codings = coding;
         if let Err(e) = coder.transposed().raw().check_unchanged() {
             writer.abandon();
             return Err(e);
@@ -333,21 +357,89 @@ fn code_at_bits(
     }
 }
 
+/// The next plan after a coding with `plan` measured the squared error
+/// `err` outside the target range, or `None` to keep the coding. The
+/// second coding moves τ to where the first coding's [`ErrorCurve`] puts
+/// the error at `aim`; beyond the curve's range (or without one) the plan's
+/// estimate is calibrated by `err`. A later coding (after a second miss of
+/// the budget) shrinks the estimate's budget by the miss and lowers τ. An
+/// error below the range is kept after the second coding, and whenever
+/// the plan's estimate is 0.
+fn replan(
+    a: &Analysis,
+    plan: &Plan,
+    coded: &Coding,
+    bits: u32,
+    aim: f64,
+    coding: u32,
+    missed: bool,
+) -> Result<Option<Plan>> {
+    let (estimate, err) = (plan.estimated_error(), coded.err);
+    if coding == 1 {
+        let curve = coded.curve.as_ref();
+        if let Some(tau_sq) = curve.and_then(|c| c.threshold_for(err, aim - err)) {
+            return Plan::at_threshold(a, bits, tau_sq, &coded.depths).map(Some);
+        }
+        if estimate > 0.0 && err > 0.0 {
+            return Plan::calibrated(a, bits, aim, err / estimate).map(Some);
+        }
+        return Ok(None);
+    }
+    if plan.fixed_depths() && missed && coding >= 5 {
+        // The first coding's depths cannot meet the target (a quantization
+        // floor): back to the analysis's conservative plans, free depths.
+        return Plan::new(a, bits, 0.5 * aim).map(Some);
+    }
+    if plan.fixed_depths() && plan.tau_sq() > 0.0 && err > 0.0 && (coding == 2 || missed) {
+        // The curve of the re-coding itself, measured near the target,
+        // at the same depths: a third coding, and later ones only while
+        // the error exceeds the target.
+        let next = coded
+            .curve
+            .as_ref()
+            .and_then(|c| c.threshold_for(err, aim - err));
+        let tau_sq = match next {
+            Some(t) if !missed || t < plan.tau_sq() => t,
+            _ => plan.tau_sq() * 0.9 * aim / err,
+        };
+        return Plan::at_threshold(a, bits, tau_sq, &coded.depths).map(Some);
+    }
+    if !missed || plan.tau_sq() <= 0.0 || err <= 0.0 {
+        return Ok(None);
+    }
+    if estimate <= 0.0 {
+        return Ok(None);
+    }
+    let shrink = 0.9 * aim / err;
+    Plan::below(a, bits, estimate * shrink, plan.tau_sq() * shrink).map(Some)
+}
+
+/// What a coding measured: the total squared error, each column's depth
+/// and the columns' [`ErrorCurve`] (threshold plans).
+struct Coding {
+    err: f64,
+    depths: Vec<u32>,
+    curve: Option<ErrorCurve>,
+}
+
 /// Codes every column with `plan` in batches, written as they come: the
-/// unfinished file, its statistics and the total squared error.
+/// unfinished file, its statistics and what the coding measured.
 fn write_columns(
     coder: &Coder,
     out: &Path,
     plan: &Plan,
     progress: &(dyn Fn(Stage, u64, u64) + Sync),
-) -> Result<(LtmWriter, CompressStats, f64)> {
+) -> Result<(LtmWriter, CompressStats, Coding)> {
     let t = coder.transposed();
     let m = t.dims().lights();
-    let mut writer = LtmWriter::create_with_surface(
+    let mut writer = LtmWriter::create_with(
         out,
         coder.meta().clone(),
         t.raw().albedo(),
-        t.raw().surface(),
+        OptionalChunks {
+            surface: t.raw().surface(),
+            empty_rows: Some(t.empty_rows()),
+        },
     )?;
     let mut stats = CompressStats {
         raw_bytes: t.raw().dims().raw_bytes(),
@@ -358,11 +450,20 @@ fn write_columns(
         ..Default::default()
     };
     let mut err_total = 0.0f64;
+    let mut curve: Option<ErrorCurve> = None;
+    let mut depths = Vec::with_capacity(m);
     for batch in t.batches(0..m) {
         let coded = coder.code_columns(batch.clone(), plan)?;
+        for c in &coded.curves {
+            match &mut curve {
+                Some(total) => total.merge(c),
+                None => curve = Some(c.clone()),
+            }
+        }
         for (col, err) in coded.columns.iter().zip(&coded.errors) {
             stats.nonzeros += col.entry.nnz as u64;
             stats.depth_histogram[col.entry.depth as usize] += 1;
+            depths.push(col.entry.depth as u32);
             err_total += err;
         }
         writer.push_columns(coded.first, coded.columns)?;
@@ -374,5 +475,10 @@ fn write_columns(
     } else {
         0.0
     };
-    Ok((writer, stats, err_total))
+    let coding = Coding {
+        err: err_total,
+        depths,
+        curve,
+    };
+    Ok((writer, stats, coding))
 }

@@ -12,7 +12,7 @@
 //! `x ≥ Δ`, `x(Δ − x)` below. That is more than dropping it (`x²`) when
 //! `x < Δ/2`, so those are dropped (as the quantizer does).
 
-use super::analysis::{bin_threshold, Analysis, AnalysisSettings, BINS};
+use super::analysis::{bin_threshold, Analysis, AnalysisSettings, BINS, BINS_PER_OCTAVE};
 use crate::error::{Error, Result};
 use crate::quant::levels;
 use std::ops::Range;
@@ -36,6 +36,12 @@ pub struct Plan {
     columns: Range<usize>,
     /// Per column: the best and the runner-up depth by estimate.
     choice: Vec<[u32; 2]>,
+    /// The estimated total squared error at τ (threshold plans; 0 for a
+    /// term count).
+    estimate: f64,
+    /// Each column is coded at its best depth only (a re-coding that keeps
+    /// the first coding's depths).
+    fixed: bool,
 }
 
 impl Plan {
@@ -59,12 +65,7 @@ impl Plan {
         budget: f64,
         max_tau_sq: f64,
     ) -> Result<Plan> {
-        if !(2..=16).contains(&bits) {
-            return Err(Error::range("bits", bits, "2..=16"));
-        }
-        if !(budget >= 0.0 && budget.is_finite()) {
-            return Err(Error::range("error budget", budget, "finite and ≥ 0"));
-        }
+        check_plan_args(bits, budget)?;
         let q = levels(bits) as f64;
         let mut fallback = None;
         let tau0_sq = analysis.settings().tau0_sq;
@@ -75,21 +76,114 @@ impl Plan {
             }
             let (err, choice) = choose(analysis, b, q);
             if err <= budget {
-                return Ok(Plan::threshold(analysis, bits, tau_sq, choice));
+                return Ok(Plan::threshold(analysis, bits, tau_sq, choice, err));
             }
-            fallback = Some(choice);
+            fallback = Some((choice, err));
         }
-        let choice = fallback.unwrap_or_else(|| choose(analysis, 0, q).1);
-        Ok(Plan::threshold(analysis, bits, 0.0, choice))
+        let (choice, err) = fallback.unwrap_or_else(|| {
+            let (err, choice) = choose(analysis, 0, q);
+            (choice, err)
+        });
+        Ok(Plan::threshold(analysis, bits, 0.0, choice, err))
     }
 
-    fn threshold(analysis: &Analysis, bits: u32, tau_sq: f64, choice: Vec<[u32; 2]>) -> Plan {
+    /// The plan whose estimated error, multiplied by `ratio` (a coding's
+    /// measured error over its plan's estimate), is `budget`: the threshold
+    /// τ² is interpolated (linearly in `log τ²`) between the two bin edges
+    /// whose calibrated estimates bracket the budget, so that a second
+    /// coding lands on the target instead of on the safe bin edge below it.
+    pub fn calibrated(analysis: &Analysis, bits: u32, budget: f64, ratio: f64) -> Result<Plan> {
+        check_plan_args(bits, budget)?;
+        if !(ratio > 0.0 && ratio.is_finite()) {
+            return Err(Error::range(
+                "error calibration ratio",
+                ratio,
+                "finite and > 0",
+            ));
+        }
+        let q = levels(bits) as f64;
+        let tau0_sq = analysis.settings().tau0_sq;
+        let mut above: Option<f64> = None;
+        for b in (0..BINS).rev() {
+            let (err, choice) = choose(analysis, b, q);
+            if err * ratio <= budget {
+                let edge = bin_threshold(b, tau0_sq);
+                let (tau_sq, estimate) = match above {
+                    Some(hi) if hi > err => {
+                        let t = ((budget / ratio - err) / (hi - err)).clamp(0.0, 1.0);
+                        (edge * 2f64.powf(t / BINS_PER_OCTAVE), err + t * (hi - err))
+                    }
+                    _ => (edge, err),
+                };
+                return Ok(Plan::threshold(analysis, bits, tau_sq, choice, estimate));
+            }
+            above = Some(err);
+        }
+        let (err, choice) = choose(analysis, 0, q);
+        Ok(Plan::threshold(analysis, bits, 0.0, choice, err))
+    }
+
+    fn threshold(
+        analysis: &Analysis,
+        bits: u32,
+        tau_sq: f64,
+        choice: Vec<[u32; 2]>,
+        estimate: f64,
+    ) -> Plan {
         Plan {
             rule: Rule::Above(tau_sq),
             made_for: Some((analysis.settings().clone(), bits)),
             columns: analysis.columns(),
             choice,
+            estimate,
+            fixed: false,
         }
+    }
+
+    /// The threshold plan at `tau_sq` exactly (not a bin edge) that codes
+    /// each column of the analysis at the one depth `depths` gives it (in
+    /// the analysis's column order): the re-coding that an [`ErrorCurve`]
+    /// of a first coding calls for, at that coding's depths, where the
+    /// curve holds.
+    pub fn at_threshold(
+        analysis: &Analysis,
+        bits: u32,
+        tau_sq: f64,
+        depths: &[u32],
+    ) -> Result<Plan> {
+        check_plan_args(bits, 0.0)?;
+        if !(tau_sq > 0.0 && tau_sq.is_finite()) {
+            return Err(Error::range("threshold τ²", tau_sq, "finite and > 0"));
+        }
+        let columns = analysis.columns();
+        let valid = analysis.settings().depths();
+        if depths.len() != columns.len() || depths.iter().any(|d| !valid.contains(d)) {
+            return Err(Error::Invalid(format!(
+                "{} fixed depths for {} columns, each one of {valid:?}",
+                depths.len(),
+                columns.len()
+            )));
+        }
+        let mut plan = Plan::threshold(
+            analysis,
+            bits,
+            tau_sq,
+            depths.iter().map(|&d| [d, d]).collect(),
+            0.0,
+        );
+        plan.fixed = true;
+        Ok(plan)
+    }
+
+    /// Whether each column is coded at its best depth only.
+    pub fn fixed_depths(&self) -> bool {
+        self.fixed
+    }
+
+    /// The estimated total squared error of a threshold plan (0 for a term
+    /// count).
+    pub fn estimated_error(&self) -> f64 {
+        self.estimate
     }
 
     /// The plan of a term-count target: every column keeps its `n` largest
@@ -101,6 +195,8 @@ impl Plan {
             made_for: None,
             columns: 0..usize::MAX,
             choice: Vec::new(),
+            estimate: 0.0,
+            fixed: false,
         }
     }
 
@@ -134,6 +230,135 @@ impl Plan {
     pub(super) fn made_for(&self) -> Option<&(AnalysisSettings, u32)> {
         self.made_for.as_ref()
     }
+}
+
+/// Bins per octave of squared magnitude of an [`ErrorCurve`].
+const CURVE_BINS_PER_OCTAVE: f64 = 16.0;
+/// Bins on each side of the coded threshold: 3 octaves.
+const CURVE_BINS: usize = 48;
+
+/// How a coding's measured error would change with the threshold near the
+/// τ² it was coded at, from the coded columns themselves (their chosen
+/// depths): raising τ² past a kept coefficient of weighted squared
+/// magnitude `e` adds `e` less its quantization error; lowering it past a
+/// dropped one removes `e` less the quantization error it would get. Fine
+/// bins (1/16 octave) over 3 octaves on each side let one re-coding land
+/// on the target; the coarse analysis histogram cannot. The sums are in
+/// the weighted coefficient domain. Quantization noise (dithered, white)
+/// costs the same in pixels; dropped coefficients of the lifting filters,
+/// whose synthesis functions are not orthogonal, do not, so the dropped
+/// energies are scaled by the coding's measured dropped error (measured
+/// error less quantization error) over the curve's dropped energy.
+#[derive(Clone, Debug, PartialEq)]
+pub struct ErrorCurve {
+    tau_sq: f64,
+    /// Quantization error of the kept coefficients.
+    quantization: f64,
+    /// Energy of the dropped coefficients.
+    dropped: f64,
+    /// Per bin above τ²: (energy, quantization error) of the kept
+    /// coefficients a rise of τ² through it drops.
+    up: Vec<(f64, f64)>,
+    /// Per bin below τ²: (energy, expected quantization error) of the
+    /// dropped coefficients a fall of τ² through it keeps.
+    down: Vec<(f64, f64)>,
+}
+
+impl ErrorCurve {
+    /// An empty curve around the threshold `tau_sq` (> 0).
+    pub fn new(tau_sq: f64) -> ErrorCurve {
+        ErrorCurve {
+            tau_sq,
+            quantization: 0.0,
+            dropped: 0.0,
+            up: vec![(0.0, 0.0); CURVE_BINS],
+            down: vec![(0.0, 0.0); CURVE_BINS],
+        }
+    }
+
+    /// The threshold the curve was measured at.
+    pub fn tau_sq(&self) -> f64 {
+        self.tau_sq
+    }
+
+    /// Adds a kept coefficient of squared magnitude `e` (≥ τ²) coded with
+    /// squared error `coded_err`.
+    pub fn add_kept(&mut self, e: f64, coded_err: f64) {
+        self.quantization += coded_err;
+        let k = (e / self.tau_sq).log2() * CURVE_BINS_PER_OCTAVE;
+        if k >= 0.0 && k < CURVE_BINS as f64 {
+            let b = &mut self.up[k as usize];
+            *b = (b.0 + e, b.1 + coded_err);
+        }
+    }
+
+    /// Adds a dropped coefficient of squared magnitude `e` (< τ²) that would
+    /// be coded with squared error `coded_err` if kept.
+    pub fn add_dropped(&mut self, e: f64, coded_err: f64) {
+        self.dropped += e;
+        let k = (self.tau_sq / e).log2() * CURVE_BINS_PER_OCTAVE;
+        if e > 0.0 && k >= 0.0 && k < CURVE_BINS as f64 {
+            let b = &mut self.down[k as usize];
+            *b = (b.0 + e, b.1 + coded_err.min(e));
+        }
+    }
+
+    /// Adds a coefficient of squared magnitude `e` that the quantizer
+    /// dropped although it passed the threshold.
+    pub fn add_quantized_away(&mut self, e: f64) {
+        self.dropped += e;
+    }
+
+    /// Adds another curve of the same threshold (other columns).
+    pub fn merge(&mut self, other: &ErrorCurve) {
+        self.quantization += other.quantization;
+        self.dropped += other.dropped;
+        for (a, b) in self.up.iter_mut().zip(&other.up) {
+            *a = (a.0 + b.0, a.1 + b.1);
+        }
+        for (a, b) in self.down.iter_mut().zip(&other.down) {
+            *a = (a.0 + b.0, a.1 + b.1);
+        }
+    }
+
+    /// The threshold τ² at which a coding whose measured squared error was
+    /// `measured` changes it by `delta` (τ raised for `delta > 0`, lowered
+    /// below), interpolated within a bin; `None` when the change lies
+    /// beyond the curve's 3 octaves.
+    pub fn threshold_for(&self, measured: f64, delta: f64) -> Option<f64> {
+        let scale = if self.dropped > 0.0 {
+            ((measured - self.quantization) / self.dropped).clamp(0.25, 4.0)
+        } else {
+            1.0
+        };
+        let (bins, sign, need) = if delta >= 0.0 {
+            (&self.up, 1.0, delta)
+        } else {
+            (&self.down, -1.0, -delta)
+        };
+        let mut acc = 0.0;
+        for (k, &(e, q)) in bins.iter().enumerate() {
+            let v = (scale * e - q).max(0.0);
+            if v > 0.0 && acc + v >= need {
+                let t = (need - acc) / v;
+                return Some(
+                    self.tau_sq * 2f64.powf(sign * (k as f64 + t) / CURVE_BINS_PER_OCTAVE),
+                );
+            }
+            acc += v;
+        }
+        None
+    }
+}
+
+fn check_plan_args(bits: u32, budget: f64) -> Result<()> {
+    if !(2..=16).contains(&bits) {
+        return Err(Error::range("bits", bits, "2..=16"));
+    }
+    if !(budget >= 0.0 && budget.is_finite()) {
+        return Err(Error::range("error budget", budget, "finite and ≥ 0"));
+    }
+    Ok(())
 }
 
 /// At the threshold of bin `b`: the estimated total error and each column's
@@ -195,7 +420,7 @@ pub(super) fn estimate(
 /// The expected squared error of dither-quantizing a value of magnitude `x`
 /// with step `step`: `Δ²/6` for `x ≥ Δ`, `x(Δ − x)` below; `None` (drop it)
 /// when `x < Δ/2`, where dropping costs less.
-fn quantization_error(x: f64, step: f64) -> Option<f64> {
+pub(super) fn quantization_error(x: f64, step: f64) -> Option<f64> {
     if x < step / 2.0 {
         None
     } else if x >= step {

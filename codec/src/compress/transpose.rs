@@ -10,6 +10,7 @@
 use super::analysis::BINS_PER_OCTAVE;
 use super::{Stage, TransposeOptions};
 use crate::dims::Dims;
+use crate::empty::EmptyRows;
 use crate::error::{Error, Result};
 use crate::raw::{BlockVerifier, RawStore};
 use crate::wavelet::{row_forward, Filter};
@@ -67,6 +68,8 @@ pub struct Transposed<'a> {
     /// Depth-0 histogram of squared row-transformed values: (count, energy).
     hist0: Vec<(u64, f64)>,
     out_of_core: bool,
+    /// The rows whose values are all zero.
+    empty_rows: EmptyRows,
 }
 
 impl<'a> Transposed<'a> {
@@ -104,6 +107,7 @@ impl<'a> Transposed<'a> {
             norm_sq: 0.0,
             hist0: vec![(0, 0.0); HIST0_BINS],
             out_of_core,
+            empty_rows: EmptyRows::none(p),
         };
         // Blocks of rows within a quarter of the budget (raw rows are read
         // 8 MiB at a time).
@@ -123,6 +127,7 @@ impl<'a> Transposed<'a> {
             verifier: self.raw.verifier(),
             range: RangeCheck::default(),
             src: Vec::new(),
+            empty: EmptyRows::none(p),
         };
         let mut p0 = 0;
         while p0 < p {
@@ -135,6 +140,7 @@ impl<'a> Transposed<'a> {
         }
         reader.verifier.finish()?;
         reader.range.check()?;
+        self.empty_rows = reader.empty;
         self.raw.check_unchanged()
     }
 
@@ -153,6 +159,11 @@ impl<'a> Transposed<'a> {
             reader.verifier.feed(piece.start, &reader.src)?;
             reader.range.add(&reader.src, src_len);
             reader.range.check_norm(piece.end, p)?;
+            for (r, row) in reader.src.chunks_exact(src_len).enumerate() {
+                if row.iter().all(|&v| v == 0.0) {
+                    reader.empty.set(piece.start + r);
+                }
+            }
             let at = (piece.start - rows.start) * out_len;
             self.transform_rows(&reader.src, &mut rbuf[at..at + piece.len() * out_len])?;
         }
@@ -245,6 +256,12 @@ impl<'a> Transposed<'a> {
     /// The Frobenius norm of the matrix.
     pub fn norm(&self) -> f64 {
         self.norm_sq.sqrt()
+    }
+
+    /// The rows whose values are all zero (e.g. pixels of open sky): every
+    /// file coded from the matrix stores them, and decodes them as 0.
+    pub fn empty_rows(&self) -> &EmptyRows {
+        &self.empty_rows
     }
 
     /// Used a temporary file.
@@ -344,6 +361,8 @@ struct RowReader<'a> {
     verifier: BlockVerifier<'a>,
     range: RangeCheck,
     src: Vec<f32>,
+    /// The all-zero rows read so far.
+    empty: EmptyRows,
 }
 
 /// True when every row has equal R, G and B values: the rows are read a

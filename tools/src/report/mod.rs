@@ -8,6 +8,7 @@
 
 pub mod baselines;
 mod page;
+pub mod peers;
 pub mod plot;
 
 use crate::codec_cmds::{default_mem_budget, parse_size};
@@ -104,6 +105,12 @@ pub struct ReportArgs {
     /// directory from its results.json.
     #[arg(long)]
     pub replot: bool,
+    /// SZ3 and ZFP measured on the same raw store, as written by
+    /// `python3 tools/validate/peers.py RAW -o FILE` (pip: pysz, zfpy):
+    /// shown in the headline, the tables and the size/error plot. With
+    /// --replot, replaces the peers of results.json.
+    #[arg(long)]
+    pub peers: Option<PathBuf>,
 }
 
 /// The settings a run used, after defaults.
@@ -216,6 +223,9 @@ pub struct Results {
     pub matrix_norm: f64,
     pub codings: Vec<Coding>,
     pub baselines: Vec<baselines::BaselinePoint>,
+    /// SZ3 and ZFP (`--peers`), empty without.
+    #[serde(default)]
+    pub peers: Vec<peers::PeerPoint>,
     pub sh_relight: Vec<ShRelightPoint>,
     pub timings: Timings,
 }
@@ -402,7 +412,7 @@ fn file_name(mode: Mode, bits: u32, err: f64) -> String {
 
 pub fn run(a: ReportArgs) -> Result<()> {
     if a.replot {
-        return replot(&a.output);
+        return replot(&a.output, a.peers.as_deref());
     }
     let start = Instant::now();
     let s = settings(&a)?;
@@ -432,6 +442,10 @@ pub fn run(a: ReportArgs) -> Result<()> {
         channels: dims.channels,
         raw_bytes: dims.raw_bytes(),
         has_albedo: raw.albedo().is_some(),
+    };
+    let peers = match &a.peers {
+        Some(path) => peers::load(path, &scene)?,
+        None => Vec::new(),
     };
 
     // 2. Lighting and the exact images.
@@ -499,6 +513,7 @@ pub fn run(a: ReportArgs) -> Result<()> {
         matrix_norm,
         codings,
         baselines,
+        peers,
         sh_relight,
         timings: Timings {
             bake_or_open_s,
@@ -518,12 +533,15 @@ pub fn run(a: ReportArgs) -> Result<()> {
 }
 
 /// `--replot`: redraws the pages from a report's `results.json`.
-fn replot(output: &Path) -> Result<()> {
+fn replot(output: &Path, peers: Option<&Path>) -> Result<()> {
     let path = output.join("results.json");
     let text =
         std::fs::read_to_string(&path).with_context(|| format!("reading {}", path.display()))?;
-    let results: Results = serde_json::from_str(&text)
+    let mut results: Results = serde_json::from_str(&text)
         .with_context(|| format!("{} is not a report's results.json", path.display()))?;
+    if let Some(p) = peers {
+        results.peers = peers::load(p, &results.scene)?;
+    }
     page::write(output, &results)?;
     eprintln!("rewrote {}", output.join("index.md").display());
     Ok(())

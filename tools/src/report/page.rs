@@ -78,6 +78,91 @@ fn size_at_error(codings: &[Coding], mode: &str, e: f64) -> Option<f64> {
     })
 }
 
+/// The smallest file of `mode` coded for target error `target` that met it.
+fn coded_at<'a>(r: &'a Results, mode: &str, target: f64) -> Option<&'a Coding> {
+    r.codings
+        .iter()
+        .filter(|c| c.mode == mode && c.target_met && (c.target_error - target).abs() < 1e-9)
+        .min_by_key(|c| c.file_bytes)
+}
+
+/// The peers beside ltm at each of their target errors, and what
+/// relighting from each costs.
+fn peers_table(md: &mut String, r: &Results) -> Result<()> {
+    if r.peers.is_empty() {
+        return Ok(());
+    }
+    let raw = r.scene.raw_bytes as f64;
+    let mut targets: Vec<f64> = r.peers.iter().map(|p| p.target).collect();
+    targets.sort_by(f64::total_cmp);
+    targets.dedup();
+    writeln!(
+        md,
+        "### Peers: SZ3 and ZFP at equal matrix error
+"
+    )?;
+    writeln!(md, "Each cell: file size, ratio against the raw f32 matrix, measured matrix error. ltm: the smallest file over the swept bits coded for that target; SZ3 and ZFP (`tools/validate/peers.py`): the absolute error bound bisected to the target, the smallest over the shapes (P, M·C), (H, W, M·C) and (P, 6, n, n·C) (kept shape in brackets).\n")?;
+    writeln!(
+        md,
+        "| target | ltm 2d | ltm adaptive | SZ3 | ZFP | adaptive / SZ3 |\n|---|---|---|---|---|---|"
+    )?;
+    let cell = |bytes: u64, err: f64| {
+        format!(
+            "{} MB ({:.1}×, {})",
+            mb(bytes as f64),
+            raw / bytes as f64,
+            pct(err)
+        )
+    };
+    for &t in &targets {
+        let ours = |mode: &str| coded_at(r, mode, t);
+        let peer = |m: &str| r.peers.iter().find(|p| p.method == m && p.target == t);
+        let ltm_cell =
+            |c: Option<&Coding>| c.map_or("–".into(), |c| cell(c.file_bytes, c.matrix_error));
+        let peer_cell = |m: &str| {
+            peer(m).map_or("–".into(), |p| {
+                format!("{} [{}]", cell(p.bytes, p.matrix_error), p.shape)
+            })
+        };
+        let ratio = match (ours("adaptive"), peer("sz3")) {
+            (Some(a), Some(p)) => format!("{:.2}", a.file_bytes as f64 / p.bytes as f64),
+            _ => "–".into(),
+        };
+        writeln!(
+            md,
+            "| {} | {} | {} | {} | {} | {} |",
+            pct(t),
+            ltm_cell(ours("2d")),
+            ltm_cell(ours("adaptive")),
+            peer_cell("sz3"),
+            peer_cell("zfp"),
+            ratio
+        )?;
+    }
+    writeln!(md, "\nRelighting from a peer means decompressing the whole matrix once and a dense `T·L` per frame (numpy, median of 5); an `.ltm` file is relit from its compressed columns:\n")?;
+    writeln!(
+        md,
+        "| peer | target | compress s | decompress s | dense frame ms |\n|---|---|---|---|---|"
+    )?;
+    for p in &r.peers {
+        writeln!(
+            md,
+            "| {} | {} | {:.2} | {:.2} | {:.1} |",
+            peer_name(&p.method),
+            pct(p.target),
+            p.compress_s,
+            p.decompress_s,
+            1e3 * p.frame_s
+        )?;
+    }
+    writeln!(md)?;
+    Ok(())
+}
+
+fn peer_name(method: &str) -> &str {
+    super::peers::name(method)
+}
+
 fn pair<'a>(r: &'a Results, mode: &str) -> Option<&'a Coding> {
     r.codings.iter().find(|c| c.quality_pair && c.mode == mode)
 }
@@ -161,6 +246,7 @@ pub fn write(dir: &Path, r: &Results) -> Result<()> {
     writeln!(md, "Errors are relative L2 (Frobenius) norms: the *matrix error* of a decoded file against the raw matrix; the *relit error* of a relit image against the exact product `T·L` of the raw matrix (`ltm reference`). Frame times are medians; relit numbers are means over the maps.\n")?;
 
     headline(&mut md, r)?;
+    peers_table(&mut md, r)?;
     size_error(&mut md, dir, r)?;
     relit_error(&mut md, dir, r)?;
     frame_time(&mut md, dir, r)?;
@@ -306,6 +392,22 @@ fn size_error(md: &mut String, dir: &Path, r: &Results) -> Result<()> {
             "spherical harmonics (order L)"
         };
         ser.push(series(name, pts, Style::LinePoints));
+    }
+    for method in ["sz3", "zfp"] {
+        let mut pts: Vec<(f64, f64)> = r
+            .peers
+            .iter()
+            .filter(|p| p.method == method && p.matrix_error > 0.0)
+            .map(|p| (p.matrix_error, p.bytes as f64 / 1e6))
+            .collect();
+        if pts.is_empty() {
+            continue;
+        }
+        pts.sort_by(|a, b| a.0.total_cmp(&b.0));
+        for p in &pts {
+            x_range = (x_range.0.min(p.0), x_range.1.max(p.0));
+        }
+        ser.push(series(peer_name(method), pts, Style::LinePoints));
     }
     if x_range.0.is_finite() {
         let flat = |y: f64| vec![(x_range.0, y), (x_range.1, y)];

@@ -17,6 +17,7 @@ pub mod container;
 pub mod cubemap;
 mod decode;
 mod dims;
+pub mod eigen;
 mod error;
 mod fileio;
 mod limits;
@@ -41,6 +42,7 @@ pub use compress::{
 pub use container::{LtmFile, LtmWriter, Meta, Mode, SparseColumn};
 pub use decode::ColumnDecoder;
 pub use dims::{Dims, LightBasis, RowLayout, MAX_FACE_RES, MAX_PIXELS, MAX_SIDE};
+pub use eigen::{compress_pca, PcaModel, PcaOptions, PcaStats};
 pub use error::{Error, Result};
 pub use limits::Limits;
 pub use output::AtomicFile;

@@ -16,6 +16,13 @@ pub fn decode_through_public_api(bytes: &[u8]) {
         return;
     };
     let dims = file.meta().dims;
+    if let Some(model) = file.pca() {
+        // A pca file: reconstruct its first rows (every value must be
+        // finite or the decode an error, never a panic).
+        let mut rows = Vec::new();
+        model.reconstruct_rows(0, dims.pixels().min(16), &mut rows);
+        return;
+    }
     let decoder = ColumnDecoder::new(file.meta());
     let small = dims.pixels() <= 1 << 12;
     let mut plane = vec![0.0f32; if small { dims.pixels() } else { 0 }];

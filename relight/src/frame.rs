@@ -60,6 +60,8 @@ pub struct Frame {
     pub(crate) wavelet: Option<WaveletScratch>,
     /// The lighting projected on a linear basis (RGB per basis function).
     pub(crate) projected: Vec<[f64; 3]>,
+    /// The projected lighting in f32, one plane per colour channel.
+    pub(crate) planar: Vec<f32>,
 }
 
 impl Default for Frame {
@@ -68,6 +70,7 @@ impl Default for Frame {
             image: Image::new(0, 0),
             wavelet: None,
             projected: Vec::new(),
+            planar: Vec::new(),
         }
     }
 }

@@ -12,7 +12,7 @@
 //!    brings the planes one level up, until depth 0 (eq. 8);
 //! 4. a factored monochrome file multiplies in its albedo image.
 
-use crate::error::Result;
+use crate::error::{RelightError, Result};
 use crate::frame::{check_light, Frame, FrameStats, Relight, Request};
 use crate::image_io::Image;
 use crate::select::{select, support_area, Weighting};
@@ -81,6 +81,12 @@ impl Relighter {
     /// coefficients, sized by the file's column table, is checked against
     /// `limits` before anything is decoded.
     pub fn new(file: LtmFile, limits: &Limits) -> Result<Relighter> {
+        if file.pca().is_some() {
+            return Err(RelightError::Invalid(
+                "a pca file has no wavelet columns: open it with PcaRelighter (or open_relighter)"
+                    .into(),
+            ));
+        }
         let meta = file.meta().clone();
         let dims = meta.dims;
         let nonzeros: u64 = file.columns().iter().map(|c| c.nnz as u64).sum();

@@ -132,8 +132,8 @@ impl PcaRelighter {
             let f = &self.coefficients[p * self.rank..p * self.rank + k];
             let mut v = projected[0];
             for (a, &fa) in f.iter().enumerate() {
-                for c in 0..3 {
-                    v[c] += fa as f64 * projected[1 + a][c];
+                for (vc, lc) in v.iter_mut().zip(projected[1 + a]) {
+                    *vc += fa as f64 * lc;
                 }
             }
             *px = self.albedo_times(p, v);
@@ -266,8 +266,8 @@ impl Relight for PcaRelighter {
         frame.planar.clear();
         frame.planar.resize(3 * kp, 0.0);
         for (a, l) in frame.projected[1..].iter().enumerate() {
-            for c in 0..3 {
-                frame.planar[c * kp + a] = l[c] as f32;
+            for (c, lc) in l.iter().enumerate() {
+                frame.planar[c * kp + a] = *lc as f32;
             }
         }
         let t1 = Instant::now();

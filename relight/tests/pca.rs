@@ -122,14 +122,14 @@ fn relit_images_match_the_decoded_matrix_and_the_scalar_loop() {
         let want: Vec<[f32; 3]> = (0..p)
             .map(|px| {
                 let mut v = [0.0f64; 3];
-                for j in 0..m {
-                    for ch in 0..3 {
-                        v[ch] += dense[(px * m + j) * c + ch.min(c - 1)] as f64 * l[j][ch] as f64;
+                for (j, lj) in l.iter().enumerate() {
+                    for (ch, vc) in v.iter_mut().enumerate() {
+                        *vc += dense[(px * m + j) * c + ch.min(c - 1)] as f64 * lj[ch] as f64;
                     }
                 }
                 if let Some(a) = a {
-                    for ch in 0..3 {
-                        v[ch] *= a[3 * px + ch] as f64;
+                    for (ch, vc) in v.iter_mut().enumerate() {
+                        *vc *= a[3 * px + ch] as f64;
                     }
                 }
                 v.map(|x| x as f32)
@@ -286,9 +286,9 @@ fn point_lights_on_an_analytic_sphere() {
         .unwrap();
     let top = (0..64).map(|p| exact(p, true) * 10.0).fold(0.0, f64::max);
     let (mut e_near, mut e_bil, mut norm) = (0.0, 0.0, 0.0);
-    for p in 0..64 {
-        for c in 0..3 {
-            let i = light.intensity[c] as f64;
+    for (p, sample) in samples.iter().enumerate() {
+        for (c, &i) in light.intensity.iter().enumerate() {
+            let i = i as f64;
             // Nearest: the matrix's own value at the texel centre.
             let want = exact(p, true) * i;
             // Quantization (16 bits) leaves errors near 1e-5 of the largest values.
@@ -302,7 +302,7 @@ fn point_lights_on_an_analytic_sphere() {
             e_bil += (bil.data[p][c] as f64 - e).powi(2);
             norm += e * e;
         }
-        if !samples[p].valid {
+        if !sample.valid {
             assert_eq!(near.data[p], [0.0; 3]);
         }
     }

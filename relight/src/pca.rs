@@ -205,12 +205,21 @@ impl PcaRelighter {
                     let p = t * PIXELS_PER_TASK + i;
                     let f = &self.coefficients[p * self.rank..p * self.rank + k];
                     let mut acc = [[0.0f32; LANES]; 3];
-                    for (b, fb) in f[..full].chunks_exact(LANES).enumerate() {
-                        let o = b * LANES;
+                    let blocks = f[..full]
+                        .chunks_exact(LANES)
+                        .zip(lr.chunks_exact(LANES))
+                        .zip(lg.chunks_exact(LANES))
+                        .zip(lb.chunks_exact(LANES));
+                    for (((fb, r8), g8), b8) in blocks {
+                        // Fixed-size lanes: no bounds checks, one SIMD
+                        // multiply-add per lane group and channel.
+                        let lanes =
+                            |x: &[f32]| -> [f32; LANES] { x.try_into().expect("LANES values") };
+                        let (fb, r8, g8, b8) = (lanes(fb), lanes(r8), lanes(g8), lanes(b8));
                         for l in 0..LANES {
-                            acc[0][l] += fb[l] * lr[o + l];
-                            acc[1][l] += fb[l] * lg[o + l];
-                            acc[2][l] += fb[l] * lb[o + l];
+                            acc[0][l] += fb[l] * r8[l];
+                            acc[1][l] += fb[l] * g8[l];
+                            acc[2][l] += fb[l] * b8[l];
                         }
                     }
                     let mut v = base;

@@ -14,7 +14,9 @@ raw = (out / "scene.raw").stat().st_size
 def log(name):
     t = (out / name).read_text()
     m = re.search(r"wrote .*?: (\d+) bytes .*?(?:pca rank (\d+), )?(\d+) bits.*?relative L2 error ([0-9.]+)", t)
-    secs = re.search(r"([0-9.]+) s \d+ KB", t)
+    # The command's own time (the wall time in the log includes waiting
+    # for the shared lock).
+    secs = re.search(r"wrote [^\n]*?, ([0-9.]+) s", t)
     return m, secs.group(1) if secs else "?"
 
 print(f"raw store: {raw/1e9:.2f} GB\n")

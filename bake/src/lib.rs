@@ -48,6 +48,6 @@ pub use inside::INSIDE_LIMIT;
 pub use ltm_codec::raw::{RestartReason, ResumeState};
 pub use rows::{RowSample, RowSource};
 pub use scene::{Overrides, SceneDesc, DEFAULT_SCENE_TOML};
-pub use transport::RowStats;
 pub use texture::{TexelMap, TexelStats};
+pub use transport::RowStats;
 pub use world::{Camera, Hit, MeshStats, Scene, SceneStats};

@@ -138,9 +138,14 @@ pub(crate) fn parse(bytes: &[u8]) -> Result<RawMesh, String> {
                     (Some(a), Some(b), Some(c)) => Some([a, b, c]),
                     _ => None,
                 };
-                let uv = [("s", "t"), ("u", "v"), ("texture_u", "texture_v"), ("texture_s", "texture_t")]
-                    .iter()
-                    .find_map(|(a, b)| Some([idx(a)?, idx(b)?]));
+                let uv = [
+                    ("s", "t"),
+                    ("u", "v"),
+                    ("texture_u", "texture_v"),
+                    ("texture_s", "texture_t"),
+                ]
+                .iter()
+                .find_map(|(a, b)| Some([idx(a)?, idx(b)?]));
                 let mut uvs = Vec::with_capacity(if uv.is_some() { el.count } else { 0 });
                 mesh.positions.reserve(el.count);
                 let mut vals = vec![0.0f64; el.props.len()];

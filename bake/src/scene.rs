@@ -559,7 +559,12 @@ impl SceneDesc {
             ));
         }
         if t.spp == 0 || t.spp > MAX_SPP {
-            return Err(BakeError::range(o, "texture.spp", t.spp, format!("1..={MAX_SPP}")));
+            return Err(BakeError::range(
+                o,
+                "texture.spp",
+                t.spp,
+                format!("1..={MAX_SPP}"),
+            ));
         }
         if t.dilate > MAX_DILATE {
             return Err(BakeError::range(
@@ -570,7 +575,11 @@ impl SceneDesc {
             ));
         }
         let material = &self.meshes[t.mesh].material;
-        if matches!(self.materials.get(material), Some(MaterialDesc::Glossy { .. })) && !t.diffuse_only {
+        if matches!(
+            self.materials.get(material),
+            Some(MaterialDesc::Glossy { .. })
+        ) && !t.diffuse_only
+        {
             return Err(BakeError::invalid(
                 o,
                 "texture.mesh",

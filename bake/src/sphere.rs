@@ -114,7 +114,8 @@ impl SphereMap {
     /// units of an `size²` texture) and its barycentric weights.
     pub fn locate(&self, q: DVec2, size: u32) -> Option<(usize, [f64; 3])> {
         let s = size as f64;
-        let sq = DVec2::new(2.0 * q.x / s - 1.0, 1.0 - 2.0 * q.y / s).clamp(DVec2::splat(-1.0), DVec2::splat(1.0));
+        let sq = DVec2::new(2.0 * q.x / s - 1.0, 1.0 - 2.0 * q.y / s)
+            .clamp(DVec2::splat(-1.0), DVec2::splat(1.0));
         let cell = |v: f64| (((v + 1.0) * 0.5 * HINT_GRID as f64) as usize).min(HINT_GRID - 1);
         // Hints are laid out with y up the square.
         let start = self.hints[cell(sq.y) * HINT_GRID + cell(sq.x)] as usize;

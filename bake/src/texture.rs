@@ -324,11 +324,9 @@ impl ChartGrid {
             "the mesh has no texture coordinates (OBJ vt, PLY s,t or u,v); use parameterization = \"sphere\" for a closed mesh, or add texture coordinates",
         )?;
         let sz = size as f64;
-        if let Some((i, uv)) = uvs
-            .iter()
-            .enumerate()
-            .find(|(_, uv)| !(-1e-6..=1.0 + 1e-6).contains(&uv.x) || !(-1e-6..=1.0 + 1e-6).contains(&uv.y))
-        {
+        if let Some((i, uv)) = uvs.iter().enumerate().find(|(_, uv)| {
+            !(-1e-6..=1.0 + 1e-6).contains(&uv.x) || !(-1e-6..=1.0 + 1e-6).contains(&uv.y)
+        }) {
             return Err(format!(
                 "vertex {i} has texture coordinates ({}, {}) outside [0, 1] (tiled or wrapped UVs cannot give one texel per surface point)",
                 uv.x, uv.y
@@ -492,12 +490,21 @@ mod tests {
 
     /// Two triangles making the unit square in the XZ plane, uv = (x, z).
     fn square(uv_scale: f64) -> SurfaceMesh {
-        let p = [[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [1.0, 0.0, 1.0], [0.0, 0.0, 1.0]];
+        let p = [
+            [0.0, 0.0, 0.0],
+            [1.0, 0.0, 0.0],
+            [1.0, 0.0, 1.0],
+            [0.0, 0.0, 1.0],
+        ];
         SurfaceMesh {
             positions: p.iter().map(|&v| DVec3::from(v)).collect(),
             normals: vec![DVec3::Y; 4],
             triangles: vec![[0, 2, 1], [0, 3, 2]],
-            uvs: Some(p.iter().map(|v| DVec2::new(v[0], v[2]) * uv_scale).collect()),
+            uvs: Some(
+                p.iter()
+                    .map(|v| DVec2::new(v[0], v[2]) * uv_scale)
+                    .collect(),
+            ),
             material: 0,
             degenerate: 0,
             degenerate_triangles: Vec::new(),
@@ -523,7 +530,11 @@ mod tests {
         assert!(m.is_valid(3 * 8 + 4) && !m.is_valid(2 * 8 + 5));
         // A dilated texel maps to the nearest chart point, on its edge.
         let s = m.locate(DVec2::new(4.5, 4.5)).unwrap();
-        assert!((s.point - DVec3::new(1.0, 0.0, 0.875)).length() < 1e-12, "{}", s.point);
+        assert!(
+            (s.point - DVec3::new(1.0, 0.0, 0.875)).length() < 1e-12,
+            "{}",
+            s.point
+        );
         assert!(m.locate(DVec2::new(7.5, 0.5)).is_none());
         let m0 = TexelMap::from_uv(square(0.5), 8, 0).unwrap();
         assert_eq!(m0.stats().valid_texels, 16);
@@ -533,8 +544,12 @@ mod tests {
     fn bad_uv_layouts_are_errors() {
         let mut m = square(1.0);
         m.uvs = None;
-        assert!(TexelMap::from_uv(m, 8, 2).unwrap_err().contains("no texture coordinates"));
-        assert!(TexelMap::from_uv(square(1.5), 8, 2).unwrap_err().contains("outside [0, 1]"));
+        assert!(TexelMap::from_uv(m, 8, 2)
+            .unwrap_err()
+            .contains("no texture coordinates"));
+        assert!(TexelMap::from_uv(square(1.5), 8, 2)
+            .unwrap_err()
+            .contains("outside [0, 1]"));
         // Both triangles over the same chart: an overlap.
         let mut m = square(1.0);
         m.uvs.as_mut().unwrap()[3] = DVec2::new(1.0, 0.0);
@@ -551,7 +566,10 @@ mod tests {
     fn closest_point_is_on_the_nearest_edge() {
         let c = [DVec2::ZERO, DVec2::X, DVec2::Y];
         let (d2, w) = closest_on_triangle(&c, DVec2::new(2.0, 0.5));
-        assert!((d2 - 1.25).abs() < 1e-12 && w == [0.0, 1.0, 0.0], "{d2} {w:?}");
+        assert!(
+            (d2 - 1.25).abs() < 1e-12 && w == [0.0, 1.0, 0.0],
+            "{d2} {w:?}"
+        );
         let (d2, w) = closest_on_triangle(&c, DVec2::new(0.25, 0.25));
         assert!(d2 == 0.0 && (w[0] - 0.5).abs() < 1e-12);
     }

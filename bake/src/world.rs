@@ -36,11 +36,11 @@ use crate::scene::{CameraDesc, SceneDesc};
 use crate::texture::{SurfaceMesh, TexelMap};
 use glam::{DMat3, DVec2, DVec3, Vec3A};
 use ltm_codec::Parameterization;
-use std::sync::Arc;
 use obvhs::cwbvh::CwBvh;
 use obvhs::ray::{Ray, RayHit};
 use std::collections::HashMap;
 use std::path::PathBuf;
+use std::sync::Arc;
 
 /// Largest and smallest scene extent traced (the larger of the bounding
 /// box's diagonal and its largest coordinate magnitude): single precision
@@ -244,7 +244,10 @@ impl Scene {
                 let map = match t.parameterization {
                     Parameterization::Uv => TexelMap::from_uv(receiver, t.size, t.dilate),
                     Parameterization::Sphere => TexelMap::from_sphere(receiver, t.size),
-                    p => Err(format!("the {} parameterization is not supported", p.name())),
+                    p => Err(format!(
+                        "the {} parameterization is not supported",
+                        p.name()
+                    )),
                 }
                 .map_err(|message| BakeError::Parameterization {
                     path,
@@ -584,10 +587,11 @@ impl Placement {
                 .collect(),
             degenerate: tris.len() - kept.len(),
             triangles: kept,
-            uvs: raw
-                .uvs
-                .as_ref()
-                .map(|uv| uv.iter().map(|t| DVec2::new(t[0] as f64, t[1] as f64)).collect()),
+            uvs: raw.uvs.as_ref().map(|uv| {
+                uv.iter()
+                    .map(|t| DVec2::new(t[0] as f64, t[1] as f64))
+                    .collect()
+            }),
             material: self.material as usize,
         })
     }

@@ -13,15 +13,40 @@ use std::fmt::Write as _;
 pub fn icosphere(level: usize, r: f64, c: [f64; 3]) -> String {
     let t = (1.0 + 5f64.sqrt()) / 2.0;
     let mut v: Vec<[f64; 3]> = vec![
-        [-1.0, t, 0.0], [1.0, t, 0.0], [-1.0, -t, 0.0], [1.0, -t, 0.0],
-        [0.0, -1.0, t], [0.0, 1.0, t], [0.0, -1.0, -t], [0.0, 1.0, -t],
-        [t, 0.0, -1.0], [t, 0.0, 1.0], [-t, 0.0, -1.0], [-t, 0.0, 1.0],
+        [-1.0, t, 0.0],
+        [1.0, t, 0.0],
+        [-1.0, -t, 0.0],
+        [1.0, -t, 0.0],
+        [0.0, -1.0, t],
+        [0.0, 1.0, t],
+        [0.0, -1.0, -t],
+        [0.0, 1.0, -t],
+        [t, 0.0, -1.0],
+        [t, 0.0, 1.0],
+        [-t, 0.0, -1.0],
+        [-t, 0.0, 1.0],
     ];
     let mut f: Vec<[usize; 3]> = vec![
-        [0, 11, 5], [0, 5, 1], [0, 1, 7], [0, 7, 10], [0, 10, 11],
-        [1, 5, 9], [5, 11, 4], [11, 10, 2], [10, 7, 6], [7, 1, 8],
-        [3, 9, 4], [3, 4, 2], [3, 2, 6], [3, 6, 8], [3, 8, 9],
-        [4, 9, 5], [2, 4, 11], [6, 2, 10], [8, 6, 7], [9, 8, 1],
+        [0, 11, 5],
+        [0, 5, 1],
+        [0, 1, 7],
+        [0, 7, 10],
+        [0, 10, 11],
+        [1, 5, 9],
+        [5, 11, 4],
+        [11, 10, 2],
+        [10, 7, 6],
+        [7, 1, 8],
+        [3, 9, 4],
+        [3, 4, 2],
+        [3, 2, 6],
+        [3, 6, 8],
+        [3, 8, 9],
+        [4, 9, 5],
+        [2, 4, 11],
+        [6, 2, 10],
+        [8, 6, 7],
+        [9, 8, 1],
     ];
     for _ in 0..level {
         let mut mid = std::collections::HashMap::new();
@@ -35,14 +60,26 @@ pub fn icosphere(level: usize, r: f64, c: [f64; 3]) -> String {
                     v.len() - 1
                 });
             }
-            nf.extend([[tri[0], m[0], m[2]], [tri[1], m[1], m[0]], [tri[2], m[2], m[1]], m]);
+            nf.extend([
+                [tri[0], m[0], m[2]],
+                [tri[1], m[1], m[0]],
+                [tri[2], m[2], m[1]],
+                m,
+            ]);
         }
         f = nf;
     }
     let mut s = String::new();
     for p in &v {
         let l = (p[0] * p[0] + p[1] * p[1] + p[2] * p[2]).sqrt();
-        writeln!(s, "v {} {} {}", c[0] + r * p[0] / l, c[1] + r * p[1] / l, c[2] + r * p[2] / l).unwrap();
+        writeln!(
+            s,
+            "v {} {} {}",
+            c[0] + r * p[0] / l,
+            c[1] + r * p[1] / l,
+            c[2] + r * p[2] / l
+        )
+        .unwrap();
     }
     for t in &f {
         writeln!(s, "f {} {} {}", t[0] + 1, t[1] + 1, t[2] + 1).unwrap();
@@ -115,9 +152,16 @@ fn uv_plane_texels_see_the_whole_sky() {
         assert!((sum - 1.0).abs() < 0.02, "texel {k}: {sum}");
         assert_eq!(albedo[3 * k], 0.5);
         let p = surface.points()[k];
-        let (u, v) = (((k % 8) as f32 + 0.5) / 8.0, 1.0 - ((k / 8) as f32 + 0.5) / 8.0);
+        let (u, v) = (
+            ((k % 8) as f32 + 0.5) / 8.0,
+            1.0 - ((k / 8) as f32 + 0.5) / 8.0,
+        );
         let want = [u - 0.5, 0.0, 0.5 - v];
-        assert!((0..3).all(|i| (p.position[i] - want[i]).abs() < 1e-5), "{k}: {:?}", p.position);
+        assert!(
+            (0..3).all(|i| (p.position[i] - want[i]).abs() < 1e-5),
+            "{k}: {:?}",
+            p.position
+        );
         assert_eq!(p.normal, [0.0, 1.0, 0.0]);
     }
     assert_eq!(scene.texel_map().unwrap().stats().valid_texels, 64);
@@ -136,15 +180,22 @@ fn sphere_texels_of_a_convex_mesh_see_a_hemisphere() {
     assert_eq!(st.valid_texels, 256);
     assert_eq!(st.flipped_triangles, 0);
     let (mean, max) = (st.stretch_mean.unwrap(), st.stretch_max.unwrap());
-    assert!(mean >= 1.0 && mean < 1.2 && max < 2.0, "stretch {mean} {max}");
+    assert!(
+        mean >= 1.0 && mean < 1.2 && max < 2.0,
+        "stretch {mean} {max}"
+    );
     let surface = store.surface().unwrap();
     for k in 0..256 {
         let sum: f64 = store.row(k).iter().map(|&v| v as f64).sum();
         // Flat facets: the quadrature's cos over texels is approximate.
         assert!((sum - 1.0).abs() < 0.03, "texel {k}: {sum}");
         let p = surface.points()[k];
-        let r = (p.position[0].powi(2) + (p.position[1] - 0.6).powi(2) + p.position[2].powi(2)).sqrt();
-        assert!(r > 0.5 * 0.79 && r <= 0.5 + 1e-5, "texel {k} off the mesh: r = {r}");
+        let r =
+            (p.position[0].powi(2) + (p.position[1] - 0.6).powi(2) + p.position[2].powi(2)).sqrt();
+        assert!(
+            r > 0.5 * 0.79 && r <= 0.5 + 1e-5,
+            "texel {k} off the mesh: r = {r}"
+        );
     }
     let quad = "[[quads]]\ncenter = [0.0, 0.0, 0.0]\nsize = [8.0, 8.0]\nmaterial = \"grey\"\n";
     let (_s, shadowed, _d) = baked(
@@ -169,12 +220,21 @@ fn bad_texture_inputs_are_clear_errors() {
     };
     let e = case("ico.obj", "mesh = 0\nsize = 8\nparameterization = \"uv\"");
     assert!(e.contains("no texture coordinates"), "{e}");
-    let e = case("plane.obj", "mesh = 0\nsize = 8\nparameterization = \"sphere\"");
+    let e = case(
+        "plane.obj",
+        "mesh = 0\nsize = 8\nparameterization = \"sphere\"",
+    );
     assert!(e.contains("open") && e.contains("boundary edges"), "{e}");
-    let e = case("ico.obj", "mesh = 1\nsize = 8\nparameterization = \"sphere\"");
+    let e = case(
+        "ico.obj",
+        "mesh = 1\nsize = 8\nparameterization = \"sphere\"",
+    );
     assert!(e.contains("texture.mesh") && e.contains("0..1"), "{e}");
     for size in ["0", "4097"] {
-        let e = case("ico.obj", &format!("mesh = 0\nsize = {size}\nparameterization = \"sphere\""));
+        let e = case(
+            "ico.obj",
+            &format!("mesh = 0\nsize = {size}\nparameterization = \"sphere\""),
+        );
         assert!(e.contains("texture.size") && e.contains("4096"), "{e}");
     }
     let e = case("ico.obj", "mesh = 0\nsize = 8\nparameterization = \"cube\"");
@@ -189,7 +249,13 @@ fn bad_texture_inputs_are_clear_errors() {
     let (_d, r) = build(&toml, files);
     let e = err(r).1;
     assert!(e.contains("glossy") && e.contains("diffuse_only"), "{e}");
-    let (_d, r) = build(&toml.replace("parameterization = \"sphere\"", "parameterization = \"sphere\"\ndiffuse_only = true"), files);
+    let (_d, r) = build(
+        &toml.replace(
+            "parameterization = \"sphere\"",
+            "parameterization = \"sphere\"\ndiffuse_only = true",
+        ),
+        files,
+    );
     assert_eq!(r.unwrap().channels(), 1);
 }
 
@@ -203,7 +269,14 @@ fn non_genus_zero_meshes_are_refused() {
         for j in 0..m {
             let (a, b) = (i as f64 / n as f64 * 6.283, j as f64 / m as f64 * 6.283);
             let r = 1.0 + 0.3 * b.cos();
-            writeln!(s, "v {} {} {}", r * a.cos(), 0.3 * b.sin() + 1.0, r * a.sin()).unwrap();
+            writeln!(
+                s,
+                "v {} {} {}",
+                r * a.cos(),
+                0.3 * b.sin() + 1.0,
+                r * a.sin()
+            )
+            .unwrap();
         }
     }
     for i in 0..n {
@@ -214,17 +287,30 @@ fn non_genus_zero_meshes_are_refused() {
         }
     }
     let t = "[texture]\nmesh = 0\nsize = 8\nparameterization = \"sphere\"\n";
-    let (_d, r) = build(&texture_scene("torus.obj", t), &[("torus.obj", s.as_bytes())]);
+    let (_d, r) = build(
+        &texture_scene("torus.obj", t),
+        &[("torus.obj", s.as_bytes())],
+    );
     let e = err(r).1;
-    assert!(e.contains("Euler characteristic") && e.contains("= 0") && e.contains("genus 1"), "{e}");
-    let two = icosphere(1, 0.3, [0.0, 0.5, 0.0]) + &icosphere(1, 0.3, [1.0, 0.5, 0.0]).lines().map(|l| {
-        if let Some(rest) = l.strip_prefix("f ") {
-            let ids: Vec<usize> = rest.split(' ').map(|x| x.parse::<usize>().unwrap() + 42).collect();
-            format!("f {} {} {}\n", ids[0], ids[1], ids[2])
-        } else {
-            format!("{l}\n")
-        }
-    }).collect::<String>();
+    assert!(
+        e.contains("Euler characteristic") && e.contains("= 0") && e.contains("genus 1"),
+        "{e}"
+    );
+    let two = icosphere(1, 0.3, [0.0, 0.5, 0.0])
+        + &icosphere(1, 0.3, [1.0, 0.5, 0.0])
+            .lines()
+            .map(|l| {
+                if let Some(rest) = l.strip_prefix("f ") {
+                    let ids: Vec<usize> = rest
+                        .split(' ')
+                        .map(|x| x.parse::<usize>().unwrap() + 42)
+                        .collect();
+                    format!("f {} {} {}\n", ids[0], ids[1], ids[2])
+                } else {
+                    format!("{l}\n")
+                }
+            })
+            .collect::<String>();
     let (_d, r) = build(&texture_scene("two.obj", t), &[("two.obj", two.as_bytes())]);
     let e = err(r).1;
     assert!(e.contains("2 connected component"), "{e}");

@@ -18,6 +18,7 @@
 
 use crate::bytes::{Reader, Writer};
 use crate::dims::Dims;
+use crate::eigen::{PcaModel, QuantizedMatrix};
 use crate::empty::EmptyRows;
 use crate::error::{Error, Result};
 use crate::limits::Limits;
@@ -37,6 +38,8 @@ pub const MAGIC: [u8; 8] = *b"\x89LTM\r\n\x1a\n";
 /// adds the empty-row mask ([`FEATURE_EMPTY_ROWS`]) and the row layout with
 /// per-row surface data ([`FEATURE_SURFACE`]). A version-1 file has neither.
 pub const VERSION: u32 = 2;
+/// The oldest format version this build reads.
+pub const MIN_VERSION: u32 = 1;
 /// Feature flag: an RGB albedo image is stored (chunk ALBD).
 pub const FEATURE_ALBEDO: u32 = 1;
 /// Feature flag (version 2): the mask of all-zero rows is stored (chunk
@@ -67,6 +70,11 @@ pub enum Mode {
     /// Each column to the depth that codes it best (Cheslack-Postava et al. 2007).
     #[serde(rename = "adaptive")]
     Adaptive,
+    /// Mean-centred principal components of the rows (Eigentransport):
+    /// chunks `PCAM`, `PCAB`, `PCAC` instead of `COLS` and `DATA`
+    /// (format version 2).
+    #[serde(rename = "pca")]
+    Pca,
 }
 
 impl Mode {
@@ -77,6 +85,7 @@ impl Mode {
             Mode::TwoD => "2d",
             Mode::FourD => "4d",
             Mode::Adaptive => "adaptive",
+            Mode::Pca => "pca",
         }
     }
     fn code(self) -> u8 {
@@ -84,10 +93,15 @@ impl Mode {
             Mode::TwoD => 0,
             Mode::FourD => 1,
             Mode::Adaptive => 2,
+            Mode::Pca => 3,
         }
     }
+    /// True for the wavelet modes (columns in `COLS`/`DATA`).
+    pub fn is_wavelet(self) -> bool {
+        self != Mode::Pca
+    }
     fn from_code(c: u8) -> Option<Mode> {
-        [Mode::TwoD, Mode::FourD, Mode::Adaptive]
+        [Mode::TwoD, Mode::FourD, Mode::Adaptive, Mode::Pca]
             .into_iter()
             .find(|m| m.code() == c)
     }
@@ -100,7 +114,10 @@ impl std::str::FromStr for Mode {
             "2d" => Ok(Mode::TwoD),
             "4d" => Ok(Mode::FourD),
             "adaptive" => Ok(Mode::Adaptive),
-            _ => Err(format!("unknown mode '{s}' (expected 2d, 4d or adaptive)")),
+            "pca" => Ok(Mode::Pca),
+            _ => Err(format!(
+                "unknown mode '{s}' (expected 2d, 4d, adaptive or pca)"
+            )),
         }
     }
 }
@@ -161,7 +178,7 @@ impl Meta {
         dims.validate()?;
         let mode = r.u8()?;
         let mode = Mode::from_code(mode)
-            .ok_or_else(|| Error::range("mode", mode, "0 (2d), 1 (4d) or 2 (adaptive)"))?;
+            .ok_or_else(|| Error::range("mode", mode, "0 (2d), 1 (4d), 2 (adaptive) or 3 (pca)"))?;
         let filter =
             |c: u8| Filter::from_code(c).ok_or_else(|| Error::range("filter code", c, "0..=5"));
         let row_filter = filter(r.u8()?)?;
@@ -181,6 +198,15 @@ impl Meta {
         let target_error = r.f32()?;
         let achieved_error = r.f32()?;
         let terms = r.u32()?;
+        if mode == Mode::Pca {
+            if (row_filter, col_filter) != (Filter::Haar, Filter::Haar) {
+                return Err(Error::corrupt(
+                    "META chunk",
+                    "filter codes of a pca file must be 0",
+                ));
+            }
+            crate::eigen::check_rank(terms as usize, dims)?;
+        }
         let norm = f64::from_le_bytes(r.take(8)?.try_into().expect("8 bytes"));
         if !norm.is_finite() || norm < 0.0 {
             return Err(Error::range("matrix norm", norm, "finite and >= 0"));
@@ -449,6 +475,12 @@ impl LtmWriter {
         extra: OptionalChunks<'_>,
     ) -> Result<LtmWriter> {
         meta.dims.validate()?;
+        if !meta.mode.is_wavelet() {
+            return Err(Error::Invalid(format!(
+                "the column writer writes wavelet modes, not {} (see ltm_codec::eigen::compress_pca)",
+                meta.mode.name()
+            )));
+        }
         if let Some(s) = extra.surface {
             s.check_rows(&meta.dims)?;
         } else if meta.dims.rows.is_texture() {
@@ -483,10 +515,8 @@ impl LtmWriter {
         };
         let file = AtomicFile::create(path)?;
         let tmp = file.tmp_path().to_path_buf();
-        let chunks = 3
-            + albedo.is_some() as u64
-            + empty_rows.is_some() as u64
-            + surface.is_some() as u64;
+        let chunks =
+            3 + albedo.is_some() as u64 + empty_rows.is_some() as u64 + surface.is_some() as u64;
         let head_len = HEADER_LEN as u64 + DIR_ENTRY_LEN as u64 * chunks + 4;
         let cols_len = (COLUMN_ENTRY_LEN * meta.dims.lights()) as u64;
         let optional = |c: &Option<Vec<u8>>| c.as_ref().map_or(0, |a| a.len() as u64);
@@ -611,25 +641,10 @@ impl LtmWriter {
             len: self.data_len,
             crc: 0,
         });
-        let mut head = Writer::default();
-        head.bytes.extend_from_slice(&MAGIC);
-        head.u32(VERSION);
-        head.u32(features);
-        head.u32(dir.len() as u32);
-        head.u32(0);
-        for d in &dir {
-            head.bytes.extend_from_slice(&d.tag);
-            head.u32(0);
-            head.u64(d.offset);
-            head.u64(d.len);
-            head.u32(d.crc);
-            head.u32(0);
-        }
-        let crc = crc32fast::hash(&head.bytes);
-        head.u32(crc);
+        let head = encode_head(features, &dir);
         let io = |e| Error::io(&self.tmp, e);
         self.file.seek(SeekFrom::Start(0)).map_err(io)?;
-        self.file.write_all(&head.bytes).map_err(io)?;
+        self.file.write_all(&head).map_err(io)?;
         for (_, bytes) in &chunks {
             self.file.write_all(bytes).map_err(io)?;
         }
@@ -673,8 +688,11 @@ pub struct LtmIndex {
     pub surface: Option<Surface>,
     /// The mask of all-zero rows (chunk EMPT), if stored.
     pub empty_rows: Option<EmptyRows>,
-    /// Where the column payloads (chunk DATA) lie in the file.
+    /// Where the column payloads (chunk DATA) lie in the file (empty in
+    /// PCA files).
     pub data: std::ops::Range<usize>,
+    /// The decoded PCA model of a `pca` file (chunks PCAM, PCAB, PCAC).
+    pub pca: Option<PcaModel>,
 }
 
 /// An opened, validated `.ltm` file (memory-mapped, or held in memory).
@@ -723,11 +741,10 @@ impl LtmFile {
     /// Parses and validates a whole file held in memory: header, directory,
     /// chunk CRCs, metadata and column table (not the column payloads).
     pub fn parse(bytes: &[u8], limits: &Limits) -> Result<LtmIndex> {
-        let (features, dir) = read_directory(bytes)?;
+        let (version, features, dir) = read_directory(bytes)?;
         let missing =
             |t: &str| Error::corrupt("chunk directory", format!("required chunk {t} is missing"));
-        let mut meta =
-            Meta::decode(chunk(bytes, &dir, b"META")?.ok_or_else(|| missing("META"))?)?;
+        let mut meta = Meta::decode(chunk(bytes, &dir, b"META")?.ok_or_else(|| missing("META"))?)?;
         let albedo = read_albedo(
             chunk(bytes, &dir, b"ALBD")?,
             features & FEATURE_ALBEDO != 0,
@@ -756,6 +773,19 @@ impl LtmFile {
             features & FEATURE_EMPTY_ROWS != 0,
             &meta.dims,
         )?;
+        check_mode_chunks(version, &meta, &dir)?;
+        if meta.mode == Mode::Pca {
+            let pca = read_pca_chunks(bytes, &dir, &meta, limits)?;
+            return Ok(LtmIndex {
+                meta,
+                columns: Vec::new(),
+                albedo,
+                surface,
+                empty_rows,
+                data: 0..0,
+                pca: Some(pca),
+            });
+        }
         let cols = chunk(bytes, &dir, b"COLS")?.ok_or_else(|| missing("COLS"))?;
         let data_dir = dir
             .iter()
@@ -770,6 +800,7 @@ impl LtmFile {
             surface,
             empty_rows,
             data,
+            pca: None,
         })
     }
 
@@ -778,7 +809,13 @@ impl LtmFile {
         &self.index.meta
     }
 
-    /// The column table.
+    /// The PCA model of a `pca` file (decoded and checked at open), `None`
+    /// for the wavelet modes.
+    pub fn pca(&self) -> Option<&PcaModel> {
+        self.index.pca.as_ref()
+    }
+
+    /// The column table (empty in a `pca` file).
     pub fn columns(&self) -> &[ColumnEntry] {
         &self.index.columns
     }
@@ -822,13 +859,13 @@ impl LtmFile {
 /// known feature flags, the directory CRC, and chunks with known unique
 /// tags, in range, sorted and non-overlapping. Returns the feature flags
 /// and the directory.
-fn read_directory(bytes: &[u8]) -> Result<(u32, Vec<DirEntry>)> {
+fn read_directory(bytes: &[u8]) -> Result<(u32, u32, Vec<DirEntry>)> {
     let mut r = Reader::new(bytes, ".ltm header");
     if r.take(8)? != MAGIC {
         return Err(Error::corrupt(".ltm header", "bad magic bytes"));
     }
     let version = r.u32()?;
-    if !(1..=VERSION).contains(&version) {
+    if !(MIN_VERSION..=VERSION).contains(&version) {
         return Err(Error::Version {
             what: ".ltm",
             found: version,
@@ -874,7 +911,7 @@ fn read_directory(bytes: &[u8]) -> Result<(u32, Vec<DirEntry>)> {
         });
     }
     check_directory(&dir, r.pos() as u64, bytes.len())?;
-    Ok((features, dir))
+    Ok((version, features, dir))
 }
 
 /// Directory entries: known unique tags, in range, sorted, non-overlapping,
@@ -883,7 +920,10 @@ fn check_directory(dir: &[DirEntry], start: u64, file_len: usize) -> Result<()> 
     let mut end = start;
     for d in dir {
         let tag = String::from_utf8_lossy(&d.tag);
-        if !matches!(&d.tag, b"META" | b"ALBD" | b"EMPT" | b"SURF" | b"COLS" | b"DATA") {
+        if !matches!(
+            &d.tag,
+            b"META" | b"ALBD" | b"EMPT" | b"SURF" | b"COLS" | b"DATA" | b"PCAM" | b"PCAB" | b"PCAC"
+        ) {
             return Err(Error::corrupt(
                 "chunk directory",
                 format!("unknown chunk tag {tag:?}"),
@@ -1095,6 +1135,9 @@ fn check_column_entry(
 /// it. Returns the nonzero count.
 pub fn validate_bytes(bytes: &[u8], limits: &Limits) -> Result<u64> {
     let file = LtmFile::from_bytes(bytes, limits)?;
+    if let Some(m) = file.pca() {
+        return Ok((m.rank() * (m.dims().pixels() + m.dims().row_len())) as u64);
+    }
     let mut nnz = 0;
     for j in 0..file.columns().len() {
         nnz += file.column(j)?.indices.len() as u64;
@@ -1220,4 +1263,170 @@ pub(crate) fn read_column(
         }
     };
     Ok(col)
+}
+
+/// The chunks a mode needs: wavelet files hold `COLS` and `DATA` and no PCA
+/// chunk; `pca` files (version 2 and later) hold `PCAM`, `PCAB`, `PCAC` and
+/// neither `COLS` nor `DATA`.
+fn check_mode_chunks(version: u32, meta: &Meta, dir: &[DirEntry]) -> Result<()> {
+    let has = |t: &[u8; 4]| dir.iter().any(|d| &d.tag == t);
+    let pca = meta.mode == Mode::Pca;
+    if pca && version < 2 {
+        return Err(Error::corrupt(
+            ".ltm header",
+            format!("mode pca in a version-{version} file (pca needs version 2)"),
+        ));
+    }
+    let (need, refuse): (&[&[u8; 4]], &[&[u8; 4]]) = if pca {
+        (&[b"PCAM", b"PCAB", b"PCAC"], &[b"COLS", b"DATA"])
+    } else {
+        (&[b"COLS", b"DATA"], &[b"PCAM", b"PCAB", b"PCAC"])
+    };
+    for t in need {
+        if !has(t) {
+            return Err(Error::corrupt(
+                "chunk directory",
+                format!(
+                    "required chunk {} is missing in a {} file",
+                    String::from_utf8_lossy(*t),
+                    meta.mode.name()
+                ),
+            ));
+        }
+    }
+    for t in refuse {
+        if has(t) {
+            return Err(Error::corrupt(
+                "chunk directory",
+                format!(
+                    "chunk {} in a {} file",
+                    String::from_utf8_lossy(*t),
+                    meta.mode.name()
+                ),
+            ));
+        }
+    }
+    Ok(())
+}
+
+/// Decodes and checks the PCA chunks against the metadata (`K` = `terms`,
+/// already checked against the dimensions) and `limits`.
+fn read_pca_chunks(
+    bytes: &[u8],
+    dir: &[DirEntry],
+    meta: &Meta,
+    limits: &Limits,
+) -> Result<PcaModel> {
+    let dims = meta.dims;
+    let (p, n, k) = (dims.pixels(), dims.row_len(), meta.terms as usize);
+    let get = |t: &[u8; 4]| -> Result<&[u8]> {
+        chunk(bytes, dir, t)?
+            .ok_or_else(|| Error::corrupt("chunk directory", "a PCA chunk is missing"))
+    };
+    let mean_bytes = get(b"PCAM")?;
+    if mean_bytes.len() != 4 * n {
+        return Err(Error::corrupt(
+            "PCAM chunk",
+            format!(
+                "{} bytes, the mean row needs {} ({n} values)",
+                mean_bytes.len(),
+                4 * n
+            ),
+        ));
+    }
+    limits.check_alloc("PCA mean row", n as u64, 4)?;
+    let mean: Vec<f32> = mean_bytes
+        .chunks_exact(4)
+        .map(|c| f32::from_le_bytes(c.try_into().expect("4 bytes")))
+        .collect();
+    if let Some(i) = mean
+        .iter()
+        .position(|v| !v.is_finite() || v.abs() > crate::eigen::MAX_SCALE)
+    {
+        return Err(Error::corrupt(
+            "PCAM chunk",
+            format!(
+                "mean value {i} is {} (valid: finite, at most 2^100)",
+                mean[i]
+            ),
+        ));
+    }
+    // The model also keeps the basis in f64.
+    limits.check_alloc("PCA basis", (k * n) as u64, 8)?;
+    let basis = QuantizedMatrix::decode(
+        get(b"PCAB")?,
+        "PCAB chunk",
+        (k, n, dims.channels as usize),
+        meta.bits,
+        limits,
+    )?;
+    let coefficients =
+        QuantizedMatrix::decode(get(b"PCAC")?, "PCAC chunk", (k, p, 1), meta.bits, limits)?;
+    PcaModel::new(dims, mean, basis, coefficients)
+}
+
+/// Writes a `pca` file (version 2): META, ALBD (when given), PCAM, PCAB,
+/// PCAC, atomically. Returns the file size.
+pub(crate) fn write_pca_file(
+    path: &Path,
+    meta: Meta,
+    albedo: Option<&[f32]>,
+    model: &PcaModel,
+    zstd_level: i32,
+) -> Result<u64> {
+    let mut chunks: Vec<([u8; 4], Vec<u8>)> = vec![(*b"META", meta.encode())];
+    if let Some(a) = albedo {
+        chunks.push((*b"ALBD", bytemuck::cast_slice::<f32, u8>(a).to_vec()));
+    }
+    let mean: Vec<u8> = model.mean().iter().flat_map(|v| v.to_le_bytes()).collect();
+    chunks.push((*b"PCAM", mean));
+    chunks.push((*b"PCAB", model.basis().encode(zstd_level)?));
+    chunks.push((*b"PCAC", model.coefficients().encode(zstd_level)?));
+    let head_len = HEADER_LEN + DIR_ENTRY_LEN * chunks.len() + 4;
+    let mut dir = Vec::new();
+    let mut offset = head_len as u64;
+    for (tag, bytes) in &chunks {
+        dir.push(DirEntry {
+            tag: *tag,
+            offset,
+            len: bytes.len() as u64,
+            crc: crc32fast::hash(bytes),
+        });
+        offset += bytes.len() as u64;
+    }
+    let features = if albedo.is_some() { FEATURE_ALBEDO } else { 0 };
+    let head = encode_head(features, &dir);
+    let file = AtomicFile::create(path)?;
+    let tmp = file.tmp_path().to_path_buf();
+    let mut w = BufWriter::with_capacity(1 << 20, file);
+    let io = |e| Error::io(&tmp, e);
+    w.write_all(&head).map_err(io)?;
+    for (_, bytes) in &chunks {
+        w.write_all(bytes).map_err(io)?;
+    }
+    w.into_inner()
+        .map_err(|e| Error::io(&tmp, e.into_error()))?
+        .commit()?;
+    Ok(offset)
+}
+
+/// The header and chunk directory with its CRC.
+fn encode_head(features: u32, dir: &[DirEntry]) -> Vec<u8> {
+    let mut head = Writer::default();
+    head.bytes.extend_from_slice(&MAGIC);
+    head.u32(VERSION);
+    head.u32(features);
+    head.u32(dir.len() as u32);
+    head.u32(0);
+    for d in dir {
+        head.bytes.extend_from_slice(&d.tag);
+        head.u32(0);
+        head.u64(d.offset);
+        head.u64(d.len);
+        head.u32(d.crc);
+        head.u32(0);
+    }
+    let crc = crc32fast::hash(&head.bytes);
+    head.u32(crc);
+    head.bytes
 }

@@ -342,9 +342,24 @@ mod tests {
         assert!(d.rows.is_texture() && d.validate().is_ok());
         let back = RowLayout::from_codes(d.rows.code(), 2, 8, 8).unwrap();
         assert_eq!(back, d.rows);
-        assert_eq!(RowLayout::from_codes(0, 0, 5, 3).unwrap(), RowLayout::Image { width: 5, height: 3 });
-        for (l, p, w, h) in [(1, 2, 8, 4), (1, 0, 8, 8), (1, 3, 8, 8), (0, 1, 8, 8), (2, 0, 8, 8)] {
-            assert!(RowLayout::from_codes(l, p, w, h).is_err(), "{l} {p} {w} {h}");
+        assert_eq!(
+            RowLayout::from_codes(0, 0, 5, 3).unwrap(),
+            RowLayout::Image {
+                width: 5,
+                height: 3
+            }
+        );
+        for (l, p, w, h) in [
+            (1, 2, 8, 4),
+            (1, 0, 8, 8),
+            (1, 3, 8, 8),
+            (0, 1, 8, 8),
+            (2, 0, 8, 8),
+        ] {
+            assert!(
+                RowLayout::from_codes(l, p, w, h).is_err(),
+                "{l} {p} {w} {h}"
+            );
         }
         assert_eq!("uv".parse::<Parameterization>(), Ok(Parameterization::Uv));
         assert!("cube".parse::<Parameterization>().is_err());

@@ -17,6 +17,7 @@ pub mod container;
 pub mod cubemap;
 mod decode;
 mod dims;
+pub mod eigen;
 mod empty;
 mod error;
 mod fileio;
@@ -46,6 +47,7 @@ pub use dims::{
     Dims, LightBasis, Parameterization, RowLayout, MAX_FACE_RES, MAX_PIXELS, MAX_SIDE,
     MAX_TEXTURE_SIZE,
 };
+pub use eigen::{compress_pca, PcaModel, PcaOptions, PcaStats};
 pub use empty::EmptyRows;
 pub use error::{Error, Result};
 pub use limits::Limits;

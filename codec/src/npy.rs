@@ -355,6 +355,25 @@ pub fn decode_matrix(file: &LtmFile, limits: &Limits) -> Result<Vec<f32>> {
     let meta = file.meta();
     let dims = meta.dims;
     limits.check_alloc("dense decoded matrix", dims.raw_bytes() / 4, 4)?;
+    if let Some(model) = file.pca() {
+        // Reconstructed in f64 in blocks of rows, rounded to f32.
+        let n = dims.row_len();
+        let mut dense = Vec::with_capacity(dims.pixels() * n);
+        let mut block = Vec::new();
+        let step = ((1usize << 22) / n).max(1);
+        for first in (0..dims.pixels()).step_by(step) {
+            let count = step.min(dims.pixels() - first);
+            model.reconstruct_rows(first, count, &mut block);
+            dense.extend(block.iter().map(|&v| v as f32));
+        }
+        if let Some(i) = dense.iter().position(|v| !v.is_finite()) {
+            return Err(Error::corrupt(
+                "PCA file",
+                format!("decoded value {i} exceeds the f32 range"),
+            ));
+        }
+        return Ok(dense);
+    }
     let (p, m, c) = (dims.pixels(), dims.lights(), dims.channels as usize);
     let n = dims.face_res() as usize;
     let decoder = ColumnDecoder::for_file(file);

@@ -352,9 +352,13 @@ impl RawHeader {
             0
         };
         if surface_offset != layout.surface_offset {
-            return Err(Error::corrupt("raw store header", format!(
-                "surface_offset {surface_offset} disagrees with the dimensions (expected {})",
-                layout.surface_offset)));
+            return Err(Error::corrupt(
+                "raw store header",
+                format!(
+                    "surface_offset {surface_offset} disagrees with the dimensions (expected {})",
+                    layout.surface_offset
+                ),
+            ));
         }
         if block_count as u64 != layout.block_count
             || data_offset != layout.data_offset
@@ -1395,8 +1399,15 @@ mod tests {
             assert!(e.contains("surface"), "{e}");
         }
         let wrong = surface(7);
-        assert!(RawWriter::create_with_surface(&dir.path().join("w.raw"), plain, Some(&wrong)).is_err());
-        assert!(RawWriter::create_with_surface(&dir.path().join("w.raw"), header(200), Some(&surface(30))).is_err());
+        assert!(
+            RawWriter::create_with_surface(&dir.path().join("w.raw"), plain, Some(&wrong)).is_err()
+        );
+        assert!(RawWriter::create_with_surface(
+            &dir.path().join("w.raw"),
+            header(200),
+            Some(&surface(30))
+        )
+        .is_err());
         let no_surface = RawHeader {
             has_surface: false,
             ..plain

@@ -52,14 +52,24 @@ impl SurfacePoint {
     }
 
     fn check(&self, row: usize) -> Result<()> {
-        let bad = |detail: String| Err(Error::corrupt("surface data", format!("row {row}: {detail}")));
+        let bad = |detail: String| {
+            Err(Error::corrupt(
+                "surface data",
+                format!("row {row}: {detail}"),
+            ))
+        };
         if !self.valid {
             if self.position != [0.0; 3] || self.normal != [0.0; 3] {
                 return bad("an invalid row must have zero position and normal".into());
             }
             return Ok(());
         }
-        if self.position.iter().chain(&self.normal).any(|v| !v.is_finite()) {
+        if self
+            .position
+            .iter()
+            .chain(&self.normal)
+            .any(|v| !v.is_finite())
+        {
             return bad(format!(
                 "position {:?} or normal {:?} is not finite",
                 self.position, self.normal
@@ -207,15 +217,22 @@ impl Surface {
         if bytes.len() < SURF_HEADER_LEN {
             return Err(Error::corrupt(
                 "SURF chunk",
-                format!("{} bytes, shorter than its {SURF_HEADER_LEN}-byte header", bytes.len()),
+                format!(
+                    "{} bytes, shorter than its {SURF_HEADER_LEN}-byte header",
+                    bytes.len()
+                ),
             ));
         }
-        let word = |i: usize| u32::from_le_bytes(bytes[4 * i..4 * i + 4].try_into().expect("4 bytes"));
-        let rows =
-            RowLayout::from_codes(word(0), word(1), dims.width(), dims.height())?;
+        let word =
+            |i: usize| u32::from_le_bytes(bytes[4 * i..4 * i + 4].try_into().expect("4 bytes"));
+        let rows = RowLayout::from_codes(word(0), word(1), dims.width(), dims.height())?;
         let (count, reserved) = (word(2) as usize, word(3));
         if reserved != 0 {
-            return Err(Error::range("SURF reserved field", format!("{reserved:#x}"), "0"));
+            return Err(Error::range(
+                "SURF reserved field",
+                format!("{reserved:#x}"),
+                "0",
+            ));
         }
         if count != dims.pixels() {
             return Err(Error::range(
@@ -257,7 +274,8 @@ mod tests {
         let (rows, back) = Surface::decode_chunk(&bytes, &image, &Limits::default()).unwrap();
         assert_eq!((rows, &back), (dims.rows, &s));
         let (rows, _) =
-            Surface::decode_chunk(&s.encode_chunk(&image.rows), &image, &Limits::default()).unwrap();
+            Surface::decode_chunk(&s.encode_chunk(&image.rows), &image, &Limits::default())
+                .unwrap();
         assert_eq!(rows, image.rows);
     }
 
@@ -285,7 +303,9 @@ mod tests {
         patch(16 + 12, 0.5f32.to_bits(), "length");
         patch(16 + 28, 1.0f32.to_bits(), "zero position");
         for (bytes, why) in cases {
-            let e = Surface::decode_chunk(&bytes, &dims, &limits).unwrap_err().to_string();
+            let e = Surface::decode_chunk(&bytes, &dims, &limits)
+                .unwrap_err()
+                .to_string();
             assert!(e.contains(why), "{why}: {e}");
         }
         let e = Surface::decode_chunk(&good, &dims, &Limits::with_max_alloc(100))

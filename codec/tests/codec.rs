@@ -538,7 +538,7 @@ fn stages_run_per_column_range_give_the_same_file() {
             coder.meta().clone(),
             None,
             ltm_codec::container::OptionalChunks {
-                surface: t.raw().surface(),
+                surface: None,
                 empty_rows: Some(t.empty_rows()),
             },
         )

@@ -107,10 +107,16 @@ fn version_1_files_are_still_read() {
     for j in 0..g.meta().dims.lights() {
         assert_eq!(f.column(j).unwrap(), g.column(j).unwrap());
     }
-    let (out, _) = compressed(dir.path(), Dims::texture(8, Parameterization::Uv, 2, 1), true);
+    let (out, _) = compressed(
+        dir.path(),
+        Dims::texture(8, Parameterization::Uv, 2, 1),
+        true,
+    );
     let mut b = std::fs::read(&out).unwrap();
     set_version(&mut b, 1);
-    let e = validate_bytes(&b, &Limits::default()).unwrap_err().to_string();
+    let e = validate_bytes(&b, &Limits::default())
+        .unwrap_err()
+        .to_string();
     assert!(e.contains("feature flags"), "{e}");
     set_version(&mut b, 3);
     assert!(validate_bytes(&b, &Limits::default()).is_err());
@@ -133,7 +139,11 @@ fn surf_chunk(bytes: &[u8]) -> (usize, usize, usize) {
 #[test]
 fn hostile_surface_chunks_are_errors() {
     let dir = tempfile::tempdir().unwrap();
-    let (out, _) = compressed(dir.path(), Dims::texture(8, Parameterization::Sphere, 2, 1), true);
+    let (out, _) = compressed(
+        dir.path(),
+        Dims::texture(8, Parameterization::Sphere, 2, 1),
+        true,
+    );
     let good = std::fs::read(&out).unwrap();
     let limits = Limits::default();
     let (off, len, _) = surf_chunk(&good);
@@ -166,7 +176,10 @@ fn hostile_surface_chunks_are_errors() {
     b[12..16].copy_from_slice(&0u32.to_le_bytes());
     ltm_codec::container::repair_checksums(&mut b);
     let e = validate_bytes(&b, &limits).unwrap_err().to_string();
-    assert!(e.contains("SURF chunk and surface feature flag disagree"), "{e}");
+    assert!(
+        e.contains("SURF chunk and surface feature flag disagree"),
+        "{e}"
+    );
     // A limit below the surface data's size is refused before allocating.
     let e = LtmFile::from_bytes(good.clone(), &Limits::with_max_alloc(1000))
         .err()

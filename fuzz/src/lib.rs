@@ -16,6 +16,13 @@ pub fn decode_through_public_api(bytes: &[u8]) {
         return;
     };
     let dims = file.meta().dims;
+    if let Some(model) = file.pca() {
+        // A pca file: reconstruct its first rows (every value must be
+        // finite or the decode an error, never a panic).
+        let mut rows = Vec::new();
+        model.reconstruct_rows(0, dims.pixels().min(16), &mut rows);
+        return;
+    }
     let decoder = ColumnDecoder::for_file(&file);
     let small = dims.pixels() <= 1 << 12;
     let mut plane = vec![0.0f32; if small { dims.pixels() } else { 0 }];
@@ -49,4 +56,28 @@ pub fn read_raw_store(bytes: &[u8]) {
         let _ = (raw.row(p).len(), raw.is_zero_row(p));
     }
     let _ = raw.albedo();
+}
+
+/// A valid `pca` file of a small matrix (10×7 pixels, n = 2, RGB, rank 4),
+/// made once per process, for the `pca_decode` target to mutate.
+pub fn small_pca_file() -> Option<Vec<u8>> {
+    static FILE: std::sync::OnceLock<Option<Vec<u8>>> = std::sync::OnceLock::new();
+    FILE.get_or_init(|| {
+        let dir = tempfile::tempdir().ok()?;
+        let dims = ltm_codec::Dims::image(10, 7, 2, 3);
+        let t: Vec<f32> = (0..dims.pixels() * dims.row_len())
+            .map(|i| ((i % 37) as f32 * 0.3).sin().abs() * 1e-2)
+            .collect();
+        let header = ltm_codec::RawHeader::new(dims, false, 1 << 16);
+        let raw = ltm_codec::RawWriter::write_dense(&dir.path().join("t.raw"), header, &t, None).ok()?;
+        let raw = ltm_codec::RawStore::open(&raw).ok()?;
+        let out = dir.path().join("t.ltm");
+        let opts = ltm_codec::PcaOptions {
+            rank: Some(4),
+            ..Default::default()
+        };
+        ltm_codec::compress_pca(&raw, &out, &opts, &|_, _| {}).ok()?;
+        std::fs::read(&out).ok()
+    })
+    .clone()
 }

@@ -159,6 +159,17 @@ impl Relight for BasisRelighter {
             Fit::Sh(p) => p.max_order(),
         }
     }
+    fn held_bytes(&self) -> usize {
+        let fit = match &self.fit {
+            Fit::Pca {
+                coefficients,
+                vectors,
+                ..
+            } => 8 * (coefficients.len() + vectors.len()),
+            Fit::Sh(sh) => 8 * (sh.coefficients().len() + sh.weighted_basis().len()),
+        };
+        fit + self.albedo.as_ref().map_or(0, |a| 4 * a.len())
+    }
 
     fn frame(&self) -> Frame {
         let (w, h) = self.size();

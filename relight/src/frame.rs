@@ -34,6 +34,9 @@ pub trait Relight {
     fn size(&self) -> (usize, usize);
     /// The largest useful [`Request::terms`].
     fn max_terms(&self) -> usize;
+    /// Bytes of decoded data this relighter holds in memory (its arena,
+    /// basis or coefficients), for reports.
+    fn held_bytes(&self) -> usize;
     /// A frame holding every buffer this relighter needs, so that
     /// [`Relight::relight`] allocates nothing. Any frame works (buffers of
     /// the wrong size are replaced on first use).
@@ -60,6 +63,8 @@ pub struct Frame {
     pub(crate) wavelet: Option<WaveletScratch>,
     /// The lighting projected on a linear basis (RGB per basis function).
     pub(crate) projected: Vec<[f64; 3]>,
+    /// The projected lighting in f32, one plane per colour channel.
+    pub(crate) planar: Vec<f32>,
 }
 
 impl Default for Frame {
@@ -68,6 +73,7 @@ impl Default for Frame {
             image: Image::new(0, 0),
             wavelet: None,
             projected: Vec::new(),
+            planar: Vec::new(),
         }
     }
 }

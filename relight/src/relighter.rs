@@ -17,7 +17,7 @@
 //! 4. a factored monochrome file multiplies in its albedo image.
 
 use crate::arena::Arena;
-use crate::error::Result;
+use crate::error::{RelightError, Result};
 use crate::frame::{check_light, Frame, FrameStats, Relight, Request};
 use crate::image_io::Image;
 use crate::kernel::Kernel;
@@ -89,6 +89,12 @@ impl Relighter {
     /// coefficients, sized by the file's column table, is checked against
     /// `limits` before anything is decoded.
     pub fn new(file: LtmFile, limits: &Limits) -> Result<Relighter> {
+        if file.pca().is_some() {
+            return Err(RelightError::Invalid(
+                "a pca file has no wavelet columns: open it with PcaRelighter (or open_relighter)"
+                    .into(),
+            ));
+        }
         let meta = file.meta().clone();
         let dims = meta.dims;
         let nonzeros: u64 = file.columns().iter().map(|c| c.nnz as u64).sum();
@@ -396,6 +402,9 @@ impl Relight for Relighter {
     /// Every light: larger requests are clamped to it.
     fn max_terms(&self) -> usize {
         self.lights()
+    }
+    fn held_bytes(&self) -> usize {
+        self.arena_bytes()
     }
 
     fn frame(&self) -> Frame {

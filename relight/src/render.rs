@@ -71,13 +71,29 @@ impl ViewCamera {
     /// up direction not parallel to the view, fov in (0, 180), sides in
     /// `1..=MAX_VIEW_SIDE`.
     pub fn validate(&self) -> Result<()> {
-        for (what, v) in [("camera eye", self.eye), ("camera target", self.target), ("camera up", self.up)] {
+        for (what, v) in [
+            ("camera eye", self.eye),
+            ("camera target", self.target),
+            ("camera up", self.up),
+        ] {
             if !v.is_finite() {
-                return Err(RelightError::range(what, format!("{v}"), "finite coordinates"));
+                return Err(RelightError::range(
+                    what,
+                    format!("{v}"),
+                    "finite coordinates",
+                ));
             }
         }
         let d = self.target - self.eye;
-        if d.length() <= 1e-9 * self.eye.abs().max(self.target.abs()).max_element().max(1e-300) {
+        if d.length()
+            <= 1e-9
+                * self
+                    .eye
+                    .abs()
+                    .max(self.target.abs())
+                    .max_element()
+                    .max(1e-300)
+        {
             return Err(RelightError::Invalid(format!(
                 "camera eye {} and target {} coincide",
                 self.eye, self.target
@@ -90,7 +106,11 @@ impl ViewCamera {
             )));
         }
         if !(self.fov > 0.0 && self.fov < 180.0) {
-            return Err(RelightError::range("camera fov", self.fov, "0 < fov < 180 degrees"));
+            return Err(RelightError::range(
+                "camera fov",
+                self.fov,
+                "0 < fov < 180 degrees",
+            ));
         }
         for (what, v) in [("view width", self.width), ("view height", self.height)] {
             if v == 0 || v > MAX_VIEW_SIDE {
@@ -156,7 +176,11 @@ impl TexturedMesh {
     }
 
     /// The mesh of an `size × size` geometry image.
-    pub fn new(size: u32, parameterization: Parameterization, surface: &Surface) -> Result<TexturedMesh> {
+    pub fn new(
+        size: u32,
+        parameterization: Parameterization,
+        surface: &Surface,
+    ) -> Result<TexturedMesh> {
         let s = size as usize;
         if surface.len() != s * s {
             return Err(RelightError::Invalid(format!(
@@ -165,8 +189,14 @@ impl TexturedMesh {
             )));
         }
         let p = surface.points();
-        let positions: Vec<DVec3> = p.iter().map(|q| DVec3::from(q.position.map(f64::from))).collect();
-        let normals: Vec<DVec3> = p.iter().map(|q| DVec3::from(q.normal.map(f64::from))).collect();
+        let positions: Vec<DVec3> = p
+            .iter()
+            .map(|q| DVec3::from(q.position.map(f64::from)))
+            .collect();
+        let normals: Vec<DVec3> = p
+            .iter()
+            .map(|q| DVec3::from(q.normal.map(f64::from)))
+            .collect();
         let valid: Vec<bool> = p.iter().map(|q| q.valid).collect();
         let mut mesh = TexturedMesh {
             size: s,
@@ -234,7 +264,10 @@ impl TexturedMesh {
                 tris.extend(pair.into_iter().filter(|t| ok(t, self)));
             } else {
                 // Three valid corners make one triangle.
-                let v: Vec<u32> = [a, b, d, c].into_iter().filter(|&i| self.valid[i as usize]).collect();
+                let v: Vec<u32> = [a, b, d, c]
+                    .into_iter()
+                    .filter(|&i| self.valid[i as usize])
+                    .collect();
                 if v.len() == 3 && ok(&[v[0], v[1], v[2]], self) {
                     tris.push([v[0], v[1], v[2]]);
                 }
@@ -250,7 +283,10 @@ impl TexturedMesh {
         for y in 0..s {
             for x in 0..s {
                 let k = y * s + x;
-                for n in [(x + 1 < s).then(|| k + 1), (y + 1 < s).then(|| k + s)].into_iter().flatten() {
+                for n in [(x + 1 < s).then(|| k + 1), (y + 1 < s).then(|| k + s)]
+                    .into_iter()
+                    .flatten()
+                {
                     if self.valid[k] && self.valid[n] {
                         e.push((self.positions[k] - self.positions[n]).length());
                     }
@@ -302,7 +338,10 @@ impl TexturedMesh {
             }
         }
         let (_, i) = best?;
-        let n: DVec3 = self.triangles[i].iter().map(|&k| self.normals[k as usize]).sum();
+        let n: DVec3 = self.triangles[i]
+            .iter()
+            .map(|&k| self.normals[k as usize])
+            .sum();
         Some(n.dot(d) > 0.0)
     }
 
@@ -311,7 +350,11 @@ impl TexturedMesh {
     pub fn render(&self, texture: &Image, camera: &ViewCamera, ss: u32) -> Result<Image> {
         camera.validate()?;
         if !(1..=MAX_SUPERSAMPLE).contains(&ss) {
-            return Err(RelightError::range("supersampling", ss, format!("1..={MAX_SUPERSAMPLE}")));
+            return Err(RelightError::range(
+                "supersampling",
+                ss,
+                format!("1..={MAX_SUPERSAMPLE}"),
+            ));
         }
         if texture.width != self.size || texture.height != self.size {
             return Err(RelightError::Invalid(format!(
@@ -370,7 +413,11 @@ impl TexturedMesh {
             let sx = r.dot(f.right) / (z * f.tan_half * (sw / sh));
             let sy = r.dot(f.up) / (z * f.tan_half);
             let uv = DVec2::new((k as usize % s) as f64 + 0.5, (k as usize / s) as f64 + 0.5);
-            (DVec2::new((sx + 1.0) * 0.5 * sw, (1.0 - sy) * 0.5 * sh), z, uv)
+            (
+                DVec2::new((sx + 1.0) * 0.5 * sw, (1.0 - sy) * 0.5 * sh),
+                z,
+                uv,
+            )
         };
         self.triangles
             .par_iter()
@@ -396,8 +443,16 @@ impl TexturedMesh {
         let (fx, fy) = (g.x - x0 as f64, g.y - y0 as f64);
         let mut acc = [0.0f64; 3];
         let mut wsum = 0.0;
-        for (dx, dy, w) in [(0, 0, (1.0 - fx) * (1.0 - fy)), (1, 0, fx * (1.0 - fy)), (0, 1, (1.0 - fx) * fy), (1, 1, fx * fy)] {
-            let (x, y) = ((x0 + dx).clamp(0, s - 1) as usize, (y0 + dy).clamp(0, s - 1) as usize);
+        for (dx, dy, w) in [
+            (0, 0, (1.0 - fx) * (1.0 - fy)),
+            (1, 0, fx * (1.0 - fy)),
+            (0, 1, (1.0 - fx) * fy),
+            (1, 1, fx * fy),
+        ] {
+            let (x, y) = (
+                (x0 + dx).clamp(0, s - 1) as usize,
+                (y0 + dy).clamp(0, s - 1) as usize,
+            );
             let k = y * self.size + x;
             if w > 0.0 && self.valid[k] {
                 let c = tex.data[k];

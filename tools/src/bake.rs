@@ -86,7 +86,10 @@ pub fn run(args: BakeArgs) -> anyhow::Result<()> {
     if let Some(map) = scene.texel_map() {
         let st = map.stats();
         let stretch = match (st.stretch_mean, st.stretch_max) {
-            (Some(m), Some(x)) => format!(", L2 stretch mean {m:.3} max {x:.3}, {} flipped triangles", st.flipped_triangles),
+            (Some(m), Some(x)) => format!(
+                ", L2 stretch mean {m:.3} max {x:.3}, {} flipped triangles",
+                st.flipped_triangles
+            ),
             _ => String::new(),
         };
         eprintln!(

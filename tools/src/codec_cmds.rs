@@ -11,7 +11,7 @@ use ltm_codec::compress::{
 use ltm_codec::container::{LtmFile, Mode};
 use ltm_codec::npy::{export_npy, import_npy};
 use ltm_codec::wavelet::row_level;
-use ltm_codec::{Filter, RawStore};
+use ltm_codec::{compress_pca, Filter, PcaOptions, RawStore};
 use serde::Serialize;
 use std::path::PathBuf;
 use std::sync::Mutex;
@@ -68,17 +68,25 @@ pub struct CompressArgs {
     #[arg(short, long)]
     pub output: PathBuf,
     /// 2d: rows only (Ng et al. 2003); 4d: every column image to full depth;
-    /// adaptive: each column to the depth that codes it best.
+    /// adaptive: each column to the depth that codes it best; pca: mean row
+    /// plus the top K eigen-transports and K coefficients per pixel
+    /// (Eigentransport), K from --rank or the smallest meeting --max-error.
     #[arg(long, default_value = "adaptive")]
     pub mode: Mode,
+    /// pca: store exactly K eigen-transports (1..=min(pixels, lights·channels)).
+    #[arg(long, value_name = "K", conflicts_with_all = ["max_error", "keep"])]
+    pub rank: Option<usize>,
+    /// pca: the largest rank --max-error may choose (the fit's sketch size).
+    #[arg(long, value_name = "K", default_value_t = ltm_codec::eigen::DEFAULT_MAX_RANK)]
+    pub max_rank: usize,
     /// Row filter over each cube face: haar, d4, d6 or d8.
     #[arg(long, default_value = "haar")]
     pub row_filter: Filter,
     /// Column image filter: legall53, cdf97, haar, d4, d6 or d8.
     #[arg(long, default_value = "legall53")]
     pub col_filter: Filter,
-    /// Quantization bits per coefficient (2..=16) [default: 10, raised by 2
-    /// at a time (up to 16) while a --max-error target is missed].
+    /// Quantization bits per coefficient (2..=16) [default: 10 (pca: 12),
+    /// raised by 2 at a time (up to 16) while a --max-error target is missed].
     #[arg(long, value_parser = clap::value_parser!(u32).range(2..=16))]
     pub bits: Option<u32>,
     /// Keep the N largest coefficients of each column (the paper's N-term
@@ -151,6 +159,15 @@ pub fn compress_cmd(a: CompressArgs) -> Result<()> {
     paths::check_files(&[("input", &a.raw)], &[("-o", &a.output)])?;
     let raw = RawStore::open_with_limits(&a.raw, crate::limits())
         .with_context(|| format!("opening {}", a.raw.display()))?;
+    if a.mode == Mode::Pca {
+        return compress_pca_cmd(&a, &raw);
+    }
+    if a.rank.is_some() {
+        bail!(
+            "--rank applies to --mode pca only (this is --mode {})",
+            a.mode.name()
+        );
+    }
     let target = match (a.keep, a.max_error) {
         (Some(n), _) => Target::Keep(n),
         (None, Some(e)) => Target::MaxError(e),
@@ -227,6 +244,54 @@ pub fn compress_cmd(a: CompressArgs) -> Result<()> {
     Ok(())
 }
 
+/// `ltm compress --mode pca`.
+fn compress_pca_cmd(a: &CompressArgs, raw: &RawStore) -> Result<()> {
+    if a.keep.is_some() {
+        bail!("--keep counts wavelet coefficients per column; --mode pca takes --rank K or --max-error E");
+    }
+    let mem_budget = a
+        .mem_budget
+        .as_deref()
+        .map(parse_size)
+        .transpose()?
+        .unwrap_or_else(default_mem_budget);
+    let opts = PcaOptions {
+        rank: a.rank,
+        max_error: a.max_error.unwrap_or(DEFAULT_MAX_ERROR),
+        max_rank: a.max_rank,
+        bits: a.bits.unwrap_or(ltm_codec::eigen::DEFAULT_PCA_BITS),
+        raise_bits: a.bits.is_none(),
+        seed: a.seed,
+        mem_budget,
+        ..PcaOptions::default()
+    };
+    let bar = progress::bar(0, "passes");
+    let start = std::time::Instant::now();
+    let stats = compress_pca(raw, &a.output, &opts, &|done, total| {
+        bar.set_length(total as u64);
+        bar.set_position(done as u64);
+    })
+    .with_context(|| format!("compressing {}", a.raw.display()))?;
+    bar.finish_and_clear();
+    let secs = start.elapsed().as_secs_f64();
+    eprintln!(
+        "wrote {}: {} bytes ({:.1}x smaller than {} raw), pca rank {}, {} bits, relative L2 error {:.5} (rank alone {:.5}), {:.1} s",
+        a.output.display(),
+        stats.file_bytes,
+        stats.raw_bytes as f64 / stats.file_bytes as f64,
+        stats.raw_bytes,
+        stats.rank,
+        stats.bits,
+        stats.achieved_error,
+        stats.predicted_error,
+        secs
+    );
+    if !stats.target_met {
+        eprintln!("warning: the target error was not reached at rank {} and {} bits; raise --max-rank or --bits", stats.rank, stats.bits);
+    }
+    Ok(())
+}
+
 /// Arguments of `ltm inspect`.
 #[derive(Args)]
 pub struct InspectArgs {
@@ -262,6 +327,8 @@ pub struct Inspection {
     /// Average column depth per row-wavelet level (index = level, 0 = scaling
     /// functions): the paper's Fig. 8.
     pub average_depth_by_row_level: Vec<f64>,
+    /// pca files: the eigen-transports stored (0 otherwise).
+    pub pca_rank: usize,
 }
 
 pub fn inspect(file: &LtmFile) -> Inspection {
@@ -294,7 +361,10 @@ pub fn inspect(file: &LtmFile) -> Inspection {
         raw_bytes,
         compression_ratio: raw_bytes as f64 / file.file_bytes() as f64,
         bits_per_element: file.file_bytes() as f64 * 8.0 / elements as f64,
-        nonzeros: nnz,
+        nonzeros: match file.pca() {
+            Some(m) => (m.rank() * (dims.pixels() + dims.row_len())) as u64,
+            None => nnz,
+        },
         target_error: meta.target_error,
         terms: meta.terms,
         achieved_error: meta.achieved_error,
@@ -304,6 +374,7 @@ pub fn inspect(file: &LtmFile) -> Inspection {
             .iter()
             .map(|(s, c)| if *c > 0 { s / *c as f64 } else { 0.0 })
             .collect(),
+        pca_rank: file.pca().map_or(0, |m| m.rank()),
     }
 }
 
@@ -329,16 +400,29 @@ pub fn inspect_cmd(a: InspectArgs) -> Result<()> {
         i.face_res,
         6 * i.face_res * i.face_res
     );
-    println!(
-        "  mode           {} (rows {}, columns {}), {} bits",
-        i.mode, i.row_filter, i.col_filter, i.bits
-    );
+    if i.pca_rank > 0 {
+        println!(
+            "  mode           pca, rank {} (mean row + {} eigen-transports, {} coefficients per pixel), {} bits",
+            i.pca_rank, i.pca_rank, i.pca_rank, i.bits
+        );
+    } else {
+        println!(
+            "  mode           {} (rows {}, columns {}), {} bits",
+            i.mode, i.row_filter, i.col_filter, i.bits
+        );
+    }
     println!(
         "  size           {} bytes, raw {} bytes, ratio {:.1}x, {:.3} bits/element",
         i.file_bytes, i.raw_bytes, i.compression_ratio, i.bits_per_element
     );
     println!("  nonzeros       {}", i.nonzeros);
-    if i.terms > 0 {
+    if i.pca_rank > 0 {
+        if i.target_error > 0.0 {
+            println!("  target error   {}", i.target_error);
+        } else {
+            println!("  target         rank {}", i.pca_rank);
+        }
+    } else if i.terms > 0 {
         println!("  target         {} coefficients kept per column", i.terms);
     } else {
         println!("  target error   {}", i.target_error);
@@ -347,6 +431,9 @@ pub fn inspect_cmd(a: InspectArgs) -> Result<()> {
         "  measured error {:.6} (relative L2 of the decoded matrix)",
         i.achieved_error
     );
+    if i.pca_rank > 0 {
+        return Ok(());
+    }
     println!("  columns by depth {:?}", i.depth_histogram);
     let avg: Vec<String> = i
         .average_depth_by_row_level

@@ -2,7 +2,7 @@
 
 use anyhow::{bail, Context, Result};
 use clap::Args;
-use ltm_relight::{relative_l2, EnvMap, Image, Relight, Relighter, Request, Rotation, Weighting};
+use ltm_relight::{open_relighter, relative_l2, EnvMap, Image, Request, Rotation, Weighting};
 use std::path::PathBuf;
 use std::str::FromStr;
 
@@ -32,9 +32,11 @@ pub struct RelightArgs {
     #[arg(long)]
     pub env: PathBuf,
     /// Wavelet lights per frame (non-linear approximation), or `all`.
-    /// Values above the number of lights use them all.
-    #[arg(long, default_value = "200")]
-    pub terms: Terms,
+    /// Values above the number of lights use them all. For a pca file: the
+    /// first N eigen-transports (at most the rank stored). [default: 200
+    /// wavelet lights; every eigen-transport of a pca file]
+    #[arg(long)]
+    pub terms: Option<Terms>,
     /// Priority of wavelet lights: unweighted |c|, transport |c|·‖T_j‖, or
     /// area |c|·support area (Ng et al. 2003).
     #[arg(long, default_value = "unweighted")]
@@ -77,18 +79,27 @@ pub fn run(a: RelightArgs) -> Result<()> {
     }
     crate::paths::check_files(&inputs, &outputs)?;
     let opened = std::time::Instant::now();
-    let relighter = Relighter::open_with_limits(&a.file, crate::limits())
+    let relighter = open_relighter(&a.file, crate::limits())
         .with_context(|| format!("opening {}", a.file.display()))?;
     let open_time = opened.elapsed();
     let env = EnvMap::load(&a.env).with_context(|| format!("loading {}", a.env.display()))?;
-    let n = relighter.meta().dims.face_res() as usize;
+    let n = ((relighter.lights() / 6) as f64).sqrt().round() as usize;
+    // A pca file (linear basis) refuses more terms than it stores; `all`
+    // and the default mean all of them there.
+    let linear = relighter.max_terms() < relighter.lights();
+    let terms = match a.terms {
+        Some(Terms(usize::MAX)) => relighter.max_terms(),
+        Some(Terms(t)) => t,
+        None if linear => relighter.max_terms(),
+        None => 200,
+    };
     let light = env.to_cubemap(n, &a.rotate);
     if a.frames == 0 {
         bail!("--frames must be at least 1");
     }
     let mut bufs = relighter.frame();
     let request = Request {
-        terms: a.terms.0,
+        terms,
         weighting: a.weighting,
     };
     // Every timed frame transforms its lighting, as a new light would;
@@ -134,14 +145,14 @@ pub fn run(a: RelightArgs) -> Result<()> {
         let ms = |d: std::time::Duration| d.as_secs_f64() * 1e3;
         let line = serde_json::json!({
             "file": a.file,
-            "terms": a.terms.0.min(relighter.lights()),
+            "terms": terms.min(relighter.lights()),
             "weighting": a.weighting.name(),
             "lights": stats.lights,
             "nonzeros": stats.nonzeros,
             "frame_ms": ms(median),
             "same_light_frame_ms": ms(median_reuse),
             "open_ms": ms(open_time),
-            "arena_bytes": relighter.arena_bytes(),
+            "arena_bytes": relighter.held_bytes(),
             "light_transform_ms": ms(stats.light_transform),
             "selection_ms": ms(stats.selection),
             "multiply_ms": ms(stats.multiply),

@@ -90,7 +90,11 @@ fn size(s: &str) -> std::result::Result<(u32, u32), String> {
     let (w, h) = s
         .split_once(['x', 'X'])
         .ok_or_else(|| format!("'{s}' is not WxH"))?;
-    let p = |t: &str| t.trim().parse::<u32>().map_err(|_| format!("'{s}' is not WxH"));
+    let p = |t: &str| {
+        t.trim()
+            .parse::<u32>()
+            .map_err(|_| format!("'{s}' is not WxH"))
+    };
     let (w, h) = (p(w)?, p(h)?);
     let max = ltm_relight::MAX_VIEW_SIDE;
     if !(1..=max).contains(&w) || !(1..=max).contains(&h) {
@@ -135,7 +139,9 @@ pub fn run(a: RenderArgs) -> Result<()> {
         height: a.size.1,
     };
     camera.validate()?;
-    let mut names: Vec<PathBuf> = (0..a.views).map(|k| numbered(&a.output, k, a.views)).collect();
+    let mut names: Vec<PathBuf> = (0..a.views)
+        .map(|k| numbered(&a.output, k, a.views))
+        .collect();
     if let Some(png) = &a.png {
         names.extend((0..a.views).map(|k| numbered(png, k, a.views)));
     }
@@ -222,7 +228,10 @@ mod tests {
         for bad in ["0x10", "10", "10x", "99999x2"] {
             assert!(size(bad).is_err(), "{bad}");
         }
-        assert_eq!(numbered(Path::new("a/v.exr"), 3, 8), Path::new("a/v-003.exr"));
+        assert_eq!(
+            numbered(Path::new("a/v.exr"), 3, 8),
+            Path::new("a/v-003.exr")
+        );
         assert_eq!(numbered(Path::new("v.exr"), 0, 1), Path::new("v.exr"));
         assert!(views("0").is_err() && views("3601").is_err() && views("4").is_ok());
     }

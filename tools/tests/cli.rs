@@ -111,10 +111,40 @@ fn report_quick_writes_every_section() {
     }
     let r: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(out.join("results.json")).unwrap()).unwrap();
-    let codings = r["codings"].as_array().unwrap();
-    // 3 modes × 1 bit depth × 2 target errors; the pair is among them.
+    let all = r["codings"].as_array().unwrap();
+    let (pca, codings): (Vec<_>, Vec<_>) = all.iter().partition(|c| c["mode"] == "pca");
+    // 3 wavelet modes × 1 bit depth × 2 target errors; the pair is among them.
     assert_eq!(codings.len(), 6);
-    for c in codings {
+    // pca at each target a rank up to 256 reaches: relit at N = 1, 4, 16,
+    // 64, 256 clamped to its rank, and its rank, under 2 maps.
+    assert!(pca.iter().any(|c| c["target_error"] == 0.01), "{pca:?}");
+    for c in &pca {
+        let (target, error) = (
+            c["target_error"].as_f64().unwrap(),
+            c["matrix_error"].as_f64().unwrap(),
+        );
+        assert!(c["target_met"].as_bool().unwrap() && error <= target && error > 0.0);
+        let points = c["relight"].as_array().unwrap();
+        assert!(
+            points.len() >= 2 && points.len() <= 12 && points.len() % 2 == 0,
+            "{c}"
+        );
+        for p in points {
+            assert!(
+                p["relit_error"].as_f64().unwrap().is_finite()
+                    && p["frame_ms"].as_f64().unwrap() > 0.0
+            );
+        }
+        let name = format!("pca-e{target}.ltm");
+        let pair = c["quality_pair"].as_bool().unwrap();
+        assert_eq!(pair, target == 0.01);
+        assert_eq!(out.join("files").join(&name).is_file(), pair, "{name}");
+    }
+    assert!(
+        index.contains("relit error, ") && index.contains("is the fastest mode"),
+        "headline lacks the fastest mode at 1 %"
+    );
+    for c in codings.iter().copied() {
         let (target, error) = (
             c["target_error"].as_f64().unwrap(),
             c["matrix_error"].as_f64().unwrap(),
@@ -148,9 +178,9 @@ fn report_quick_writes_every_section() {
             .collect()
     };
     assert_eq!(of("zstd-raw"), vec![0.0]);
+    // PCA is a mode now, not a baseline.
     let (pca, sh) = (of("pca"), of("sh"));
-    assert_eq!((pca.len(), sh.len()), (3, 3));
-    assert!(pca.windows(2).all(|w| w[1] < w[0]), "{pca:?}");
+    assert_eq!((pca.len(), sh.len()), (0, 3));
     assert!(sh.windows(2).all(|w| w[1] < w[0]), "{sh:?}");
     assert_eq!(r["sh_relight"].as_array().unwrap().len(), 2 * 3);
 
@@ -346,4 +376,130 @@ fn compress_keep_and_the_renamed_terms_flag() {
         stdout.contains("5 coefficients kept per column"),
         "{stdout}"
     );
+}
+
+/// `ltm compress --mode pca` end to end: inspect, export (the decoded
+/// matrix within the recorded error), relight with `--terms`, and the bad
+/// ranks, targets and flags that must fail with a message.
+#[test]
+fn pca_mode_compress_inspect_export_relight() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = |n: &str| dir.path().join(n).to_str().unwrap().to_string();
+    let (p, m) = (4 * 3, 6 * 2 * 2);
+    let values: Vec<f32> = (0..p * m)
+        .map(|i| 0.05 + ((i * 7) % 13) as f32 * 0.01 * (1.0 + (i / m) as f32 * 0.1))
+        .collect();
+    write_npy(dir.path().join("t.npy").as_path(), p, m, &values);
+    let (ok, _, stderr) = ltm(&[
+        "import",
+        &path("t.npy"),
+        "--width",
+        "4",
+        "--height",
+        "3",
+        "-o",
+        &path("t.raw"),
+    ]);
+    assert!(ok, "{stderr}");
+    let (ok, _, stderr) = ltm(&[
+        "compress",
+        &path("t.raw"),
+        "-o",
+        &path("p.ltm"),
+        "--mode",
+        "pca",
+        "--rank",
+        "3",
+    ]);
+    assert!(ok && stderr.contains("pca rank 3"), "{stderr}");
+    let (ok, stdout, stderr) = ltm(&["inspect", &path("p.ltm"), "--json"]);
+    assert!(ok, "{stderr}");
+    let i: serde_json::Value = serde_json::from_str(&stdout).unwrap();
+    assert_eq!(
+        (i["mode"].as_str(), i["pca_rank"].as_u64()),
+        (Some("pca"), Some(3))
+    );
+    let recorded = i["achieved_error"].as_f64().unwrap();
+    let (ok, stdout, _) = ltm(&["inspect", &path("p.ltm")]);
+    assert!(ok && stdout.contains("pca, rank 3"), "{stdout}");
+    let (ok, _, stderr) = ltm(&["export", &path("p.ltm"), "-o", &path("p.npy")]);
+    assert!(ok, "{stderr}");
+    let bytes = std::fs::read(dir.path().join("p.npy")).unwrap();
+    let decoded: Vec<f32> = bytes[bytes.len() - 4 * p * m..]
+        .chunks_exact(4)
+        .map(|c| f32::from_le_bytes(c.try_into().unwrap()))
+        .collect();
+    let num: f64 = decoded
+        .iter()
+        .zip(&values)
+        .map(|(a, b)| (*a as f64 - *b as f64).powi(2))
+        .sum();
+    let den: f64 = values.iter().map(|b| (*b as f64).powi(2)).sum();
+    assert!(
+        ((num / den).sqrt() - recorded).abs() < 1e-6 + 1e-3 * recorded,
+        "{} vs {recorded}",
+        (num / den).sqrt()
+    );
+    let env = Path::new(env!("CARGO_MANIFEST_DIR")).join("../assets/envmaps/interior.exr");
+    let env = env.to_str().unwrap();
+    let (ok, stdout, stderr) = ltm(&[
+        "relight",
+        &path("p.ltm"),
+        "--env",
+        env,
+        "--terms",
+        "2",
+        "-o",
+        &path("r.exr"),
+        "--json",
+    ]);
+    assert!(ok, "{stderr}");
+    assert!(stdout.contains("\"lights\":2"), "{stdout}");
+    let (ok, _, stderr) = ltm(&[
+        "relight",
+        &path("p.ltm"),
+        "--env",
+        env,
+        "--terms",
+        "4",
+        "-o",
+        &path("r.exr"),
+    ]);
+    assert!(!ok && stderr.contains("0..=3"), "{stderr}");
+    for (extra, want) in [
+        (&["--rank", "0"][..], "1..=12"),
+        (&["--rank", "13"], "1..=12"),
+        (&["--max-error", "1e-9", "--max-rank", "1"], "--max-rank"),
+        (&["--max-rank", "0"], "--max-rank"),
+        (&["--keep", "4"], "--rank"),
+    ] {
+        let mut args = vec![
+            "compress",
+            &path("t.raw")[..],
+            "-o",
+            &path("x.ltm")[..],
+            "--mode",
+            "pca",
+        ]
+        .into_iter()
+        .map(String::from)
+        .collect::<Vec<_>>();
+        args.extend(extra.iter().map(|s| s.to_string()));
+        let args: Vec<&str> = args.iter().map(String::as_str).collect();
+        let (ok, _, stderr) = ltm(&args);
+        assert!(
+            !ok && stderr.contains(want) && !stderr.contains("panicked"),
+            "{extra:?}: {stderr}"
+        );
+        assert!(!dir.path().join("x.ltm").exists());
+    }
+    let (ok, _, stderr) = ltm(&[
+        "compress",
+        &path("t.raw"),
+        "-o",
+        &path("x.ltm"),
+        "--rank",
+        "3",
+    ]);
+    assert!(!ok && stderr.contains("--mode pca"), "{stderr}");
 }

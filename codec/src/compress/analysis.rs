@@ -42,7 +42,8 @@ pub(super) fn candidate_depths(mode: Mode, max_depth: u32) -> Vec<u32> {
     match mode {
         Mode::TwoD => vec![0],
         Mode::FourD => vec![max_depth],
-        Mode::Adaptive => (0..=max_depth).collect(),
+        // Refused by `CodeOptions::validate`.
+        Mode::Adaptive | Mode::Pca => (0..=max_depth).collect(),
     }
 }
 
@@ -78,7 +79,9 @@ impl AnalysisSettings {
     pub fn depth_count(&self) -> usize {
         match self.mode {
             Mode::TwoD | Mode::FourD => 1,
-            Mode::Adaptive => max_levels(self.width as usize, self.height as usize) as usize + 1,
+            Mode::Adaptive | Mode::Pca => {
+                max_levels(self.width as usize, self.height as usize) as usize + 1
+            }
         }
     }
 

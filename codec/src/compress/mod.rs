@@ -169,6 +169,13 @@ impl CodeOptions {
         if !(2..=16).contains(&self.bits) {
             return Err(Error::range("bits", self.bits, "2..=16"));
         }
+        if !self.mode.is_wavelet() {
+            return Err(Error::range(
+                "wavelet coding mode",
+                self.mode.name(),
+                "2d, 4d or adaptive (pca files come from ltm_codec::compress_pca)",
+            ));
+        }
         match self.target {
             Target::MaxError(e) if !(e > 0.0 && e < 1.0) => {
                 return Err(Error::range("max error", e, "0 < E < 1"))

@@ -1,10 +1,10 @@
 //! Baselines for the size/error report: what the wavelet codec is measured
 //! against on the same matrix `T` (rows = pixels, columns = cubemap texels).
+//! PCA (Eigentransport) is no longer a baseline here: it is a coded mode,
+//! `ltm compress --mode pca`, swept with the others.
 //!
 //! - `zstd-raw`: the raw f32 matrix compressed losslessly with zstd (a pure
 //!   measurement, here).
-//! - `pca`: the best low-rank factorisation `T ≈ T·V_k·V_kᵀ`, the idea of
-//!   Eigentransport, fitted by [`ltm_codec::PcaBasis`] (randomized SVD).
 //! - `sh`: the linear spherical-harmonics approximation of each row,
 //!   [`ltm_codec::ShProjection`], relit by [`ltm_relight::BasisRelighter`].
 //!
@@ -14,7 +14,7 @@
 //! store.
 
 use anyhow::{anyhow, Result};
-use ltm_codec::{PcaBasis, RawStore, ShProjection};
+use ltm_codec::{RawStore, ShProjection};
 use rayon::prelude::*;
 use std::io::Write;
 
@@ -25,7 +25,7 @@ const ZSTD_FRAME_BYTES: usize = 32 << 20;
 /// of the matrix.
 #[derive(Clone, Debug, serde::Serialize, serde::Deserialize)]
 pub struct BaselinePoint {
-    /// `"zstd-raw"`, `"pca"` or `"sh"`.
+    /// `"zstd-raw"` or `"sh"` (`"pca"` in reports made before PCA was a mode).
     pub method: String,
     /// 0 for zstd, the rank `k` for PCA, the order `L` for SH (`L²`
     /// coefficients, bands `l < L`).
@@ -112,32 +112,7 @@ fn zstd_raw_to(raw: &RawStore, level: i32, frame_bytes: usize, out: &mut dyn Wri
 }
 
 // ---------------------------------------------------------------------------
-// PCA and spherical harmonics
-
-/// PCA over rows at each rank of `ranks` (sorted, clamped to
-/// `min(P·C, M)` and deduplicated), from one [`PcaBasis`] fit of the largest
-/// rank with the sketch drawn from `seed`. The size of rank `k` is
-/// `k·(P·C + M)·4` bytes (f32 factors).
-pub fn pca(raw: &RawStore, ranks: &[usize], seed: u64) -> Result<Vec<BaselinePoint>> {
-    let dims = raw.dims();
-    let (n_rows, m) = (dims.pixels() * dims.channels as usize, dims.lights());
-    let ranks = sorted(ranks, n_rows.min(m));
-    let Some(&k_max) = ranks.last() else {
-        return Ok(Vec::new());
-    };
-    let basis = PcaBasis::fit(raw, k_max, seed)?;
-    ranks
-        .iter()
-        .map(|&k| {
-            Ok(BaselinePoint {
-                method: "pca".into(),
-                param: k,
-                bytes: k as u64 * (n_rows + m) as u64 * 4,
-                matrix_error: curve_point(basis.rank_errors(), k, "PCA rank")?,
-            })
-        })
-        .collect()
-}
+// Spherical harmonics
 
 /// Spherical-harmonics projection of each row at each order of `orders`
 /// (sorted and deduplicated; at most [`ltm_codec::MAX_SH_ORDER`]), from one
@@ -192,35 +167,6 @@ mod tests {
                 }
             })
             .collect()
-    }
-
-    #[test]
-    fn pca_ranks_sorted_clamped_and_full_rank_exact() {
-        let dir = tempfile::tempdir().unwrap();
-        let d = dims(4, 3, 2, 1); // 12 rows, 24 lights
-        let t = matrix(d);
-        let raw = RawStore::open(&write_raw(dir.path(), "t.raw", d, &t, 5)).unwrap();
-        let points = pca(&raw, &[300, 2, 1, 2, 0], 7).unwrap();
-        let params: Vec<usize> = points.iter().map(|p| p.param).collect();
-        assert_eq!(params, vec![0, 1, 2, 12]);
-        for p in &points {
-            assert_eq!(p.method, "pca");
-            assert_eq!(p.bytes, (p.param * (12 + d.lights()) * 4) as u64);
-        }
-        assert!((points[0].matrix_error - 1.0).abs() < 1e-12);
-        assert!(points[3].matrix_error < 1e-6, "{}", points[3].matrix_error);
-        assert!(pca(&raw, &[], 7).unwrap().is_empty());
-        // The points are the fit's rank-error curve.
-        let basis = PcaBasis::fit(&raw, 12, 7).unwrap();
-        for p in &points {
-            assert_eq!(p.matrix_error, basis.rank_errors()[p.param]);
-        }
-
-        // An all-zero store.
-        let zero = vec![0.0f32; t.len()];
-        let raw0 = RawStore::open(&write_raw(dir.path(), "z.raw", d, &zero, 5)).unwrap();
-        let points = pca(&raw0, &[1, 4], 7).unwrap();
-        assert!(points.iter().all(|p| p.matrix_error == 0.0));
     }
 
     #[test]
@@ -291,12 +237,6 @@ mod tests {
             "zstd-raw level 3: {:.2} s, {z:?}",
             t0.elapsed().as_secs_f64()
         );
-        let t0 = std::time::Instant::now();
-        let points = pca(&raw, &[1, 2, 4, 8, 16, 32, 64, 128, 256], 1).unwrap();
-        println!("pca: {:.2} s", t0.elapsed().as_secs_f64());
-        for p in &points {
-            println!("  {p:?}");
-        }
         let t0 = std::time::Instant::now();
         let (points, projection) = sh(&raw, &(2..=20).collect::<Vec<_>>()).unwrap();
         println!("sh: {:.2} s", t0.elapsed().as_secs_f64());

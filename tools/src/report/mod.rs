@@ -18,10 +18,12 @@ use anyhow::{bail, Context, Result};
 use clap::Args;
 use ltm_bake::{Overrides, SceneDesc};
 use ltm_codec::wavelet::row_level;
-use ltm_codec::{CodeOptions, Mode, RawStore, Target, TransposeOptions, Transposed};
+use ltm_codec::{
+    compress_pca, CodeOptions, Mode, PcaOptions, RawStore, Target, TransposeOptions, Transposed,
+};
 use ltm_relight::{
-    reference, relative_l2, BasisRelighter, Frame, Image, Relight, Relighter, Request, Rotation,
-    Weighting,
+    reference, relative_l2, BasisRelighter, Frame, Image, PcaRelighter, Relight, Relighter,
+    Request, Rotation, Weighting,
 };
 use serde::{Deserialize, Serialize};
 use std::path::{Path, PathBuf};
@@ -32,7 +34,7 @@ use std::time::Instant;
 #[command(
     long_about = "Measure size, speed and error over a sweep of settings on one matrix.
 
-The matrix (a baked scene or --raw) is row-transformed and transposed once; every mode (2d, 4d, adaptive) × --bits × --errors is coded from it, relit under every --env at every --terms N, and compared with the exact product T·L. Baselines on the same matrix: lossless zstd of the raw matrix, PCA (rank k) and spherical harmonics (order L).
+The matrix (a baked scene or --raw) is row-transformed and transposed once; every wavelet mode (2d, 4d, adaptive) × --bits × --errors is coded from it, relit under every --env at every --terms N, and compared with the exact product T·L. The pca mode (Eigentransport) is coded at every --errors target and relit with the first N of its components for N in --pca-ranks. Baselines on the same matrix: lossless zstd of the raw matrix and spherical harmonics (order L).
 
 Writes OUTPUT/index.md (machine, date, settings, headline table and five sections: size against matrix error, relit error against N for the three light weightings and SH, frame time and dynamic compression against N, average column depth by row level, speed against error with Pareto fronts), the SVG plots, and OUTPUT/results.json with every measured point. OUTPUT/files/ keeps the 2d and adaptive files compared at equal quality.
 
@@ -88,7 +90,9 @@ pub struct ReportArgs {
     /// [default: 11; quick: 3].
     #[arg(long)]
     pub frames: Option<usize>,
-    /// PCA ranks [default: 1,2,4,…,256; quick: 1,4,16].
+    /// pca files: numbers of eigen-transports N relit (at most the rank
+    /// each file stores, which is also relit); the largest is the largest
+    /// rank a target may choose [default: 1,2,4,…,512; quick: 1,4,16,64,256].
     #[arg(long, value_delimiter = ',')]
     pub pca_ranks: Vec<usize>,
     /// Spherical-harmonics orders L (L² coefficients)
@@ -257,8 +261,8 @@ fn settings(a: &ReportArgs) -> Result<Settings> {
         frames: a.frames.unwrap_or(if q { 3 } else { 11 }),
         pca_ranks: or_default(
             &a.pca_ranks,
-            &[1, 2, 4, 8, 16, 32, 64, 128, 256],
-            &[1, 4, 16],
+            &[1, 2, 4, 8, 16, 32, 64, 128, 256, 512],
+            &[1, 4, 16, 64, 256],
             q,
         ),
         sh_orders: or_default(&a.sh_orders, &(2..=20).collect::<Vec<_>>(), &[2, 4, 8], q),
@@ -309,7 +313,8 @@ fn median(mut v: Vec<f64>) -> f64 {
 /// Relights `frames` times; the median time, the last frame's statistics
 /// and its error.
 fn measure(
-    relighter: &Relighter,
+    relighter: &dyn Relight,
+    channels: u32,
     bufs: &mut Frame,
     env: &Env,
     n: usize,
@@ -327,8 +332,8 @@ fn measure(
         times.push(stats.total().as_secs_f64());
     }
     let stats: ltm_relight::FrameStats = stats;
-    let dims = relighter.meta().dims;
-    let dense = stats.lights as f64 * dims.pixels() as f64 * dims.channels as f64;
+    let (w, h) = relighter.size();
+    let dense = stats.lights as f64 * (w * h) as f64 * channels as f64;
     Ok(RelightPoint {
         env: env.name.clone(),
         weighting: weighting.name().to_string(),
@@ -495,10 +500,19 @@ pub fn run(a: ReportArgs) -> Result<()> {
     }
     let (out_of_core, matrix_norm) = (transposed.out_of_core(), transposed.norm());
     drop(transposed);
+    let mut pca_errors = s.errors.clone();
+    if !pca_errors.contains(&s.quality) {
+        pca_errors.push(s.quality);
+    }
+    for (i, &err) in pca_errors.iter().enumerate() {
+        let label = format!("[pca {}/{}]", i + 1, pca_errors.len());
+        let files = (files_dir.as_path(), a.keep_files);
+        codings.extend(code_and_relight_pca(&raw, err, &label, &s, &envs, files)?);
+    }
 
     // 5. Baselines on the same matrix.
     let t = Instant::now();
-    eprintln!("baselines: zstd of the raw matrix, PCA, spherical harmonics");
+    eprintln!("baselines: zstd of the raw matrix, spherical harmonics");
     let (baselines, sh_relight) = measure_baselines(&raw, &s, &envs)?;
     let baselines_s = t.elapsed().as_secs_f64();
 
@@ -633,7 +647,10 @@ fn code_and_relight(
     for env in envs {
         for &weighting in weightings {
             for &n in &terms {
-                relight.push(measure(&relighter, &mut bufs, env, n, weighting, s.frames)?);
+                let c = relighter.meta().dims.channels;
+                relight.push(measure(
+                    &relighter, c, &mut bufs, env, n, weighting, s.frames,
+                )?);
             }
         }
     }
@@ -663,7 +680,94 @@ fn code_and_relight(
     Ok(coding)
 }
 
-/// The zstd, PCA and SH points on the same matrix, and the images relit
+/// Codes the pca mode at target error `err` from the raw store, relights
+/// the file under every map with the first N components for every N of
+/// `--pca-ranks` up to its rank (and the rank), and removes it unless it
+/// is the equal-quality one or files are kept.
+fn code_and_relight_pca(
+    raw: &RawStore,
+    err: f64,
+    label: &str,
+    s: &Settings,
+    envs: &[Env],
+    (files_dir, keep_files): (&Path, bool),
+) -> Result<Option<Coding>> {
+    let dims = raw.dims();
+    let full = dims.pixels().min(dims.row_len());
+    let max_rank = s.pca_ranks.iter().copied().max().unwrap_or(256).min(full);
+    let opts = PcaOptions {
+        max_error: err,
+        max_rank,
+        ..Default::default()
+    };
+    let path = files_dir.join(format!("pca-e{err}.ltm"));
+    let t = Instant::now();
+    let stats = match compress_pca(raw, &path, &opts, &|_, _| {}) {
+        Ok(stats) => stats,
+        // A target no rank up to the largest reaches: left out of the
+        // sweep, and said so.
+        Err(
+            e @ ltm_codec::Error::OutOfRange {
+                what: "PCA target error",
+                ..
+            },
+        ) => {
+            eprintln!("{label} pca {err}: left out: {e}");
+            return Ok(None);
+        }
+        Err(e) => return Err(e.into()),
+    };
+    let code_s = t.elapsed().as_secs_f64();
+    let relighter = PcaRelighter::open_with_limits(&path, crate::limits())?;
+    let mut terms: Vec<usize> = s.pca_ranks.iter().map(|&n| n.min(stats.rank)).collect();
+    terms.push(stats.rank);
+    terms.sort_unstable();
+    terms.dedup();
+    let mut bufs = relighter.frame();
+    let mut relight = Vec::new();
+    for env in envs {
+        for &n in &terms {
+            let w = Weighting::Transport;
+            relight.push(measure(
+                &relighter,
+                dims.channels,
+                &mut bufs,
+                env,
+                n,
+                w,
+                s.frames,
+            )?);
+        }
+    }
+    drop(relighter);
+    let quality_pair = err == s.quality;
+    if !(quality_pair || keep_files) {
+        std::fs::remove_file(&path).with_context(|| format!("removing {}", path.display()))?;
+    }
+    eprintln!(
+        "{label} pca {err}: rank {}, {} bits, {:.2} MB, matrix error {:.3} %, {code_s:.1} s",
+        stats.rank,
+        stats.bits,
+        stats.file_bytes as f64 / 1e6,
+        100.0 * stats.achieved_error
+    );
+    Ok(Some(Coding {
+        mode: Mode::Pca.name().into(),
+        bits: stats.bits,
+        target_error: err,
+        file_bytes: stats.file_bytes,
+        matrix_error: stats.achieved_error,
+        target_met: stats.target_met,
+        nonzeros: (stats.rank * (dims.pixels() + dims.row_len())) as u64,
+        code_s,
+        depth_histogram: Vec::new(),
+        depth_by_row_level: Vec::new(),
+        quality_pair,
+        relight,
+    }))
+}
+
+/// The zstd and SH points on the same matrix, and the images relit
 /// from the SH projection under every map.
 fn measure_baselines(
     raw: &RawStore,
@@ -671,7 +775,6 @@ fn measure_baselines(
     envs: &[Env],
 ) -> Result<(Vec<baselines::BaselinePoint>, Vec<ShRelightPoint>)> {
     let mut points = vec![baselines::zstd_raw(raw, s.zstd_raw_level)?];
-    points.extend(baselines::pca(raw, &s.pca_ranks, 0x6c74_6d01)?);
     let (sh_points, sh) = baselines::sh(raw, &s.sh_orders)?;
     points.extend(sh_points);
     let sh = BasisRelighter::sh(sh, raw)?;

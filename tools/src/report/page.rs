@@ -8,7 +8,7 @@ use anyhow::Result;
 use std::fmt::Write as _;
 use std::path::Path;
 
-const MODES: [&str; 3] = ["2d", "4d", "adaptive"];
+const MODES: [&str; 4] = ["2d", "4d", "adaptive", "pca"];
 
 /// The relit-frame numbers of one (setting, weighting, N), averaged over maps.
 #[derive(Clone, Copy, Debug, Default)]
@@ -290,7 +290,7 @@ fn headline(md: &mut String, r: &Results) -> Result<()> {
     writeln!(md, "Size at equal matrix error (log-log interpolation on each mode's size/error front over all bit depths):\n")?;
     writeln!(
         md,
-        "| matrix error | 2d MB | 4d MB | adaptive MB | 2d / adaptive | 4d / adaptive |\n|---|---|---|---|---|---|"
+        "| matrix error | 2d MB | 4d MB | adaptive MB | pca MB | 2d / adaptive | 4d / adaptive | pca / adaptive |\n|---|---|---|---|---|---|---|---|"
     )?;
     let mut errors = s.errors.clone();
     errors.push(s.quality);
@@ -308,19 +308,22 @@ fn headline(md: &mut String, r: &Results) -> Result<()> {
         };
         writeln!(
             md,
-            "| {} | {} | {} | {} | {} | {} |",
+            "| {} | {} | {} | {} | {} | {} | {} | {} |",
             pct(e),
             cell(sz[0]),
             cell(sz[1]),
             cell(sz[2]),
+            cell(sz[3]),
             ratio(sz[0], sz[2]),
-            ratio(sz[1], sz[2])
+            ratio(sz[1], sz[2]),
+            ratio(sz[3], sz[2])
         )?;
     }
     writeln!(
         md,
         "\n\"–\": the error lies outside the errors that mode reached in this sweep.\n"
     )?;
+    best_at_relit_error(md, r, 0.01)?;
     if let (Some(a), Some(d)) = (pair(r, "adaptive"), pair(r, "2d")) {
         writeln!(
             md,
@@ -350,19 +353,82 @@ fn headline(md: &mut String, r: &Results) -> Result<()> {
     Ok(())
 }
 
+/// Each mode's Pareto front of (median frame time, relit error) over every
+/// coded setting and N (transport weighting, means over maps).
+fn speed_fronts(r: &Results) -> Vec<(&'static str, Vec<(f64, f64)>)> {
+    MODES
+        .into_iter()
+        .map(|mode| {
+            let pts = r
+                .codings
+                .iter()
+                .filter(|c| c.mode == mode)
+                .flat_map(|c| frames(&c.relight, "transport"))
+                .map(|f| (f.frame_ms, f.relit_error))
+                .collect();
+            (mode, pareto(pts))
+        })
+        .collect()
+}
+
+/// The headline's choice: which mode reaches relit error `e` within each
+/// frame-time budget, and the fastest of all.
+fn best_at_relit_error(md: &mut String, r: &Results, e: f64) -> Result<()> {
+    let fronts = speed_fronts(r);
+    let fastest: Vec<(&str, f64)> = fronts
+        .iter()
+        .filter_map(|(m, f)| f.iter().find(|p| p.1 <= e).map(|p| (*m, p.0)))
+        .collect();
+    let Some(best) = fastest.iter().min_by(|a, b| a.1.total_cmp(&b.1)) else {
+        writeln!(
+            md,
+            "No mode reached {} relit error in this sweep.\n",
+            pct(e)
+        )?;
+        return Ok(());
+    };
+    let others: Vec<String> = fastest
+        .iter()
+        .filter(|m| m.0 != best.0)
+        .map(|(m, ms)| format!("{m} {ms:.3} ms"))
+        .collect();
+    writeln!(
+        md,
+        "**At ≤ {} relit error, {} is the fastest mode: {:.3} ms a frame** (others: {}). With a frame-time budget below {:.3} ms no mode reaches {}; above it, {} does.\n",
+        pct(e),
+        best.0,
+        best.1,
+        if others.is_empty() { "none reached it".into() } else { others.join(", ") },
+        best.1,
+        pct(e),
+        best.0
+    )?;
+    Ok(())
+}
+
 fn size_error(md: &mut String, dir: &Path, r: &Results) -> Result<()> {
     writeln!(md, "## 1. Size against matrix error\n")?;
     let mut ser = Vec::new();
     for mode in MODES {
-        for &b in &r.settings.bits {
+        // pca files choose their bits: one series over all of them.
+        let bit_sets: Vec<Option<u32>> = if mode == "pca" {
+            vec![None]
+        } else {
+            r.settings.bits.iter().map(|&b| Some(b)).collect()
+        };
+        for b in bit_sets {
             let mut pts: Vec<(f64, f64)> = r
                 .codings
                 .iter()
-                .filter(|c| c.mode == mode && c.bits == b)
+                .filter(|c| c.mode == mode && b.is_none_or(|b| c.bits == b))
                 .map(|c| (c.matrix_error, c.file_bytes as f64 / 1e6))
                 .collect();
             pts.sort_by(|a, b| a.0.total_cmp(&b.0));
-            ser.push(series(format!("{mode} {b} bits"), pts, Style::LinePoints));
+            let name = match b {
+                Some(b) => format!("{mode} {b} bits"),
+                None => format!("{mode} (Eigentransport)"),
+            };
+            ser.push(series(name, pts, Style::LinePoints));
         }
     }
     let mut x_range = r
@@ -480,7 +546,7 @@ fn relit_error(md: &mut String, dir: &Path, r: &Results) -> Result<()> {
     let Some(a) = pair(r, "adaptive") else {
         return Ok(());
     };
-    writeln!(md, "The adaptive file of the equal-quality pair, with each rule for choosing the N wavelet lights (Ng et al. 2003): unweighted (largest |L|), transport-weighted (|L| × column norm) and area-weighted (|L| × support area). Spherical harmonics with L² coefficients are on the same axes.\n")?;
+    writeln!(md, "The adaptive file of the equal-quality pair, with each rule for choosing the N wavelet lights (Ng et al. 2003): unweighted (largest |L|), transport-weighted (|L| × column norm) and area-weighted (|L| × support area). The pca file at the same target matrix error relit with its first N eigen-transports, and spherical harmonics with L² coefficients, are on the same axes.\n")?;
     let weightings = ["unweighted", "transport", "area"];
     for env in &r.envs {
         let pts: Vec<RelightPoint> = a
@@ -500,6 +566,22 @@ fn relit_error(md: &mut String, dir: &Path, r: &Results) -> Result<()> {
                 )
             })
             .collect();
+        if let Some(p) = pair(r, "pca") {
+            let pts: Vec<RelightPoint> = p
+                .relight
+                .iter()
+                .filter(|x| &x.env == env)
+                .cloned()
+                .collect();
+            ser.push(series(
+                "pca (first N eigen-transports)",
+                frames(&pts, "transport")
+                    .iter()
+                    .map(|f| (f.lights as f64, f.relit_error))
+                    .collect(),
+                Style::LinePoints,
+            ));
+        }
         ser.push(series(
             "spherical harmonics (L² terms)",
             r.sh_relight
@@ -561,7 +643,7 @@ fn relit_error(md: &mut String, dir: &Path, r: &Results) -> Result<()> {
 
 fn frame_time(md: &mut String, dir: &Path, r: &Results) -> Result<()> {
     writeln!(md, "## 3. Frame time and dynamic compression against N\n")?;
-    let pairs: Vec<&Coding> = ["2d", "adaptive"]
+    let pairs: Vec<&Coding> = ["2d", "adaptive", "pca"]
         .iter()
         .filter_map(|m| pair(r, m))
         .collect();

@@ -75,7 +75,8 @@ fn texture_rows_and_surface_carry_through_compress() {
         assert_eq!(f.surface(), Some(&s));
         let bytes = std::fs::read(&out).unwrap();
         assert_eq!(u32::from_le_bytes(bytes[8..12].try_into().unwrap()), 2);
-        assert_eq!(u32::from_le_bytes(bytes[12..16].try_into().unwrap()), 4);
+        let features = u32::from_le_bytes(bytes[12..16].try_into().unwrap());
+        assert_eq!(features & 4, 4, "feature flags {features:#x}");
     }
     let (out, _) = compressed(dir.path(), Dims::image(8, 8, 2, 1), false);
     let f = LtmFile::open(&out).unwrap();
@@ -98,14 +99,14 @@ fn set_version(bytes: &mut [u8], version: u32) {
 #[test]
 fn version_1_files_are_still_read() {
     let dir = tempfile::tempdir().unwrap();
-    let (out, _) = compressed(dir.path(), Dims::image(8, 8, 2, 1), false);
-    let mut v1 = std::fs::read(&out).unwrap();
-    set_version(&mut v1, 1);
-    let f = LtmFile::from_bytes(v1.clone(), &Limits::default()).unwrap();
+    // A file written by the version-1 writer (committed fixture).
+    let fixture =
+        std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/fixtures/golden-v1.ltm");
+    let f = LtmFile::open(&fixture).unwrap();
     assert!(f.surface().is_none());
-    let g = LtmFile::open(&out).unwrap();
-    for j in 0..g.meta().dims.lights() {
-        assert_eq!(f.column(j).unwrap(), g.column(j).unwrap());
+    assert!(matches!(f.meta().dims.rows, RowLayout::Image { .. }));
+    for j in 0..f.meta().dims.lights() {
+        f.column(j).unwrap();
     }
     let (out, _) = compressed(
         dir.path(),

@@ -181,7 +181,7 @@ fn sphere_texels_of_a_convex_mesh_see_a_hemisphere() {
     assert_eq!(st.flipped_triangles, 0);
     let (mean, max) = (st.stretch_mean.unwrap(), st.stretch_max.unwrap());
     assert!(
-        mean >= 1.0 && mean < 1.2 && max < 2.0,
+        (1.0..1.2).contains(&mean) && max < 2.0,
         "stretch {mean} {max}"
     );
     let surface = store.surface().unwrap();
@@ -267,7 +267,10 @@ fn non_genus_zero_meshes_are_refused() {
     let mut s = String::new();
     for i in 0..n {
         for j in 0..m {
-            let (a, b) = (i as f64 / n as f64 * 6.283, j as f64 / m as f64 * 6.283);
+            let (a, b) = (
+                i as f64 / n as f64 * std::f64::consts::TAU,
+                j as f64 / m as f64 * std::f64::consts::TAU,
+            );
             let r = 1.0 + 0.3 * b.cos();
             writeln!(
                 s,

@@ -423,7 +423,9 @@ impl TexturedMesh {
             .par_iter()
             .filter_map(|t| {
                 let v = t.map(vert);
-                if v.iter().any(|(_, z, _)| !(*z > near)) {
+                if v.iter().any(|(_, z, _)| {
+                    !matches!(z.partial_cmp(&near), Some(std::cmp::Ordering::Greater))
+                }) {
                     return None;
                 }
                 Some(Projected {

@@ -133,8 +133,9 @@ impl ColumnDecoder {
         }
     }
 
-    /// One inverse column step from depth `level` to `level − 1`.
-    pub fn inverse_step(&self, level: u32, plane: &mut [f32], work: &mut [f32]) -> Result<()> {
+    /// The image width and the band that the inverse step from depth
+    /// `level` rebuilds, with `level` checked against `1..=max_depth`.
+    fn step_band(&self, level: u32) -> Result<(usize, usize, usize)> {
         let max = self.meta.max_depth();
         if level == 0 || level > max {
             return Err(Error::range(
@@ -148,6 +149,12 @@ impl ColumnDecoder {
             self.meta.dims.height() as usize,
         );
         let (bw, bh) = band_size(w, h, level - 1);
+        Ok((w, bw, bh))
+    }
+
+    /// One inverse column step from depth `level` to `level − 1`.
+    pub fn inverse_step(&self, level: u32, plane: &mut [f32], work: &mut [f32]) -> Result<()> {
+        let (w, bw, bh) = self.step_band(level)?;
         wavelet::inverse_step(self.meta.col_filter, plane, w, bw, bh, work)
     }
 
@@ -161,19 +168,7 @@ impl ColumnDecoder {
         lanes: usize,
         work: &mut [f32],
     ) -> Result<()> {
-        let max = self.meta.max_depth();
-        if level == 0 || level > max {
-            return Err(Error::range(
-                "inverse step level",
-                level,
-                format!("1..={max}"),
-            ));
-        }
-        let (w, h) = (
-            self.meta.dims.width() as usize,
-            self.meta.dims.height() as usize,
-        );
-        let (bw, bh) = band_size(w, h, level - 1);
+        let (w, bw, bh) = self.step_band(level)?;
         wavelet::inverse_step_lanes(self.meta.col_filter, planes, w, bw, bh, lanes, work)
     }
 

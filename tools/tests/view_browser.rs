@@ -304,6 +304,8 @@ fn measure_latency() {
             set(&tab, "n", &pos.to_string(), "input");
             let n = eval(&tab, "document.getElementById('n-value').textContent");
             let n = n.as_str().unwrap().to_string();
+            let settled = eval(&tab, "query(0)");
+            wait_shown(&tab, "view0", settled.as_str().unwrap());
             let first = eval(&tab, "window.ltmView.latencies.length")
                 .as_u64()
                 .unwrap();

@@ -239,7 +239,10 @@ fn concurrent_clients_get_frames_or_busy_and_the_server_stays_up() {
             break;
         }
         assert_eq!(r.status, 503, "{}", r.text());
-        assert!(std::time::Instant::now() < deadline, "the slot was never freed");
+        assert!(
+            std::time::Instant::now() < deadline,
+            "the slot was never freed"
+        );
         std::thread::yield_now();
     }
 }

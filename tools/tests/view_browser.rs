@@ -129,17 +129,18 @@ fn srgb8(v: f32, exposure: f32) -> u8 {
 /// The displayed pixels against `ltm relight` at the same settings: within
 /// one level (the frame travels as half floats, which can move a value
 /// across a rounding boundary of the 8-bit encoding).
-fn check_pixels(tab: &Tab, rotate: &str, n: usize, exposure: f32) {
+fn check_pixels(tab: &Tab, file: usize, rotate: &str, n: usize, exposure: f32) {
     let s = scene();
-    let (want, _) = relight(&s.ltm, &map("sunset.exr"), rotate, n, "unweighted", None);
-    let got = pixels(tab, "view0");
+    let path = [&s.ltm, &s.ltm2][file];
+    let (want, _) = relight(path, &map("sunset.exr"), rotate, n, "unweighted", None);
+    let got = pixels(tab, &format!("view{file}"));
     assert_eq!(got.len(), want.len(), "displayed pixels");
     let mut lit = 0;
     for (i, (g, w)) in got.iter().zip(&want).enumerate() {
         let w8 = srgb8(*w, exposure);
         assert!(
             g.abs_diff(w8) <= 1,
-            "value {i} at rotate {rotate}, N {n}, exposure {exposure}: shown {g}, ltm relight {w8}"
+            "file {file}, value {i} at rotate {rotate}, N {n}, exposure {exposure}: shown {g}, ltm relight {w8}"
         );
         lit += usize::from(w8 > 0);
     }
@@ -186,6 +187,7 @@ fn page_controls_show_what_ltm_relight_computes() {
     let s = scene();
     let srv = Server::start(&[
         s.ltm.to_str().unwrap(),
+        s.ltm2.to_str().unwrap(),
         "--env",
         map("interior.exr").to_str().unwrap(),
         "--env",
@@ -208,8 +210,11 @@ fn page_controls_show_what_ltm_relight_computes() {
     set(&tab, "pitch", "-15", "change");
     set(&tab, "n", "700", "input");
     set(&tab, "exposure", "1", "input");
-    let n: usize = eval(&tab, "document.getElementById('n-value').textContent")
+    // Both files have 96 lights: one N for both ("N / N").
+    let n_text = eval(&tab, "document.getElementById('n-value').textContent");
+    let n: usize = n_text
         .as_str()
+        .and_then(|t| t.split(" / ").next())
         .unwrap()
         .parse()
         .unwrap();
@@ -219,12 +224,14 @@ fn page_controls_show_what_ltm_relight_computes() {
     );
     let q = format!("file=0&map=1&yaw=30&pitch=-15&roll=0&n={n}&weighting=unweighted");
     wait_shown(&tab, "view0", &q);
-    check_pixels(&tab, "30,-15,0", n, 1.0);
+    wait_shown(&tab, "view1", &q.replace("file=0", "file=1"));
+    check_pixels(&tab, 0, "30,-15,0", n, 1.0);
+    check_pixels(&tab, 1, "30,-15,0", n, 1.0);
 
     // Exposure is applied in the page: no new frame.
     let frames = eval(&tab, "window.ltmView.frames");
     set(&tab, "exposure", "-1.5", "input");
-    check_pixels(&tab, "30,-15,0", n, -1.5);
+    check_pixels(&tab, 0, "30,-15,0", n, -1.5);
     assert_eq!(eval(&tab, "window.ltmView.frames"), frames);
 
     // A drag of 40 px to the right turns the yaw by 20 degrees.
@@ -233,7 +240,7 @@ fn page_controls_show_what_ltm_relight_computes() {
     assert_eq!(yaw, json!("50"), "yaw after the drag");
     let q = format!("file=0&map=1&yaw=50&pitch=-15&roll=0&n={n}&weighting=unweighted");
     wait_shown(&tab, "view0", &q);
-    check_pixels(&tab, "50,-15,0", n, -1.5);
+    check_pixels(&tab, 0, "50,-15,0", n, -1.5);
 
     // The exact view and its error readout.
     tab.find_element("#show-exact").unwrap().click().unwrap();
@@ -351,4 +358,36 @@ fn measure_latency() {
         }
     }
     std::fs::write(out, serde_json::to_string_pretty(&results).unwrap()).unwrap();
+}
+
+/// The README's screenshot: `LTM_VIEW_SHOT_ARGS` (the arguments of `ltm
+/// view`, separated by spaces) with the exact view on, saved to
+/// `LTM_VIEW_SHOT`. Run by hand like `measure_latency`.
+#[test]
+#[ignore = "makes docs/view.png, run by hand"]
+fn screenshot_for_readme() {
+    let args = std::env::var("LTM_VIEW_SHOT_ARGS").expect("LTM_VIEW_SHOT_ARGS");
+    let out = std::env::var("LTM_VIEW_SHOT").expect("LTM_VIEW_SHOT=out.png");
+    let args: Vec<&str> = args.split(' ').collect();
+    let browser = browser().expect("Chromium");
+    let srv = Server::start(&args);
+    let tab = browser.new_tab().unwrap();
+    tab.navigate_to(&srv.url())
+        .unwrap()
+        .wait_until_navigated()
+        .unwrap();
+    tab.wait_for_element_with_custom_timeout("#view0[data-shown]", TIMEOUT)
+        .unwrap();
+    set(&tab, "yaw", "40", "change");
+    set(&tab, "n", "720", "input");
+    let q = eval(&tab, "query(0)");
+    wait_shown(&tab, "view0", q.as_str().unwrap());
+    if eval(&tab, "!!info.reference") == json!(true) {
+        tab.find_element("#show-exact").unwrap().click().unwrap();
+        wait_shown(&tab, "exact", q.as_str().unwrap());
+    }
+    let png = tab
+        .capture_screenshot(Page::CaptureScreenshotFormatOption::Png, None, None, true)
+        .unwrap();
+    std::fs::write(out, png).unwrap();
 }

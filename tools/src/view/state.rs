@@ -5,7 +5,7 @@
 use super::params::{Client, FrameParams, Lighting};
 use anyhow::{bail, Context, Result};
 use ltm_codec::container::LtmFile;
-use ltm_codec::RawStore;
+use ltm_codec::{RawStore, RowLayout};
 use ltm_relight::{
     open_relighter, reference, relative_l2, EnvMap, Frame, FrameStats, Image, Relight, Request,
 };
@@ -57,6 +57,9 @@ pub struct FileInfo {
     pub max_terms: usize,
     /// `image` (a fixed camera's pixels) or `texture` (a mesh's texels).
     pub layout: &'static str,
+    /// A texture's parameterization (`uv` or `sphere`, whose square folds
+    /// onto itself along its border).
+    pub parameterization: Option<&'static str>,
 }
 
 /// A listed environment map.
@@ -155,6 +158,12 @@ impl ViewFile {
             lights: relighter.lights(),
             max_terms: relighter.max_terms(),
             layout: if texture { "texture" } else { "image" },
+            parameterization: match meta.dims.rows {
+                RowLayout::Texture {
+                    parameterization, ..
+                } => Some(parameterization.name()),
+                _ => None,
+            },
         };
         Ok(ViewFile {
             path: path.to_path_buf(),

@@ -104,7 +104,8 @@ async function send(p) {
   p.inFlight = true;
   const sent = performance.now();
   try {
-    const r = await fetch(`/api/frame?${job.query}&client=${client}&seq=${++seq}`);
+    // Each panel is its own stream for latest-request-wins.
+    const r = await fetch(`/api/frame?${job.query}&client=${client}${p.index}&seq=${++seq}`);
     if (r.status === 200) {
       const frame = decodeFrame(await r.arrayBuffer());
       Object.assign(p, frame);
@@ -257,10 +258,10 @@ async function meshPanel(p) {
   gl_canvas.width = gl_canvas.height = 512;
   p.figure.insertBefore(gl_canvas, p.canvas);
   p.canvas.style.width = "128px";
-  p.gl = makeGl(gl_canvas, side, pos, valid, () => draw(p));
+  p.gl = makeGl(gl_canvas, side, pos, valid, info.files[p.index].parameterization === "sphere");
 }
 
-function makeGl(canvas, side, pos, valid, redraw) {
+function makeGl(canvas, side, pos, valid, fold) {
   const gl = canvas.getContext("webgl");
   if (!gl || !gl.getExtension("OES_element_index_uint")) throw new Error("WebGL with 32-bit indices is needed for texture-space files");
   const uv = new Float32Array(side * side * 2);
@@ -270,10 +271,25 @@ function makeGl(canvas, side, pos, valid, redraw) {
     uv[2 * i] = (x + 0.5) / side; uv[2 * i + 1] = (y + 0.5) / side;
     if (valid[i]) for (let c = 0; c < 3; c++) { lo[c] = Math.min(lo[c], pos[3 * i + c]); hi[c] = Math.max(hi[c], pos[3 * i + c]); }
   }
+  // Cells of the geometry image (and, for the sphere parameterization, the
+  // border's fold onto itself), split along the shorter diagonal; a cell
+  // with three valid corners makes one triangle.
+  const quads = [];
+  const id = (x, y) => y * side + x;
+  for (let y = 0; y + 1 < side; y++) for (let x = 0; x + 1 < side; x++) quads.push([id(x, y), id(x + 1, y), id(x, y + 1), id(x + 1, y + 1)]);
+  if (fold && side >= 4) {
+    for (let x = 0; x < side / 2 - 1; x++) {
+      const [a, b, ma, mb] = [x, x + 1, side - 1 - x, side - 2 - x], e = side - 1;
+      quads.push([id(a, 0), id(b, 0), id(ma, 0), id(mb, 0)], [id(a, e), id(b, e), id(ma, e), id(mb, e)],
+        [id(0, a), id(0, b), id(0, ma), id(0, mb)], [id(e, a), id(e, b), id(e, ma), id(e, mb)]);
+    }
+  }
+  const d2 = (i, j) => (pos[3 * i] - pos[3 * j]) ** 2 + (pos[3 * i + 1] - pos[3 * j + 1]) ** 2 + (pos[3 * i + 2] - pos[3 * j + 2]) ** 2;
   const idx = [];
-  for (let y = 0; y + 1 < side; y++) for (let x = 0; x + 1 < side; x++) {
-    const a = y * side + x, b = a + 1, c = a + side, d = c + 1;
-    if (valid[a] && valid[b] && valid[c] && valid[d]) idx.push(a, c, b, b, c, d);
+  for (const [a, b, c, d] of quads) {
+    const v = [a, b, d, c].filter((i) => valid[i]);
+    if (v.length === 4) idx.push(...(d2(a, d) <= d2(b, c) ? [a, b, d, a, d, c] : [a, b, c, b, d, c]));
+    else if (v.length === 3) idx.push(...v);
   }
   const center = lo.map((l, c) => (l + hi[c]) / 2);
   const radius = Math.hypot(hi[0] - lo[0], hi[1] - lo[1], hi[2] - lo[2]) / 2 || 1;
@@ -289,6 +305,7 @@ function makeGl(canvas, side, pos, valid, redraw) {
   gl.bindTexture(gl.TEXTURE_2D, tex);
   for (const [k, v] of [[gl.TEXTURE_MIN_FILTER, gl.LINEAR], [gl.TEXTURE_MAG_FILTER, gl.LINEAR], [gl.TEXTURE_WRAP_S, gl.CLAMP_TO_EDGE], [gl.TEXTURE_WRAP_T, gl.CLAMP_TO_EDGE]]) gl.texParameteri(gl.TEXTURE_2D, k, v);
   gl.enable(gl.DEPTH_TEST);
+  canvas.dataset.triangles = idx.length / 3;
   const cam = { az: 0.6, el: 0.3, dist: 3 * radius };
   const render = () => {
     const eye = [center[0] + cam.dist * Math.cos(cam.el) * Math.sin(cam.az), center[1] + cam.dist * Math.sin(cam.el), center[2] + cam.dist * Math.cos(cam.el) * Math.cos(cam.az)];

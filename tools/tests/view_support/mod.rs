@@ -103,7 +103,11 @@ impl Server {
     /// asset maps are added) and reads the URL it prints.
     pub fn start(args: &[&str]) -> Server {
         let cwd = &scene().dir;
-        let mut child = Command::new(env!("CARGO_BIN_EXE_ltm"))
+        // Measurements run a release binary: LTM_VIEW_BIN.
+        let bin = std::env::var_os("LTM_VIEW_BIN")
+            .map(PathBuf::from)
+            .unwrap_or_else(|| PathBuf::from(env!("CARGO_BIN_EXE_ltm")));
+        let mut child = Command::new(bin)
             .arg("view")
             .args(args)
             .args(["--port", "0"])

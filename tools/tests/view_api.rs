@@ -202,7 +202,7 @@ fn concurrent_clients_get_frames_or_busy_and_the_server_stays_up() {
     ]);
     let q = "/api/frame?file=0&map=0&yaw=10&n=96";
     let want = srv.get(q).frame();
-    let statuses: Vec<(u16, Option<(usize, usize, Vec<f32>)>)> = std::thread::scope(|sc| {
+    let statuses: Vec<(u16, Option<_>)> = std::thread::scope(|sc| {
         let handles: Vec<_> = (0..12)
             .map(|_| {
                 sc.spawn(|| {
@@ -280,4 +280,58 @@ fn malformed_requests_never_panic() {
             Ok(())
         })
         .unwrap();
+}
+
+/// A texture-space file: the page gets its geometry image, and its frames
+/// (the relit texture) equal `ltm relight`'s.
+#[test]
+fn texture_files_serve_their_surface_and_relit_texture() {
+    let dir = tempfile::tempdir().unwrap();
+    let scene_text = std::fs::read_to_string(assets().join("scenes/default.toml"))
+        .unwrap()
+        .replace("../meshes/", &format!("{}/meshes/", assets().display()));
+    let toml = dir.path().join("tex.toml");
+    std::fs::write(
+        &toml,
+        format!("{scene_text}\n[texture]\nmesh = 0\nsize = 16\nparameterization = \"sphere\"\n"),
+    )
+    .unwrap();
+    let (raw, tex) = (dir.path().join("tex.raw"), dir.path().join("tex.ltm"));
+    let p = |p: &std::path::Path| p.to_str().unwrap().to_string();
+    ltm(&[
+        "bake",
+        &p(&toml),
+        "-o",
+        &p(&raw),
+        "--face-res",
+        "2",
+        "--texel-samples",
+        "1",
+    ]);
+    ltm(&["compress", &p(&raw), "-o", &p(&tex), "--max-error", "0.05"]);
+    let srv = Server::start(&[&p(&tex), "--env", &p(&map("interior.exr"))]);
+    let info: serde_json::Value = serde_json::from_slice(&srv.get("/api/info").body).unwrap();
+    assert_eq!(info["files"][0]["layout"], "texture");
+    assert_eq!(info["files"][0]["parameterization"], "sphere");
+    let r = srv.get("/api/surface?file=0");
+    assert_eq!(r.status, 200, "{}", r.text());
+    let b = &r.body;
+    assert_eq!(&b[..4], b"LTMS");
+    assert_eq!(b.len(), 16 + 256 * 13);
+    let valid = &b[16 + 256 * 12..];
+    assert!(valid.iter().all(|&v| v <= 1) && valid.iter().filter(|&&v| v == 1).count() > 128);
+    let xyz: Vec<f32> = b[16..16 + 256 * 12]
+        .chunks_exact(4)
+        .map(|c| f32::from_le_bytes(c.try_into().unwrap()))
+        .collect();
+    assert!(xyz.iter().all(|v| v.is_finite() && v.abs() < 10.0));
+    let got = srv.get("/api/frame?file=0&map=0&yaw=20&n=24");
+    assert_eq!(got.status, 200, "{}", got.text());
+    let (w, h, values) = got.frame();
+    assert_eq!((w, h), (16, 16));
+    let (want, _) = relight(&tex, &map("interior.exr"), "20,0,0", 24, "unweighted", None);
+    for (a, b) in values.iter().zip(&want) {
+        assert!((a - b).abs() <= f16_tolerance(*b), "{a} vs {b}");
+    }
+    assert!(want.iter().any(|&v| v > 0.0));
 }

@@ -100,6 +100,8 @@ pub enum FrameError {
 }
 
 type LightKey = (usize, usize, [u64; 3]);
+/// A cubemap light: one RGB value per texel.
+type Light = Arc<Vec<[f32; 3]>>;
 type ExactKey = (usize, [u64; 3]);
 
 /// The server's state, shared by all worker threads.
@@ -108,7 +110,7 @@ pub struct Viewer {
     pub files: Vec<ViewFile>,
     maps: Vec<(MapInfo, EnvMap)>,
     raw: Option<(PathBuf, RawStore)>,
-    lights: Mutex<VecDeque<(LightKey, Arc<Vec<[f32; 3]>>)>>,
+    lights: Mutex<VecDeque<(LightKey, Light)>>,
     exact: Mutex<VecDeque<(ExactKey, Arc<Image>)>>,
     slots: Slots,
     clients: Mutex<HashMap<String, (u64, Instant)>>,
@@ -244,7 +246,7 @@ impl Viewer {
 
     /// The rotated cubemap light at face resolution `n`, and the time spent
     /// resampling it (zero when cached).
-    pub fn light(&self, n: usize, l: &Lighting) -> (Arc<Vec<[f32; 3]>>, Duration) {
+    pub fn light(&self, n: usize, l: &Lighting) -> (Light, Duration) {
         let key = (n, l.map, key_of(l));
         if let Some(v) = lock(&self.lights).iter().find(|(k, _)| *k == key) {
             return (v.1.clone(), Duration::ZERO);

@@ -11,6 +11,7 @@ mod reference;
 mod relight_cmd;
 mod render_cmd;
 mod report;
+mod view;
 
 use clap::{Parser, Subcommand};
 use ltm_codec::Limits;
@@ -93,6 +94,10 @@ enum Command {
     /// Measure size, speed and error over a sweep of settings; write
     /// index.md, results.json and SVG plots.
     Report(report::ReportArgs),
+    /// Serve an interactive relighting page on a local port (rotate the
+    /// lighting, change N, map and exposure, compare two files or the exact
+    /// image).
+    View(view::ViewArgs),
 }
 
 /// Restores the default action of SIGPIPE, which the Rust runtime ignores:
@@ -124,6 +129,7 @@ fn main() -> ExitCode {
         Command::Render(args) => render_cmd::run(args),
         Command::Reference(args) => reference::run(args),
         Command::Report(args) => report::run(args),
+        Command::View(args) => view::run(args),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,

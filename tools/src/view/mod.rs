@@ -1,0 +1,170 @@
+//! `ltm view`: an interactive relighting page served on a local port.
+//!
+//! The page (`page.html`, `view.js`, embedded in the binary) asks the server
+//! for frames and draws them on a canvas; exposure and tone mapping are
+//! applied in the browser, so they need no new frame. Only the files named
+//! on the command line are read: maps and files are chosen by index.
+//!
+//! # API (all `GET`; any other method gets 405, a bad parameter 400)
+//!
+//! - `/api/info`: JSON with `files` (name, bytes, mode, matrix_error, width,
+//!   height, lights, max_terms, layout `image` or `texture`), `maps` (name,
+//!   width, height), `reference` (the raw store's name or null).
+//! - `/api/frame?file=F&map=M&yaw=Y&pitch=P&roll=R&n=N&weighting=W&client=C&seq=S`:
+//!   one frame. `yaw`, `pitch`, `roll` (degrees, finite, |a| ≤ 36000) and
+//!   `weighting` (unweighted, transport, area) are optional; `n` is 1 to the
+//!   file's `max_terms`; `client` (1–32 letters and digits) and `seq` go
+//!   together: a request older than the newest seen from the same client
+//!   is dropped with 204 (latest request wins). Frames run in a fixed number
+//!   of slots; when all are busy the answer is 503.
+//! - `/api/exact?…` (same parameters): the exact image `T·L` from the
+//!   `--reference` store, computed on demand and cached per map and
+//!   rotation; `X-Error` gives the frame's relative L2 error against it.
+//!   Once cached, `/api/frame` answers also carry `X-Error`.
+//! - `/api/surface?file=F`: a texture-space file's geometry image: the
+//!   16-byte header below with magic `LTMS` and format 2, then x, y, z as
+//!   little-endian f32 per texel (rows top to bottom), then one valid byte
+//!   per texel.
+//!
+//! # Binary frame
+//!
+//! A 16-byte header of four little-endian `u32`s: magic `LTMF` (bytes),
+//! width, height, format (1 = RGB half float), then `width·height·3`
+//! little-endian IEEE half floats, linear RGB, rows top to bottom. Headers
+//! carry the readouts: `X-Frame-Ms` (relight wall time on the server),
+//! `X-Resample-Ms` (resampling the map to the rotated cubemap; 0 when the
+//! rotated light was cached), `X-Lights` (lights used), `X-Nonzeros`
+//! (coefficients multiply-added), `X-Error` and `X-Exact-Ms` where given.
+
+mod http;
+pub mod params;
+mod state;
+
+use anyhow::{bail, Context, Result};
+use clap::Args;
+use std::net::{IpAddr, Ipv4Addr, SocketAddr};
+use std::path::{Path, PathBuf};
+use std::sync::Arc;
+
+/// Most files `ltm view` compares.
+pub const MAX_FILES: usize = 2;
+
+/// Arguments of `ltm view`.
+#[derive(Args)]
+#[command(
+    after_long_help = "Open the printed URL in a browser. Drag on the image to rotate the \
+lighting; the page has fields for yaw, pitch and roll, a log-scale slider for N, the map, \
+the weighting, exposure and tone mapping, and readouts of the server's frame time, the \
+round trip, lights used and nonzeros touched. With two files they are shown side by side \
+(or under a split slider). With --reference, the exact image T·L can be shown and the \
+frame's error against it is read out. Texture-space files are drawn as their mesh in WebGL \
+with an orbit camera."
+)]
+pub struct ViewArgs {
+    /// One or two compressed matrices (two are compared side by side).
+    #[arg(required = true, num_args = 1..=MAX_FILES)]
+    pub files: Vec<PathBuf>,
+    /// Environment maps to offer (lat-long EXR or HDR); the maps in
+    /// ./assets/envmaps are added when that folder exists.
+    #[arg(long, value_name = "MAP")]
+    pub env: Vec<PathBuf>,
+    /// Raw store of the same matrix: enables the exact view and its error.
+    #[arg(long, value_name = "RAW")]
+    pub reference: Option<PathBuf>,
+    /// Port to listen on (0: any free port).
+    #[arg(long, default_value_t = 8080)]
+    pub port: u16,
+    /// Address to listen on. The default serves only this machine; any
+    /// other address must be given here explicitly.
+    #[arg(long, value_name = "ADDR")]
+    pub bind: Option<IpAddr>,
+    /// Frames computed at once (more concurrent frame requests get 503).
+    #[arg(long, default_value_t = 2, value_parser = clap::value_parser!(u16).range(1..=64))]
+    pub slots: u16,
+}
+
+/// The maps in ./assets/envmaps (EXR and HDR, by name), if any.
+fn asset_maps() -> Vec<PathBuf> {
+    let dir = Path::new("assets/envmaps");
+    let Ok(entries) = std::fs::read_dir(dir) else {
+        return Vec::new();
+    };
+    let mut maps: Vec<PathBuf> = entries
+        .filter_map(|e| e.ok().map(|e| e.path()))
+        .filter(|p| {
+            p.extension()
+                .is_some_and(|x| x.eq_ignore_ascii_case("exr") || x.eq_ignore_ascii_case("hdr"))
+        })
+        .collect();
+    maps.sort();
+    maps
+}
+
+/// The `--env` maps, then the asset maps not already given.
+fn map_list(given: &[PathBuf]) -> Vec<PathBuf> {
+    let mut maps = given.to_vec();
+    let canon: Vec<_> = given.iter().filter_map(|p| p.canonicalize().ok()).collect();
+    for p in asset_maps() {
+        if !p.canonicalize().is_ok_and(|c| canon.contains(&c)) {
+            maps.push(p);
+        }
+    }
+    maps
+}
+
+pub fn run(a: ViewArgs) -> Result<()> {
+    let mut inputs: Vec<(&str, &Path)> = a.files.iter().map(|f| ("input", f.as_path())).collect();
+    inputs.extend(a.env.iter().map(|m| ("--env", m.as_path())));
+    if let Some(r) = &a.reference {
+        inputs.push(("--reference", r.as_path()));
+    }
+    crate::paths::check_files(&inputs, &[])?;
+    let maps = map_list(&a.env);
+    let viewer = Arc::new(state::Viewer::open(
+        &a.files,
+        &maps,
+        a.reference.as_deref(),
+        a.slots as usize,
+    )?);
+    let ip = a.bind.unwrap_or(IpAddr::V4(Ipv4Addr::LOCALHOST));
+    let loopback = ip.is_loopback();
+    if a.bind.is_some() && !loopback {
+        eprintln!("warning: serving on {ip}, reachable from other machines (--bind)");
+    }
+    let server = tiny_http::Server::http(SocketAddr::new(ip, a.port))
+        .map_err(|e| anyhow::anyhow!("cannot listen on {ip}:{}: {e}", a.port))?;
+    let Some(addr) = server.server_addr().to_ip() else {
+        bail!("the server has no IP address");
+    };
+    let server = Arc::new(server);
+    // Workers answer requests; frames beyond the slots get 503 at once, so
+    // a few more workers than slots keep the page and info responsive.
+    let workers = a.slots as usize + 4;
+    let mut handles = Vec::new();
+    for i in 0..workers {
+        let (s, v) = (server.clone(), viewer.clone());
+        handles.push(
+            std::thread::Builder::new()
+                .name(format!("view-{i}"))
+                .spawn(move || http::serve(&s, &v, loopback))
+                .context("starting a worker thread")?,
+        );
+    }
+    println!("http://{addr}/");
+    use std::io::Write;
+    let _ = std::io::stdout().flush();
+    eprintln!(
+        "ltm view: {} file(s), {} map(s){}; Ctrl-C to stop",
+        viewer.files.len(),
+        viewer.map_count(),
+        if viewer.has_reference() {
+            ", exact view on"
+        } else {
+            ""
+        }
+    );
+    for h in handles {
+        let _ = h.join();
+    }
+    Ok(())
+}

@@ -1,0 +1,281 @@
+//! Request parameters of the viewer's API, parsed and range-checked before
+//! any work: every value a request may carry is named here, with its valid
+//! range in the message of the error it gets.
+
+use ltm_relight::{Rotation, Weighting};
+use std::collections::HashMap;
+
+/// Largest magnitude of an angle, in degrees (angles are taken modulo 360;
+/// larger values are refused as nonsense rather than silently reduced).
+pub const MAX_ANGLE: f64 = 36_000.0;
+/// Longest accepted request target (path and query), in bytes.
+pub const MAX_URL: usize = 2048;
+/// Longest client identifier.
+pub const MAX_CLIENT_ID: usize = 32;
+
+/// A parameter error: HTTP 400 with this message.
+#[derive(Debug, Clone, PartialEq)]
+pub struct BadRequest(pub String);
+
+impl std::fmt::Display for BadRequest {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(&self.0)
+    }
+}
+
+/// What the viewer holds, for range checks.
+#[derive(Clone, Copy, Debug)]
+pub struct Bounds {
+    /// Files opened.
+    pub files: usize,
+    /// Environment maps listed.
+    pub maps: usize,
+}
+
+/// Which client sent a frame request and where it is in its sequence.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Client {
+    /// The page's random identifier (`[A-Za-z0-9]`, 1 to 32 characters).
+    pub id: String,
+    /// Increases with each request the page sends.
+    pub seq: u64,
+}
+
+/// The lighting of a frame: map and rotation.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Lighting {
+    /// Index into the map list.
+    pub map: usize,
+    /// The rotation of the map.
+    pub rotation: Rotation,
+}
+
+/// A frame request.
+#[derive(Clone, Debug, PartialEq)]
+pub struct FrameParams {
+    /// Index into the file list.
+    pub file: usize,
+    /// Map and rotation.
+    pub lighting: Lighting,
+    /// Terms N (checked against the file when the frame is made).
+    pub terms: usize,
+    /// Priority of wavelet lights.
+    pub weighting: Weighting,
+    /// The sender, for latest-request-wins (absent: never stale).
+    pub client: Option<Client>,
+}
+
+/// Splits a query string into decoded `name → value` pairs; a repeated or
+/// unknown name, or a value that is not UTF-8, is an error.
+pub fn parse_query(query: &str, allowed: &[&str]) -> Result<HashMap<String, String>, BadRequest> {
+    let mut out = HashMap::new();
+    for (k, v) in form_urlencoded::parse(query.as_bytes()) {
+        if !allowed.contains(&k.as_ref()) {
+            return Err(BadRequest(format!(
+                "unknown parameter '{}' (valid: {})",
+                truncate(&k),
+                allowed.join(", ")
+            )));
+        }
+        if out.insert(k.to_string(), v.to_string()).is_some() {
+            return Err(BadRequest(format!("parameter '{k}' given twice")));
+        }
+    }
+    Ok(out)
+}
+
+/// At most 40 characters of a value, for messages.
+fn truncate(s: &str) -> String {
+    let t: String = s.chars().take(40).collect();
+    if t.len() < s.len() {
+        format!("{t}…")
+    } else {
+        t
+    }
+}
+
+/// An index `0..count` named `name`; required.
+pub fn index(q: &HashMap<String, String>, name: &str, count: usize) -> Result<usize, BadRequest> {
+    let s = q
+        .get(name)
+        .ok_or_else(|| BadRequest(format!("missing parameter '{name}'")))?;
+    match s.parse::<usize>() {
+        Ok(i) if i < count => Ok(i),
+        _ => Err(BadRequest(format!(
+            "{name} '{}' is out of range (valid: 0..={})",
+            truncate(s),
+            count.saturating_sub(1)
+        ))),
+    }
+}
+
+/// An angle in degrees; absent means 0.
+fn angle(q: &HashMap<String, String>, name: &str) -> Result<f64, BadRequest> {
+    let Some(s) = q.get(name) else {
+        return Ok(0.0);
+    };
+    match s.parse::<f64>() {
+        Ok(v) if v.is_finite() && v.abs() <= MAX_ANGLE => Ok(v),
+        _ => Err(BadRequest(format!(
+            "{name} '{}' is out of range (valid: a finite number of degrees in -{MAX_ANGLE}..={MAX_ANGLE})",
+            truncate(s)
+        ))),
+    }
+}
+
+/// Map index and rotation (`map`, `yaw`, `pitch`, `roll`).
+pub fn lighting(q: &HashMap<String, String>, b: &Bounds) -> Result<Lighting, BadRequest> {
+    Ok(Lighting {
+        map: index(q, "map", b.maps)?,
+        rotation: Rotation::new(angle(q, "yaw")?, angle(q, "pitch")?, angle(q, "roll")?),
+    })
+}
+
+/// The names a frame request may carry.
+pub const FRAME_PARAMS: &[&str] = &[
+    "file",
+    "map",
+    "yaw",
+    "pitch",
+    "roll",
+    "n",
+    "weighting",
+    "client",
+    "seq",
+];
+
+/// Parses a frame request's query (`n` is checked against `max_terms`).
+pub fn frame(
+    query: &str,
+    b: &Bounds,
+    max_terms: &dyn Fn(usize) -> usize,
+) -> Result<FrameParams, BadRequest> {
+    let q = parse_query(query, FRAME_PARAMS)?;
+    let file = index(&q, "file", b.files)?;
+    let lighting = lighting(&q, b)?;
+    let max = max_terms(file);
+    let n = q
+        .get("n")
+        .ok_or_else(|| BadRequest("missing parameter 'n'".into()))?;
+    let terms = match n.parse::<usize>() {
+        Ok(t) if (1..=max).contains(&t) => t,
+        _ => {
+            return Err(BadRequest(format!(
+                "n '{}' is out of range (valid: 1..={max} for file {file})",
+                truncate(n)
+            )))
+        }
+    };
+    let weighting = match q.get("weighting") {
+        None => Weighting::Unweighted,
+        Some(w) => w.parse().map_err(|e: String| BadRequest(truncate(&e)))?,
+    };
+    Ok(FrameParams {
+        file,
+        lighting,
+        terms,
+        weighting,
+        client: client(&q)?,
+    })
+}
+
+/// `client` and `seq`: both or neither.
+fn client(q: &HashMap<String, String>) -> Result<Option<Client>, BadRequest> {
+    match (q.get("client"), q.get("seq")) {
+        (None, None) => Ok(None),
+        (Some(id), Some(seq)) => {
+            let ok = !id.is_empty()
+                && id.len() <= MAX_CLIENT_ID
+                && id.bytes().all(|c| c.is_ascii_alphanumeric());
+            if !ok {
+                return Err(BadRequest(format!(
+                    "client '{}' is not 1 to {MAX_CLIENT_ID} letters and digits",
+                    truncate(id)
+                )));
+            }
+            let seq = seq.parse::<u64>().map_err(|_| {
+                BadRequest(format!(
+                    "seq '{}' is out of range (valid: 0..={})",
+                    truncate(seq),
+                    u64::MAX
+                ))
+            })?;
+            Ok(Some(Client {
+                id: id.clone(),
+                seq,
+            }))
+        }
+        _ => Err(BadRequest("client and seq go together".into())),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use proptest::prelude::*;
+
+    const B: Bounds = Bounds { files: 2, maps: 3 };
+
+    fn parse(q: &str) -> Result<FrameParams, BadRequest> {
+        frame(q, &B, &|_| 100)
+    }
+
+    #[test]
+    fn good_requests_parse() {
+        let p = parse("file=1&map=2&yaw=30.5&pitch=-10&n=100&weighting=transport&client=ab1&seq=7")
+            .unwrap();
+        assert_eq!(p.file, 1);
+        assert_eq!(p.lighting.map, 2);
+        assert_eq!(p.lighting.rotation, Rotation::new(30.5, -10.0, 0.0));
+        assert_eq!(p.terms, 100);
+        assert_eq!(p.weighting, Weighting::Transport);
+        assert_eq!(p.client.unwrap().seq, 7);
+    }
+
+    #[test]
+    fn bad_values_are_refused_with_their_range() {
+        for (q, needle) in [
+            (
+                "file=2&map=0&n=1",
+                "file '2' is out of range (valid: 0..=1)",
+            ),
+            ("file=0&map=3&n=1", "map '3'"),
+            ("file=0&map=0&n=0", "valid: 1..=100"),
+            ("file=0&map=0&n=101", "n '101'"),
+            ("file=0&map=0&n=1&yaw=NaN", "yaw 'NaN'"),
+            ("file=0&map=0&n=1&pitch=inf", "pitch 'inf'"),
+            ("file=0&map=0&n=1&roll=-1e300", "roll"),
+            ("file=0&map=0&n=1&yaw=36001", "finite number of degrees"),
+            ("file=0&map=0&n=1&weighting=x", "unknown weighting"),
+            (
+                "file=0&map=0&n=1&path=/etc/passwd",
+                "unknown parameter 'path'",
+            ),
+            ("file=0&map=0&n=1&n=2", "given twice"),
+            ("file=0&map=0&n=1&client=a%2Fb&seq=1", "letters and digits"),
+            ("file=0&map=0&n=1&client=a", "go together"),
+            ("file=-1&map=0&n=1", "file '-1'"),
+            ("map=0&n=1", "missing parameter 'file'"),
+        ] {
+            let e = parse(q).unwrap_err().0;
+            assert!(e.contains(needle), "{q}: {e}");
+        }
+    }
+
+    proptest! {
+        /// Arbitrary query strings never panic, and whatever parses is in range.
+        #[test]
+        fn arbitrary_queries_never_panic(q in "[a-z=&%0-9.eE+\\-]{0,80}") {
+            if let Ok(p) = parse(&q) {
+                prop_assert!(p.file < 2 && p.lighting.map < 3 && (1..=100).contains(&p.terms));
+                let r = p.lighting.rotation;
+                prop_assert!([r.yaw, r.pitch, r.roll].iter().all(|a| a.is_finite() && a.abs() <= MAX_ANGLE));
+            }
+        }
+
+        #[test]
+        fn arbitrary_bytes_never_panic(q in any::<Vec<u8>>()) {
+            let _ = parse(&String::from_utf8_lossy(&q));
+        }
+    }
+}

@@ -1,0 +1,428 @@
+//! What the server holds: the opened files and maps, the cache of rotated
+//! lights and of exact images, the frame slots that bound concurrent work,
+//! and each client's latest sequence number.
+
+use super::params::{Client, FrameParams, Lighting};
+use anyhow::{bail, Context, Result};
+use ltm_codec::container::LtmFile;
+use ltm_codec::{RawStore, RowLayout};
+use ltm_relight::{
+    open_relighter, reference, relative_l2, EnvMap, Frame, FrameStats, Image, Relight, Request,
+};
+use serde::Serialize;
+use std::collections::{HashMap, VecDeque};
+use std::path::{Path, PathBuf};
+use std::sync::{Arc, Mutex};
+use std::time::{Duration, Instant};
+
+/// Rotated lights kept (per face resolution, map and rotation).
+const LIGHT_CACHE: usize = 16;
+/// Exact images kept (per map and rotation).
+const EXACT_CACHE: usize = 8;
+/// Clients whose latest sequence number is remembered.
+const MAX_CLIENTS: usize = 256;
+
+/// One opened `.ltm` file.
+pub struct ViewFile {
+    /// Path as given.
+    pub path: PathBuf,
+    /// The relighter (wavelet, pca or sh).
+    pub relighter: Box<dyn Relight + Send + Sync>,
+    /// Facts shown on the page.
+    pub info: FileInfo,
+    /// Geometry image of a texture-space file: position and valid flag per texel.
+    pub surface: Option<Vec<([f32; 3], bool)>>,
+    /// Frames to reuse (each holds a relighter's scratch buffers).
+    frames: Mutex<Vec<Frame>>,
+}
+
+/// A file's facts, as `/api/info` gives them.
+#[derive(Serialize, Clone)]
+pub struct FileInfo {
+    /// File name (no folders).
+    pub name: String,
+    /// Bytes on disk.
+    pub bytes: u64,
+    /// Coding mode (adaptive, 2d, 4d, pca, ...).
+    pub mode: String,
+    /// Measured relative L2 error of the decoded matrix.
+    pub matrix_error: f64,
+    /// Relit image (or texture) width and height.
+    pub width: usize,
+    /// Height.
+    pub height: usize,
+    /// Cubemap lights (columns).
+    pub lights: usize,
+    /// The largest N.
+    pub max_terms: usize,
+    /// `image` (a fixed camera's pixels) or `texture` (a mesh's texels).
+    pub layout: &'static str,
+    /// A texture's parameterization (`uv` or `sphere`, whose square folds
+    /// onto itself along its border).
+    pub parameterization: Option<&'static str>,
+}
+
+/// A listed environment map.
+#[derive(Serialize)]
+pub struct MapInfo {
+    /// File name (no folders).
+    pub name: String,
+    /// Lat-long width and height.
+    pub width: usize,
+    /// Height.
+    pub height: usize,
+}
+
+/// A finished frame.
+pub struct FrameOut {
+    /// The image.
+    pub image: Image,
+    /// Relighter statistics.
+    pub stats: FrameStats,
+    /// Wall time of the relight.
+    pub frame_time: Duration,
+    /// Time spent resampling the map (zero when the rotated light was cached).
+    pub resample_time: Duration,
+    /// Relative L2 error against the exact image, when it is cached.
+    pub error: Option<f64>,
+}
+
+/// Why a frame was not made.
+pub enum FrameError {
+    /// A newer request from the same client arrived (HTTP 204).
+    Stale,
+    /// All frame slots are busy (HTTP 503).
+    Busy,
+    /// Bad parameters for this file (HTTP 400).
+    Bad(String),
+    /// A failure of ours (HTTP 500).
+    Internal(String),
+}
+
+type LightKey = (usize, usize, [u64; 3]);
+/// A cubemap light: one RGB value per texel.
+type Light = Arc<Vec<[f32; 3]>>;
+type ExactKey = (usize, [u64; 3]);
+
+/// The server's state, shared by all worker threads.
+pub struct Viewer {
+    /// Files, in command-line order.
+    pub files: Vec<ViewFile>,
+    maps: Vec<(MapInfo, EnvMap)>,
+    raw: Option<(PathBuf, RawStore)>,
+    lights: Mutex<VecDeque<(LightKey, Light)>>,
+    exact: Mutex<VecDeque<(ExactKey, Arc<Image>)>>,
+    slots: Slots,
+    clients: Mutex<HashMap<String, (u64, Instant)>>,
+}
+
+fn key_of(l: &Lighting) -> [u64; 3] {
+    let r = l.rotation;
+    [r.yaw.to_bits(), r.pitch.to_bits(), r.roll.to_bits()]
+}
+
+fn file_name(p: &Path) -> String {
+    p.file_name()
+        .map(|s| s.to_string_lossy().into_owned())
+        .unwrap_or_else(|| p.display().to_string())
+}
+
+impl ViewFile {
+    fn open(path: &Path) -> Result<ViewFile> {
+        let limits = crate::limits();
+        let relighter =
+            open_relighter(path, limits).with_context(|| format!("opening {}", path.display()))?;
+        let file = LtmFile::open_with_limits(path, limits)
+            .with_context(|| format!("opening {}", path.display()))?;
+        let meta = file.meta();
+        let (width, height) = relighter.size();
+        let texture = meta.dims.rows.is_texture();
+        let surface = match (texture, file.surface()) {
+            (true, Some(s)) => Some(
+                s.points()
+                    .iter()
+                    .map(|p| (p.position, p.valid))
+                    .collect::<Vec<_>>(),
+            ),
+            (true, None) => bail!(
+                "{}: a texture-space file without surface data",
+                path.display()
+            ),
+            _ => None,
+        };
+        let info = FileInfo {
+            name: file_name(path),
+            bytes: file.file_bytes(),
+            mode: meta.mode.name().into(),
+            matrix_error: f64::from(meta.achieved_error),
+            width,
+            height,
+            lights: relighter.lights(),
+            max_terms: relighter.max_terms(),
+            layout: if texture { "texture" } else { "image" },
+            parameterization: match meta.dims.rows {
+                RowLayout::Texture {
+                    parameterization, ..
+                } => Some(parameterization.name()),
+                _ => None,
+            },
+        };
+        Ok(ViewFile {
+            path: path.to_path_buf(),
+            relighter,
+            info,
+            surface,
+            frames: Mutex::new(Vec::new()),
+        })
+    }
+
+    /// Cubemap face resolution n (lights = 6·n²).
+    fn face_res(&self) -> usize {
+        ((self.relighter.lights() / 6) as f64).sqrt().round() as usize
+    }
+}
+
+impl Viewer {
+    /// Opens the files, maps and raw store; `slots` frames may run at once.
+    pub fn open(
+        files: &[PathBuf],
+        maps: &[PathBuf],
+        raw: Option<&Path>,
+        slots: usize,
+    ) -> Result<Viewer> {
+        let files = files
+            .iter()
+            .map(|p| ViewFile::open(p))
+            .collect::<Result<Vec<_>>>()?;
+        let maps = maps
+            .iter()
+            .map(|p| {
+                let env = EnvMap::load(p).with_context(|| format!("loading {}", p.display()))?;
+                let info = MapInfo {
+                    name: file_name(p),
+                    width: env.width(),
+                    height: env.height(),
+                };
+                Ok((info, env))
+            })
+            .collect::<Result<Vec<_>>>()?;
+        if maps.is_empty() {
+            bail!("no environment map: give --env MAP (or run from the repository, where assets/envmaps has some)");
+        }
+        let raw = match raw {
+            Some(p) => Some((p.to_path_buf(), open_raw(p, &files)?)),
+            None => None,
+        };
+        Ok(Viewer {
+            files,
+            maps,
+            raw,
+            lights: Mutex::new(VecDeque::new()),
+            exact: Mutex::new(VecDeque::new()),
+            slots: Slots::new(slots),
+            clients: Mutex::new(HashMap::new()),
+        })
+    }
+
+    /// The listed maps.
+    pub fn maps(&self) -> impl Iterator<Item = &MapInfo> {
+        self.maps.iter().map(|(i, _)| i)
+    }
+
+    /// Number of maps.
+    pub fn map_count(&self) -> usize {
+        self.maps.len()
+    }
+
+    /// Whether `--reference` was given.
+    pub fn has_reference(&self) -> bool {
+        self.raw.is_some()
+    }
+
+    /// The reference store's file name.
+    pub fn reference_name(&self) -> Option<String> {
+        self.raw.as_ref().map(|(p, _)| file_name(p))
+    }
+
+    /// The rotated cubemap light at face resolution `n`, and the time spent
+    /// resampling it (zero when cached).
+    pub fn light(&self, n: usize, l: &Lighting) -> (Light, Duration) {
+        let key = (n, l.map, key_of(l));
+        if let Some(v) = lock(&self.lights).iter().find(|(k, _)| *k == key) {
+            return (v.1.clone(), Duration::ZERO);
+        }
+        let t = Instant::now();
+        let light = Arc::new(self.maps[l.map].1.to_cubemap(n, &l.rotation));
+        let took = t.elapsed();
+        let mut cache = lock(&self.lights);
+        cache.push_back((key, light.clone()));
+        if cache.len() > LIGHT_CACHE {
+            cache.pop_front();
+        }
+        (light, took)
+    }
+
+    /// Records `c` as its client's latest request; false when a newer one
+    /// was already seen.
+    pub fn note_client(&self, c: &Client) -> bool {
+        let mut m = lock(&self.clients);
+        if m.len() >= MAX_CLIENTS && !m.contains_key(&c.id) {
+            // Forget the client heard from longest ago.
+            if let Some(old) = m.iter().min_by_key(|(_, v)| v.1).map(|(k, _)| k.clone()) {
+                m.remove(&old);
+            }
+        }
+        let e = m.entry(c.id.clone()).or_insert((c.seq, Instant::now()));
+        if c.seq < e.0 {
+            return false;
+        }
+        *e = (c.seq, Instant::now());
+        true
+    }
+
+    /// Whether a newer request from the same client has arrived.
+    fn is_stale(&self, c: &Option<Client>) -> bool {
+        c.as_ref()
+            .is_some_and(|c| lock(&self.clients).get(&c.id).is_some_and(|v| v.0 > c.seq))
+    }
+
+    /// Makes a frame: waits for nothing (a busy server answers Busy), and
+    /// drops the request when a newer one from the same client arrived.
+    pub fn frame(&self, p: &FrameParams) -> Result<FrameOut, FrameError> {
+        if let Some(c) = &p.client {
+            if !self.note_client(c) {
+                return Err(FrameError::Stale);
+            }
+        }
+        let _slot = self.slots.try_acquire().ok_or(FrameError::Busy)?;
+        if self.is_stale(&p.client) {
+            return Err(FrameError::Stale);
+        }
+        let f = &self.files[p.file];
+        let (light, resample_time) = self.light(f.face_res(), &p.lighting);
+        let mut frame = lock(&f.frames).pop().unwrap_or_else(|| f.relighter.frame());
+        let request = Request {
+            terms: p.terms,
+            weighting: p.weighting,
+        };
+        let t = Instant::now();
+        let result = f.relighter.relight(&light, &request, &mut frame);
+        let frame_time = t.elapsed();
+        let out = match result {
+            Ok(stats) => {
+                let error = self
+                    .cached_exact(&p.lighting)
+                    .and_then(|e| relative_l2(&frame.image, &e).ok());
+                Ok(FrameOut {
+                    image: frame.image.clone(),
+                    stats,
+                    frame_time,
+                    resample_time,
+                    error,
+                })
+            }
+            Err(e) => Err(FrameError::Bad(e.to_string())),
+        };
+        lock(&f.frames).push(frame);
+        if self.is_stale(&p.client) {
+            return Err(FrameError::Stale);
+        }
+        out
+    }
+
+    fn cached_exact(&self, l: &Lighting) -> Option<Arc<Image>> {
+        let key = (l.map, key_of(l));
+        lock(&self.exact)
+            .iter()
+            .find(|(k, _)| *k == key)
+            .map(|(_, v)| v.clone())
+    }
+
+    /// The exact image T·L from the raw store (cached per map and rotation)
+    /// and the time it took (zero when cached).
+    pub fn exact(&self, l: &Lighting) -> Result<(Arc<Image>, Duration), FrameError> {
+        let Some((_, raw)) = &self.raw else {
+            return Err(FrameError::Bad(
+                "no reference: start ltm view with --reference RAW".into(),
+            ));
+        };
+        if let Some(img) = self.cached_exact(l) {
+            return Ok((img, Duration::ZERO));
+        }
+        let _slot = self.slots.try_acquire().ok_or(FrameError::Busy)?;
+        let n = raw.dims().face_res() as usize;
+        let (light, _) = self.light(n, l);
+        let t = Instant::now();
+        let img =
+            Arc::new(reference(raw, &light).map_err(|e| FrameError::Internal(e.to_string()))?);
+        let took = t.elapsed();
+        let mut cache = lock(&self.exact);
+        cache.push_back(((l.map, key_of(l)), img.clone()));
+        if cache.len() > EXACT_CACHE {
+            cache.pop_front();
+        }
+        Ok((img, took))
+    }
+}
+
+/// Opens the raw store and checks that it is the matrix of the files.
+fn open_raw(p: &Path, files: &[ViewFile]) -> Result<RawStore> {
+    let raw = RawStore::open_with_limits(p, crate::limits())
+        .with_context(|| format!("opening raw store {}", p.display()))?;
+    let d = raw.dims();
+    let size = (d.width() as usize, d.height() as usize);
+    for f in files {
+        let i = &f.info;
+        if (i.width, i.height, i.lights) != (size.0, size.1, d.lights()) {
+            bail!(
+                "--reference {}: {}×{} rows and {} lights, but {} has {}×{} and {}",
+                p.display(),
+                size.0,
+                size.1,
+                d.lights(),
+                f.path.display(),
+                i.width,
+                i.height,
+                i.lights
+            );
+        }
+    }
+    Ok(raw)
+}
+
+/// Locks a mutex, recovering the data if a panicking thread poisoned it.
+fn lock<T>(m: &Mutex<T>) -> std::sync::MutexGuard<'_, T> {
+    m.lock().unwrap_or_else(|e| e.into_inner())
+}
+
+/// A counting semaphore that never waits: at most `n` holders.
+struct Slots {
+    free: Mutex<usize>,
+}
+
+/// A held slot, given back when dropped (also when its request's client
+/// went away or a frame failed).
+struct Slot<'a>(&'a Slots);
+
+impl Slots {
+    fn new(n: usize) -> Slots {
+        Slots {
+            free: Mutex::new(n.max(1)),
+        }
+    }
+
+    fn try_acquire(&self) -> Option<Slot<'_>> {
+        let mut f = lock(&self.free);
+        if *f == 0 {
+            return None;
+        }
+        *f -= 1;
+        Some(Slot(self))
+    }
+}
+
+impl Drop for Slot<'_> {
+    fn drop(&mut self) {
+        *lock(&self.0.free) += 1;
+    }
+}

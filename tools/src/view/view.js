@@ -1,0 +1,401 @@
+// ltm view: asks the server for frames (binary RGB half floats, see the
+// server's module docs), tone-maps them here and draws them. One request per
+// file is in flight at a time; inputs that arrive meanwhile only update the
+// pending state, so the newest settings are sent next (latest wins).
+"use strict";
+
+const $ = (id) => document.getElementById(id);
+const client = Array.from(crypto.getRandomValues(new Uint8Array(8)), (b) => b.toString(16).padStart(2, "0")).join("");
+let seq = 0;
+let info = null;
+const panels = []; // one per file: { canvas, floats, width, height, inFlight, pending, ... }
+let exactPanel = null;
+const stats = { latencies: [], frames: 0 };
+window.ltmView = stats;
+
+// Half float → float, through a table of all 65536 values.
+const HALF = new Float32Array(65536);
+(function () {
+  for (let h = 0; h < 65536; h++) {
+    const s = h & 0x8000 ? -1 : 1, e = (h >> 10) & 0x1f, m = h & 0x3ff;
+    HALF[h] = e === 0 ? s * m * 2 ** -24 : e === 31 ? (m ? NaN : s * Infinity) : s * (1 + m / 1024) * 2 ** (e - 15);
+  }
+})();
+
+function decodeFrame(buf) {
+  const dv = new DataView(buf);
+  const magic = String.fromCharCode(...new Uint8Array(buf, 0, 4));
+  if (magic !== "LTMF" || dv.getUint32(12, true) !== 1) throw new Error("not an RGB f16 frame");
+  const w = dv.getUint32(4, true), h = dv.getUint32(8, true);
+  const halves = new Uint16Array(buf, 16, w * h * 3);
+  const f = new Float32Array(w * h * 3);
+  for (let i = 0; i < f.length; i++) f[i] = HALF[halves[i]];
+  return { width: w, height: h, floats: f };
+}
+
+// sRGB 8-bit encoding, as ltm's PNG writer does it.
+function srgb8(v) {
+  v = Math.min(Math.max(v, 0), 1);
+  const e = v <= 0.0031308 ? 12.92 * v : 1.055 * Math.pow(v, 1 / 2.4) - 0.055;
+  return Math.floor(e * 255 + 0.5);
+}
+
+function toRgba(floats, w, h) {
+  const scale = Math.pow(2, Number($("exposure").value));
+  const reinhard = $("tonemap").value === "reinhard";
+  const out = new Uint8ClampedArray(w * h * 4);
+  for (let p = 0; p < w * h; p++) {
+    for (let c = 0; c < 3; c++) {
+      // Math.fround: the same f32 product as the PNG writer's.
+      let v = Math.fround(floats[3 * p + c] * Math.fround(scale));
+      if (reinhard) v = v / (1 + v);
+      out[4 * p + c] = srgb8(v);
+    }
+    out[4 * p + 3] = 255;
+  }
+  return out;
+}
+
+function terms(fileIndex) {
+  const max = info.files[fileIndex].max_terms;
+  const t = Number($("n").value) / 1000;
+  return Math.min(max, Math.max(1, Math.round(Math.exp(t * Math.log(max)))));
+}
+
+function angle(id) {
+  const v = Number($(id).value);
+  return Number.isFinite(v) ? v : 0;
+}
+
+function query(fileIndex) {
+  return `file=${fileIndex}&map=${$("map").value}&yaw=${angle("yaw")}&pitch=${angle("pitch")}` +
+    `&roll=${angle("roll")}&n=${terms(fileIndex)}&weighting=${$("weighting").value}`;
+}
+
+function message(text) { $("message").textContent = text || ""; }
+
+// --- drawing -------------------------------------------------------------
+
+function draw(panel) {
+  if (!panel.floats) return;
+  const rgba = toRgba(panel.floats, panel.width, panel.height);
+  if (panel.gl) { panel.gl.setTexture(rgba, panel.width, panel.height); return; }
+  const c = panel.canvas;
+  if (c.width !== panel.width || c.height !== panel.height) { c.width = panel.width; c.height = panel.height; }
+  c.getContext("2d").putImageData(new ImageData(rgba, panel.width, panel.height), 0, 0);
+  layoutSplit();
+}
+
+function drawAll() { panels.forEach(draw); if (exactPanel) draw(exactPanel); }
+
+// --- requests --------------------------------------------------------------
+
+function requestFrames() {
+  const now = performance.now();
+  for (const p of panels) {
+    p.pending = { query: query(p.index), input: p.pending ? p.pending.input : now };
+    if (!p.inFlight) send(p);
+  }
+}
+
+async function send(p) {
+  const job = p.pending;
+  p.pending = null;
+  p.inFlight = true;
+  const sent = performance.now();
+  try {
+    // Each panel is its own stream for latest-request-wins.
+    const r = await fetch(`/api/frame?${job.query}&client=${client}${p.index}&seq=${++seq}`);
+    if (r.status === 200) {
+      const frame = decodeFrame(await r.arrayBuffer());
+      Object.assign(p, frame);
+      draw(p);
+      p.readout = {
+        serverMs: Number(r.headers.get("X-Frame-Ms")),
+        resampleMs: Number(r.headers.get("X-Resample-Ms")),
+        lights: r.headers.get("X-Lights"),
+        nonzeros: r.headers.get("X-Nonzeros"),
+        error: r.headers.get("X-Error"),
+      };
+      await new Promise((res) => requestAnimationFrame(res));
+      const shown = performance.now();
+      p.readout.latencyMs = shown - job.input;
+      p.readout.roundTripMs = shown - sent;
+      stats.frames++;
+      stats.latencies.push({ file: p.index, query: job.query, latency_ms: shown - job.input,
+        round_trip_ms: shown - sent, server_ms: p.readout.serverMs, resample_ms: p.readout.resampleMs });
+      p.canvas.dataset.shown = job.query;
+      message("");
+    } else if (r.status === 503) {
+      if (!p.pending) p.pending = job; // busy: retry with the newest settings
+    } else if (r.status !== 204) {
+      message(`frame: ${r.status} ${await r.text()}`);
+    }
+  } catch (e) {
+    message(`frame: ${e}`);
+  }
+  p.inFlight = false;
+  if (p.pending) send(p);
+  else if (p.index === 0) requestExact();
+  readouts();
+}
+
+async function requestExact() {
+  if (!info.reference || !$("show-exact").checked) return;
+  const q = query(0);
+  if (exactPanel.shownQuery === q || exactPanel.inFlight) return;
+  exactPanel.inFlight = true;
+  $("error").textContent = "computing…";
+  try {
+    const r = await fetch(`/api/exact?${q}`);
+    if (r.status === 200) {
+      Object.assign(exactPanel, decodeFrame(await r.arrayBuffer()));
+      draw(exactPanel);
+      const e = Number(r.headers.get("X-Error"));
+      $("error").textContent = `relative L2 error ${e.toPrecision(5)}`;
+      $("error").dataset.value = r.headers.get("X-Error");
+      exactPanel.shownQuery = q;
+      exactPanel.canvas.dataset.shown = q;
+      exactPanel.exactMs = r.headers.get("X-Exact-Ms");
+    } else if (r.status !== 503) {
+      message(`exact: ${r.status} ${await r.text()}`);
+    }
+  } catch (e) {
+    message(`exact: ${e}`);
+  }
+  exactPanel.inFlight = false;
+  if (query(0) !== exactPanel.shownQuery && !panels[0].inFlight) requestExact();
+  readouts();
+}
+
+function fmt(bytes) {
+  return bytes > 1e6 ? `${(bytes / 1e6).toFixed(2)} MB` : `${(bytes / 1e3).toFixed(1)} kB`;
+}
+
+function readouts() {
+  const lines = panels.map((p) => {
+    const f = info.files[p.index], r = p.readout || {};
+    return `${f.name}: ${fmt(f.bytes)} ${f.mode}, matrix error ${(100 * f.matrix_error).toFixed(3)} %, N = ${terms(p.index)}` +
+      `\n  server ${r.serverMs?.toFixed(2) ?? "-"} ms (+ resample ${r.resampleMs?.toFixed(2) ?? "-"} ms), ` +
+      `round trip ${r.roundTripMs?.toFixed(1) ?? "-"} ms, input→screen ${r.latencyMs?.toFixed(1) ?? "-"} ms, ` +
+      `lights ${r.lights ?? "-"}, nonzeros ${r.nonzeros ?? "-"}`;
+  });
+  if (exactPanel && exactPanel.exactMs) lines.push(`exact T·L: ${Number(exactPanel.exactMs).toFixed(1)} ms (0 when cached)`);
+  $("readouts").textContent = lines.join("\n");
+  panels.forEach((p) => { $(`n-value`).textContent = panels.map((q) => terms(q.index)).join(" / "); });
+}
+
+// --- controls ---------------------------------------------------------------
+
+function wireControls() {
+  for (const id of ["map", "weighting", "yaw", "pitch", "roll", "show-exact"]) $(id).addEventListener("change", requestFrames);
+  for (const id of ["yaw", "pitch", "roll"]) $(id).addEventListener("input", requestFrames);
+  $("n").addEventListener("input", () => { readouts(); requestFrames(); });
+  $("exposure").addEventListener("input", () => { $("exposure-value").textContent = Number($("exposure").value).toFixed(1); drawAll(); });
+  $("tonemap").addEventListener("change", drawAll);
+  $("layout").addEventListener("change", layoutSplit);
+  $("split").addEventListener("input", layoutSplit);
+}
+
+// Drag on an image rotates the lighting: x → yaw, y → pitch (0.5° a pixel).
+function dragRotates(el) {
+  let last = null;
+  el.addEventListener("pointerdown", (e) => { if (!e.shiftKey) { last = [e.clientX, e.clientY]; el.setPointerCapture(e.pointerId); } });
+  el.addEventListener("pointermove", (e) => {
+    if (!last) return;
+    const dx = e.clientX - last[0], dy = e.clientY - last[1];
+    last = [e.clientX, e.clientY];
+    $("yaw").value = +(angle("yaw") + dx * 0.5).toFixed(2);
+    $("pitch").value = +Math.max(-90, Math.min(90, angle("pitch") + dy * 0.5)).toFixed(2);
+    requestFrames();
+  });
+  el.addEventListener("pointerup", () => { last = null; });
+}
+
+function layoutSplit() {
+  if (panels.length < 2) return;
+  const split = $("layout").value === "split";
+  const wrap = $("split-wrap");
+  wrap.style.display = split ? "block" : "none";
+  for (const p of panels) (split ? wrap : p.figure).insertBefore(p.canvas, split ? null : p.figure.firstChild);
+  $("split").hidden = !split;
+  if (split) {
+    const [a, b] = panels;
+    wrap.style.width = a.canvas.style.width || "512px";
+    wrap.style.height = `${a.canvas.getBoundingClientRect().height}px`;
+    b.canvas.style.clipPath = `inset(0 0 0 ${100 * Number($("split").value)}%)`;
+  } else {
+    panels.forEach((p) => { p.canvas.style.clipPath = ""; });
+  }
+}
+
+function addPanel(title, index) {
+  const fig = document.createElement("figure");
+  const canvas = document.createElement("canvas");
+  canvas.className = "view";
+  canvas.id = index === "exact" ? "exact" : `view${index}`;
+  const cap = document.createElement("figcaption");
+  cap.textContent = title;
+  if (index === "exact") { const e = document.createElement("div"); e.id = "error"; cap.append(document.createElement("br"), e); }
+  fig.append(canvas, cap);
+  $("panels").append(fig);
+  dragRotates(canvas);
+  return { index, canvas, figure: fig, inFlight: false, pending: null };
+}
+
+// --- texture-space files: the mesh in WebGL, with an orbit camera ------------
+
+async function meshPanel(p) {
+  const r = await fetch(`/api/surface?file=${p.index}`);
+  if (r.status !== 200) throw new Error(`surface: ${r.status} ${await r.text()}`);
+  const buf = await r.arrayBuffer();
+  const dv = new DataView(buf);
+  const side = dv.getUint32(4, true);
+  const pos = new Float32Array(buf.slice(16, 16 + side * side * 12));
+  const valid = new Uint8Array(buf, 16 + side * side * 12, side * side);
+  const gl_canvas = document.createElement("canvas");
+  gl_canvas.className = "gl";
+  gl_canvas.width = gl_canvas.height = 512;
+  p.figure.insertBefore(gl_canvas, p.canvas);
+  p.canvas.style.width = "128px";
+  p.gl = makeGl(gl_canvas, side, pos, valid, info.files[p.index].parameterization === "sphere");
+}
+
+function makeGl(canvas, side, pos, valid, fold) {
+  const gl = canvas.getContext("webgl");
+  if (!gl || !gl.getExtension("OES_element_index_uint")) throw new Error("WebGL with 32-bit indices is needed for texture-space files");
+  const uv = new Float32Array(side * side * 2);
+  const lo = [Infinity, Infinity, Infinity], hi = [-Infinity, -Infinity, -Infinity];
+  for (let y = 0; y < side; y++) for (let x = 0; x < side; x++) {
+    const i = y * side + x;
+    uv[2 * i] = (x + 0.5) / side; uv[2 * i + 1] = (y + 0.5) / side;
+    if (valid[i]) for (let c = 0; c < 3; c++) { lo[c] = Math.min(lo[c], pos[3 * i + c]); hi[c] = Math.max(hi[c], pos[3 * i + c]); }
+  }
+  // Cells of the geometry image (and, for the sphere parameterization, the
+  // border's fold onto itself), split along the shorter diagonal; a cell
+  // with three valid corners makes one triangle.
+  const quads = [];
+  const id = (x, y) => y * side + x;
+  for (let y = 0; y + 1 < side; y++) for (let x = 0; x + 1 < side; x++) quads.push([id(x, y), id(x + 1, y), id(x, y + 1), id(x + 1, y + 1)]);
+  if (fold && side >= 4) {
+    for (let x = 0; x < side / 2 - 1; x++) {
+      const [a, b, ma, mb] = [x, x + 1, side - 1 - x, side - 2 - x], e = side - 1;
+      quads.push([id(a, 0), id(b, 0), id(ma, 0), id(mb, 0)], [id(a, e), id(b, e), id(ma, e), id(mb, e)],
+        [id(0, a), id(0, b), id(0, ma), id(0, mb)], [id(e, a), id(e, b), id(e, ma), id(e, mb)]);
+    }
+  }
+  const d2 = (i, j) => (pos[3 * i] - pos[3 * j]) ** 2 + (pos[3 * i + 1] - pos[3 * j + 1]) ** 2 + (pos[3 * i + 2] - pos[3 * j + 2]) ** 2;
+  const idx = [];
+  for (const [a, b, c, d] of quads) {
+    const v = [a, b, d, c].filter((i) => valid[i]);
+    if (v.length === 4) idx.push(...(d2(a, d) <= d2(b, c) ? [a, b, d, a, d, c] : [a, b, c, b, d, c]));
+    else if (v.length === 3) idx.push(...v);
+  }
+  const center = lo.map((l, c) => (l + hi[c]) / 2);
+  const radius = Math.hypot(hi[0] - lo[0], hi[1] - lo[1], hi[2] - lo[2]) / 2 || 1;
+  const prog = program(gl,
+    "attribute vec3 p; attribute vec2 t; uniform mat4 m; varying vec2 v; void main(){ v=t; gl_Position=m*vec4(p,1.0); }",
+    "precision mediump float; varying vec2 v; uniform sampler2D s; void main(){ gl_FragColor=texture2D(s,v); }");
+  const buffer = (target, data) => { const b = gl.createBuffer(); gl.bindBuffer(target, b); gl.bufferData(target, data, gl.STATIC_DRAW); return b; };
+  const pb = buffer(gl.ARRAY_BUFFER, pos), tb = buffer(gl.ARRAY_BUFFER, uv);
+  buffer(gl.ELEMENT_ARRAY_BUFFER, new Uint32Array(idx));
+  const attr = (name, b, n) => { const l = gl.getAttribLocation(prog, name); gl.bindBuffer(gl.ARRAY_BUFFER, b); gl.enableVertexAttribArray(l); gl.vertexAttribPointer(l, n, gl.FLOAT, false, 0, 0); };
+  attr("p", pb, 3); attr("t", tb, 2);
+  const tex = gl.createTexture();
+  gl.bindTexture(gl.TEXTURE_2D, tex);
+  for (const [k, v] of [[gl.TEXTURE_MIN_FILTER, gl.LINEAR], [gl.TEXTURE_MAG_FILTER, gl.LINEAR], [gl.TEXTURE_WRAP_S, gl.CLAMP_TO_EDGE], [gl.TEXTURE_WRAP_T, gl.CLAMP_TO_EDGE]]) gl.texParameteri(gl.TEXTURE_2D, k, v);
+  gl.enable(gl.DEPTH_TEST);
+  canvas.dataset.triangles = idx.length / 3;
+  const cam = { az: 0.6, el: 0.3, dist: 3 * radius };
+  const render = () => {
+    const eye = [center[0] + cam.dist * Math.cos(cam.el) * Math.sin(cam.az), center[1] + cam.dist * Math.sin(cam.el), center[2] + cam.dist * Math.cos(cam.el) * Math.cos(cam.az)];
+    gl.viewport(0, 0, canvas.width, canvas.height);
+    gl.clearColor(0, 0, 0, 1);
+    gl.clear(gl.COLOR_BUFFER_BIT | gl.DEPTH_BUFFER_BIT);
+    gl.uniformMatrix4fv(gl.getUniformLocation(prog, "m"), false, mul(perspective(0.6, 1, radius * 0.05, cam.dist + 4 * radius), lookAt(eye, center)));
+    gl.drawElements(gl.TRIANGLES, idx.length, gl.UNSIGNED_INT, 0);
+  };
+  let last = null;
+  canvas.addEventListener("pointerdown", (e) => { last = [e.clientX, e.clientY]; canvas.setPointerCapture(e.pointerId); });
+  canvas.addEventListener("pointermove", (e) => {
+    if (!last) return;
+    cam.az -= (e.clientX - last[0]) * 0.01;
+    cam.el = Math.max(-1.5, Math.min(1.5, cam.el + (e.clientY - last[1]) * 0.01));
+    last = [e.clientX, e.clientY];
+    render(); // the camera needs no new relight
+  });
+  canvas.addEventListener("pointerup", () => { last = null; });
+  canvas.addEventListener("wheel", (e) => { e.preventDefault(); cam.dist *= Math.exp(e.deltaY * 0.001); render(); });
+  return {
+    setTexture(rgba, w, h) {
+      gl.bindTexture(gl.TEXTURE_2D, tex);
+      gl.texImage2D(gl.TEXTURE_2D, 0, gl.RGBA, w, h, 0, gl.RGBA, gl.UNSIGNED_BYTE, new Uint8Array(rgba.buffer));
+      render();
+      // Keep the flat texture too, small, beside the mesh.
+      const c = canvas.nextSibling;
+      if (c.width !== w) { c.width = w; c.height = h; }
+      c.getContext("2d").putImageData(new ImageData(rgba, w, h), 0, 0);
+    },
+  };
+}
+
+function program(gl, vs, fs) {
+  const p = gl.createProgram();
+  for (const [type, src] of [[gl.VERTEX_SHADER, vs], [gl.FRAGMENT_SHADER, fs]]) {
+    const s = gl.createShader(type);
+    gl.shaderSource(s, src); gl.compileShader(s);
+    if (!gl.getShaderParameter(s, gl.COMPILE_STATUS)) throw new Error(gl.getShaderInfoLog(s));
+    gl.attachShader(p, s);
+  }
+  gl.linkProgram(p); gl.useProgram(p);
+  return p;
+}
+
+function perspective(fovy, aspect, near, far) {
+  const f = 1 / Math.tan(fovy / 2), nf = 1 / (near - far);
+  return [f / aspect, 0, 0, 0, 0, f, 0, 0, 0, 0, (far + near) * nf, -1, 0, 0, 2 * far * near * nf, 0];
+}
+
+function lookAt(eye, at) {
+  const sub = (a, b) => a.map((v, i) => v - b[i]);
+  const norm = (a) => { const l = Math.hypot(...a) || 1; return a.map((v) => v / l); };
+  const cross = (a, b) => [a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]];
+  const dot = (a, b) => a[0] * b[0] + a[1] * b[1] + a[2] * b[2];
+  const z = norm(sub(eye, at)), x = norm(cross([0, 1, 0], z)), y = cross(z, x);
+  return [x[0], y[0], z[0], 0, x[1], y[1], z[1], 0, x[2], y[2], z[2], 0, -dot(x, eye), -dot(y, eye), -dot(z, eye), 1];
+}
+
+function mul(a, b) { // column-major 4×4: a·b
+  const o = new Array(16).fill(0);
+  for (let c = 0; c < 4; c++) for (let r = 0; r < 4; r++) for (let k = 0; k < 4; k++) o[4 * c + r] += a[4 * k + r] * b[4 * c + k];
+  return o;
+}
+
+// --- start ------------------------------------------------------------------
+
+async function start() {
+  info = await (await fetch("/api/info")).json();
+  info.maps.forEach((m, i) => $("map").add(new Option(`${m.name} (${m.width}×${m.height})`, i)));
+  info.weightings.forEach((w) => $("weighting").add(new Option(w, w)));
+  for (const [i, f] of info.files.entries()) {
+    const p = addPanel(`${f.name}: ${f.mode}, ${fmt(f.bytes)}, matrix error ${(100 * f.matrix_error).toFixed(3)} %, ${f.width}×${f.height} ${f.layout}`, i);
+    panels.push(p);
+    if (f.layout === "texture") await meshPanel(p).catch((e) => message(String(e)));
+  }
+  if (panels.length === 2) {
+    $("layout-label").hidden = false;
+    const wrap = document.createElement("div");
+    wrap.id = "split-wrap";
+    $("panels").prepend(wrap);
+    $("split").hidden = true;
+  }
+  if (info.reference) {
+    $("exact-label").hidden = false;
+    exactPanel = addPanel(`exact T·L from ${info.reference}`, "exact");
+  }
+  wireControls();
+  readouts();
+  requestFrames();
+}
+
+start().catch((e) => message(`start: ${e}`));

@@ -1,0 +1,337 @@
+//! `ltm view`'s HTTP API, against the binary: frames equal `ltm relight`'s
+//! at the same settings, the exact view's error equals `ltm relight
+//! --reference`'s, bad parameters get 400, malformed requests never bring
+//! the server down, and concurrent frames are bounded.
+
+mod view_support;
+
+use proptest::prelude::*;
+use view_support::*;
+
+fn server() -> Server {
+    let s = scene();
+    Server::start(&[
+        s.ltm.to_str().unwrap(),
+        s.ltm2.to_str().unwrap(),
+        "--env",
+        map("interior.exr").to_str().unwrap(),
+        "--env",
+        map("sunset.exr").to_str().unwrap(),
+        "--reference",
+        s.raw.to_str().unwrap(),
+    ])
+}
+
+#[test]
+fn info_lists_files_and_maps_by_name_only() {
+    let srv = server();
+    let r = srv.get("/api/info");
+    assert_eq!(r.status, 200);
+    let v: serde_json::Value = serde_json::from_slice(&r.body).unwrap();
+    assert_eq!(v["files"][0]["name"], "t.ltm");
+    assert_eq!(v["files"][1]["mode"], "2d");
+    assert_eq!(v["files"][0]["width"], 24);
+    assert_eq!(v["files"][0]["height"], 20);
+    assert_eq!(v["files"][0]["lights"], 96);
+    assert_eq!(v["files"][0]["layout"], "image");
+    let e = v["files"][0]["matrix_error"].as_f64().unwrap();
+    assert!(e > 0.0 && e <= 0.05, "{e}");
+    assert_eq!(v["maps"][1]["name"], "sunset.exr");
+    assert_eq!(v["maps"].as_array().unwrap().len(), 2);
+    assert_eq!(v["reference"], "t.raw");
+    // No folder of any file is given away.
+    assert!(!r.text().contains('/'), "{}", r.text());
+    let page = srv.get("/");
+    assert_eq!(page.status, 200);
+    assert!(page.text().contains("/view.js"));
+    assert_eq!(srv.get("/view.js").status, 200);
+}
+
+#[test]
+fn frames_match_ltm_relight() {
+    let srv = server();
+    let s = scene();
+    for (file, path, map_i, map_name, rot, n, w) in [
+        (0, &s.ltm, 0, "interior.exr", "0,0,0", 96, "unweighted"),
+        (0, &s.ltm, 1, "sunset.exr", "30,-15,5", 20, "transport"),
+        (1, &s.ltm2, 1, "sunset.exr", "-120.5,40,0", 7, "area"),
+        (1, &s.ltm2, 0, "interior.exr", "400,0,-90", 1, "unweighted"),
+    ] {
+        let r: Vec<&str> = rot.split(',').collect();
+        let q = format!(
+            "/api/frame?file={file}&map={map_i}&yaw={}&pitch={}&roll={}&n={n}&weighting={w}",
+            r[0], r[1], r[2]
+        );
+        let got = srv.get(&q);
+        assert_eq!(got.status, 200, "{q}: {}", got.text());
+        let (width, height, values) = got.frame();
+        assert_eq!((width, height), (24, 20));
+        let (want, json) = relight(path, &map(map_name), rot, n, w, None);
+        assert_eq!(values.len(), want.len());
+        for (i, (a, b)) in values.iter().zip(&want).enumerate() {
+            assert!(
+                (a - b).abs() <= f16_tolerance(*b),
+                "{q}: value {i}: {a} vs {b}"
+            );
+        }
+        assert_eq!(
+            got.header("x-lights"),
+            Some(json["lights"].to_string().as_str()),
+            "{q}"
+        );
+        assert_eq!(
+            got.header("x-nonzeros"),
+            Some(json["nonzeros"].to_string().as_str()),
+            "{q}"
+        );
+        let ms: f64 = got.header("x-frame-ms").unwrap().parse().unwrap();
+        assert!(ms >= 0.0);
+    }
+}
+
+#[test]
+fn exact_error_matches_ltm_relight_reference() {
+    let srv = server();
+    let s = scene();
+    let q = "file=0&map=1&yaw=45&pitch=10&roll=0&n=12&weighting=transport";
+    // Before the exact image is computed, frames carry no error.
+    assert_eq!(srv.get(&format!("/api/frame?{q}")).header("x-error"), None);
+    let exact = srv.get(&format!("/api/exact?{q}"));
+    assert_eq!(exact.status, 200, "{}", exact.text());
+    let err: f64 = exact.header("x-error").unwrap().parse().unwrap();
+    let exr = reference(&map("sunset.exr"), "45,10,0");
+    let want_img = ltm_relight::Image::read_exr(&exr).unwrap();
+    let (_, _, got_img) = exact.frame();
+    for (a, b) in got_img.iter().zip(want_img.data.iter().flatten()) {
+        assert!((a - b).abs() <= f16_tolerance(*b), "exact: {a} vs {b}");
+    }
+    let (_, json) = relight(
+        &s.ltm,
+        &map("sunset.exr"),
+        "45,10,0",
+        12,
+        "transport",
+        Some(&exr),
+    );
+    let want = json["relative_error"].as_f64().unwrap();
+    assert!(
+        (err - want).abs() <= 1e-6 * want.max(1e-3),
+        "{err} vs {want}"
+    );
+    // Now cached: frames carry the error too.
+    let again = srv.get(&format!("/api/frame?{q}"));
+    let e2: f64 = again.header("x-error").unwrap().parse().unwrap();
+    assert!((e2 - want).abs() <= 1e-6 * want.max(1e-3));
+}
+
+#[test]
+fn bad_parameters_get_400_with_a_message() {
+    let srv = server();
+    for (q, needle) in [
+        ("file=2&map=0&n=1", "file '2' is out of range"),
+        ("file=0&map=9&n=1", "map '9' is out of range (valid: 0..=1)"),
+        ("file=0&map=0&n=0", "n '0' is out of range (valid: 1..=96"),
+        ("file=0&map=0&n=97", "n '97'"),
+        ("file=0&map=0&n=5&yaw=nan", "yaw 'nan'"),
+        ("file=0&map=0&n=5&pitch=-inf", "pitch '-inf'"),
+        ("file=0&map=0&n=5&roll=1e20", "roll '1e20'"),
+        (
+            "file=0&map=0&n=5&weighting=best",
+            "unknown weighting 'best'",
+        ),
+        (
+            "file=0&map=0&n=5&env=..%2F..%2Fetc%2Fpasswd",
+            "unknown parameter 'env'",
+        ),
+        ("file=0&map=0&n=5&seq=3", "client and seq go together"),
+        ("file=0&map=0&n=5&client=%00x&seq=3", "letters and digits"),
+    ] {
+        for endpoint in ["frame", "exact"] {
+            let r = srv.get(&format!("/api/{endpoint}?{q}"));
+            assert_eq!(r.status, 400, "{q}");
+            assert!(r.text().contains(needle), "{q}: {}", r.text());
+        }
+    }
+    let r = srv.get("/api/surface?file=0");
+    assert_eq!(r.status, 400);
+    assert!(r.text().contains("image-space"), "{}", r.text());
+    assert_eq!(srv.get("/api/info?x=1").status, 400);
+    assert_eq!(srv.get("/etc/passwd").status, 404);
+    assert_eq!(srv.get("/../Cargo.toml").status, 404);
+    let long = format!("/api/frame?file=0&map=0&n=1&yaw={}", "1".repeat(3000));
+    assert_eq!(srv.get(&long).status, 414);
+    let post = srv.raw(b"POST /api/frame?file=0&map=0&n=1 HTTP/1.1\r\nHost: localhost\r\nContent-Length: 3\r\nConnection: close\r\n\r\nabc");
+    assert!(String::from_utf8_lossy(&post).starts_with("HTTP/1.1 405"));
+    let rebound =
+        srv.raw(b"GET /api/info HTTP/1.1\r\nHost: evil.example\r\nConnection: close\r\n\r\n");
+    assert!(String::from_utf8_lossy(&rebound).starts_with("HTTP/1.1 403"));
+}
+
+#[test]
+fn stale_requests_of_a_client_are_dropped() {
+    let srv = server();
+    let q = "file=0&map=0&n=5";
+    assert_eq!(
+        srv.get(&format!("/api/frame?{q}&client=abc&seq=10")).status,
+        200
+    );
+    let stale = srv.get(&format!("/api/frame?{q}&client=abc&seq=9"));
+    assert_eq!(stale.status, 204);
+    assert_eq!(stale.header("x-stale"), Some("1"));
+    // Other clients are independent.
+    assert_eq!(
+        srv.get(&format!("/api/frame?{q}&client=other&seq=1"))
+            .status,
+        200
+    );
+    assert_eq!(
+        srv.get(&format!("/api/frame?{q}&client=abc&seq=11")).status,
+        200
+    );
+}
+
+#[test]
+fn concurrent_clients_get_frames_or_busy_and_the_server_stays_up() {
+    let s = scene();
+    let mut srv = Server::start(&[
+        s.ltm.to_str().unwrap(),
+        "--env",
+        map("interior.exr").to_str().unwrap(),
+        "--slots",
+        "1",
+    ]);
+    let q = "/api/frame?file=0&map=0&yaw=10&n=96";
+    let want = srv.get(q).frame();
+    let statuses: Vec<(u16, Option<_>)> = std::thread::scope(|sc| {
+        let handles: Vec<_> = (0..12)
+            .map(|_| {
+                sc.spawn(|| {
+                    let r = srv.get(q);
+                    let f = (r.status == 200).then(|| r.frame());
+                    (r.status, f)
+                })
+            })
+            .collect();
+        handles.into_iter().map(|h| h.join().unwrap()).collect()
+    });
+    for (status, frame) in &statuses {
+        assert!(*status == 200 || *status == 503, "status {status}");
+        if let Some(f) = frame {
+            assert_eq!(f, &want, "a frame made under load differs");
+        }
+    }
+    // Clients that connect and go away mid-request free what they held.
+    for _ in 0..8 {
+        let mut c = std::net::TcpStream::connect(&srv.addr).unwrap();
+        use std::io::Write;
+        let _ =
+            c.write_all(b"GET /api/frame?file=0&map=0&n=96 HTTP/1.1\r\nHost: localhost\r\n\r\n");
+        drop(c);
+    }
+    assert!(srv.is_alive());
+    // Their frames may still hold the slot: the next request gets 503 until
+    // they end, then the same frame.
+    let deadline = std::time::Instant::now() + std::time::Duration::from_secs(60);
+    loop {
+        let r = srv.get(q);
+        if r.status == 200 {
+            assert_eq!(r.frame(), want);
+            break;
+        }
+        assert_eq!(r.status, 503, "{}", r.text());
+        assert!(
+            std::time::Instant::now() < deadline,
+            "the slot was never freed"
+        );
+        std::thread::yield_now();
+    }
+}
+
+/// Random query strings and random bytes never bring the server down: each
+/// gets an HTTP answer (or none, for bytes that are not HTTP), and the
+/// server answers a good request afterwards.
+#[test]
+fn malformed_requests_never_panic() {
+    use proptest::test_runner::{Config, TestRunner};
+    let srv = server();
+    let mut runner = TestRunner::new(Config {
+        cases: 48,
+        ..Config::default()
+    });
+    let strategy = (
+        "[a-z=&%0-9.eE+\\-]{0,120}",
+        proptest::collection::vec(any::<u8>(), 0..600),
+    );
+    runner
+        .run(&strategy, |(query, junk)| {
+            let r = srv.get(&format!("/api/frame?{query}"));
+            prop_assert!(
+                [200, 204, 400, 503].contains(&r.status),
+                "{}: {}",
+                r.status,
+                r.text()
+            );
+            let _ = srv.raw(&junk);
+            let mut req = b"GET /api/exact?".to_vec();
+            req.extend_from_slice(&junk);
+            req.extend_from_slice(b" HTTP/1.1\r\nHost: localhost\r\nConnection: close\r\n\r\n");
+            let _ = srv.raw(&req);
+            prop_assert_eq!(srv.get("/api/info").status, 200);
+            Ok(())
+        })
+        .unwrap();
+}
+
+/// A texture-space file: the page gets its geometry image, and its frames
+/// (the relit texture) equal `ltm relight`'s.
+#[test]
+fn texture_files_serve_their_surface_and_relit_texture() {
+    let dir = tempfile::tempdir().unwrap();
+    let scene_text = std::fs::read_to_string(assets().join("scenes/default.toml"))
+        .unwrap()
+        .replace("../meshes/", &format!("{}/meshes/", assets().display()));
+    let toml = dir.path().join("tex.toml");
+    std::fs::write(
+        &toml,
+        format!("{scene_text}\n[texture]\nmesh = 0\nsize = 16\nparameterization = \"sphere\"\n"),
+    )
+    .unwrap();
+    let (raw, tex) = (dir.path().join("tex.raw"), dir.path().join("tex.ltm"));
+    let p = |p: &std::path::Path| p.to_str().unwrap().to_string();
+    ltm(&[
+        "bake",
+        &p(&toml),
+        "-o",
+        &p(&raw),
+        "--face-res",
+        "2",
+        "--texel-samples",
+        "1",
+    ]);
+    ltm(&["compress", &p(&raw), "-o", &p(&tex), "--max-error", "0.05"]);
+    let srv = Server::start(&[&p(&tex), "--env", &p(&map("interior.exr"))]);
+    let info: serde_json::Value = serde_json::from_slice(&srv.get("/api/info").body).unwrap();
+    assert_eq!(info["files"][0]["layout"], "texture");
+    assert_eq!(info["files"][0]["parameterization"], "sphere");
+    let r = srv.get("/api/surface?file=0");
+    assert_eq!(r.status, 200, "{}", r.text());
+    let b = &r.body;
+    assert_eq!(&b[..4], b"LTMS");
+    assert_eq!(b.len(), 16 + 256 * 13);
+    let valid = &b[16 + 256 * 12..];
+    assert!(valid.iter().all(|&v| v <= 1) && valid.iter().filter(|&&v| v == 1).count() > 128);
+    let xyz: Vec<f32> = b[16..16 + 256 * 12]
+        .chunks_exact(4)
+        .map(|c| f32::from_le_bytes(c.try_into().unwrap()))
+        .collect();
+    assert!(xyz.iter().all(|v| v.is_finite() && v.abs() < 10.0));
+    let got = srv.get("/api/frame?file=0&map=0&yaw=20&n=24");
+    assert_eq!(got.status, 200, "{}", got.text());
+    let (w, h, values) = got.frame();
+    assert_eq!((w, h), (16, 16));
+    let (want, _) = relight(&tex, &map("interior.exr"), "20,0,0", 24, "unweighted", None);
+    for (a, b) in values.iter().zip(&want) {
+        assert!((a - b).abs() <= f16_tolerance(*b), "{a} vs {b}");
+    }
+    assert!(want.iter().any(|&v| v > 0.0));
+}

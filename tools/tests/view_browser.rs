@@ -1,0 +1,393 @@
+//! `ltm view` in a real browser: headless Chromium is driven through the
+//! page's own controls (map, rotation fields, a drag on the image, the N
+//! slider, exposure, the exact view), and the pixels it displays are
+//! checked against `ltm relight` at the same settings, the error readout
+//! against `ltm relight --reference`.
+//!
+//! Chromium is found as `$LTM_CHROMIUM`, else `chromium`,
+//! `chromium-browser` or `google-chrome` on the PATH. Without it the test
+//! fails when `CI` is set (CI installs it: `.ci/run`) and is skipped with a
+//! message otherwise.
+
+mod view_support;
+
+use headless_chrome::protocol::cdp::{Input, Page};
+use headless_chrome::{Browser, LaunchOptions, Tab};
+use serde_json::{json, Value};
+use std::path::PathBuf;
+use std::time::{Duration, Instant};
+use view_support::*;
+
+/// Longest wait for any one thing the page does.
+const TIMEOUT: Duration = Duration::from_secs(60);
+
+fn chromium() -> Option<PathBuf> {
+    if let Some(p) = std::env::var_os("LTM_CHROMIUM") {
+        return Some(PathBuf::from(p));
+    }
+    let path = std::env::var_os("PATH")?;
+    for dir in std::env::split_paths(&path) {
+        for name in ["chromium", "chromium-browser", "google-chrome"] {
+            let p = dir.join(name);
+            if p.is_file() {
+                return Some(p);
+            }
+        }
+    }
+    None
+}
+
+/// Starts headless Chromium, or says why the test cannot run.
+fn browser() -> Option<Browser> {
+    let Some(path) = chromium() else {
+        let msg = "Chromium not found (install Debian's `chromium` package or set LTM_CHROMIUM)";
+        if std::env::var_os("CI").is_some() {
+            panic!("{msg}; CI must run the browser test");
+        }
+        eprintln!("SKIPPED view_browser: {msg}");
+        return None;
+    };
+    let options = LaunchOptions::default_builder()
+        .path(Some(path.clone()))
+        .headless(true)
+        // The test runs as root in CI containers, where the sandbox cannot start.
+        .sandbox(false)
+        .window_size(Some((1300, 900)))
+        .idle_browser_timeout(Duration::from_secs(300))
+        .build()
+        .expect("launch options");
+    match Browser::new(options) {
+        Ok(b) => Some(b),
+        Err(e) => panic!("Chromium at {} could not start: {e:#}", path.display()),
+    }
+}
+
+fn eval(tab: &Tab, js: &str) -> Value {
+    tab.evaluate(js, false)
+        .unwrap_or_else(|e| panic!("evaluating {js}: {e}"))
+        .value
+        .unwrap_or(Value::Null)
+}
+
+/// Sets a control's value and fires the event its listeners wait for, as
+/// typing into it or moving it would.
+fn set(tab: &Tab, id: &str, value: &str, event: &str) {
+    tab.find_element(&format!("#{id}"))
+        .unwrap()
+        .call_js_fn(
+            "function(v, ev) { this.value = v; this.dispatchEvent(new Event(ev, { bubbles: true })); }",
+            vec![json!(value), json!(event)],
+            false,
+        )
+        .unwrap_or_else(|e| panic!("setting #{id}: {e}"));
+}
+
+/// Waits until the canvas `id` shows the frame of `query`.
+fn wait_shown(tab: &Tab, id: &str, query: &str) {
+    let sel = format!("#{id}[data-shown=\"{query}\"]");
+    if let Err(e) = tab.wait_for_element_with_custom_timeout(&sel, TIMEOUT) {
+        let shown = eval(
+            tab,
+            &format!("document.getElementById('{id}').dataset.shown || ''"),
+        );
+        let msg = eval(tab, "document.getElementById('message').textContent");
+        panic!(
+            "{id} did not show {query} within {TIMEOUT:?} ({e}); it shows {shown}; page says {msg}"
+        );
+    }
+}
+
+/// The displayed 8-bit RGB pixels of a canvas.
+fn pixels(tab: &Tab, id: &str) -> Vec<u8> {
+    let js = format!(
+        "(() => {{ const c = document.getElementById('{id}'); \
+         return Array.from(c.getContext('2d').getImageData(0, 0, c.width, c.height).data).join(','); }})()"
+    );
+    let s = eval(tab, &js);
+    let rgba: Vec<u8> = s
+        .as_str()
+        .unwrap()
+        .split(',')
+        .map(|v| v.parse().unwrap())
+        .collect();
+    rgba.chunks_exact(4)
+        .flat_map(|p| [p[0], p[1], p[2]])
+        .collect()
+}
+
+/// sRGB 8-bit of a linear value after `exposure` stops, as `ltm relight --png`.
+fn srgb8(v: f32, exposure: f32) -> u8 {
+    let v = (v * 2f32.powf(exposure)).clamp(0.0, 1.0);
+    let e = if v <= 0.003_130_8 {
+        12.92 * v
+    } else {
+        1.055 * v.powf(1.0 / 2.4) - 0.055
+    };
+    (e * 255.0 + 0.5) as u8
+}
+
+/// The displayed pixels against `ltm relight` at the same settings: within
+/// one level (the frame travels as half floats, which can move a value
+/// across a rounding boundary of the 8-bit encoding).
+fn check_pixels(tab: &Tab, file: usize, rotate: &str, n: usize, exposure: f32) {
+    let s = scene();
+    let path = [&s.ltm, &s.ltm2][file];
+    let (want, _) = relight(path, &map("sunset.exr"), rotate, n, "unweighted", None);
+    let got = pixels(tab, &format!("view{file}"));
+    assert_eq!(got.len(), want.len(), "displayed pixels");
+    let mut lit = 0;
+    for (i, (g, w)) in got.iter().zip(&want).enumerate() {
+        let w8 = srgb8(*w, exposure);
+        assert!(
+            g.abs_diff(w8) <= 1,
+            "file {file}, value {i} at rotate {rotate}, N {n}, exposure {exposure}: shown {g}, ltm relight {w8}"
+        );
+        lit += usize::from(w8 > 0);
+    }
+    assert!(
+        lit > got.len() / 10,
+        "the frame is nearly black: nothing was compared"
+    );
+}
+
+fn drag(tab: &Tab, id: &str, dx: f64) {
+    let p = tab
+        .find_element(&format!("#{id}"))
+        .unwrap()
+        .get_midpoint()
+        .unwrap();
+    let event = |kind, x: f64, buttons| Input::DispatchMouseEvent {
+        Type: kind,
+        x,
+        y: p.y,
+        modifiers: None,
+        timestamp: None,
+        button: Some(Input::MouseButton::Left),
+        buttons: Some(buttons),
+        click_count: Some(1),
+        force: None,
+        tangential_pressure: None,
+        tilt_x: None,
+        tilt_y: None,
+        twist: None,
+        delta_x: None,
+        delta_y: None,
+        pointer_Type: None,
+    };
+    use Input::DispatchMouseEventTypeOption as T;
+    tab.call_method(event(T::MousePressed, p.x, 1)).unwrap();
+    tab.call_method(event(T::MouseMoved, p.x + dx, 1)).unwrap();
+    tab.call_method(event(T::MouseReleased, p.x + dx, 0))
+        .unwrap();
+}
+
+#[test]
+fn page_controls_show_what_ltm_relight_computes() {
+    let Some(browser) = browser() else { return };
+    let s = scene();
+    let srv = Server::start(&[
+        s.ltm.to_str().unwrap(),
+        s.ltm2.to_str().unwrap(),
+        "--env",
+        map("interior.exr").to_str().unwrap(),
+        "--env",
+        map("sunset.exr").to_str().unwrap(),
+        "--reference",
+        s.raw.to_str().unwrap(),
+    ]);
+    let tab = browser.new_tab().expect("open a tab");
+    tab.set_default_timeout(TIMEOUT);
+    tab.navigate_to(&srv.url())
+        .unwrap()
+        .wait_until_navigated()
+        .unwrap();
+    tab.wait_for_element_with_custom_timeout("#view0[data-shown]", TIMEOUT)
+        .expect("the first frame");
+
+    // Map, rotation fields, N slider and exposure, through the controls.
+    set(&tab, "map", "1", "change");
+    set(&tab, "yaw", "30", "change");
+    set(&tab, "pitch", "-15", "change");
+    set(&tab, "n", "700", "input");
+    set(&tab, "exposure", "1", "input");
+    // Both files have 96 lights: one N for both ("N / N").
+    let n_text = eval(&tab, "document.getElementById('n-value').textContent");
+    let n: usize = n_text
+        .as_str()
+        .and_then(|t| t.split(" / ").next())
+        .unwrap()
+        .parse()
+        .unwrap();
+    assert!(
+        (1..96).contains(&n),
+        "N = {n} from slider position 700 of 1..96"
+    );
+    let q = format!("file=0&map=1&yaw=30&pitch=-15&roll=0&n={n}&weighting=unweighted");
+    wait_shown(&tab, "view0", &q);
+    wait_shown(&tab, "view1", &q.replace("file=0", "file=1"));
+    check_pixels(&tab, 0, "30,-15,0", n, 1.0);
+    check_pixels(&tab, 1, "30,-15,0", n, 1.0);
+
+    // Exposure is applied in the page: no new frame.
+    let frames = eval(&tab, "window.ltmView.frames");
+    set(&tab, "exposure", "-1.5", "input");
+    check_pixels(&tab, 0, "30,-15,0", n, -1.5);
+    assert_eq!(eval(&tab, "window.ltmView.frames"), frames);
+
+    // A drag of 40 px to the right turns the yaw by 20 degrees.
+    drag(&tab, "view0", 40.0);
+    let yaw = eval(&tab, "document.getElementById('yaw').value");
+    assert_eq!(yaw, json!("50"), "yaw after the drag");
+    let q = format!("file=0&map=1&yaw=50&pitch=-15&roll=0&n={n}&weighting=unweighted");
+    wait_shown(&tab, "view0", &q);
+    check_pixels(&tab, 0, "50,-15,0", n, -1.5);
+
+    // The exact view and its error readout.
+    tab.find_element("#show-exact").unwrap().click().unwrap();
+    wait_shown(&tab, "exact", &q);
+    let text = eval(&tab, "document.getElementById('error').textContent");
+    let shown: f64 = text
+        .as_str()
+        .and_then(|t| t.strip_prefix("relative L2 error "))
+        .unwrap_or_else(|| panic!("error readout {text}"))
+        .parse()
+        .unwrap();
+    let exr = reference(&map("sunset.exr"), "50,-15,0");
+    let (_, json) = relight(
+        &s.ltm,
+        &map("sunset.exr"),
+        "50,-15,0",
+        n,
+        "unweighted",
+        Some(&exr),
+    );
+    let want = json["relative_error"].as_f64().unwrap();
+    assert!(
+        (shown - want).abs() <= 1e-4 * want,
+        "error readout {shown}, ltm relight --reference {want}"
+    );
+
+    let png = tab
+        .capture_screenshot(Page::CaptureScreenshotFormatOption::Png, None, None, true)
+        .unwrap();
+    let out = PathBuf::from(env!("CARGO_TARGET_TMPDIR")).join("view-browser.png");
+    std::fs::write(&out, png).unwrap();
+    eprintln!("screenshot: {}", out.display());
+}
+
+/// Interaction latency in the browser (`performance.now()` from a rotation
+/// input to the new frame on screen), the server's frame time and the
+/// resampling time, for the figures in docs/results/viewer.md. Not a test
+/// of correctness; run by hand:
+///
+/// `LTM_VIEW_BENCH=a.ltm,b.ltm LTM_VIEW_BENCH_ENV=map.exr LTM_VIEW_BENCH_OUT=out.json
+/// cargo test --release -p ltm-tools --test view_browser -- --ignored --nocapture`
+#[test]
+#[ignore = "measurement, run by hand (see docs/results/viewer.md)"]
+fn measure_latency() {
+    let files = std::env::var("LTM_VIEW_BENCH").expect("LTM_VIEW_BENCH=FILE.ltm[,FILE.ltm]");
+    let env = std::env::var("LTM_VIEW_BENCH_ENV").expect("LTM_VIEW_BENCH_ENV=MAP");
+    let out = std::env::var("LTM_VIEW_BENCH_OUT").expect("LTM_VIEW_BENCH_OUT=results.json");
+    let rotations: usize = std::env::var("LTM_VIEW_BENCH_ROTATIONS")
+        .ok()
+        .and_then(|s| s.parse().ok())
+        .unwrap_or(40);
+    let browser = browser().expect("Chromium");
+    let mut results = Vec::new();
+    for file in files.split(',') {
+        let srv = Server::start(&[file, "--env", &env]);
+        let tab = browser.new_tab().unwrap();
+        tab.navigate_to(&srv.url())
+            .unwrap()
+            .wait_until_navigated()
+            .unwrap();
+        tab.wait_for_element_with_custom_timeout("#view0[data-shown]", TIMEOUT)
+            .unwrap();
+        let max = eval(&tab, "window.ltmView && info.files[0].max_terms")
+            .as_u64()
+            .unwrap() as f64;
+        for target in [50.0f64, 200.0, 1000.0] {
+            let pos = (target.ln() / max.ln() * 1000.0).round().min(1000.0);
+            set(&tab, "n", &pos.to_string(), "input");
+            let n = eval(&tab, "document.getElementById('n-value').textContent");
+            let n = n.as_str().unwrap().to_string();
+            let settled = eval(&tab, "query(0)");
+            wait_shown(&tab, "view0", settled.as_str().unwrap());
+            let first = eval(&tab, "window.ltmView.latencies.length")
+                .as_u64()
+                .unwrap();
+            let start = Instant::now();
+            for k in 0..rotations {
+                let yaw = format!("{}", (k as f64 + 1.0) * 7.25);
+                set(&tab, "yaw", &yaw, "input");
+                let q = format!("file=0&map=0&yaw={yaw}&pitch=0&roll=0&n={n}&weighting=unweighted");
+                wait_shown(&tab, "view0", &q);
+            }
+            let samples = eval(
+                &tab,
+                &format!(
+                    "JSON.stringify(window.ltmView.latencies.slice({}))",
+                    first + 1
+                ),
+            );
+            let samples: Vec<Value> = serde_json::from_str(samples.as_str().unwrap()).unwrap();
+            let stat = |key: &str| {
+                let mut v: Vec<f64> = samples.iter().map(|s| s[key].as_f64().unwrap()).collect();
+                v.sort_by(f64::total_cmp);
+                let q = |p: f64| v[((v.len() - 1) as f64 * p).round() as usize];
+                json!({ "median": q(0.5), "p95": q(0.95) })
+            };
+            let r = json!({
+                "file": file,
+                "terms": n,
+                "samples": samples.len(),
+                "latency_ms": stat("latency_ms"),
+                "round_trip_ms": stat("round_trip_ms"),
+                "server_frame_ms": stat("server_ms"),
+                "resample_ms": stat("resample_ms"),
+                "wall_s": start.elapsed().as_secs_f64(),
+            });
+            eprintln!("{r}");
+            results.push(r);
+        }
+        if let Ok(shot) = std::env::var("LTM_VIEW_BENCH_SHOT") {
+            let png = tab
+                .capture_screenshot(Page::CaptureScreenshotFormatOption::Png, None, None, true)
+                .unwrap();
+            std::fs::write(shot, png).unwrap();
+        }
+    }
+    std::fs::write(out, serde_json::to_string_pretty(&results).unwrap()).unwrap();
+}
+
+/// The README's screenshot: `LTM_VIEW_SHOT_ARGS` (the arguments of `ltm
+/// view`, separated by spaces) with the exact view on, saved to
+/// `LTM_VIEW_SHOT`. Run by hand like `measure_latency`.
+#[test]
+#[ignore = "makes docs/view.png, run by hand"]
+fn screenshot_for_readme() {
+    let args = std::env::var("LTM_VIEW_SHOT_ARGS").expect("LTM_VIEW_SHOT_ARGS");
+    let out = std::env::var("LTM_VIEW_SHOT").expect("LTM_VIEW_SHOT=out.png");
+    let args: Vec<&str> = args.split(' ').collect();
+    let browser = browser().expect("Chromium");
+    let srv = Server::start(&args);
+    let tab = browser.new_tab().unwrap();
+    tab.navigate_to(&srv.url())
+        .unwrap()
+        .wait_until_navigated()
+        .unwrap();
+    tab.wait_for_element_with_custom_timeout("#view0[data-shown]", TIMEOUT)
+        .unwrap();
+    set(&tab, "yaw", "40", "change");
+    set(&tab, "n", "720", "input");
+    let q = eval(&tab, "query(0)");
+    wait_shown(&tab, "view0", q.as_str().unwrap());
+    if eval(&tab, "!!info.reference") == json!(true) {
+        tab.find_element("#show-exact").unwrap().click().unwrap();
+        wait_shown(&tab, "exact", q.as_str().unwrap());
+    }
+    let png = tab
+        .capture_screenshot(Page::CaptureScreenshotFormatOption::Png, None, None, true)
+        .unwrap();
+    std::fs::write(out, png).unwrap();
+}

@@ -318,3 +318,13 @@ fn non_genus_zero_meshes_are_refused() {
     let e = err(r).1;
     assert!(e.contains("2 connected component"), "{e}");
 }
+
+/// The shipped texture-space scene parses and names a sphere layout.
+#[test]
+fn shipped_texture_scene_parses() {
+    let path = common::assets().join("scenes/bunny_texture.toml");
+    let desc = ltm_bake::SceneDesc::load(&path).unwrap();
+    let t = desc.texture.as_ref().unwrap();
+    assert_eq!((t.mesh, t.size), (0, 256));
+    assert_eq!(t.parameterization, Parameterization::Sphere);
+}

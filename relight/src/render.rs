@@ -20,7 +20,8 @@
 //! Cells of a `uv` layout that join two charts (neighbouring in the
 //! texture, far apart on the surface) must not be drawn: a triangle with
 //! an edge longer than [`SEAM_FACTOR`] times the median grid edge is left
-//! out. The `sphere` layout's square is also joined along its border,
+//! out. The `sphere` layout is one chart, so none of its cells is a seam
+//! (its long edges are stretched parts of the surface). The `sphere` layout's square is also joined along its border,
 //! where the octahedral unfolding folds it: texel `(x, 0)` meets
 //! `(S−1−x, 0)`, and likewise on the other three sides.
 
@@ -252,7 +253,13 @@ impl TexturedMesh {
                 }
             }
         }
-        let limit = SEAM_FACTOR * self.median_edge();
+        // A sphere layout is one chart with no seams: its long edges are
+        // stretched parts of the surface (ears, limbs) and must be drawn.
+        let limit = if fold_border {
+            f64::INFINITY
+        } else {
+            SEAM_FACTOR * self.median_edge()
+        };
         let ok = |t: &[u32; 3], m: &TexturedMesh| {
             (0..3).all(|k| {
                 let (a, b) = (t[k] as usize, t[(k + 1) % 3] as usize);

@@ -627,10 +627,7 @@ fn equalize_area(d: &mut [DVec3], mesh: &SurfaceMesh) {
         solve(&stiff, &m, EQUALIZE_DIFFUSION, &rhs, &mut smooth);
         let mut v = vec![DVec3::ZERO; n];
         for (t, tri) in tris.iter().enumerate() {
-            let g = gradient(
-                tri.map(|i| d[i as usize]),
-                tri.map(|i| smooth[i as usize]),
-            );
+            let g = gradient(tri.map(|i| d[i as usize]), tri.map(|i| smooth[i as usize]));
             for &i in tri {
                 v[i as usize] += g * sph[t];
             }

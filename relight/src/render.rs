@@ -236,7 +236,10 @@ impl TexturedMesh {
         let mut quads = Vec::new();
         for y in 0..s.saturating_sub(1) {
             for x in 0..s - 1 {
-                quads.push(([id(x, y), id(x + 1, y), id(x, y + 1), id(x + 1, y + 1)], false));
+                quads.push((
+                    [id(x, y), id(x + 1, y), id(x, y + 1), id(x + 1, y + 1)],
+                    false,
+                ));
             }
         }
         if fold_border && s >= 4 {
@@ -541,10 +544,8 @@ impl Projected {
     fn rows(&self, sh: usize) -> Option<(usize, usize)> {
         let [a, b, c] = self.p;
         let lo = (a.y.min(b.y).min(c.y) - 0.5).ceil().max(0.0);
-        let hi = (a.y.max(b.y).max(c.y) - 0.5)
-            .floor()
-            .min(sh as f64 - 1.0);
-        (lo.is_finite() && hi.is_finite() && lo <= hi).then(|| (lo as usize, hi as usize))
+        let hi = (a.y.max(b.y).max(c.y) - 0.5).floor().min(sh as f64 - 1.0);
+        (lo.is_finite() && hi.is_finite() && lo <= hi).then_some((lo as usize, hi as usize))
     }
 }
 
@@ -750,9 +751,9 @@ mod tests {
                 for x in 0..cam.width as usize {
                     let sx = 2.0 * (x as f64 + 0.5) / w - 1.0;
                     let sy = 1.0 - 2.0 * (y as f64 + 0.5) / h;
-                    let d = (f.forward + f.right * sx * f.tan_half * w / h
-                        + f.up * sy * f.tan_half)
-                        .normalize();
+                    let d =
+                        (f.forward + f.right * sx * f.tan_half * w / h + f.up * sy * f.tan_half)
+                            .normalize();
                     // Ray–unit sphere: |e + t d|² = 1.
                     let b = eye.dot(d);
                     let disc = b * b - (eye.length_squared() - 1.0);

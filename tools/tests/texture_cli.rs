@@ -164,9 +164,15 @@ fn texture_bakes_render_and_bad_input_is_refused() {
     std::fs::remove_file(&view).unwrap();
 
     // An image-space file where a texture-space one is needed.
-    fails(&args(&render(&p("img.ltm"), "0,1,3")), &["image-space file"]);
+    fails(
+        &args(&render(&p("img.ltm"), "0,1,3")),
+        &["image-space file"],
+    );
     // A raw store instead of a compressed file.
-    fails(&args(&render(&p("tex.raw"), "0,1,3")), &["not an .ltm file"]);
+    fails(
+        &args(&render(&p("tex.raw"), "0,1,3")),
+        &["not an .ltm file"],
+    );
     // A NaN camera, and a camera inside the mesh.
     fails(&args(&render(&p("tex.ltm"), "nan,1,3")), &["not finite"]);
     fails(
@@ -250,10 +256,7 @@ fn bad_texture_scenes_are_refused_by_bake() {
             vec!["texture.size = 4097", "1..=4096"],
         ),
         (
-            scene(
-                "sphere.obj",
-                &TEXTURE.replace("\"sphere\"", "\"uv\""),
-            ),
+            scene("sphere.obj", &TEXTURE.replace("\"sphere\"", "\"uv\"")),
             vec!["no texture coordinates"],
         ),
     ];

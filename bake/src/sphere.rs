@@ -17,7 +17,12 @@
 //! 3. **Untangling.** Spherical triangles `(a, b, c)` with `det(a, b, c) ≤ 0`
 //!    are flipped. The vertices of flipped triangles are moved to the
 //!    normalized mean of their neighbours until none remain.
-//! 4. **Stretch relaxation.** Conformal maps shrink protruding parts (ears,
+//! 4. **Density equalization.** A density-equalizing flow (Gastner &
+//!    Newman 2004; Choi & Rycroft 2018) moves vertices down the gradient of
+//!    the smoothed area density (surface area per unit of sphere area), so
+//!    that squeezed regions expand; steps that would flip a triangle are
+//!    shortened, and the flow stops when it cannot move without a flip.
+//! 5. **Stretch relaxation.** Conformal maps shrink protruding parts (ears,
 //!    limbs) to small regions. Each vertex in turn is moved on the sphere
 //!    to lower the L2 stretch (Sander et al. 2001) of its one-ring — the
 //!    stretch of the map from the flat spherical triangles (scaled to the
@@ -25,7 +30,7 @@
 //!    tangent directions; a move that would flip a triangle is refused.
 //!    This is the energy Praun & Hoppe minimize; it grows without bound as
 //!    a triangle's share of the sphere shrinks, so it undoes the collapse.
-//! 5. A final flip count must be 0, else the build is an error rather than
+//! 6. A final flip count must be 0, else the build is an error rather than
 //!    a bad geometry image.
 //!
 //! The sphere is unfolded to the square through the octahedron with the
@@ -46,6 +51,13 @@ const FLOW_STEPS: usize = 12;
 const FLOW_STEP: f64 = 2e-2;
 /// Stretch relaxation passes over all vertices.
 const RELAX_PASSES: usize = 30;
+/// Density-equalizing steps at most, the largest move of a step
+/// (radians), the diffusion time of a step's smoothing (unit sphere), and
+/// the RMS of `ln ρ` at which the density counts as uniform.
+const EQUALIZE_STEPS: usize = 300;
+const EQUALIZE_STEP: f64 = 0.02;
+const EQUALIZE_DIFFUSION: f64 = 2e-3;
+const EQUALIZE_TOLERANCE: f64 = 0.1;
 /// Untangling passes before giving up.
 const UNTANGLE_PASSES: usize = 200;
 /// Side of the grid of walk starting triangles over the square.
@@ -76,6 +88,7 @@ impl SphereMap {
         let adj = check_topology(mesh)?;
         let mut dirs = flow_embedding(mesh);
         untangle(&mut dirs, mesh)?;
+        equalize_area(&mut dirs, mesh);
         relax_stretch(&mut dirs, mesh);
         let quality = quality(&dirs, mesh);
         if quality.flipped > 0 {
@@ -548,6 +561,102 @@ fn flat_sphere_area(d: &[DVec3], tris: &[[u32; 3]]) -> f64 {
             0.5 * (s[1] - s[0]).cross(s[2] - s[0]).length()
         })
         .sum()
+}
+
+/// The gradient of the linear function with values `f` at the corners of
+/// the flat triangle `p` (zero when degenerate).
+fn gradient(p: [DVec3; 3], f: [f64; 3]) -> DVec3 {
+    let n = (p[1] - p[0]).cross(p[2] - p[0]);
+    let a2 = n.length_squared();
+    if a2 <= 0.0 {
+        return DVec3::ZERO;
+    }
+    (0..3)
+        .map(|i| f[i] * n.cross(p[(i + 2) % 3] - p[(i + 1) % 3]))
+        .sum::<DVec3>()
+        / a2
+}
+
+/// Density-equalizing flow on the sphere (after Gastner & Newman 2004 and
+/// Choi & Rycroft 2018): the density `ρ` (surface area per unit of
+/// sphere area, per triangle) is spread to the vertices, smoothed by an
+/// implicit diffusion step, and every vertex moves along `−∇ρ/ρ`, so that
+/// regions squeezed by the conformal map (ears, limbs: high density)
+/// expand and the others shrink. A step that would flip a triangle is
+/// halved until it does not; the flow stops when the density is nearly
+/// uniform or a step cannot be made without a flip.
+fn equalize_area(d: &mut [DVec3], mesh: &SurfaceMesh) {
+    let tris = &mesh.triangles;
+    let area = surface_areas(mesh);
+    let total: f64 = area.iter().sum();
+    let n = d.len();
+    for _ in 0..EQUALIZE_STEPS {
+        let sph: Vec<f64> = tris
+            .iter()
+            .map(|t| {
+                let s = t.map(|i| d[i as usize]);
+                0.5 * (s[1] - s[0]).cross(s[2] - s[0]).length()
+            })
+            .collect();
+        let k = total / sph.iter().sum::<f64>();
+        let (mut rho, mut w) = (vec![0.0; n], vec![0.0; n]);
+        let mut spread = 0.0;
+        for (t, tri) in tris.iter().enumerate() {
+            let r = (area[t] / (k * sph[t]).max(1e-300)).clamp(1e-4, 1e6);
+            spread += r.ln().powi(2) * area[t];
+            for &i in tri {
+                rho[i as usize] += r * sph[t];
+                w[i as usize] += sph[t];
+            }
+        }
+        if (spread / total).sqrt() < EQUALIZE_TOLERANCE {
+            break;
+        }
+        for i in 0..n {
+            rho[i] /= w[i].max(1e-300);
+        }
+        let sphere = SurfaceMesh {
+            positions: d.to_vec(),
+            triangles: tris.clone(),
+            ..Default::default()
+        };
+        let stiff = stiffness(&sphere);
+        let m = masses(d, tris);
+        let rhs: Vec<f64> = (0..n).map(|i| m[i] * rho[i]).collect();
+        let mut smooth = rho.clone();
+        solve(&stiff, &m, EQUALIZE_DIFFUSION, &rhs, &mut smooth);
+        let mut v = vec![DVec3::ZERO; n];
+        for (t, tri) in tris.iter().enumerate() {
+            let g = gradient(tri.map(|i| d[i as usize]), tri.map(|i| smooth[i as usize]));
+            for &i in tri {
+                v[i as usize] += g * sph[t];
+            }
+        }
+        let mut fastest: f64 = 0.0;
+        for i in 0..n {
+            let vi = -v[i] / (w[i].max(1e-300) * smooth[i].max(1e-300));
+            v[i] = vi - d[i] * vi.dot(d[i]);
+            fastest = fastest.max(v[i].length());
+        }
+        if fastest <= 0.0 || !fastest.is_finite() {
+            break;
+        }
+        let mut dt = EQUALIZE_STEP / fastest;
+        let moved = loop {
+            let next: Vec<DVec3> = (0..n).map(|i| (d[i] + v[i] * dt).normalize()).collect();
+            if !tris.iter().any(|t| flipped(&next, t)) {
+                break Some(next);
+            }
+            dt *= 0.5;
+            if dt * fastest < 1e-6 {
+                break None;
+            }
+        };
+        match moved {
+            Some(next) => d.copy_from_slice(&next),
+            None => break,
+        }
+    }
 }
 
 /// Local stretch minimization with a flip check.

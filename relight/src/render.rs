@@ -20,7 +20,8 @@
 //! Cells of a `uv` layout that join two charts (neighbouring in the
 //! texture, far apart on the surface) must not be drawn: a triangle with
 //! an edge longer than [`SEAM_FACTOR`] times the median grid edge is left
-//! out. The `sphere` layout's square is also joined along its border,
+//! out. The `sphere` layout is one chart, so none of its cells is a seam
+//! (its long edges are stretched parts of the surface). The `sphere` layout's square is also joined along its border,
 //! where the octahedral unfolding folds it: texel `(x, 0)` meets
 //! `(S−1−x, 0)`, and likewise on the other three sides.
 
@@ -154,6 +155,10 @@ pub struct TexturedMesh {
     valid: Vec<bool>,
     /// Triangles as texel indices.
     triangles: Vec<[u32; 3]>,
+    /// Per triangle: true when it joins texels across a fold of the
+    /// octahedral square (its texture coordinates are not contiguous, so
+    /// it is shaded by blending its corners' texels instead).
+    folded: Vec<bool>,
 }
 
 impl TexturedMesh {
@@ -204,6 +209,7 @@ impl TexturedMesh {
             normals,
             valid,
             triangles: Vec::new(),
+            folded: Vec::new(),
         };
         mesh.triangulate(parameterization == Parameterization::Sphere);
         if mesh.triangles.is_empty() {
@@ -230,20 +236,33 @@ impl TexturedMesh {
         let mut quads = Vec::new();
         for y in 0..s.saturating_sub(1) {
             for x in 0..s - 1 {
-                quads.push([id(x, y), id(x + 1, y), id(x, y + 1), id(x + 1, y + 1)]);
+                quads.push((
+                    [id(x, y), id(x + 1, y), id(x, y + 1), id(x + 1, y + 1)],
+                    false,
+                ));
             }
         }
         if fold_border && s >= 4 {
             // The octahedral square folds onto itself along each side.
             for x in 0..s / 2 - 1 {
                 let (a, b, ma, mb) = (x, x + 1, s - 1 - x, s - 2 - x);
-                quads.push([id(a, 0), id(b, 0), id(ma, 0), id(mb, 0)]);
-                quads.push([id(a, s - 1), id(b, s - 1), id(ma, s - 1), id(mb, s - 1)]);
-                quads.push([id(0, a), id(0, b), id(0, ma), id(0, mb)]);
-                quads.push([id(s - 1, a), id(s - 1, b), id(s - 1, ma), id(s - 1, mb)]);
+                for q in [
+                    [id(a, 0), id(b, 0), id(ma, 0), id(mb, 0)],
+                    [id(a, s - 1), id(b, s - 1), id(ma, s - 1), id(mb, s - 1)],
+                    [id(0, a), id(0, b), id(0, ma), id(0, mb)],
+                    [id(s - 1, a), id(s - 1, b), id(s - 1, ma), id(s - 1, mb)],
+                ] {
+                    quads.push((q, true));
+                }
             }
         }
-        let limit = SEAM_FACTOR * self.median_edge();
+        // A sphere layout is one chart with no seams: its long edges are
+        // stretched parts of the surface (ears, limbs) and must be drawn.
+        let limit = if fold_border {
+            f64::INFINITY
+        } else {
+            SEAM_FACTOR * self.median_edge()
+        };
         let ok = |t: &[u32; 3], m: &TexturedMesh| {
             (0..3).all(|k| {
                 let (a, b) = (t[k] as usize, t[(k + 1) % 3] as usize);
@@ -251,7 +270,8 @@ impl TexturedMesh {
             })
         };
         let mut tris = Vec::with_capacity(2 * quads.len());
-        for [a, b, c, d] in quads {
+        let mut folded = Vec::with_capacity(2 * quads.len());
+        for ([a, b, c, d], fold) in quads {
             let p = |i: u32| self.positions[i as usize];
             // Split along the shorter diagonal (a–d or b–c).
             let pair = if (p(a) - p(d)).length_squared() <= (p(b) - p(c)).length_squared() {
@@ -261,7 +281,10 @@ impl TexturedMesh {
             };
             let all = [a, b, c, d].iter().all(|&i| self.valid[i as usize]);
             if all {
-                tris.extend(pair.into_iter().filter(|t| ok(t, self)));
+                for t in pair.into_iter().filter(|t| ok(t, self)) {
+                    tris.push(t);
+                    folded.push(fold);
+                }
             } else {
                 // Three valid corners make one triangle.
                 let v: Vec<u32> = [a, b, d, c]
@@ -270,10 +293,12 @@ impl TexturedMesh {
                     .collect();
                 if v.len() == 3 && ok(&[v[0], v[1], v[2]], self) {
                     tris.push([v[0], v[1], v[2]]);
+                    folded.push(fold);
                 }
             }
         }
         self.triangles = tris;
+        self.folded = folded;
     }
 
     /// Median length of the edges between valid neighbouring texels.
@@ -347,6 +372,11 @@ impl TexturedMesh {
 
     /// Draws the mesh textured with `texture` (the relit texture, S × S)
     /// from `camera`, with `ss × ss` samples per pixel.
+    ///
+    /// Triangles are binned by bands of pixel rows, each band is drawn
+    /// (in parallel) into its own depth buffer of the nearest triangle and
+    /// perspective-correct barycentrics per sample, and each sample is then
+    /// shaded once.
     pub fn render(&self, texture: &Image, camera: &ViewCamera, ss: u32) -> Result<Image> {
         camera.validate()?;
         if !(1..=MAX_SUPERSAMPLE).contains(&ss) {
@@ -365,20 +395,18 @@ impl TexturedMesh {
         let f = camera.frame();
         let (w, h) = (camera.width as usize, camera.height as usize);
         let ssz = ss as usize;
-        let projected = self.project(&f, w as f64 * ss as f64, h as f64 * ss as f64);
+        let (sw, sh) = (w * ssz, h * ssz);
+        let projected = self.project(&f, sw as f64, sh as f64);
+        let bins = Bins::new(&projected, BAND * ssz, sh);
         let mut out = Image::new(w, h);
-        const BAND: usize = 8;
         out.data
             .par_chunks_mut(w * BAND)
             .enumerate()
             .for_each(|(band, pixels)| {
                 let rows = pixels.len() / w;
-                let y0 = band * BAND * ssz;
-                let (sw, sh) = (w * ssz, rows * ssz);
-                let mut depth = vec![f64::INFINITY; sw * sh];
-                let mut uv = vec![DVec2::NAN; sw * sh];
-                for t in &projected {
-                    raster(t, y0, sw, sh, &mut depth, &mut uv);
+                let mut buf = SampleBuffer::new(band * BAND * ssz, sw, rows * ssz);
+                for &t in bins.band(band) {
+                    buf.raster(&projected[t as usize], t);
                 }
                 let norm = 1.0 / (ssz * ssz) as f32;
                 for (i, px) in pixels.iter_mut().enumerate() {
@@ -386,9 +414,9 @@ impl TexturedMesh {
                     let mut acc = [0.0f32; 3];
                     for sy in 0..ssz {
                         for sx in 0..ssz {
-                            let q = uv[(y * ssz + sy) * sw + x * ssz + sx];
-                            if q.is_finite() {
-                                let c = self.lookup(texture, q);
+                            let (t, b) = buf.hit[(y * ssz + sy) * sw + x * ssz + sx];
+                            if t != u32::MAX {
+                                let c = self.shade(texture, &projected[t as usize], b);
                                 for ch in 0..3 {
                                     acc[ch] += c[ch];
                                 }
@@ -401,29 +429,23 @@ impl TexturedMesh {
         Ok(out)
     }
 
-    /// Triangles in supersampled screen space (`sw × sh`), with 1/z and
-    /// texel coordinates over z; triangles not wholly in front of the
-    /// camera are left out.
+    /// Triangles in supersampled screen space (`sw × sh`) with 1/z;
+    /// triangles not wholly in front of the camera are left out.
     fn project(&self, f: &Frame, sw: f64, sh: f64) -> Vec<Projected> {
         let near = 1e-9 * (1.0 + f.eye.abs().max_element());
-        let s = self.size;
         let vert = |k: u32| {
             let r = self.positions[k as usize] - f.eye;
             let z = r.dot(f.forward);
             let sx = r.dot(f.right) / (z * f.tan_half * (sw / sh));
             let sy = r.dot(f.up) / (z * f.tan_half);
-            let uv = DVec2::new((k as usize % s) as f64 + 0.5, (k as usize / s) as f64 + 0.5);
-            (
-                DVec2::new((sx + 1.0) * 0.5 * sw, (1.0 - sy) * 0.5 * sh),
-                z,
-                uv,
-            )
+            (DVec2::new((sx + 1.0) * 0.5 * sw, (1.0 - sy) * 0.5 * sh), z)
         };
         self.triangles
             .par_iter()
-            .filter_map(|t| {
+            .zip(&self.folded)
+            .filter_map(|(t, &folded)| {
                 let v = t.map(vert);
-                if v.iter().any(|(_, z, _)| {
+                if v.iter().any(|(_, z)| {
                     !matches!(z.partial_cmp(&near), Some(std::cmp::Ordering::Greater))
                 }) {
                     return None;
@@ -431,10 +453,40 @@ impl TexturedMesh {
                 Some(Projected {
                     p: v.map(|x| x.0),
                     inv_z: v.map(|x| 1.0 / x.1),
-                    uv_z: v.map(|x| x.2 / x.1),
+                    texels: *t,
+                    folded,
                 })
             })
             .collect()
+    }
+
+    /// The colour of a sample of triangle `t` at perspective-correct
+    /// barycentrics `(b1, b2)`: a bilinear lookup at the interpolated
+    /// texture coordinate, or, across a fold of the square (where the
+    /// texture coordinates jump), the blend of the corners' texels.
+    fn shade(&self, tex: &Image, t: &Projected, b: [f32; 2]) -> [f32; 3] {
+        let w = [1.0 - b[0] as f64 - b[1] as f64, b[0] as f64, b[1] as f64];
+        if t.folded {
+            let mut acc = [0.0f64; 3];
+            for (k, wk) in t.texels.iter().zip(w) {
+                let c = tex.data[*k as usize];
+                for ch in 0..3 {
+                    acc[ch] += wk * c[ch] as f64;
+                }
+            }
+            return acc.map(|v| v as f32);
+        }
+        let s = self.size;
+        let q: DVec2 = t
+            .texels
+            .iter()
+            .zip(w)
+            .map(|(&k, wk)| {
+                let k = k as usize;
+                wk * DVec2::new((k % s) as f64 + 0.5, (k / s) as f64 + 0.5)
+            })
+            .sum();
+        self.lookup(tex, q)
     }
 
     /// Bilinear lookup at texel coordinates `q` over the valid texels.
@@ -473,46 +525,127 @@ impl TexturedMesh {
     }
 }
 
+/// Pixel rows per band of the view drawn by one task.
+const BAND: usize = 8;
+
 /// A triangle in supersampled screen space.
 struct Projected {
     p: [DVec2; 3],
     inv_z: [f64; 3],
-    uv_z: [DVec2; 3],
+    /// Its corners' texels.
+    texels: [u32; 3],
+    /// True across a fold of the octahedral square.
+    folded: bool,
 }
 
-/// Rasterizes `t` into the band of sample rows `y0 .. y0 + sh` (sample
-/// centres at half-integers), keeping the nearest surface per sample.
-fn raster(t: &Projected, y0: usize, sw: usize, sh: usize, depth: &mut [f64], uv: &mut [DVec2]) {
-    let [a, b, c] = t.p;
-    let area = (b - a).perp_dot(c - a);
-    if area == 0.0 || !area.is_finite() {
-        return;
+impl Projected {
+    /// The sample rows `lo..=hi` its box covers (sample centres at
+    /// half-integers), clipped to `0..sh`; `None` when empty.
+    fn rows(&self, sh: usize) -> Option<(usize, usize)> {
+        let [a, b, c] = self.p;
+        let lo = (a.y.min(b.y).min(c.y) - 0.5).ceil().max(0.0);
+        let hi = (a.y.max(b.y).max(c.y) - 0.5).floor().min(sh as f64 - 1.0);
+        (lo.is_finite() && hi.is_finite() && lo <= hi).then_some((lo as usize, hi as usize))
     }
-    let lo = a.min(b).min(c);
-    let hi = a.max(b).max(c);
-    let x_lo = (lo.x - 0.5).ceil().max(0.0) as usize;
-    let x_hi = ((hi.x - 0.5).floor().min(sw as f64 - 1.0)).max(-1.0);
-    let y_lo = (lo.y - 0.5).ceil().max(y0 as f64) as usize;
-    let y_hi = ((hi.y - 0.5).floor().min((y0 + sh) as f64 - 1.0)).max(-1.0);
-    if x_hi < 0.0 || y_hi < 0.0 {
-        return;
-    }
-    let (x_hi, y_hi) = (x_hi as usize, y_hi as usize);
-    for y in y_lo..=y_hi {
-        for x in x_lo..=x_hi {
-            let q = DVec2::new(x as f64 + 0.5, y as f64 + 0.5);
-            let w1 = (q - a).perp_dot(c - a) / area;
-            let w2 = (b - a).perp_dot(q - a) / area;
-            let w0 = 1.0 - w1 - w2;
-            if w0 < 0.0 || w1 < 0.0 || w2 < 0.0 {
-                continue;
+}
+
+/// Triangles listed per band of `rows` sample rows (CSR).
+struct Bins {
+    start: Vec<u32>,
+    items: Vec<u32>,
+}
+
+impl Bins {
+    fn new(tris: &[Projected], rows: usize, sh: usize) -> Bins {
+        let bands = sh.div_ceil(rows);
+        let spans: Vec<Option<(usize, usize)>> = tris
+            .iter()
+            .map(|t| t.rows(sh).map(|(lo, hi)| (lo / rows, hi / rows)))
+            .collect();
+        let mut start = vec![0u32; bands + 1];
+        for &(a, b) in spans.iter().flatten() {
+            for band in a..=b {
+                start[band + 1] += 1;
             }
-            let iz = w0 * t.inv_z[0] + w1 * t.inv_z[1] + w2 * t.inv_z[2];
-            let z = 1.0 / iz;
-            let i = (y - y0) * sw + x;
-            if z < depth[i] {
-                depth[i] = z;
-                uv[i] = (w0 * t.uv_z[0] + w1 * t.uv_z[1] + w2 * t.uv_z[2]) * z;
+        }
+        for k in 1..start.len() {
+            start[k] += start[k - 1];
+        }
+        let mut fill = start.clone();
+        let mut items = vec![0u32; start[bands] as usize];
+        for (t, span) in spans.iter().enumerate() {
+            if let Some((a, b)) = *span {
+                for band in a..=b {
+                    items[fill[band] as usize] = t as u32;
+                    fill[band] += 1;
+                }
+            }
+        }
+        Bins { start, items }
+    }
+
+    fn band(&self, k: usize) -> &[u32] {
+        &self.items[self.start[k] as usize..self.start[k + 1] as usize]
+    }
+}
+
+/// One band of samples: depth, and the nearest triangle with its
+/// perspective-correct barycentrics (`u32::MAX`: no surface).
+struct SampleBuffer {
+    y0: usize,
+    sw: usize,
+    sh: usize,
+    depth: Vec<f64>,
+    hit: Vec<(u32, [f32; 2])>,
+}
+
+impl SampleBuffer {
+    fn new(y0: usize, sw: usize, sh: usize) -> SampleBuffer {
+        SampleBuffer {
+            y0,
+            sw,
+            sh,
+            depth: vec![f64::INFINITY; sw * sh],
+            hit: vec![(u32::MAX, [0.0; 2]); sw * sh],
+        }
+    }
+
+    /// Rasterizes triangle `id` into the band's sample rows `y0 .. y0 + sh`,
+    /// keeping the nearest surface per sample.
+    fn raster(&mut self, t: &Projected, id: u32) {
+        let [a, b, c] = t.p;
+        let area = (b - a).perp_dot(c - a);
+        if area == 0.0 || !area.is_finite() {
+            return;
+        }
+        let lo = a.min(b).min(c);
+        let hi = a.max(b).max(c);
+        let x_lo = (lo.x - 0.5).ceil().max(0.0) as usize;
+        let x_hi = ((hi.x - 0.5).floor().min(self.sw as f64 - 1.0)).max(-1.0);
+        let y_lo = (lo.y - 0.5).ceil().max(self.y0 as f64) as usize;
+        let y_hi = ((hi.y - 0.5).floor().min((self.y0 + self.sh) as f64 - 1.0)).max(-1.0);
+        if x_hi < 0.0 || y_hi < 0.0 {
+            return;
+        }
+        let (x_hi, y_hi) = (x_hi as usize, y_hi as usize);
+        for y in y_lo..=y_hi {
+            for x in x_lo..=x_hi {
+                let q = DVec2::new(x as f64 + 0.5, y as f64 + 0.5);
+                let w1 = (q - a).perp_dot(c - a) / area;
+                let w2 = (b - a).perp_dot(q - a) / area;
+                let w0 = 1.0 - w1 - w2;
+                if w0 < 0.0 || w1 < 0.0 || w2 < 0.0 {
+                    continue;
+                }
+                let iz = w0 * t.inv_z[0] + w1 * t.inv_z[1] + w2 * t.inv_z[2];
+                let z = 1.0 / iz;
+                let i = (y - self.y0) * self.sw + x;
+                if z < self.depth[i] {
+                    self.depth[i] = z;
+                    let b1 = w1 * t.inv_z[1] * z;
+                    let b2 = w2 * t.inv_z[2] * z;
+                    self.hit[i] = (id, [b1 as f32, b2 as f32]);
+                }
             }
         }
     }
@@ -540,4 +673,144 @@ fn ray_triangle(o: DVec3, d: DVec3, a: DVec3, b: DVec3, c: DVec3) -> Option<f64>
     }
     let t = e2.dot(q) * inv;
     (t > 0.0).then_some(t)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use ltm_codec::SurfacePoint;
+
+    /// The (not equal-area) octahedral map of `[-1, 1]²` onto the unit
+    /// sphere: its square's border folds as the sphere layout's does.
+    fn octahedral(u: f64, v: f64) -> DVec3 {
+        let z = 1.0 - u.abs() - v.abs();
+        let (x, y) = if z >= 0.0 {
+            (u, v)
+        } else {
+            ((1.0 - v.abs()).copysign(u), (1.0 - u.abs()).copysign(v))
+        };
+        DVec3::new(x, y, z).normalize()
+    }
+
+    /// A unit sphere as an `s × s` sphere-layout geometry image, and a
+    /// texture holding a smooth function of the surface point.
+    fn sphere(s: usize) -> (TexturedMesh, Image) {
+        let mut pts = Vec::new();
+        let mut tex = Image::new(s, s);
+        for y in 0..s {
+            for x in 0..s {
+                let u = 2.0 * (x as f64 + 0.5) / s as f64 - 1.0;
+                let v = 1.0 - 2.0 * (y as f64 + 0.5) / s as f64;
+                let p = octahedral(u, v);
+                pts.push(SurfacePoint::new(
+                    p.as_vec3().to_array(),
+                    p.as_vec3().to_array(),
+                ));
+                tex.data[y * s + x] = colour(p);
+            }
+        }
+        let surface = Surface::new(pts).unwrap();
+        let mesh = TexturedMesh::new(s as u32, Parameterization::Sphere, &surface).unwrap();
+        (mesh, tex)
+    }
+
+    fn colour(p: DVec3) -> [f32; 3] {
+        (p * 0.5 + DVec3::splat(0.5)).as_vec3().to_array()
+    }
+
+    fn camera(eye: DVec3) -> ViewCamera {
+        ViewCamera {
+            eye,
+            target: DVec3::ZERO,
+            up: DVec3::Y,
+            fov: 40.0,
+            width: 48,
+            height: 40,
+        }
+    }
+
+    /// Every pixel whose centre ray meets the sphere well inside its
+    /// outline shows the texture's value at the point it meets, from the
+    /// front and from behind, where the square's folded border runs
+    /// through the view (a fold's texture coordinates are not contiguous:
+    /// interpolating them would read texels from across the square).
+    #[test]
+    fn views_of_a_sphere_show_the_texture_at_the_point_seen() {
+        let (mesh, tex) = sphere(64);
+        for eye in [
+            DVec3::new(0.0, 0.0, 3.5),
+            DVec3::new(0.3, 0.2, -3.5),
+            DVec3::new(0.0, 3.5, -0.4),
+        ] {
+            let cam = camera(eye);
+            let img = mesh.render(&tex, &cam, 1).unwrap();
+            let f = cam.frame();
+            let (w, h) = (cam.width as f64, cam.height as f64);
+            let mut checked = 0;
+            for y in 0..cam.height as usize {
+                for x in 0..cam.width as usize {
+                    let sx = 2.0 * (x as f64 + 0.5) / w - 1.0;
+                    let sy = 1.0 - 2.0 * (y as f64 + 0.5) / h;
+                    let d =
+                        (f.forward + f.right * sx * f.tan_half * w / h + f.up * sy * f.tan_half)
+                            .normalize();
+                    // Ray–unit sphere: |e + t d|² = 1.
+                    let b = eye.dot(d);
+                    let disc = b * b - (eye.length_squared() - 1.0);
+                    let got = img.data[y * cam.width as usize + x];
+                    if disc < 0.0 {
+                        assert_eq!(got, [0.0; 3], "pixel ({x}, {y}) sees no surface");
+                        continue;
+                    }
+                    // Closest approach at most 0.9 from the centre.
+                    if disc < 1.0 - 0.81 {
+                        continue;
+                    }
+                    let p = eye + (-b - disc.sqrt()) * d;
+                    let want = colour(p);
+                    for c in 0..3 {
+                        assert!(
+                            (got[c] - want[c]).abs() < 0.02,
+                            "eye {eye}: pixel ({x}, {y}) {got:?}, want {want:?}"
+                        );
+                    }
+                    checked += 1;
+                }
+            }
+            assert!(checked > 300, "{checked}");
+        }
+    }
+
+    /// Supersampling averages a constant texture to itself inside the
+    /// outline and to a fraction of it at the silhouette.
+    #[test]
+    fn supersampled_edges_blend_towards_black() {
+        let (mesh, mut tex) = sphere(32);
+        tex.data.fill([0.5, 0.25, 1.0]);
+        let img = mesh
+            .render(&tex, &camera(DVec3::new(0.0, 0.0, 3.0)), 4)
+            .unwrap();
+        let centre = img.data[20 * 48 + 24];
+        assert!((centre[0] - 0.5).abs() < 1e-6 && (centre[2] - 1.0).abs() < 1e-6);
+        let partial = img
+            .data
+            .iter()
+            .filter(|p| p[2] > 0.05 && p[2] < 0.95)
+            .count();
+        assert!(partial > 10, "{partial}");
+        assert!(img.data.iter().all(|p| p[2] <= 1.0 + 1e-6));
+    }
+
+    #[test]
+    fn bad_cameras_and_textures_are_errors() {
+        let (mesh, tex) = sphere(16);
+        let mut cam = camera(DVec3::new(0.0, 0.0, 3.0));
+        cam.eye.x = f64::NAN;
+        assert!(mesh.render(&tex, &cam, 1).is_err());
+        let cam = camera(DVec3::new(0.0, 0.0, 3.0));
+        assert!(mesh.render(&tex, &cam, 0).is_err());
+        assert!(mesh.render(&Image::new(8, 8), &cam, 1).is_err());
+        assert!(mesh.check_outside(DVec3::new(0.1, 0.0, 0.0)).is_err());
+        assert!(mesh.check_outside(DVec3::new(0.0, 0.0, 3.0)).is_ok());
+    }
 }

@@ -1,0 +1,267 @@
+//! Geometry relighting through the `ltm` binary: a texture-space bake of a
+//! small closed mesh relit and drawn from a camera, and the bad input of
+//! issue 13, each a clear message and a non-zero exit (never a panic).
+
+use std::fmt::Write as _;
+use std::path::Path;
+use std::process::Command;
+
+fn ltm(args: &[&str]) -> (bool, String) {
+    let out = Command::new(env!("CARGO_BIN_EXE_ltm"))
+        .args(args)
+        .output()
+        .expect("run ltm");
+    let stderr = String::from_utf8_lossy(&out.stderr).into_owned();
+    assert!(!stderr.contains("panicked"), "{args:?}: {stderr}");
+    (out.status.success(), stderr)
+}
+
+fn fails(args: &[&str], expect: &[&str]) {
+    let (ok, stderr) = ltm(args);
+    assert!(!ok, "{args:?} succeeded");
+    for e in expect {
+        assert!(stderr.contains(e), "{args:?}: {stderr}");
+    }
+}
+
+/// An octahedron subdivided `level` times and pushed onto a sphere of
+/// radius 0.5 (closed, genus 0), with extra OBJ lines appended.
+fn sphere_obj(level: usize, extra: &str) -> String {
+    let mut v: Vec<[f64; 3]> = vec![
+        [1.0, 0.0, 0.0],
+        [-1.0, 0.0, 0.0],
+        [0.0, 1.0, 0.0],
+        [0.0, -1.0, 0.0],
+        [0.0, 0.0, 1.0],
+        [0.0, 0.0, -1.0],
+    ];
+    let mut f: Vec<[usize; 3]> = vec![
+        [0, 2, 4],
+        [2, 1, 4],
+        [1, 3, 4],
+        [3, 0, 4],
+        [2, 0, 5],
+        [1, 2, 5],
+        [3, 1, 5],
+        [0, 3, 5],
+    ];
+    for _ in 0..level {
+        let mut mid = std::collections::HashMap::new();
+        let mut nf = Vec::new();
+        for t in &f {
+            let m: Vec<usize> = (0..3)
+                .map(|k| {
+                    let key = (t[k].min(t[(k + 1) % 3]), t[k].max(t[(k + 1) % 3]));
+                    *mid.entry(key).or_insert_with(|| {
+                        v.push([0, 1, 2].map(|i| (v[key.0][i] + v[key.1][i]) / 2.0));
+                        v.len() - 1
+                    })
+                })
+                .collect();
+            nf.extend([
+                [t[0], m[0], m[2]],
+                [t[1], m[1], m[0]],
+                [t[2], m[2], m[1]],
+                [m[0], m[1], m[2]],
+            ]);
+        }
+        f = nf;
+    }
+    let mut s = String::new();
+    for p in &v {
+        let l = (p[0] * p[0] + p[1] * p[1] + p[2] * p[2]).sqrt() * 2.0;
+        writeln!(s, "v {} {} {}", p[0] / l, p[1] / l, p[2] / l).unwrap();
+    }
+    for t in &f {
+        writeln!(s, "f {} {} {}", t[0] + 1, t[1] + 1, t[2] + 1).unwrap();
+    }
+    s + extra
+}
+
+const SCENE: &str = r#"
+[camera]
+eye = [0.0, 1.0, 3.0]
+target = [0.0, 0.5, 0.0]
+fov = 30.0
+width = 8
+height = 8
+
+[lighting]
+face_res = 2
+texel_samples = 1
+
+[materials.clay]
+type = "lambert"
+albedo = [0.7, 0.6, 0.5]
+
+[[meshes]]
+path = "MESH"
+material = "clay"
+translation = [0.0, 0.6, 0.0]
+
+[[quads]]
+center = [0.0, 0.0, 0.0]
+size = [4.0, 4.0]
+material = "clay"
+"#;
+
+const TEXTURE: &str = "\n[texture]\nmesh = 0\nsize = 16\nparameterization = \"sphere\"\nspp = 1\n";
+
+fn write_scene(dir: &Path, name: &str, mesh: &str, texture: &str) -> String {
+    let path = dir.join(name);
+    std::fs::write(&path, SCENE.replace("MESH", mesh) + texture).unwrap();
+    path.to_str().unwrap().to_string()
+}
+
+fn args(v: &[String]) -> Vec<&str> {
+    v.iter().map(String::as_str).collect()
+}
+
+fn env_map() -> String {
+    Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("../assets/envmaps/studio.exr")
+        .to_str()
+        .unwrap()
+        .to_string()
+}
+
+#[test]
+fn texture_bakes_render_and_bad_input_is_refused() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let p = |n: &str| d.join(n).to_str().unwrap().to_string();
+    std::fs::write(d.join("sphere.obj"), sphere_obj(2, "")).unwrap();
+    let env = env_map();
+
+    // A texture-space and an image-space file of the same scene.
+    let tex = write_scene(d, "tex.toml", "sphere.obj", TEXTURE);
+    let img = write_scene(d, "img.toml", "sphere.obj", "");
+    for (scene, name) in [(&tex, "tex"), (&img, "img")] {
+        let raw = p(&format!("{name}.raw"));
+        assert!(ltm(&["bake", scene, "-o", &raw]).0);
+        assert!(ltm(&["compress", &raw, "-o", &p(&format!("{name}.ltm"))]).0);
+    }
+    let view = p("view.exr");
+    let render = |file: &str, eye: &str| {
+        vec![
+            "render".to_string(),
+            file.to_string(),
+            "--env".into(),
+            env.clone(),
+            "--camera".into(),
+            eye.to_string(),
+            "--target".into(),
+            "0,0.6,0".into(),
+            "--size".into(),
+            "24x16".into(),
+            "-o".into(),
+            view.clone(),
+        ]
+    };
+    let (ok, stderr) = ltm(&args(&render(&p("tex.ltm"), "0,1,3")));
+    assert!(ok, "{stderr}");
+    assert!(Path::new(&view).exists());
+    std::fs::remove_file(&view).unwrap();
+
+    // An image-space file where a texture-space one is needed.
+    fails(
+        &args(&render(&p("img.ltm"), "0,1,3")),
+        &["image-space file"],
+    );
+    // A raw store instead of a compressed file.
+    fails(
+        &args(&render(&p("tex.raw"), "0,1,3")),
+        &["not an .ltm file"],
+    );
+    // A NaN camera, and a camera inside the mesh.
+    fails(&args(&render(&p("tex.ltm"), "nan,1,3")), &["not finite"]);
+    fails(
+        &args(&render(&p("tex.ltm"), "0.05,0.6,0.02")),
+        &["inside the mesh"],
+    );
+    // A camera on its target.
+    fails(&args(&render(&p("tex.ltm"), "0,0.6,0")), &["coincide"]);
+    assert!(!Path::new(&view).exists());
+
+    // A texture relit and compared with a reference of the image space:
+    // the sizes differ.
+    let reference = p("ref.exr");
+    assert!(ltm(&["reference", &p("img.raw"), "--env", &env, "-o", &reference]).0);
+    fails(
+        &[
+            "relight",
+            &p("tex.ltm"),
+            "--env",
+            &env,
+            "-o",
+            &p("t.exr"),
+            "--reference",
+            &reference,
+        ],
+        &["16×16", "8×8"],
+    );
+}
+
+#[test]
+fn bad_texture_scenes_are_refused_by_bake() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let out = d.join("o.raw");
+    let out = out.to_str().unwrap();
+    let sphere = sphere_obj(1, "");
+    let n = sphere.lines().filter(|l| l.starts_with("v ")).count();
+    let meshes: &[(&str, String)] = &[
+        ("sphere.obj", sphere.clone()),
+        // A triangle that repeats a vertex.
+        ("repeat.obj", sphere_obj(1, "f 1 1 2\n")),
+        // Every triangle of zero area.
+        (
+            "flat.obj",
+            "v 0 0 0\nv 1 0 0\nv 2 0 0\nv 3 0 0\nf 1 2 3\nf 1 3 4\nf 1 4 2\nf 2 4 3\n".into(),
+        ),
+        // A fin on one edge: three triangles meet there.
+        (
+            "fin.obj",
+            sphere_obj(1, &format!("v 2 2 2\nf 1 3 {}\n", n + 1)),
+        ),
+    ];
+    for (name, text) in meshes {
+        std::fs::write(d.join(name), text).unwrap();
+    }
+    let count = std::cell::Cell::new(0);
+    let scene = |mesh: &str, texture: &str| {
+        count.set(count.get() + 1);
+        write_scene(d, &format!("s{}.toml", count.get()), mesh, texture)
+    };
+    let cases: Vec<(String, Vec<&str>)> = vec![
+        (
+            scene("repeat.obj", TEXTURE),
+            vec!["repeat.obj", "repeats vertex"],
+        ),
+        (
+            scene("flat.obj", TEXTURE),
+            vec!["flat.obj", "degenerate (zero area)"],
+        ),
+        (scene("fin.obj", TEXTURE), vec!["fin.obj", "edges"]),
+        (
+            scene("sphere.obj", &TEXTURE.replace("mesh = 0", "mesh = 2")),
+            vec!["texture.mesh = 2", "0..1"],
+        ),
+        (
+            scene("sphere.obj", &TEXTURE.replace("size = 16", "size = 0")),
+            vec!["texture.size = 0", "1..=4096"],
+        ),
+        (
+            scene("sphere.obj", &TEXTURE.replace("size = 16", "size = 4097")),
+            vec!["texture.size = 4097", "1..=4096"],
+        ),
+        (
+            scene("sphere.obj", &TEXTURE.replace("\"sphere\"", "\"uv\"")),
+            vec!["no texture coordinates"],
+        ),
+    ];
+    for (scene, expect) in cases {
+        fails(&["bake", &scene, "-o", out], &expect);
+        assert!(!Path::new(out).exists());
+    }
+}

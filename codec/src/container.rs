@@ -1371,12 +1371,24 @@ pub(crate) fn write_pca_file(
     path: &Path,
     meta: Meta,
     albedo: Option<&[f32]>,
+    surface: Option<&Surface>,
     model: &PcaModel,
     zstd_level: i32,
 ) -> Result<u64> {
     let mut chunks: Vec<([u8; 4], Vec<u8>)> = vec![(*b"META", meta.encode())];
+    let mut features = 0;
     if let Some(a) = albedo {
         chunks.push((*b"ALBD", bytemuck::cast_slice::<f32, u8>(a).to_vec()));
+        features |= FEATURE_ALBEDO;
+    }
+    if let Some(s) = surface {
+        s.check_rows(&meta.dims)?;
+        chunks.push((*b"SURF", s.encode_chunk(&meta.dims.rows)));
+        features |= FEATURE_SURFACE;
+    } else if meta.dims.rows.is_texture() {
+        return Err(Error::Invalid(
+            "a texture-space .ltm file needs its surface data".into(),
+        ));
     }
     let mean: Vec<u8> = model.mean().iter().flat_map(|v| v.to_le_bytes()).collect();
     chunks.push((*b"PCAM", mean));
@@ -1394,7 +1406,6 @@ pub(crate) fn write_pca_file(
         });
         offset += bytes.len() as u64;
     }
-    let features = if albedo.is_some() { FEATURE_ALBEDO } else { 0 };
     let head = encode_head(features, &dir);
     let file = AtomicFile::create(path)?;
     let tmp = file.tmp_path().to_path_buf();

@@ -13,7 +13,7 @@
 use crate::error::{RelightError, Result};
 use crate::frame::{check_light, Frame, FrameStats, Relight, Request};
 use crate::image_io::Image;
-use crate::point::{point_light_taps, Lookup, PointLight, SurfaceSample};
+use crate::point::{point_light_taps, Lookup, PointLight, SurfaceSample, Taps};
 use ltm_codec::{Dims, Limits, LtmFile};
 use rayon::prelude::*;
 use std::path::Path;
@@ -38,6 +38,8 @@ pub struct PcaRelighter {
     /// `P × K` decoded coefficients, pixel-major.
     coefficients: Vec<f32>,
     albedo: Option<Vec<f32>>,
+    /// Per-row surface samples (chunk SURF), for point lights.
+    surface: Option<Vec<SurfaceSample>>,
 }
 
 impl PcaRelighter {
@@ -66,6 +68,9 @@ impl PcaRelighter {
             basis: model.basis().dequantize(),
             coefficients: model.coefficients_by_pixel(),
             albedo: file.albedo().map(<[f32]>::to_vec),
+            surface: file
+                .surface()
+                .map(|s| s.points().iter().map(|&p| p.into()).collect()),
         })
     }
 
@@ -153,6 +158,39 @@ impl PcaRelighter {
         lookup: Lookup,
         terms: usize,
     ) -> Result<Image> {
+        self.relight_points_at(samples, std::slice::from_ref(light), lookup, terms)
+    }
+
+    /// The image under several point lights (their sum), at the surface
+    /// data stored in the file (chunk `SURF`, copied from the raw store by
+    /// `compress --mode pca`). Refuses a file without surface data, and
+    /// every light [`point_light_taps`] refuses, naming the light.
+    pub fn relight_points(
+        &self,
+        lights: &[PointLight],
+        lookup: Lookup,
+        terms: usize,
+    ) -> Result<Image> {
+        let Some(samples) = &self.surface else {
+            return Err(RelightError::Invalid(
+                "this pca file has no per-row surface data (chunk SURF), which point lights need: bake the scene with this version of ltm (image and texture bakes store each row's surface point) and compress it again with --mode pca".into(),
+            ));
+        };
+        self.relight_points_at(samples, lights, lookup, terms)
+    }
+
+    /// The per-row surface samples stored in the file, if any.
+    pub fn surface(&self) -> Option<&[SurfaceSample]> {
+        self.surface.as_deref()
+    }
+
+    fn relight_points_at(
+        &self,
+        samples: &[SurfaceSample],
+        lights: &[PointLight],
+        lookup: Lookup,
+        terms: usize,
+    ) -> Result<Image> {
         let k = self.check_terms(terms)?;
         if samples.len() != self.dims.pixels() {
             return Err(RelightError::range(
@@ -161,10 +199,25 @@ impl PcaRelighter {
                 format!("{} (one per pixel)", self.dims.pixels()),
             ));
         }
-        let taps = point_light_taps(samples, light, self.dims.face_res() as usize, lookup)?;
-        let (n, c) = (self.dims.row_len(), self.dims.channels as usize);
         let (w, h) = self.size();
         let mut image = Image::new(w, h);
+        for (i, light) in lights.iter().enumerate() {
+            let taps = point_light_taps(samples, light, self.dims.face_res() as usize, lookup)
+                .map_err(|e| RelightError::Invalid(format!("point light {}: {e}", i + 1)))?;
+            self.add_point(&taps, light, k, &mut image);
+        }
+        if let Some((x, y)) = image.first_non_finite() {
+            return Err(RelightError::Invalid(format!(
+                "relit pixel ({x}, {y}) is not finite (exceeds the f32 range)"
+            )));
+        }
+        Ok(image)
+    }
+
+    /// Adds one point light's rows (first `k` components at `taps`) to
+    /// `image`.
+    fn add_point(&self, taps: &[Taps], light: &PointLight, k: usize, image: &mut Image) {
+        let (n, c) = (self.dims.row_len(), self.dims.channels as usize);
         image.data.par_iter_mut().enumerate().for_each(|(p, px)| {
             let f = &self.coefficients[p * self.rank..p * self.rank + k];
             let mut v = [0.0f64; 3];
@@ -179,14 +232,10 @@ impl PcaRelighter {
                     *o += t * wt as f64 * light.intensity[ch] as f64;
                 }
             }
-            *px = self.albedo_times(p, v);
+            for (o, v) in px.iter_mut().zip(self.albedo_times(p, v)) {
+                *o += v;
+            }
         });
-        if let Some((x, y)) = image.first_non_finite() {
-            return Err(RelightError::Invalid(format!(
-                "relit pixel ({x}, {y}) is not finite (exceeds the f32 range)"
-            )));
-        }
-        Ok(image)
     }
 
     /// Every pixel's blocked dot product with the planar projected lighting
@@ -250,6 +299,10 @@ impl Relight for PcaRelighter {
     fn held_bytes(&self) -> usize {
         4 * (self.mean.len() + self.basis.len() + self.coefficients.len())
             + self.albedo.as_ref().map_or(0, |a| 4 * a.len())
+            + self
+                .surface
+                .as_ref()
+                .map_or(0, |s| s.len() * std::mem::size_of::<SurfaceSample>())
     }
 
     fn frame(&self) -> Frame {

@@ -305,7 +305,14 @@ pub fn compress_pca(
         tries += 1;
         if met || tries >= 12 || (k == fitted && !can_more_bits) {
             let meta = pca_meta(dims, &model, opts, achieved, f.norm2.sqrt());
-            let file_bytes = write_pca_file(out, meta, raw.albedo(), &model, opts.zstd_level)?;
+            let file_bytes = write_pca_file(
+                out,
+                meta,
+                raw.albedo(),
+                raw.surface(),
+                &model,
+                opts.zstd_level,
+            )?;
             raw.check_unchanged()?;
             return Ok(PcaStats {
                 file_bytes,

@@ -17,6 +17,7 @@ use crate::point::{point_light_taps, Lookup, PointLight, SurfaceSample, Taps};
 use ltm_codec::{Dims, Limits, LtmFile};
 use rayon::prelude::*;
 use std::path::Path;
+use std::sync::OnceLock;
 use std::time::Instant;
 
 /// Lanes of the blocked dot product.
@@ -40,6 +41,9 @@ pub struct PcaRelighter {
     albedo: Option<Vec<f32>>,
     /// Per-row surface samples (chunk SURF), for point lights.
     surface: Option<Vec<SurfaceSample>>,
+    /// `N × K` the basis transposed (column `i` of `B` contiguous), made
+    /// by the first point light (the same size as `basis`).
+    basis_t: OnceLock<Vec<f32>>,
 }
 
 impl PcaRelighter {
@@ -66,6 +70,7 @@ impl PcaRelighter {
             rank,
             mean: model.mean().to_vec(),
             basis: model.basis().dequantize(),
+            basis_t: OnceLock::new(),
             coefficients: model.coefficients_by_pixel(),
             albedo: file.albedo().map(<[f32]>::to_vec),
             surface: file
@@ -215,21 +220,27 @@ impl PcaRelighter {
     }
 
     /// Adds one point light's rows (first `k` components at `taps`) to
-    /// `image`.
+    /// `image`: per tap, the row's value at that texel is `μ[i] + F[p]·B[·][i]`,
+    /// a `k`-term dot product with column `i` of the basis (held
+    /// texel-major for this, `basis_t`), once per stored channel.
     fn add_point(&self, taps: &[Taps], light: &PointLight, k: usize, image: &mut Image) {
-        let (n, c) = (self.dims.row_len(), self.dims.channels as usize);
+        let c = self.dims.channels as usize;
+        let basis_t = self
+            .basis_t
+            .get_or_init(|| transpose(&self.basis, self.rank, self.dims.row_len()));
         image.data.par_iter_mut().enumerate().for_each(|(p, px)| {
             let f = &self.coefficients[p * self.rank..p * self.rank + k];
             let mut v = [0.0f64; 3];
             for &(j, wt) in taps[p].iter().filter(|t| t.1 != 0.0) {
+                let mut t = [0.0f64; 3];
+                for (ch, tc) in t.iter_mut().enumerate().take(c) {
+                    let i = j as usize * c + ch;
+                    let col = &basis_t[i * self.rank..i * self.rank + k];
+                    let dot: f32 = f.iter().zip(col).map(|(a, b)| a * b).sum();
+                    *tc = self.mean[i] as f64 + dot as f64;
+                }
                 for (ch, o) in v.iter_mut().enumerate() {
-                    let i = j as usize * c + ch.min(c - 1);
-                    let t: f64 = self.mean[i] as f64
-                        + f.iter()
-                            .enumerate()
-                            .map(|(a, &fa)| fa as f64 * self.basis[a * n + i] as f64)
-                            .sum::<f64>();
-                    *o += t * wt as f64 * light.intensity[ch] as f64;
+                    *o += t[ch.min(c - 1)] * wt as f64 * light.intensity[ch] as f64;
                 }
             }
             for (o, v) in px.iter_mut().zip(self.albedo_times(p, v)) {
@@ -297,7 +308,10 @@ impl Relight for PcaRelighter {
         self.rank
     }
     fn held_bytes(&self) -> usize {
-        4 * (self.mean.len() + self.basis.len() + self.coefficients.len())
+        4 * (self.mean.len()
+            + self.basis.len()
+            + self.basis_t.get().map_or(0, Vec::len)
+            + self.coefficients.len())
             + self.albedo.as_ref().map_or(0, |a| 4 * a.len())
             + self
                 .surface
@@ -351,6 +365,17 @@ impl Relight for PcaRelighter {
             ..FrameStats::default()
         })
     }
+}
+
+/// `rows × cols` row-major values transposed.
+fn transpose(m: &[f32], rows: usize, cols: usize) -> Vec<f32> {
+    let mut t = vec![0.0; m.len()];
+    for (r, row) in m.chunks_exact(cols).enumerate() {
+        for (c, &v) in row.iter().enumerate() {
+            t[c * rows + r] = v;
+        }
+    }
+    t
 }
 
 /// Opens any `.ltm` file as a relighter: [`PcaRelighter`] for `pca` files,

@@ -53,7 +53,7 @@ pub struct RelightArgs {
     pub point: Vec<[f64; 3]>,
     /// Radiant intensity of the matching --point, W/sr: I, or R,G,B; finite
     /// and >= 0 (as Mitsuba's point emitter `intensity`).
-    #[arg(long, value_name = "I", value_parser = crate::ranges::intensity)]
+    #[arg(long, value_name = "I", value_parser = crate::ranges::intensity, allow_hyphen_values = true)]
     pub intensity: Vec<[f32; 3]>,
     /// How a point light's direction picks cubemap texels: `nearest` (the
     /// texel it falls in) or `bilinear` (the four nearest texel centres).

@@ -98,8 +98,9 @@ fn point_lights_against_mitsuba() {
         println!("{name}: relative L2 error against Mitsuba {e:.4}");
         errors.push(e);
     }
-    // Measured (docs/results/pca.md): 0.0XX outside, 0.XX between.
-    assert!(errors[0] < 0.08, "outside: {}", errors[0]);
+    // Measured (docs/results/pca.md): 0.039 outside, 0.65 between;
+    // Mitsuba's own noise is 0.2 % (two seeds).
+    assert!(errors[0] < 0.06, "outside: {}", errors[0]);
     assert!(errors[1] > 3.0 * errors[0], "between: {errors:?}");
 }
 

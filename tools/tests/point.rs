@@ -151,6 +151,13 @@ fn bad_point_lights_exit_non_zero_with_a_message() {
         let (ok, _, stderr) = ltm(&args);
         assert!(ok, "{args:?}: {stderr}");
     }
+    // The pca file carries the store's surface data; `inspect` says so.
+    for (file, want) in [("p.ltm", "12"), ("n.ltm", "null")] {
+        let (ok, stdout, stderr) = ltm(&["inspect", &path(file), "--json"]);
+        assert!(ok, "{stderr}");
+        let i: serde_json::Value = serde_json::from_str(&stdout).unwrap();
+        assert_eq!(i["surface_rows"].to_string(), want, "{file}");
+    }
     let env = repo("assets/envmaps/interior.exr");
     let env = env.to_str().unwrap();
     // A light above the plane: alone, and with the map.

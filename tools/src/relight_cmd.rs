@@ -96,6 +96,9 @@ pub struct RelightArgs {
     pub json: bool,
 }
 
+/// A relighter of any mode.
+type AnyRelighter = Box<dyn Relight + Send + Sync>;
+
 /// The point lights of the command line: `--point` and `--intensity` in
 /// pairs.
 fn point_lights(a: &RelightArgs) -> Result<Vec<PointLight>> {
@@ -144,7 +147,7 @@ pub fn run(a: RelightArgs) -> Result<()> {
     }
     crate::paths::check_files(&inputs, &outputs)?;
     let opened = std::time::Instant::now();
-    let open = || -> Result<(Option<PcaRelighter>, Option<Box<dyn Relight + Send + Sync>>)> {
+    let open = || -> Result<(Option<PcaRelighter>, Option<AnyRelighter>)> {
         Ok(if points.is_empty() {
             (None, Some(open_relighter(&a.file, crate::limits())?))
         } else {

@@ -120,7 +120,7 @@ fn stores(dir: &Path) -> (PathBuf, PathBuf) {
     let header = RawHeader::new(d, false, 1 << 16);
     let with = RawWriter::write_dense_with_surface(
         &dir.join("s.raw"),
-        header.clone().with_surface(),
+        header.with_surface(),
         &t,
         None,
         Some(&surface),

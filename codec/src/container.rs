@@ -775,7 +775,8 @@ impl LtmFile {
         )?;
         check_mode_chunks(version, &meta, &dir)?;
         if meta.mode == Mode::Pca {
-            let pca = read_pca_chunks(bytes, &dir, &meta, limits)?;
+            let pca =
+                read_pca_chunks(bytes, &dir, &meta, limits)?.with_empty_rows(empty_rows.clone())?;
             return Ok(LtmIndex {
                 meta,
                 columns: Vec::new(),
@@ -1365,13 +1366,15 @@ fn read_pca_chunks(
     PcaModel::new(dims, mean, basis, coefficients)
 }
 
-/// Writes a `pca` file (version 2): META, ALBD (when given), PCAM, PCAB,
-/// PCAC, atomically. Returns the file size.
+/// Writes a `pca` file (version 2): META, ALBD, EMPT (when it has a row),
+/// SURF (each when given), PCAM, PCAB, PCAC, atomically. Returns the file
+/// size.
 pub(crate) fn write_pca_file(
     path: &Path,
     meta: Meta,
     albedo: Option<&[f32]>,
     surface: Option<&Surface>,
+    empty_rows: Option<&EmptyRows>,
     model: &PcaModel,
     zstd_level: i32,
 ) -> Result<u64> {
@@ -1380,6 +1383,17 @@ pub(crate) fn write_pca_file(
     if let Some(a) = albedo {
         chunks.push((*b"ALBD", bytemuck::cast_slice::<f32, u8>(a).to_vec()));
         features |= FEATURE_ALBEDO;
+    }
+    if let Some(e) = empty_rows.filter(|e| e.count() > 0) {
+        if e.rows() != meta.dims.pixels() {
+            return Err(Error::BufferTooSmall {
+                what: "empty-row mask",
+                len: e.rows(),
+                need: meta.dims.pixels(),
+            });
+        }
+        chunks.push((*b"EMPT", e.as_bytes().to_vec()));
+        features |= FEATURE_EMPTY_ROWS;
     }
     if let Some(s) = surface {
         s.check_rows(&meta.dims)?;

@@ -39,6 +39,8 @@ pub struct PcaRelighter {
     /// `P × K` decoded coefficients, pixel-major.
     coefficients: Vec<f32>,
     albedo: Option<Vec<f32>>,
+    /// Rows that decode to exactly 0 (chunk EMPT): black pixels.
+    empty: Option<ltm_codec::EmptyRows>,
     /// Per-row surface samples (chunk SURF), for point lights.
     surface: Option<Vec<SurfaceSample>>,
     /// `N × K` the basis transposed (column `i` of `B` contiguous), made
@@ -71,6 +73,7 @@ impl PcaRelighter {
             mean: model.mean().to_vec(),
             basis: model.basis().dequantize(),
             basis_t: OnceLock::new(),
+            empty: model.empty_rows().cloned(),
             coefficients: model.coefficients_by_pixel(),
             albedo: file.albedo().map(<[f32]>::to_vec),
             surface: file
@@ -121,7 +124,11 @@ impl PcaRelighter {
         });
     }
 
+    /// The pixel's value times its albedo; 0 for an empty row.
     fn albedo_times(&self, p: usize, mut v: [f64; 3]) -> [f32; 3] {
+        if self.empty.as_ref().is_some_and(|e| e.is_empty_row(p)) {
+            return [0.0; 3];
+        }
         if let Some(a) = &self.albedo {
             for (c, x) in v.iter_mut().enumerate() {
                 *x *= a[3 * p + c] as f64;

@@ -429,3 +429,51 @@ fn point_lights_on_an_analytic_sphere() {
         .to_string();
     assert!(e.contains("no per-row surface data"), "{e}");
 }
+
+/// Rows the raw store flags all zero (background pixels) are stored in the
+/// pca file's empty-row mask (chunk EMPT) and decode and relight to exactly
+/// 0, where `μ + F·B` alone would leave small values.
+#[test]
+fn empty_rows_decode_and_relight_to_zero() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = Dims::image(6, 5, 2, 3);
+    let mut t = matrix(d);
+    let empty = [0usize, 7, 29];
+    for &p in &empty {
+        t[p * d.row_len()..(p + 1) * d.row_len()].fill(0.0);
+    }
+    let header = RawHeader::new(d, false, (7 * d.row_len() * 4) as u64);
+    let raw = RawStore::open(
+        &RawWriter::write_dense(&dir.path().join("e.raw"), header, &t, None).unwrap(),
+    )
+    .unwrap();
+    let out = dir.path().join("e.ltm");
+    let opts = PcaOptions {
+        rank: Some(3),
+        bits: 12,
+        raise_bits: false,
+        ..Default::default()
+    };
+    compress_pca(&raw, &out, &opts, &|_, _| {}).unwrap();
+    let file = LtmFile::open(&out).unwrap();
+    let mask = file.empty_rows().expect("an EMPT chunk");
+    assert_eq!(mask.count(), empty.len());
+    let dense = decode_matrix(&file, &Limits::default()).unwrap();
+    let r = PcaRelighter::new(&file, &Limits::default()).unwrap();
+    let mut frame = r.frame();
+    let request = Request {
+        terms: 3,
+        weighting: Weighting::Unweighted,
+    };
+    r.relight(&light(d.lights()), &request, &mut frame).unwrap();
+    for p in 0..d.pixels() {
+        let row = &dense[p * d.row_len()..(p + 1) * d.row_len()];
+        if empty.contains(&p) {
+            assert!(row.iter().all(|&v| v == 0.0), "row {p}");
+            assert_eq!(frame.image.data[p], [0.0; 3], "pixel {p}");
+        } else {
+            assert!(row.iter().any(|&v| v != 0.0), "row {p}");
+            assert_ne!(frame.image.data[p], [0.0; 3], "pixel {p}");
+        }
+    }
+}

@@ -268,8 +268,9 @@ pub fn run(a: RelightArgs) -> Result<()> {
         eprintln!("relative L2 error against the reference: {e:.6}");
     }
     eprintln!(
-        "wrote {}: {} lights, {} nonzeros, frame {:.3} ms (median of {}; light transform {:.3}, selection {:.3}, multiply {:.3}, inverse {:.3} ms)",
+        "wrote {}: {} point light(s), {} lights, {} nonzeros, frame {:.3} ms (median of {}; light transform {:.3}, selection {:.3}, multiply {:.3}, inverse {:.3} ms)",
         a.output.display(),
+        points.len(),
         stats.lights,
         stats.nonzeros,
         median.as_secs_f64() * 1e3,

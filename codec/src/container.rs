@@ -883,7 +883,9 @@ fn read_directory(bytes: &[u8]) -> Result<(u32, u32, Vec<DirEntry>)> {
         ));
     }
     let count = r.u32()? as usize;
-    let most = 3 + known.count_ones() as usize;
+    // Required chunks: 3 (META, COLS, DATA), 4 in a version-2 pca file
+    // (META, PCAM, PCAB, PCAC); plus one per feature bit.
+    let most = 3 + usize::from(version >= 2) + known.count_ones() as usize;
     if !(3..=most).contains(&count) {
         return Err(Error::range("chunk count", count, format!("3..={most}")));
     }

@@ -775,7 +775,8 @@ impl LtmFile {
         )?;
         check_mode_chunks(version, &meta, &dir)?;
         if meta.mode == Mode::Pca {
-            let pca = read_pca_chunks(bytes, &dir, &meta, limits)?;
+            let pca =
+                read_pca_chunks(bytes, &dir, &meta, limits)?.with_empty_rows(empty_rows.clone())?;
             return Ok(LtmIndex {
                 meta,
                 columns: Vec::new(),
@@ -882,7 +883,9 @@ fn read_directory(bytes: &[u8]) -> Result<(u32, u32, Vec<DirEntry>)> {
         ));
     }
     let count = r.u32()? as usize;
-    let most = 3 + known.count_ones() as usize;
+    // Required chunks: 3 (META, COLS, DATA), 4 in a version-2 pca file
+    // (META, PCAM, PCAB, PCAC); plus one per feature bit.
+    let most = 3 + usize::from(version >= 2) + known.count_ones() as usize;
     if !(3..=most).contains(&count) {
         return Err(Error::range("chunk count", count, format!("3..={most}")));
     }
@@ -1365,18 +1368,43 @@ fn read_pca_chunks(
     PcaModel::new(dims, mean, basis, coefficients)
 }
 
-/// Writes a `pca` file (version 2): META, ALBD (when given), PCAM, PCAB,
-/// PCAC, atomically. Returns the file size.
+/// Writes a `pca` file (version 2): META, ALBD, EMPT (when it has a row),
+/// SURF (each when given), PCAM, PCAB, PCAC, atomically. Returns the file
+/// size.
 pub(crate) fn write_pca_file(
     path: &Path,
     meta: Meta,
     albedo: Option<&[f32]>,
+    surface: Option<&Surface>,
+    empty_rows: Option<&EmptyRows>,
     model: &PcaModel,
     zstd_level: i32,
 ) -> Result<u64> {
     let mut chunks: Vec<([u8; 4], Vec<u8>)> = vec![(*b"META", meta.encode())];
+    let mut features = 0;
     if let Some(a) = albedo {
         chunks.push((*b"ALBD", bytemuck::cast_slice::<f32, u8>(a).to_vec()));
+        features |= FEATURE_ALBEDO;
+    }
+    if let Some(e) = empty_rows.filter(|e| e.count() > 0) {
+        if e.rows() != meta.dims.pixels() {
+            return Err(Error::BufferTooSmall {
+                what: "empty-row mask",
+                len: e.rows(),
+                need: meta.dims.pixels(),
+            });
+        }
+        chunks.push((*b"EMPT", e.as_bytes().to_vec()));
+        features |= FEATURE_EMPTY_ROWS;
+    }
+    if let Some(s) = surface {
+        s.check_rows(&meta.dims)?;
+        chunks.push((*b"SURF", s.encode_chunk(&meta.dims.rows)));
+        features |= FEATURE_SURFACE;
+    } else if meta.dims.rows.is_texture() {
+        return Err(Error::Invalid(
+            "a texture-space .ltm file needs its surface data".into(),
+        ));
     }
     let mean: Vec<u8> = model.mean().iter().flat_map(|v| v.to_le_bytes()).collect();
     chunks.push((*b"PCAM", mean));
@@ -1394,7 +1422,6 @@ pub(crate) fn write_pca_file(
         });
         offset += bytes.len() as u64;
     }
-    let features = if albedo.is_some() { FEATURE_ALBEDO } else { 0 };
     let head = encode_head(features, &dir);
     let file = AtomicFile::create(path)?;
     let tmp = file.tmp_path().to_path_buf();

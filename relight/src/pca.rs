@@ -13,10 +13,11 @@
 use crate::error::{RelightError, Result};
 use crate::frame::{check_light, Frame, FrameStats, Relight, Request};
 use crate::image_io::Image;
-use crate::point::{point_light_taps, Lookup, PointLight, SurfaceSample};
+use crate::point::{point_light_taps, Lookup, PointLight, SurfaceSample, Taps};
 use ltm_codec::{Dims, Limits, LtmFile};
 use rayon::prelude::*;
 use std::path::Path;
+use std::sync::OnceLock;
 use std::time::Instant;
 
 /// Lanes of the blocked dot product.
@@ -38,6 +39,13 @@ pub struct PcaRelighter {
     /// `P × K` decoded coefficients, pixel-major.
     coefficients: Vec<f32>,
     albedo: Option<Vec<f32>>,
+    /// Rows that decode to exactly 0 (chunk EMPT): black pixels.
+    empty: Option<ltm_codec::EmptyRows>,
+    /// Per-row surface samples (chunk SURF), for point lights.
+    surface: Option<Vec<SurfaceSample>>,
+    /// `N × K` the basis transposed (column `i` of `B` contiguous), made
+    /// by the first point light (the same size as `basis`).
+    basis_t: OnceLock<Vec<f32>>,
 }
 
 impl PcaRelighter {
@@ -64,8 +72,13 @@ impl PcaRelighter {
             rank,
             mean: model.mean().to_vec(),
             basis: model.basis().dequantize(),
+            basis_t: OnceLock::new(),
+            empty: model.empty_rows().cloned(),
             coefficients: model.coefficients_by_pixel(),
             albedo: file.albedo().map(<[f32]>::to_vec),
+            surface: file
+                .surface()
+                .map(|s| s.points().iter().map(|&p| p.into()).collect()),
         })
     }
 
@@ -111,7 +124,11 @@ impl PcaRelighter {
         });
     }
 
+    /// The pixel's value times its albedo; 0 for an empty row.
     fn albedo_times(&self, p: usize, mut v: [f64; 3]) -> [f32; 3] {
+        if self.empty.as_ref().is_some_and(|e| e.is_empty_row(p)) {
+            return [0.0; 3];
+        }
         if let Some(a) = &self.albedo {
             for (c, x) in v.iter_mut().enumerate() {
                 *x *= a[3 * p + c] as f64;
@@ -153,6 +170,39 @@ impl PcaRelighter {
         lookup: Lookup,
         terms: usize,
     ) -> Result<Image> {
+        self.relight_points_at(samples, std::slice::from_ref(light), lookup, terms)
+    }
+
+    /// The image under several point lights (their sum), at the surface
+    /// data stored in the file (chunk `SURF`, copied from the raw store by
+    /// `compress --mode pca`). Refuses a file without surface data, and
+    /// every light [`point_light_taps`] refuses, naming the light.
+    pub fn relight_points(
+        &self,
+        lights: &[PointLight],
+        lookup: Lookup,
+        terms: usize,
+    ) -> Result<Image> {
+        let Some(samples) = &self.surface else {
+            return Err(RelightError::Invalid(
+                "this pca file has no per-row surface data (chunk SURF), which point lights need: bake the scene with this version of ltm (image and texture bakes store each row's surface point) and compress it again with --mode pca".into(),
+            ));
+        };
+        self.relight_points_at(samples, lights, lookup, terms)
+    }
+
+    /// The per-row surface samples stored in the file, if any.
+    pub fn surface(&self) -> Option<&[SurfaceSample]> {
+        self.surface.as_deref()
+    }
+
+    fn relight_points_at(
+        &self,
+        samples: &[SurfaceSample],
+        lights: &[PointLight],
+        lookup: Lookup,
+        terms: usize,
+    ) -> Result<Image> {
         let k = self.check_terms(terms)?;
         if samples.len() != self.dims.pixels() {
             return Err(RelightError::range(
@@ -161,32 +211,49 @@ impl PcaRelighter {
                 format!("{} (one per pixel)", self.dims.pixels()),
             ));
         }
-        let taps = point_light_taps(samples, light, self.dims.face_res() as usize, lookup)?;
-        let (n, c) = (self.dims.row_len(), self.dims.channels as usize);
         let (w, h) = self.size();
         let mut image = Image::new(w, h);
-        image.data.par_iter_mut().enumerate().for_each(|(p, px)| {
-            let f = &self.coefficients[p * self.rank..p * self.rank + k];
-            let mut v = [0.0f64; 3];
-            for &(j, wt) in taps[p].iter().filter(|t| t.1 != 0.0) {
-                for (ch, o) in v.iter_mut().enumerate() {
-                    let i = j as usize * c + ch.min(c - 1);
-                    let t: f64 = self.mean[i] as f64
-                        + f.iter()
-                            .enumerate()
-                            .map(|(a, &fa)| fa as f64 * self.basis[a * n + i] as f64)
-                            .sum::<f64>();
-                    *o += t * wt as f64 * light.intensity[ch] as f64;
-                }
-            }
-            *px = self.albedo_times(p, v);
-        });
+        for (i, light) in lights.iter().enumerate() {
+            let taps = point_light_taps(samples, light, self.dims.face_res() as usize, lookup)
+                .map_err(|e| RelightError::Invalid(format!("point light {}: {e}", i + 1)))?;
+            self.add_point(&taps, light, k, &mut image);
+        }
         if let Some((x, y)) = image.first_non_finite() {
             return Err(RelightError::Invalid(format!(
                 "relit pixel ({x}, {y}) is not finite (exceeds the f32 range)"
             )));
         }
         Ok(image)
+    }
+
+    /// Adds one point light's rows (first `k` components at `taps`) to
+    /// `image`: per tap, the row's value at that texel is `μ[i] + F[p]·B[·][i]`,
+    /// a `k`-term dot product with column `i` of the basis (held
+    /// texel-major for this, `basis_t`), once per stored channel.
+    fn add_point(&self, taps: &[Taps], light: &PointLight, k: usize, image: &mut Image) {
+        let c = self.dims.channels as usize;
+        let basis_t = self
+            .basis_t
+            .get_or_init(|| transpose(&self.basis, self.rank, self.dims.row_len()));
+        image.data.par_iter_mut().enumerate().for_each(|(p, px)| {
+            let f = &self.coefficients[p * self.rank..p * self.rank + k];
+            let mut v = [0.0f64; 3];
+            for &(j, wt) in taps[p].iter().filter(|t| t.1 != 0.0) {
+                let mut t = [0.0f64; 3];
+                for (ch, tc) in t.iter_mut().enumerate().take(c) {
+                    let i = j as usize * c + ch;
+                    let col = &basis_t[i * self.rank..i * self.rank + k];
+                    let dot: f32 = f.iter().zip(col).map(|(a, b)| a * b).sum();
+                    *tc = self.mean[i] as f64 + dot as f64;
+                }
+                for (ch, o) in v.iter_mut().enumerate() {
+                    *o += t[ch.min(c - 1)] * wt as f64 * light.intensity[ch] as f64;
+                }
+            }
+            for (o, v) in px.iter_mut().zip(self.albedo_times(p, v)) {
+                *o += v;
+            }
+        });
     }
 
     /// Every pixel's blocked dot product with the planar projected lighting
@@ -248,8 +315,15 @@ impl Relight for PcaRelighter {
         self.rank
     }
     fn held_bytes(&self) -> usize {
-        4 * (self.mean.len() + self.basis.len() + self.coefficients.len())
+        4 * (self.mean.len()
+            + self.basis.len()
+            + self.basis_t.get().map_or(0, Vec::len)
+            + self.coefficients.len())
             + self.albedo.as_ref().map_or(0, |a| 4 * a.len())
+            + self
+                .surface
+                .as_ref()
+                .map_or(0, |s| s.len() * std::mem::size_of::<SurfaceSample>())
     }
 
     fn frame(&self) -> Frame {
@@ -298,6 +372,17 @@ impl Relight for PcaRelighter {
             ..FrameStats::default()
         })
     }
+}
+
+/// `rows × cols` row-major values transposed.
+fn transpose(m: &[f32], rows: usize, cols: usize) -> Vec<f32> {
+    let mut t = vec![0.0; m.len()];
+    for (r, row) in m.chunks_exact(cols).enumerate() {
+        for (c, &v) in row.iter().enumerate() {
+            t[c * rows + r] = v;
+        }
+    }
+    t
 }
 
 /// Opens any `.ltm` file as a relighter: [`PcaRelighter`] for `pca` files,

@@ -8,6 +8,28 @@
 //! Visibility is that of the distant direction `ω` (exact for lights far
 //! outside the scene; wrong for a light between objects).
 //!
+//! # Units
+//!
+//! `I` is radiant intensity in W/sr per colour channel (Mitsuba 3's `point`
+//! emitter `intensity`; PBRT's `I` times its `scale`), in the units of the
+//! environment maps' radiance: a row then gets `f_r·V·cos θ·I/d²`, the
+//! radiance a renderer computes for direct light from that point light.
+//! Positions are in the scene's world units (the bake's TOML).
+//!
+//! # Refused lights
+//!
+//! - a non-finite position, a NaN, infinite or negative intensity;
+//! - a light within `1e-6 · s` of a valid row's surface point, where `s` is
+//!   the largest coordinate magnitude of the light and the surface points
+//!   (at least 1): the direction is undefined there;
+//! - a light *behind every row*: on the back side (`n·(X − x_p) ≤ 0`) of
+//!   every valid row's surface, as a light inside a closed object seen
+//!   from outside is. Such a light lights nothing. A light inside an
+//!   object whose inside no row sees, but in front of another surface (a
+//!   light inside the bunny, above the ground), is not detected: it is
+//!   lit as if the object were not around it, shadowed by the distant
+//!   visibility of each row's direction.
+//!
 //! [`point_light_taps`] computes every row's taps from its surface sample;
 //! [`PcaRelighter::relight_point`](crate::PcaRelighter::relight_point)
 //! evaluates the rows of a `pca` file at them.
@@ -23,10 +45,21 @@ use ltm_codec::cubemap::{direction_face_point, texel_index, texel_solid_angle};
 pub struct SurfaceSample {
     /// World-space position of the row's surface point.
     pub position: [f32; 3],
-    /// Unit shading normal (not used by the lookup; kept with the sample).
+    /// Unit shading normal, on the side the row is seen from (used only to
+    /// refuse a light behind every row).
     pub normal: [f32; 3],
     /// The row sees a surface.
     pub valid: bool,
+}
+
+impl From<ltm_codec::SurfacePoint> for SurfaceSample {
+    fn from(p: ltm_codec::SurfacePoint) -> SurfaceSample {
+        SurfaceSample {
+            position: p.position,
+            normal: p.normal,
+            valid: p.valid,
+        }
+    }
 }
 
 /// An isotropic point light.
@@ -49,6 +82,29 @@ pub enum Lookup {
     Bilinear,
 }
 
+impl Lookup {
+    /// The name `FromStr` reads: `nearest` or `bilinear`.
+    pub fn name(self) -> &'static str {
+        match self {
+            Lookup::Nearest => "nearest",
+            Lookup::Bilinear => "bilinear",
+        }
+    }
+}
+
+impl std::str::FromStr for Lookup {
+    type Err = String;
+    fn from_str(s: &str) -> std::result::Result<Lookup, String> {
+        match s {
+            "nearest" => Ok(Lookup::Nearest),
+            "bilinear" => Ok(Lookup::Bilinear),
+            _ => Err(format!(
+                "texel lookup '{s}' is not one of: nearest, bilinear"
+            )),
+        }
+    }
+}
+
 /// One row's lighting: up to four `(texel, I/(d²·Ω_j)·weight)` pairs (weight
 /// 0 for unused slots). Multiply by the light's RGB intensity.
 pub type Taps = [(u32, f32); 4];
@@ -58,9 +114,10 @@ pub type Taps = [(u32, f32); 4];
 const MIN_DISTANCE: f64 = 1e-6;
 
 /// Every row's taps for `light` on a matrix of face resolution `n`.
-/// Refuses a NaN, infinite or negative intensity, a non-finite position
-/// and a light at (within 1e-6 of the scene's scale of) a valid surface
-/// point, naming the row.
+/// Refuses a NaN, infinite or negative intensity, a non-finite position,
+/// a light at (within 1e-6 of the scene's scale of) a valid surface
+/// point, naming the row, and a light behind every valid row's surface
+/// (see the module's "Refused lights").
 pub fn point_light_taps(
     samples: &[SurfaceSample],
     light: &PointLight,
@@ -89,7 +146,7 @@ pub fn point_light_taps(
         .filter(|s| s.valid)
         .flat_map(|s| s.position)
         .fold(x.abs().max_element().max(1.0), |m, v| m.max(v.abs() as f64));
-    samples
+    let all = samples
         .iter()
         .enumerate()
         .map(|(p, s)| {
@@ -106,7 +163,28 @@ pub fn point_light_taps(
             }
             Ok(taps(to, d2, n, lookup))
         })
-        .collect()
+        .collect::<Result<Vec<Taps>>>()?;
+    check_in_front(samples, x)?;
+    Ok(all)
+}
+
+/// Refuses a light on the back side of every valid row's surface.
+fn check_in_front(samples: &[SurfaceSample], x: DVec3) -> Result<()> {
+    let mut valid = samples.iter().filter(|s| s.valid).peekable();
+    if valid.peek().is_none() {
+        return Ok(());
+    }
+    let in_front = |s: &SurfaceSample| {
+        let to = x - DVec3::from_array(s.position.map(f64::from));
+        to.dot(DVec3::from_array(s.normal.map(f64::from))) > 0.0
+    };
+    if !valid.any(in_front) {
+        return Err(RelightError::Invalid(format!(
+            "point light at {x} is behind the surface of every row (n·(X − x) ≤ 0 at all {} surface points): inside or behind the geometry the rows see, it lights nothing",
+            samples.iter().filter(|s| s.valid).count()
+        )));
+    }
+    Ok(())
 }
 
 /// The taps of direction `to` (unnormalised) at squared distance `d2`.

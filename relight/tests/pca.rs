@@ -241,9 +241,26 @@ fn point_lights_on_an_analytic_sphere() {
     let dir = tempfile::tempdir().unwrap();
     let n = 8;
     let (d, t, samples) = sphere(n);
-    let header = RawHeader::new(d, false, (8 * d.row_len() * 4) as u64);
+    let header = RawHeader::new(d, false, (8 * d.row_len() * 4) as u64).with_surface();
+    let surface = ltm_codec::Surface::new(
+        samples
+            .iter()
+            .map(|s| match s.valid {
+                true => ltm_codec::SurfacePoint::new(s.position, s.normal),
+                false => ltm_codec::SurfacePoint::INVALID,
+            })
+            .collect(),
+    )
+    .unwrap();
     let raw = RawStore::open(
-        &RawWriter::write_dense(&dir.path().join("s.raw"), header, &t, None).unwrap(),
+        &RawWriter::write_dense_with_surface(
+            &dir.path().join("s.raw"),
+            header,
+            &t,
+            None,
+            Some(&surface),
+        )
+        .unwrap(),
     )
     .unwrap();
     let out = dir.path().join("s.ltm");
@@ -278,9 +295,28 @@ fn point_lights_on_an_analytic_sphere() {
         let nrm = glam::DVec3::from_array(s.normal.map(f64::from));
         0.8 / std::f64::consts::PI * nrm.dot(w).max(0.0) / to.length_squared()
     };
-    let near = r
-        .relight_point(&samples, &light, Lookup::Nearest, 64)
+    // The file carries the store's surface data: its own samples give the
+    // same image, and two lights give the sum of their images.
+    assert_eq!(r.surface().map(<[_]>::len), Some(64));
+    let near = r.relight_points(&[light], Lookup::Nearest, 64).unwrap();
+    assert_eq!(
+        near,
+        r.relight_point(&samples, &light, Lookup::Nearest, 64)
+            .unwrap()
+    );
+    let second = PointLight {
+        position: [-3.0, 2.0, 1.0],
+        intensity: [0.5, 1.0, 2.0],
+    };
+    let both = r
+        .relight_points(&[light, second], Lookup::Nearest, 64)
         .unwrap();
+    let alone = r.relight_points(&[second], Lookup::Nearest, 64).unwrap();
+    for ((b, a), s) in both.data.iter().zip(&alone.data).zip(&near.data) {
+        for c in 0..3 {
+            assert!((b[c] - a[c] - s[c]).abs() <= 1e-6 * b[c].abs().max(1e-3));
+        }
+    }
     let bil = r
         .relight_point(&samples, &light, Lookup::Bilinear, 64)
         .unwrap();
@@ -344,17 +380,100 @@ fn point_lights_on_an_analytic_sphere() {
     assert!(r
         .relight_point(&samples[1..], &light, Lookup::Nearest, 64)
         .is_err());
-    // A light at an invalid row's point is fine (that row sees no surface).
-    let off = samples[5].position.map(f64::from);
+    // A light at an invalid row's point is not refused for that row (it
+    // sees no surface), but it lies on the sphere, behind every other
+    // row's tangent plane; so is a light inside the sphere.
+    for position in [samples[5].position.map(f64::from), [0.0, 0.2, 0.1]] {
+        let e = bad(PointLight { position, ..light });
+        assert!(
+            e.contains("behind the surface of every row") && !e.contains("row 5"),
+            "{e}"
+        );
+    }
+    // Beside the sphere, in front of some rows: accepted.
     assert!(r
         .relight_point(
             &samples,
             &PointLight {
-                position: off,
+                position: [3.0, 0.1, 0.0],
                 ..light
             },
             Lookup::Nearest,
             64
         )
         .is_ok());
+    let e = r
+        .relight_points(
+            &[
+                light,
+                PointLight {
+                    intensity: [-1.0; 3],
+                    ..light
+                },
+            ],
+            Lookup::Nearest,
+            64,
+        )
+        .unwrap_err()
+        .to_string();
+    assert!(
+        e.contains("point light 2") && e.contains("intensity"),
+        "{e}"
+    );
+    // A file without surface data refuses point lights.
+    let (_, plain) = setup(dir.path(), Dims::image(6, 5, 2, 1), 5, false);
+    let e = PcaRelighter::open_with_limits(&plain, &Limits::default())
+        .unwrap()
+        .relight_points(&[light], Lookup::Nearest, 5)
+        .unwrap_err()
+        .to_string();
+    assert!(e.contains("no per-row surface data"), "{e}");
+}
+
+/// Rows the raw store flags all zero (background pixels) are stored in the
+/// pca file's empty-row mask (chunk EMPT) and decode and relight to exactly
+/// 0, where `μ + F·B` alone would leave small values.
+#[test]
+fn empty_rows_decode_and_relight_to_zero() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = Dims::image(6, 5, 2, 3);
+    let mut t = matrix(d);
+    let empty = [0usize, 7, 29];
+    for &p in &empty {
+        t[p * d.row_len()..(p + 1) * d.row_len()].fill(0.0);
+    }
+    let header = RawHeader::new(d, false, (7 * d.row_len() * 4) as u64);
+    let raw = RawStore::open(
+        &RawWriter::write_dense(&dir.path().join("e.raw"), header, &t, None).unwrap(),
+    )
+    .unwrap();
+    let out = dir.path().join("e.ltm");
+    let opts = PcaOptions {
+        rank: Some(3),
+        bits: 12,
+        raise_bits: false,
+        ..Default::default()
+    };
+    compress_pca(&raw, &out, &opts, &|_, _| {}).unwrap();
+    let file = LtmFile::open(&out).unwrap();
+    let mask = file.empty_rows().expect("an EMPT chunk");
+    assert_eq!(mask.count(), empty.len());
+    let dense = decode_matrix(&file, &Limits::default()).unwrap();
+    let r = PcaRelighter::new(&file, &Limits::default()).unwrap();
+    let mut frame = r.frame();
+    let request = Request {
+        terms: 3,
+        weighting: Weighting::Unweighted,
+    };
+    r.relight(&light(d.lights()), &request, &mut frame).unwrap();
+    for p in 0..d.pixels() {
+        let row = &dense[p * d.row_len()..(p + 1) * d.row_len()];
+        if empty.contains(&p) {
+            assert!(row.iter().all(|&v| v == 0.0), "row {p}");
+            assert_eq!(frame.image.data[p], [0.0; 3], "pixel {p}");
+        } else {
+            assert!(row.iter().any(|&v| v != 0.0), "row {p}");
+            assert_ne!(frame.image.data[p], [0.0; 3], "pixel {p}");
+        }
+    }
 }

@@ -329,6 +329,9 @@ pub struct Inspection {
     pub average_depth_by_row_level: Vec<f64>,
     /// pca files: the eigen-transports stored (0 otherwise).
     pub pca_rank: usize,
+    /// Rows with a surface point in the file's surface data (chunk SURF;
+    /// `None` without it). pca files need it for point lights.
+    pub surface_rows: Option<usize>,
 }
 
 pub fn inspect(file: &LtmFile) -> Inspection {
@@ -375,6 +378,7 @@ pub fn inspect(file: &LtmFile) -> Inspection {
             .map(|(s, c)| if *c > 0 { s / *c as f64 } else { 0.0 })
             .collect(),
         pca_rank: file.pca().map_or(0, |m| m.rank()),
+        surface_rows: file.surface().map(|s| s.valid_count()),
     }
 }
 
@@ -416,6 +420,14 @@ pub fn inspect_cmd(a: InspectArgs) -> Result<()> {
         i.file_bytes, i.raw_bytes, i.compression_ratio, i.bits_per_element
     );
     println!("  nonzeros       {}", i.nonzeros);
+    match (i.surface_rows, i.pca_rank > 0) {
+        (Some(v), true) => {
+            println!("  surface data   {v} rows with a surface point (relight --point works)")
+        }
+        (Some(v), false) => println!("  surface data   {v} rows with a surface point"),
+        (None, true) => println!("  surface data   none (relight --point needs it)"),
+        (None, false) => {}
+    }
     if i.pca_rank > 0 {
         if i.target_error > 0.0 {
             println!("  target error   {}", i.target_error);

@@ -83,8 +83,9 @@ enum Command {
     Inspect(codec_cmds::InspectArgs),
     /// Decode an .ltm file to a dense NumPy matrix.
     Export(codec_cmds::ExportArgs),
-    /// Relight a compressed matrix under an environment map (an image, or
-    /// for a texture-space matrix the relit texture).
+    /// Relight a compressed matrix under an environment map and, for pca
+    /// files, point lights (an image, or for a texture-space matrix the
+    /// relit texture).
     Relight(relight_cmd::RelightArgs),
     /// Relight a texture-space matrix and draw the relit mesh from any
     /// camera (or an orbit of cameras).

@@ -18,6 +18,7 @@ pub use quantized::{dequantize, q_max, QuantizedMatrix, MAX_SCALE};
 
 use crate::container::{write_pca_file, Meta, Mode};
 use crate::dims::Dims;
+use crate::empty::EmptyRows;
 use crate::error::{Error, Result};
 use crate::limits::Limits;
 use crate::raw::RawStore;
@@ -100,6 +101,8 @@ pub struct PcaModel {
     coefficients: QuantizedMatrix,
     /// The decoded basis, `K × N`, row-major.
     basis_values: Vec<f64>,
+    /// Rows the raw store flagged all zero (chunk EMPT): decoded as 0.
+    empty_rows: Option<EmptyRows>,
 }
 
 impl PcaModel {
@@ -130,7 +133,29 @@ impl PcaModel {
             basis,
             coefficients,
             basis_values,
+            empty_rows: None,
         })
+    }
+
+    /// The model with the mask of rows that decode to exactly 0 (chunk
+    /// EMPT); a mask with no row set is dropped.
+    pub fn with_empty_rows(mut self, empty: Option<EmptyRows>) -> Result<PcaModel> {
+        if let Some(e) = &empty {
+            if e.rows() != self.dims.pixels() {
+                return Err(Error::BufferTooSmall {
+                    what: "empty-row mask",
+                    len: e.rows(),
+                    need: self.dims.pixels(),
+                });
+            }
+        }
+        self.empty_rows = empty.filter(|e| e.count() > 0);
+        Ok(self)
+    }
+
+    /// The rows that decode to exactly 0, if any are marked.
+    pub fn empty_rows(&self) -> Option<&EmptyRows> {
+        self.empty_rows.as_ref()
     }
 
     /// The matrix's dimensions.
@@ -175,9 +200,10 @@ impl PcaModel {
         out
     }
 
-    /// Rows `first..first + count` of the decoded matrix, `μ + F·B` in f64,
-    /// into `out` (`count × N`, row-major): the reconstruction of every
-    /// decoder and of the encoder's error measurement.
+    /// Rows `first..first + count` of the decoded matrix, `μ + F·B` in f64
+    /// (0 in the rows of the empty-row mask), into `out` (`count × N`,
+    /// row-major): the reconstruction of every decoder and of the encoder's
+    /// error measurement.
     pub fn reconstruct_rows(&self, first: usize, count: usize, out: &mut Vec<f64>) {
         let (n, k) = (self.dims.row_len(), self.rank());
         let f: Vec<f64> = (first..first + count)
@@ -195,6 +221,13 @@ impl PcaModel {
         let fm = MatRef::from_row_major_slice(&f, count, k);
         let bm = MatRef::from_row_major_slice(&self.basis_values, k, n);
         matmul(dst, Accum::Add, fm, bm, 1.0, Par::rayon(0));
+        if let Some(e) = &self.empty_rows {
+            for (r, row) in out.chunks_exact_mut(n).enumerate() {
+                if e.is_empty_row(first + r) {
+                    row.fill(0.0);
+                }
+            }
+        }
     }
 
     /// `‖T − T̂‖²_F` against the store (f64, `T̂` rounded to f32 as decoders
@@ -296,16 +329,26 @@ pub fn compress_pca(
             (k, opts.bits)
         }
     };
+    // Rows the store flags all zero (checked by the fit's verified pass).
+    let empty = EmptyRows::from_fn(dims.pixels(), |r| raw.is_zero_row(r));
     let mut tries = 0;
     loop {
-        let model = quantize(&f, dims, k, bits)?;
+        let model = quantize(&f, dims, k, bits)?.with_empty_rows(Some(empty.clone()))?;
         let achieved = rel(model.error2(raw, block_values)?);
         let met = opts.rank.is_some() || achieved <= opts.max_error;
         let can_more_bits = opts.raise_bits && bits < 16;
         tries += 1;
         if met || tries >= 12 || (k == fitted && !can_more_bits) {
             let meta = pca_meta(dims, &model, opts, achieved, f.norm2.sqrt());
-            let file_bytes = write_pca_file(out, meta, raw.albedo(), &model, opts.zstd_level)?;
+            let file_bytes = write_pca_file(
+                out,
+                meta,
+                raw.albedo(),
+                raw.surface(),
+                model.empty_rows(),
+                &model,
+                opts.zstd_level,
+            )?;
             raw.check_unchanged()?;
             return Ok(PcaStats {
                 file_bytes,

@@ -22,38 +22,21 @@
 //! - `decode_column`: the same plus the four inverse steps (image
 //!   coefficients), for comparison.
 
+mod common;
+
 use criterion::{criterion_group, criterion_main, BenchmarkId, Criterion, Throughput};
-use ltm::bake::{bake, BakeOptions, Overrides, Scene, SceneDesc};
 use ltm::codec::compress::{compress, CodeOptions, Target};
 use ltm::codec::container::{EncodedColumn, Mode};
 use ltm::codec::quant::{self, scale_groups, BandWeights};
 use ltm::codec::wavelet::{self, row_forward};
 use ltm::codec::{ColumnDecoder, Dims, Filter, Meta, RawStore, SparseColumn};
 use ltm::relight::{EnvMap, Relight, Relighter, Request, Rotation, Weighting};
-use std::path::Path;
 use std::time::Duration;
 
 fn bench(c: &mut Criterion) {
     let dir = tempfile::tempdir().unwrap();
-    let assets = Path::new(env!("CARGO_MANIFEST_DIR")).join("assets");
-    let mut desc = SceneDesc::default_scene(&assets).unwrap();
-    desc.apply(&Overrides {
-        width: Some(64),
-        height: Some(64),
-        face_res: Some(16),
-        ..Default::default()
-    })
-    .unwrap();
-    let raw_path = dir.path().join("scene.raw");
-    bake(
-        &Scene::build(&desc).unwrap(),
-        &raw_path,
-        &BakeOptions::default(),
-        &|_| {},
-    )
-    .unwrap();
-    let raw = RawStore::open(&raw_path).unwrap();
-    let env = EnvMap::load(&assets.join("envmaps/interior.exr")).unwrap();
+    let raw = RawStore::open(&common::small_scene(dir.path())).unwrap();
+    let env = EnvMap::load(&common::assets().join("envmaps/interior.exr")).unwrap();
     let light = env.to_cubemap(16, &Rotation::IDENTITY);
 
     let relighters: Vec<(Mode, Relighter)> = [Mode::Adaptive, Mode::TwoD]
@@ -261,24 +244,11 @@ fn quantize(c: &mut Criterion) {
 /// - `multiply_add/stream_probe`: a parallel read of a 256 MiB buffer of
 ///   `u64` (summed), the streaming bound those bytes are compared with.
 fn multiply_add(c: &mut Criterion) {
-    use rayon::prelude::*;
     let dir = tempfile::tempdir().unwrap();
     let files: Vec<(String, std::path::PathBuf)> = match std::env::var_os("LTM_BENCH_LTM") {
         Some(path) => vec![("file".into(), path.into())],
         None => {
-            let assets = Path::new(env!("CARGO_MANIFEST_DIR")).join("assets");
-            let mut desc = SceneDesc::default_scene(&assets).unwrap();
-            desc.apply(&Overrides {
-                width: Some(64),
-                height: Some(64),
-                face_res: Some(16),
-                ..Default::default()
-            })
-            .unwrap();
-            let raw_path = dir.path().join("scene.raw");
-            let scene = Scene::build(&desc).unwrap();
-            bake(&scene, &raw_path, &BakeOptions::default(), &|_| {}).unwrap();
-            let raw = RawStore::open(&raw_path).unwrap();
+            let raw = RawStore::open(&common::small_scene(dir.path())).unwrap();
             [Mode::TwoD, Mode::Adaptive]
                 .into_iter()
                 .map(|mode| {
@@ -295,8 +265,7 @@ fn multiply_add(c: &mut Criterion) {
                 .collect()
         }
     };
-    let assets = Path::new(env!("CARGO_MANIFEST_DIR")).join("assets");
-    let env = EnvMap::load(&assets.join("envmaps/interior.exr")).unwrap();
+    let env = EnvMap::load(&common::assets().join("envmaps/interior.exr")).unwrap();
     let mut group = c.benchmark_group("multiply_add");
     for (name, path) in &files {
         let relighter = Relighter::open(path).unwrap();
@@ -330,16 +299,7 @@ fn multiply_add(c: &mut Criterion) {
             });
         }
     }
-    let probe: Vec<u64> = (0..(256u64 << 20) / 8).collect();
-    group.throughput(Throughput::Bytes(8 * probe.len() as u64));
-    group.bench_function("stream_probe", |b| {
-        b.iter(|| {
-            probe
-                .par_chunks(1 << 16)
-                .map(|c| c.iter().fold(0u64, |a, &v| a.wrapping_add(v)))
-                .reduce(|| 0, u64::wrapping_add)
-        })
-    });
+    common::stream_probe(&mut group);
     group.finish();
 }
 

@@ -60,6 +60,7 @@ mod frame;
 mod image_io;
 mod kernel;
 mod pca;
+mod pca_blocks;
 mod point;
 mod reference;
 mod relighter;

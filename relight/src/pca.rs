@@ -5,25 +5,21 @@
 //! product of its coefficients per colour channel. Grey files (`C = 1`)
 //! project each light channel on the same basis, then multiply the albedo.
 //!
-//! The per-pixel loop reads each pixel's coefficient row once for all three
-//! channels, eight lanes at a time with separate accumulators (which the
-//! compiler turns into SIMD multiply-adds); [`PcaRelighter::relight_scalar`]
-//! is the plain f64 loop it is tested against.
+//! The coefficients are held in component blocks ([`crate::pca_blocks`]), so
+//! a frame with the first `k` components streams just those, eight pixels
+//! at a time with vector multiply-adds; [`PcaRelighter::relight_scalar`] is
+//! the plain f64 loop it is tested against.
 
 use crate::error::{RelightError, Result};
 use crate::frame::{check_light, Frame, FrameStats, Relight, Request};
 use crate::image_io::Image;
+use crate::pca_blocks::{Blocks, Path as DotPath, LANES};
 use crate::point::{point_light_taps, Lookup, PointLight, SurfaceSample, Taps};
 use ltm_codec::{Dims, Limits, LtmFile};
 use rayon::prelude::*;
 use std::path::Path;
 use std::sync::OnceLock;
 use std::time::Instant;
-
-/// Lanes of the blocked dot product.
-const LANES: usize = 8;
-/// Pixels per parallel task.
-const PIXELS_PER_TASK: usize = 1024;
 
 /// A `pca` file ready to relight: the [`Relight`] implementation for
 /// Eigentransport. [`Request::terms`] is the number of eigen-transports
@@ -36,8 +32,10 @@ pub struct PcaRelighter {
     mean: Vec<f32>,
     /// `K × N` decoded eigen-transports.
     basis: Vec<f32>,
-    /// `P × K` decoded coefficients, pixel-major.
-    coefficients: Vec<f32>,
+    /// The decoded coefficients in component blocks.
+    coefficients: Blocks,
+    /// The compiled dot-product loop this CPU runs.
+    path: DotPath,
     albedo: Option<Vec<f32>>,
     /// Rows that decode to exactly 0 (chunk EMPT): black pixels.
     empty: Option<ltm_codec::EmptyRows>,
@@ -65,7 +63,8 @@ impl PcaRelighter {
         };
         let dims = model.dims();
         let rank = model.rank();
-        limits.check_alloc("PCA coefficients", (dims.pixels() * rank) as u64, 4)?;
+        let padded = Blocks::padded_len(dims.pixels(), rank);
+        limits.check_alloc("PCA coefficients", padded as u64, 2)?;
         limits.check_alloc("PCA basis", (dims.row_len() * rank) as u64, 4)?;
         Ok(PcaRelighter {
             dims,
@@ -74,7 +73,8 @@ impl PcaRelighter {
             basis: model.basis().dequantize(),
             basis_t: OnceLock::new(),
             empty: model.empty_rows().cloned(),
-            coefficients: model.coefficients_by_pixel(),
+            coefficients: blocks(model),
+            path: DotPath::detect(),
             albedo: file.albedo().map(<[f32]>::to_vec),
             surface: file
                 .surface()
@@ -145,8 +145,9 @@ impl PcaRelighter {
         self.project(light, k, &mut projected);
         let (w, h) = self.size();
         let mut image = Image::new(w, h);
+        let mut f = Vec::with_capacity(k);
         for (p, px) in image.data.iter_mut().enumerate() {
-            let f = &self.coefficients[p * self.rank..p * self.rank + k];
+            self.coefficients.row(p, k, &mut f);
             let mut v = projected[0];
             for (a, &fa) in f.iter().enumerate() {
                 for (vc, lc) in v.iter_mut().zip(projected[1 + a]) {
@@ -235,69 +236,44 @@ impl PcaRelighter {
         let basis_t = self
             .basis_t
             .get_or_init(|| transpose(&self.basis, self.rank, self.dims.row_len()));
-        image.data.par_iter_mut().enumerate().for_each(|(p, px)| {
-            let f = &self.coefficients[p * self.rank..p * self.rank + k];
-            let mut v = [0.0f64; 3];
-            for &(j, wt) in taps[p].iter().filter(|t| t.1 != 0.0) {
-                let mut t = [0.0f64; 3];
-                for (ch, tc) in t.iter_mut().enumerate().take(c) {
-                    let i = j as usize * c + ch;
-                    let col = &basis_t[i * self.rank..i * self.rank + k];
-                    let dot: f32 = f.iter().zip(col).map(|(a, b)| a * b).sum();
-                    *tc = self.mean[i] as f64 + dot as f64;
-                }
-                for (ch, o) in v.iter_mut().enumerate() {
-                    *o += t[ch.min(c - 1)] * wt as f64 * light.intensity[ch] as f64;
-                }
-            }
-            for (o, v) in px.iter_mut().zip(self.albedo_times(p, v)) {
-                *o += v;
-            }
-        });
-    }
-
-    /// Every pixel's blocked dot product with the planar projected lighting
-    /// (`3 × kp` values, `kp` = `k` rounded up to the lanes, zero padded).
-    fn dot_rows(&self, planar: &[f32], k: usize, base: [f64; 3], image: &mut Image) {
-        let kp = planar.len() / 3;
-        let (lr, rest) = planar.split_at(kp);
-        let (lg, lb) = rest.split_at(kp);
-        let full = k / LANES * LANES;
         image
             .data
-            .par_chunks_mut(PIXELS_PER_TASK)
+            .par_iter_mut()
             .enumerate()
-            .for_each(|(t, pixels)| {
-                for (i, px) in pixels.iter_mut().enumerate() {
-                    let p = t * PIXELS_PER_TASK + i;
-                    let f = &self.coefficients[p * self.rank..p * self.rank + k];
-                    let mut acc = [[0.0f32; LANES]; 3];
-                    let blocks = f[..full]
-                        .chunks_exact(LANES)
-                        .zip(lr.chunks_exact(LANES))
-                        .zip(lg.chunks_exact(LANES))
-                        .zip(lb.chunks_exact(LANES));
-                    for (((fb, r8), g8), b8) in blocks {
-                        // Fixed-size lanes: no bounds checks, one SIMD
-                        // multiply-add per lane group and channel.
-                        let lanes =
-                            |x: &[f32]| -> [f32; LANES] { x.try_into().expect("LANES values") };
-                        let (fb, r8, g8, b8) = (lanes(fb), lanes(r8), lanes(g8), lanes(b8));
-                        for l in 0..LANES {
-                            acc[0][l] += fb[l] * r8[l];
-                            acc[1][l] += fb[l] * g8[l];
-                            acc[2][l] += fb[l] * b8[l];
-                        }
+            .for_each_init(Vec::new, |f, (p, px)| {
+                self.coefficients.row(p, k, f);
+                let mut v = [0.0f64; 3];
+                for &(j, wt) in taps[p].iter().filter(|t| t.1 != 0.0) {
+                    let mut t = [0.0f64; 3];
+                    for (ch, tc) in t.iter_mut().enumerate().take(c) {
+                        let i = j as usize * c + ch;
+                        let col = &basis_t[i * self.rank..i * self.rank + k];
+                        let dot: f32 = f.iter().zip(col).map(|(a, b)| a * b).sum();
+                        *tc = self.mean[i] as f64 + dot as f64;
                     }
-                    let mut v = base;
-                    for (c, lc) in [lr, lg, lb].iter().enumerate() {
-                        let tail: f32 =
-                            f[full..].iter().zip(&lc[full..k]).map(|(a, b)| a * b).sum();
-                        v[c] += (acc[c].iter().sum::<f32>() + tail) as f64;
+                    for (ch, o) in v.iter_mut().enumerate() {
+                        *o += t[ch.min(c - 1)] * wt as f64 * light.intensity[ch] as f64;
                     }
-                    *px = self.albedo_times(p, v);
+                }
+                for (o, v) in px.iter_mut().zip(self.albedo_times(p, v)) {
+                    *o += v;
                 }
             });
+    }
+
+    /// Every pixel's dot product of its first `k` coefficients with the
+    /// planar projected lighting ([`Blocks::scaled_light`]), plus the mean's
+    /// projection `base`.
+    fn dot_rows(&self, planar: &[f32], k: usize, base: [f64; 3], image: &mut Image) {
+        self.coefficients
+            .dot_rows(self.path, planar, k, &mut image.data, |p, v| {
+                self.albedo_times(p, [0, 1, 2].map(|c| base[c] + v[c] as f64))
+            });
+    }
+
+    /// Bytes of coefficients a frame with `terms` components reads.
+    pub fn coefficient_bytes(&self, terms: usize) -> usize {
+        self.coefficients.bytes_read(terms)
     }
 }
 
@@ -315,10 +291,8 @@ impl Relight for PcaRelighter {
         self.rank
     }
     fn held_bytes(&self) -> usize {
-        4 * (self.mean.len()
-            + self.basis.len()
-            + self.basis_t.get().map_or(0, Vec::len)
-            + self.coefficients.len())
+        4 * (self.mean.len() + self.basis.len() + self.basis_t.get().map_or(0, Vec::len))
+            + self.coefficients.held_bytes()
             + self.albedo.as_ref().map_or(0, |a| 4 * a.len())
             + self
                 .surface
@@ -349,14 +323,8 @@ impl Relight for PcaRelighter {
         frame.fit_image(w, h);
         let t0 = Instant::now();
         self.project(light, k, &mut frame.projected);
-        let kp = k.next_multiple_of(LANES);
-        frame.planar.clear();
-        frame.planar.resize(3 * kp, 0.0);
-        for (a, l) in frame.projected[1..].iter().enumerate() {
-            for (c, lc) in l.iter().enumerate() {
-                frame.planar[c * kp + a] = *lc as f32;
-            }
-        }
+        self.coefficients
+            .scaled_light(&frame.projected[1..], k, &mut frame.planar);
         let t1 = Instant::now();
         self.dot_rows(&frame.planar, k, frame.projected[0], &mut frame.image);
         if let Some((x, y)) = frame.image.first_non_finite() {
@@ -372,6 +340,18 @@ impl Relight for PcaRelighter {
             ..FrameStats::default()
         })
     }
+}
+
+/// The model's quantized coefficients in component blocks.
+fn blocks(model: &ltm_codec::PcaModel) -> Blocks {
+    let coefficients = model.coefficients();
+    let q_max = ltm_codec::eigen::q_max(coefficients.bits);
+    Blocks::new(
+        model.dims().pixels(),
+        &coefficients.q,
+        &coefficients.scales,
+        q_max,
+    )
 }
 
 /// `rows × cols` row-major values transposed.

@@ -188,18 +188,6 @@ impl PcaModel {
         &self.coefficients
     }
 
-    /// The decoded coefficients pixel-major: `P × K`, row `p` the pixel's.
-    pub fn coefficients_by_pixel(&self) -> Vec<f32> {
-        let (p, k) = (self.dims.pixels(), self.rank());
-        let mut out = vec![0.0f32; p * k];
-        for a in 0..k {
-            for px in 0..p {
-                out[px * k + a] = self.coefficients.value(a, px);
-            }
-        }
-        out
-    }
-
     /// Rows `first..first + count` of the decoded matrix, `μ + F·B` in f64
     /// (0 in the rows of the empty-row mask), into `out` (`count × N`,
     /// row-major): the reconstruction of every decoder and of the encoder's

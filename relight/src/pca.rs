@@ -98,16 +98,28 @@ impl PcaRelighter {
         Ok(terms)
     }
 
-    /// `row · L` per light channel for one `N`-value row (f64).
+    /// `row · L` per light channel for one `N`-value row, in f64 with four
+    /// partial sums per channel (texels `j mod 4`) added at the end.
     fn project_row(&self, row: &[f32], light: &[[f32; 3]]) -> [f64; 3] {
         let c = self.dims.channels as usize;
-        let mut acc = [0.0f64; 3];
-        for (j, l) in light.iter().enumerate() {
-            for (ch, a) in acc.iter_mut().enumerate() {
-                *a += row[j * c + ch.min(c - 1)] as f64 * l[ch] as f64;
+        let mut acc = [[0.0f64; 3]; 4];
+        let add = |a: &mut [f64; 3], v: &[f32], l: &[f32; 3]| {
+            for ch in 0..3 {
+                a[ch] += v[ch.min(c - 1)] as f64 * l[ch] as f64;
+            }
+        };
+        let lights = light.chunks_exact(4);
+        let tail = lights.remainder();
+        for (l4, v4) in lights.zip(row.chunks_exact(4 * c)) {
+            for (t, a) in acc.iter_mut().enumerate() {
+                add(a, &v4[t * c..t * c + c], &l4[t]);
             }
         }
-        acc
+        let rest = &row[(light.len() - tail.len()) * c..];
+        for ((a, l), v) in acc.iter_mut().zip(tail).zip(rest.chunks_exact(c)) {
+            add(a, v, l);
+        }
+        [0, 1, 2].map(|ch| (acc[0][ch] + acc[1][ch]) + (acc[2][ch] + acc[3][ch]))
     }
 
     /// The mean's and the first `k` components' projections: entry 0 is the

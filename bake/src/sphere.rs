@@ -989,7 +989,11 @@ mod probe {
         });
         let raw = crate::mesh::load(std::path::Path::new(&path)).unwrap().mesh;
         let mesh = SurfaceMesh {
-            positions: raw.positions.iter().map(|p| DVec3::new(p[0] as f64, p[1] as f64, p[2] as f64)).collect(),
+            positions: raw
+                .positions
+                .iter()
+                .map(|p| DVec3::new(p[0] as f64, p[1] as f64, p[2] as f64))
+                .collect(),
             normals: vec![DVec3::ZERO; raw.positions.len()],
             triangles: raw.triangles.clone(),
             ..Default::default()
@@ -998,14 +1002,21 @@ mod probe {
         let t0 = std::time::Instant::now();
         let lap = |what: &str, d: &[DVec3]| {
             let q = quality(d, &mesh);
-            eprintln!("{what:>10}: {:6.1} s  stretch {:.2} / {:.1}  flips {}", t0.elapsed().as_secs_f64(), q.stretch_mean, q.stretch_max, q.flipped);
+            eprintln!(
+                "{what:>10}: {:6.1} s  stretch {:.2} / {:.1}  flips {}",
+                t0.elapsed().as_secs_f64(),
+                q.stretch_mean,
+                q.stretch_max,
+                q.flipped
+            );
         };
         check_topology(&mesh).unwrap();
         let mut d = flow_embedding(&mesh);
         lap("flow", &d);
         untangle(&mut d, &mesh).unwrap();
         lap("untangle", &d);
-        let stages = std::env::var("LTM_PROBE_STAGES").unwrap_or_else(|_| "equalize,relax,sobolev:100:0.01,grelax:10".into());
+        let stages = std::env::var("LTM_PROBE_STAGES")
+            .unwrap_or_else(|_| "equalize,relax,sobolev:100:0.01,grelax:10".into());
         for st in stages.split(',') {
             let parts: Vec<&str> = st.split(':').collect();
             let num = |i: usize, dflt: f64| parts.get(i).map_or(dflt, |x| x.parse().unwrap());

@@ -30,7 +30,19 @@
 //!    tangent directions; a move that would flip a triangle is refused.
 //!    This is the energy Praun & Hoppe minimize; it grows without bound as
 //!    a triangle's share of the sphere shrinks, so it undoes the collapse.
-//! 6. A final flip count must be 0, else the build is an error rather than
+//! 6. **Sobolev descent.** One-ring moves spread a correction by one ring
+//!    per pass, too slowly to give a squeezed ear the room that its
+//!    neighbourhood must yield (Praun & Hoppe solve this coarse-to-fine).
+//!    Here the whole stretch energy descends along its Sobolev gradient:
+//!    the per-vertex gradient `g` (central differences of the one-ring
+//!    energy) is smoothed over the current spherical mesh by solving
+//!    `(M + τ·K) G = g`, so a region moves as a whole; each step is
+//!    backtracked until it flips nothing (a flip has infinite energy) and
+//!    lowers the energy. A few one-ring passes along each vertex's own
+//!    gradient then polish the result. On the Stanford bunny this takes
+//!    the L2 stretch from mean 68 / max 500 (after step 5) to about
+//!    3 / 10.
+//! 7. A final flip count must be 0, else the build is an error rather than
 //!    a bad geometry image.
 //!
 //! The sphere is unfolded to the square through the octahedron with the

@@ -511,6 +511,43 @@ mod tests {
         }
     }
 
+    /// Near-zero-area slivers (a needle, a triangle of three collinear
+    /// points, one of a single repeated point) and smooth normals that
+    /// cancel: every point's normals stay finite unit vectors.
+    #[test]
+    fn sliver_normals_are_never_nan() {
+        let p = [
+            [0.0, 0.0, 0.0],
+            [1.0, 0.0, 0.0],
+            [0.5, 1e-300, 0.0],
+            [2.0, 0.0, 0.0],
+            [0.5, 1e-13, 1e-13],
+        ];
+        for normals in [
+            vec![DVec3::ZERO; 5],
+            vec![DVec3::Y, -DVec3::Y, DVec3::Y, -DVec3::Y, DVec3::Z],
+        ] {
+            let mesh = SurfaceMesh {
+                positions: p.iter().map(|&v| DVec3::from(v)).collect(),
+                normals,
+                triangles: vec![[0, 1, 2], [0, 1, 3], [0, 0, 0], [0, 1, 4]],
+                ..Default::default()
+            };
+            for t in 0..4 {
+                for w in [[1.0 / 3.0; 3], [0.5, 0.5, 0.0], [1.0, 0.0, 0.0]] {
+                    let (point, ng, ns) = mesh.at(t, w);
+                    assert!(point.is_finite(), "triangle {t}: point {point}");
+                    for n in [ng, ns] {
+                        assert!(
+                            (n.length() - 1.0).abs() < 1e-9,
+                            "triangle {t} at {w:?}: {n}"
+                        );
+                    }
+                }
+            }
+        }
+    }
+
     #[test]
     fn uv_square_maps_texels_to_points() {
         let m = TexelMap::from_uv(square(1.0), 8, 2).unwrap();

@@ -387,12 +387,15 @@ impl Relighter {
     }
 
     fn finish_image(&self, pixels: &[[f32; LANES]], image: &mut Image) {
-        let albedo = self.file.albedo();
-        for (p, (px, v)) in image.data.iter_mut().zip(pixels).enumerate() {
-            *px = [v[0], v[1], v[2]];
-            if let Some(a) = albedo {
-                for (c, v) in px.iter_mut().enumerate() {
-                    *v *= a[3 * p + c];
+        match self.file.albedo() {
+            Some(albedo) => {
+                for ((px, v), a) in image.data.iter_mut().zip(pixels).zip(albedo.chunks_exact(3)) {
+                    *px = [v[0] * a[0], v[1] * a[1], v[2] * a[2]];
+                }
+            }
+            None => {
+                for (px, v) in image.data.iter_mut().zip(pixels) {
+                    *px = [v[0], v[1], v[2]];
                 }
             }
         }

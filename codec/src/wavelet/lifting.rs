@@ -95,11 +95,13 @@ pub(crate) fn inverse_1d(scheme: &Scheme, bands: &[f32], out: &mut [f32]) {
     let n = bands.len();
     let ns = n.div_ceil(2);
     let (low, high) = bands.split_at(ns);
+    // Division by a scale of 1 is the identity: skipped (same bits).
+    let unscale = |v: f32, s: f32| if s == 1.0 { v } else { v / s };
     for (i, l) in low.iter().enumerate() {
-        out[2 * i] = *l / scheme.low_scale;
+        out[2 * i] = unscale(*l, scheme.low_scale);
     }
     for (i, h) in high.iter().enumerate() {
-        out[2 * i + 1] = *h / scheme.high_scale;
+        out[2 * i + 1] = unscale(*h, scheme.high_scale);
     }
     let last_even = 2 * (ns - 1);
     let last_odd = 2 * (n / 2) - 1;
@@ -130,11 +132,22 @@ pub(crate) fn inverse_1d_lanes<const L: usize>(
     let n = bands.len();
     let ns = n.div_ceil(2);
     let (low, high) = bands.split_at(ns);
-    for (i, l) in low.iter().enumerate() {
-        out[2 * i] = l.map(|v| v / scheme.low_scale);
-    }
-    for (i, h) in high.iter().enumerate() {
-        out[2 * i + 1] = h.map(|v| v / scheme.high_scale);
+    // Division by a scale of 1 is the identity: skipped (same bits).
+    if scheme.low_scale == 1.0 && scheme.high_scale == 1.0 {
+        for (o, (l, h)) in out.chunks_exact_mut(2).zip(low.iter().zip(high)) {
+            o[0] = *l;
+            o[1] = *h;
+        }
+        if n % 2 == 1 {
+            out[n - 1] = low[ns - 1];
+        }
+    } else {
+        for (i, l) in low.iter().enumerate() {
+            out[2 * i] = l.map(|v| v / scheme.low_scale);
+        }
+        for (i, h) in high.iter().enumerate() {
+            out[2 * i + 1] = h.map(|v| v / scheme.high_scale);
+        }
     }
     let last_even = 2 * (ns - 1);
     let last_odd = 2 * (n / 2) - 1;

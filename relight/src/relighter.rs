@@ -126,6 +126,31 @@ impl Relighter {
         })
     }
 
+    /// Names of the multiply-add kernels this CPU runs, the scalar
+    /// reference first and the one [`Relighter::open`] picks last.
+    pub fn kernels() -> Vec<&'static str> {
+        Kernel::available().into_iter().map(Kernel::name).collect()
+    }
+
+    /// The multiply-add kernel in use.
+    pub fn kernel(&self) -> &'static str {
+        self.kernel.name()
+    }
+
+    /// Uses the named multiply-add kernel (one of
+    /// [`Relighter::kernels`]), e.g. to compare them.
+    pub fn set_kernel(&mut self, name: &str) -> Result<()> {
+        self.kernel = Kernel::available()
+            .into_iter()
+            .find(|k| k.name() == name)
+            .ok_or_else(|| RelightError::OutOfRange {
+                what: "multiply-add kernel",
+                value: name.to_string(),
+                valid: Relighter::kernels().join(", "),
+            })?;
+        Ok(())
+    }
+
     /// The file's metadata.
     pub fn meta(&self) -> &Meta {
         self.file.meta()

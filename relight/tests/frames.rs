@@ -188,3 +188,36 @@ fn mutated_files_never_panic_or_give_nan() {
     }
     assert!(opened > 0 && relit > 0, "{opened} opened, {relit} relit");
 }
+
+/// Every multiply-add kernel the CPU runs relights within 2e-6 of eq. 3
+/// (`relight_naive`); an unknown kernel name is an error naming the valid
+/// ones.
+#[test]
+fn every_kernel_relights_like_the_naive_sum() {
+    let dir = tempfile::tempdir().unwrap();
+    let mut r = relighter(dir.path());
+    let light: Vec<[f32; 3]> = (0..r.lights())
+        .map(|j| [1.0 + j as f32 * 0.1, 0.5, (j % 5) as f32])
+        .collect();
+    let kernels = Relighter::kernels();
+    assert_eq!(kernels[0], "scalar");
+    assert_eq!(r.kernel(), *kernels.last().unwrap());
+    for kernel in kernels {
+        r.set_kernel(kernel).unwrap();
+        assert_eq!(r.kernel(), kernel);
+        for terms in [1, 40, usize::MAX] {
+            let got = image(&r, &light, terms, &mut r.frame());
+            let request = Request {
+                terms,
+                weighting: Weighting::Transport,
+            };
+            let naive = r.relight_naive(&light, &request).unwrap();
+            let mut frame = r.frame();
+            frame.image.data = got;
+            let diff = relative_l2(&frame.image, &naive).unwrap();
+            assert!(diff <= 2e-6, "{kernel} N = {terms}: {diff}");
+        }
+    }
+    let err = r.set_kernel("avx9").unwrap_err().to_string();
+    assert!(err.contains("avx9") && err.contains("scalar"), "{err}");
+}

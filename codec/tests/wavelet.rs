@@ -439,7 +439,16 @@ fn row_skipping_inverse_steps_equal_the_dense_ones() {
         seed
     };
     for filter in Filter::ALL {
-        for (w, h) in [(1, 1), (5, 3), (9, 9), (33, 17), (13, 1), (1, 7), (64, 64), (300, 257)] {
+        for (w, h) in [
+            (1, 1),
+            (5, 3),
+            (9, 9),
+            (33, 17),
+            (13, 1),
+            (1, 7),
+            (64, 64),
+            (300, 257),
+        ] {
             for lanes in [1, 3, 4] {
                 for pattern in 0..5 {
                     let mut flags: Vec<bool> = match pattern {
@@ -471,8 +480,10 @@ fn row_skipping_inverse_steps_equal_the_dense_ones() {
                     let mut work = vec![0.0; w * h * lanes];
                     for level in (0..max_levels(w, h)).rev() {
                         let (bw, bh) = band_size(w, h, level);
-                        wavelet::inverse_step_lanes(filter, &mut dense, w, bw, bh, lanes, &mut work)
-                            .unwrap();
+                        wavelet::inverse_step_lanes(
+                            filter, &mut dense, w, bw, bh, lanes, &mut work,
+                        )
+                        .unwrap();
                         work.fill(f32::NAN);
                         wavelet::inverse_step_lanes_sparse(
                             filter, &mut data, w, bw, bh, lanes, &mut work, &mut flags,

@@ -235,7 +235,7 @@ mod x86 {
             // enabled for this function.
             unsafe {
                 let q = _mm256_cvtepi32_ps(_mm256_cvtepi16_epi32(_mm_loadu_si128(
-                    e.as_ptr() as *const __m128i,
+                    e.as_ptr() as *const __m128i
                 )));
                 let t = _mm256_loadu2_m128(t1.as_ptr(), t0.as_ptr());
                 let sum = _mm256_fmadd_ps(t, q, _mm256_loadu2_m128(p1, p0));

@@ -414,7 +414,12 @@ impl Relighter {
     fn finish_image(&self, pixels: &[[f32; LANES]], image: &mut Image) {
         match self.file.albedo() {
             Some(albedo) => {
-                for ((px, v), a) in image.data.iter_mut().zip(pixels).zip(albedo.chunks_exact(3)) {
+                for ((px, v), a) in image
+                    .data
+                    .iter_mut()
+                    .zip(pixels)
+                    .zip(albedo.chunks_exact(3))
+                {
                     *px = [v[0] * a[0], v[1] * a[1], v[2] * a[2]];
                 }
             }

@@ -93,8 +93,11 @@ fn reused_light_transform_matches_a_fresh_frame_and_changes_are_seen() {
 fn zero_rows_are_skipped_without_changing_the_image() {
     let dir = tempfile::tempdir().unwrap();
     let dims = Dims::image(37, 23, 4, 3);
-    let mut writer =
-        RawWriter::create(&dir.path().join("z.raw"), RawHeader::new(dims, false, 1 << 20)).unwrap();
+    let mut writer = RawWriter::create(
+        &dir.path().join("z.raw"),
+        RawHeader::new(dims, false, 1 << 20),
+    )
+    .unwrap();
     let (m, w) = (dims.lights(), 37);
     let rows: Vec<f32> = (0..dims.pixels() * m * 3)
         .map(|i| {

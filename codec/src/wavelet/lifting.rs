@@ -304,12 +304,16 @@ pub(crate) fn inverse_rows_sparse(
         match *step {
             Step::Predict(c) => {
                 let sources = |i: usize| [i, (i + 1).min(ns - 1)];
-                lift_live_rows(&mut high, &low, -c, parallel, live_high, live_low, &zeros, sources)
+                lift_live_rows(
+                    &mut high, &low, -c, parallel, live_high, live_low, &zeros, sources,
+                )
             }
             Step::Update(c) => {
                 let nd = h - ns;
                 let sources = |i: usize| [i.saturating_sub(1), i.min(nd - 1)];
-                lift_live_rows(&mut low, &high, -c, parallel, live_low, live_high, &zeros, sources)
+                lift_live_rows(
+                    &mut low, &high, -c, parallel, live_low, live_high, &zeros, sources,
+                )
             }
         }
     }

@@ -236,11 +236,12 @@ fn quantize(c: &mut Criterion) {
 }
 
 /// The multiply-add against the machine's streaming bound, in one run:
-/// - `multiply_add/MODE/N`: the multiply-add part of relighting frames of
+/// - `multiply_add/MODE-KERNEL/N`: the multiply-add part of relighting frames of
 ///   `LTM_BENCH_LTM` (a `.ltm` file, e.g. the default scene at 256²; without
 ///   it, 2d and adaptive files of the 64×64 scene made here), timed from the
 ///   frames' own split; throughput in bytes of arena entries streamed (8 per
-///   RGB coefficient, 4 per grey one), so bytes ÷ 8 is coefficients;
+///   RGB coefficient, 4 per grey one), so bytes ÷ 8 is coefficients; once
+///   per kernel the CPU runs (`scalar`, `sse4.1`, `avx2+fma`);
 /// - `multiply_add/stream_probe`: a parallel read of a 256 MiB buffer of
 ///   `u64` (summed), the streaming bound those bytes are compared with.
 fn multiply_add(c: &mut Criterion) {
@@ -268,7 +269,7 @@ fn multiply_add(c: &mut Criterion) {
     let env = EnvMap::load(&common::assets().join("envmaps/interior.exr")).unwrap();
     let mut group = c.benchmark_group("multiply_add");
     for (name, path) in &files {
-        let relighter = Relighter::open(path).unwrap();
+        let mut relighter = Relighter::open(path).unwrap();
         let light = env.to_cubemap(
             relighter.meta().dims.face_res() as usize,
             &Rotation::IDENTITY,
@@ -285,18 +286,22 @@ fn multiply_add(c: &mut Criterion) {
                 .unwrap()
                 .nonzeros;
             group.throughput(Throughput::Bytes(nnz * entry_bytes));
-            group.bench_function(BenchmarkId::new(name.as_str(), n), |b| {
-                b.iter_custom(|iters| {
-                    (0..iters)
-                        .map(|_| {
-                            relighter
-                                .relight(&light, &request, &mut frame)
-                                .unwrap()
-                                .multiply
-                        })
-                        .sum()
-                })
-            });
+            for kernel in Relighter::kernels() {
+                relighter.set_kernel(kernel).unwrap();
+                let id = BenchmarkId::new(format!("{name}-{kernel}"), n);
+                group.bench_function(id, |b| {
+                    b.iter_custom(|iters| {
+                        (0..iters)
+                            .map(|_| {
+                                relighter
+                                    .relight(&light, &request, &mut frame)
+                                    .unwrap()
+                                    .multiply
+                            })
+                            .sum()
+                    })
+                });
+            }
         }
     }
     common::stream_probe(&mut group);

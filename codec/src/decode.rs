@@ -172,6 +172,31 @@ impl ColumnDecoder {
         wavelet::inverse_step_lanes(self.meta.col_filter, planes, w, bw, bh, lanes, work)
     }
 
+    /// [`ColumnDecoder::inverse_step_lanes`] skipping image rows that are
+    /// zero: `nonzero` holds one flag per image row (see
+    /// [`wavelet::inverse_step_lanes_sparse`]), updated for the rows the
+    /// step writes. Equal to the dense step as f32 values.
+    pub fn inverse_step_lanes_sparse(
+        &self,
+        level: u32,
+        planes: &mut [f32],
+        lanes: usize,
+        work: &mut [f32],
+        nonzero: &mut [bool],
+    ) -> Result<()> {
+        let (w, bw, bh) = self.step_band(level)?;
+        wavelet::inverse_step_lanes_sparse(
+            self.meta.col_filter,
+            planes,
+            w,
+            bw,
+            bh,
+            lanes,
+            work,
+            nonzero,
+        )
+    }
+
     /// Decodes channel `channel` of a column into `plane` (overwritten), in
     /// the row-wavelet lighting basis, with the empty rows exactly 0. `work` needs `width·height` values.
     /// A column that decodes to a value beyond [`ColumnDecoder::MAX_DECODED`] (or not a

@@ -100,11 +100,6 @@ impl Blocks {
         ((a / LANES * groups + p / LANES) * LANES + a % LANES) * LANES + p % LANES
     }
 
-    /// The values held.
-    pub fn len(&self) -> usize {
-        self.data.len()
-    }
-
     /// Bytes held.
     pub fn held_bytes(&self) -> usize {
         2 * self.data.len() + 8 * self.steps.len()
@@ -241,7 +236,7 @@ mod tests {
         let (pixels, rank) = (37, 13);
         let (q, scales) = matrix(pixels, rank);
         let blocks = Blocks::new(pixels, &q, &scales, 511);
-        assert_eq!(blocks.len(), Blocks::padded_len(pixels, rank));
+        assert_eq!(blocks.data.len(), Blocks::padded_len(pixels, rank));
         let mut row = Vec::new();
         for p in 0..pixels {
             blocks.row(p, rank, &mut row);

@@ -64,6 +64,13 @@ pub(crate) struct WaveletScratch {
     /// The cubemap lighting `light` was transformed from (empty when none):
     /// a frame under the same lighting reuses the transform.
     last_light: Vec<[f32; 3]>,
+    /// Per image row: whether it may hold a nonzero pixel (a row marked
+    /// `false` is all zero). The multiply-add marks the rows of the blocks
+    /// it touches; the inverse steps skip rows that are still zero.
+    rows: Vec<bool>,
+    /// Whether `rows` describes `pixels` (false while a frame is under way,
+    /// or after one failed): the next frame then clears only marked rows.
+    rows_valid: bool,
 }
 
 impl WaveletScratch {
@@ -119,6 +126,31 @@ impl Relighter {
         })
     }
 
+    /// Names of the multiply-add kernels this CPU runs, the scalar
+    /// reference first and the one [`Relighter::open`] picks last.
+    pub fn kernels() -> Vec<&'static str> {
+        Kernel::available().into_iter().map(Kernel::name).collect()
+    }
+
+    /// The multiply-add kernel in use.
+    pub fn kernel(&self) -> &'static str {
+        self.kernel.name()
+    }
+
+    /// Uses the named multiply-add kernel (one of
+    /// [`Relighter::kernels`]), e.g. to compare them.
+    pub fn set_kernel(&mut self, name: &str) -> Result<()> {
+        self.kernel = Kernel::available()
+            .into_iter()
+            .find(|k| k.name() == name)
+            .ok_or_else(|| RelightError::OutOfRange {
+                what: "multiply-add kernel",
+                value: name.to_string(),
+                valid: Relighter::kernels().join(", "),
+            })?;
+        Ok(())
+    }
+
     /// The file's metadata.
     pub fn meta(&self) -> &Meta {
         self.file.meta()
@@ -159,6 +191,8 @@ impl Relighter {
             tables: Vec::new(),
             table_starts: Vec::new(),
             last_light: Vec::new(),
+            rows: vec![true; dims.height() as usize],
+            rows_valid: false,
         }
     }
 
@@ -171,6 +205,7 @@ impl Relighter {
             && s.plane.len() == dims.lights()
             && s.work.len() == (LANES * p).max(n * n)
             && s.pixels.len() == p
+            && s.rows.len() == dims.height() as usize
     }
 
     /// Row transform of the cubemap lighting into `s.light`.
@@ -232,7 +267,7 @@ impl Relighter {
     /// group is multiply-added into the pixels, then one inverse column step
     /// of all three interleaved channels brings them a level up, to depth 0.
     fn multiply_levels(&self, s: &mut WaveletScratch, stats: &mut FrameStats) -> Result<()> {
-        s.pixels.fill([0.0; LANES]);
+        self.clear_pixels(s);
         let depths = &self.arena.depths;
         let top = s.selected.first().map_or(0, |&j| depths[j as usize]);
         let mut next = 0;
@@ -246,35 +281,78 @@ impl Relighter {
             if !group.is_empty() {
                 self.arena
                     .light_tables(group, &s.light, &mut s.tables, &mut s.table_starts);
-                stats.nonzeros +=
-                    self.multiply_add(group, &s.tables, &s.table_starts, &mut s.pixels);
+                stats.nonzeros += self.multiply_add(
+                    group,
+                    &s.tables,
+                    &s.table_starts,
+                    &mut s.pixels,
+                    &mut s.rows,
+                );
             }
             let ti = Instant::now();
             stats.multiply += ti - tm;
             if depth > 0 {
-                self.decoder.inverse_step_lanes(
+                self.decoder.inverse_step_lanes_sparse(
                     depth as u32,
                     s.pixels.as_flattened_mut(),
                     LANES,
                     &mut s.work,
+                    &mut s.rows,
                 )?;
             }
             stats.inverse += ti.elapsed();
         }
+        s.rows_valid = true;
         Ok(())
+    }
+
+    /// Zeroes the pixels for a new frame: only the rows the last frame
+    /// marked, when its marks are known to hold. Leaves every row marked
+    /// zero and the marks invalid until the frame completes.
+    fn clear_pixels(&self, s: &mut WaveletScratch) {
+        let width = self.meta().dims.width() as usize;
+        if s.rows_valid {
+            for (row, _) in s
+                .pixels
+                .chunks_mut(width)
+                .zip(&s.rows)
+                .filter(|(_, &live)| live)
+            {
+                row.fill([0.0; LANES]);
+            }
+        } else {
+            s.pixels.fill([0.0; LANES]);
+        }
+        s.rows.fill(false);
+        s.rows_valid = false;
+    }
+
+    /// Marks the image rows of every pixel block with work (coefficients).
+    fn mark_rows(&self, work: &[u64], rows: &mut [bool]) {
+        let layout = self.arena.layout;
+        let width = self.meta().dims.width() as usize;
+        let p = self.meta().dims.pixels();
+        for (b, _) in work.iter().enumerate().filter(|(_, &w)| w > 0) {
+            let lo = b * layout.block_pixels;
+            let hi = ((b + 1) * layout.block_pixels).min(p);
+            if lo < hi {
+                rows[lo / width..=(hi - 1) / width].fill(true);
+            }
+        }
     }
 
     /// Multiply-adds the columns of `group` (with their light tables) into
     /// the pixels, in parallel over pixel ranges of about equal work (from
     /// the block index; each pixel is summed by one task in group order, so
-    /// the image does not depend on the split). Returns the coefficients
-    /// used.
+    /// the image does not depend on the split), and marks the image rows it
+    /// touches in `rows`. Returns the coefficients used.
     fn multiply_add(
         &self,
         group: &[u32],
         tables: &[[f32; 4]],
         table_starts: &[usize],
         pixels: &mut [[f32; LANES]],
+        rows: &mut [bool],
     ) -> u64 {
         let arena = &self.arena;
         let layout = arena.layout;
@@ -286,6 +364,7 @@ impl Relighter {
             }
         }
         let used: u64 = work.iter().sum();
+        self.mark_rows(&work, rows);
         // Consecutive blocks grouped into ranges of about equal work.
         let tasks = TASKS_PER_THREAD * rayon::current_num_threads();
         let target = (used / tasks as u64).max(1);
@@ -333,12 +412,20 @@ impl Relighter {
     }
 
     fn finish_image(&self, pixels: &[[f32; LANES]], image: &mut Image) {
-        let albedo = self.file.albedo();
-        for (p, (px, v)) in image.data.iter_mut().zip(pixels).enumerate() {
-            *px = [v[0], v[1], v[2]];
-            if let Some(a) = albedo {
-                for (c, v) in px.iter_mut().enumerate() {
-                    *v *= a[3 * p + c];
+        match self.file.albedo() {
+            Some(albedo) => {
+                for ((px, v), a) in image
+                    .data
+                    .iter_mut()
+                    .zip(pixels)
+                    .zip(albedo.chunks_exact(3))
+                {
+                    *px = [v[0] * a[0], v[1] * a[1], v[2] * a[2]];
+                }
+            }
+            None => {
+                for (px, v) in image.data.iter_mut().zip(pixels) {
+                    *px = [v[0], v[1], v[2]];
                 }
             }
         }

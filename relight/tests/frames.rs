@@ -1,9 +1,9 @@
 //! Frame reuse: a frame under unchanged lighting reuses the light's row
 //! transform, and any change of the lighting (one texel, one bit) is seen.
 
-use ltm_codec::compress::{compress, CompressOptions};
-use ltm_codec::{Dims, RawHeader, RawStore, RawWriter};
-use ltm_relight::{Frame, Relight, Relighter, Request, Weighting};
+use ltm_codec::compress::{compress, CodeOptions, CompressOptions, Target};
+use ltm_codec::{Dims, Filter, Mode, RawHeader, RawStore, RawWriter};
+use ltm_relight::{relative_l2, Frame, Relight, Relighter, Request, Weighting};
 
 fn relighter(dir: &std::path::Path) -> Relighter {
     let dims = Dims::image(12, 9, 4, 3);
@@ -84,6 +84,68 @@ fn reused_light_transform_matches_a_fresh_frame_and_changes_are_seen() {
     );
 }
 
+/// A file whose image has runs of rows that are zero under every light
+/// (rows 0..3, 9..15 and the last two), so that the inverse steps skip rows,
+/// at an odd size transformed to full depth: one frame reused over N up and
+/// down gives a fresh frame's image bit for bit and stays within 2e-6 of
+/// eq. 3 (`relight_naive`), for 2d, 4d and adaptive files.
+#[test]
+fn zero_rows_are_skipped_without_changing_the_image() {
+    let dir = tempfile::tempdir().unwrap();
+    let dims = Dims::image(37, 23, 4, 3);
+    let mut writer = RawWriter::create(
+        &dir.path().join("z.raw"),
+        RawHeader::new(dims, false, 1 << 20),
+    )
+    .unwrap();
+    let (m, w) = (dims.lights(), 37);
+    let rows: Vec<f32> = (0..dims.pixels() * m * 3)
+        .map(|i| {
+            let y = i / (m * 3) / w;
+            let zero = y < 3 || (9..15).contains(&y) || y >= 21;
+            if zero {
+                0.0
+            } else {
+                ((i % 97) as f32 * 0.11).sin().abs() * 1e-2
+            }
+        })
+        .collect();
+    writer.write_block(0, &rows, None).unwrap();
+    let raw = RawStore::open(&writer.finish().unwrap()).unwrap();
+    let light: Vec<[f32; 3]> = (0..m)
+        .map(|j| [1.0 + j as f32 * 0.1, 0.5, (j % 5) as f32])
+        .collect();
+    for (mode, filter) in [
+        (Mode::TwoD, Filter::D4),
+        (Mode::FourD, Filter::Cdf97),
+        (Mode::Adaptive, Filter::LeGall53),
+    ] {
+        let ltm = dir.path().join("z.ltm");
+        let opts = CodeOptions {
+            mode,
+            col_filter: filter,
+            bits: 14,
+            target: Target::MaxError(1e-3),
+            ..Default::default()
+        };
+        compress(&raw, &ltm, &opts.into(), &|_, _, _| {}).unwrap();
+        let r = Relighter::open(&ltm).unwrap();
+        let mut frame = r.frame();
+        for terms in [1, 5, 60, 7, usize::MAX, 2] {
+            let reused = image(&r, &light, terms, &mut frame);
+            let fresh = image(&r, &light, terms, &mut r.frame());
+            assert_eq!(reused, fresh, "{mode:?} N = {terms}");
+            let request = Request {
+                terms,
+                weighting: Weighting::Transport,
+            };
+            let naive = r.relight_naive(&light, &request).unwrap();
+            let diff = relative_l2(&frame.image, &naive).unwrap();
+            assert!(diff <= 2e-6, "{mode:?} N = {terms}: {diff}");
+        }
+    }
+}
+
 /// Mutated files (CRCs repaired, so the mutations reach the structure and
 /// the column payloads) are refused at open or relight to finite images:
 /// the arena's band factors and `i16` values never panic or give NaN.
@@ -128,4 +190,37 @@ fn mutated_files_never_panic_or_give_nan() {
         }
     }
     assert!(opened > 0 && relit > 0, "{opened} opened, {relit} relit");
+}
+
+/// Every multiply-add kernel the CPU runs relights within 2e-6 of eq. 3
+/// (`relight_naive`); an unknown kernel name is an error naming the valid
+/// ones.
+#[test]
+fn every_kernel_relights_like_the_naive_sum() {
+    let dir = tempfile::tempdir().unwrap();
+    let mut r = relighter(dir.path());
+    let light: Vec<[f32; 3]> = (0..r.lights())
+        .map(|j| [1.0 + j as f32 * 0.1, 0.5, (j % 5) as f32])
+        .collect();
+    let kernels = Relighter::kernels();
+    assert_eq!(kernels[0], "scalar");
+    assert_eq!(r.kernel(), *kernels.last().unwrap());
+    for kernel in kernels {
+        r.set_kernel(kernel).unwrap();
+        assert_eq!(r.kernel(), kernel);
+        for terms in [1, 40, usize::MAX] {
+            let got = image(&r, &light, terms, &mut r.frame());
+            let request = Request {
+                terms,
+                weighting: Weighting::Transport,
+            };
+            let naive = r.relight_naive(&light, &request).unwrap();
+            let mut frame = r.frame();
+            frame.image.data = got;
+            let diff = relative_l2(&frame.image, &naive).unwrap();
+            assert!(diff <= 2e-6, "{kernel} N = {terms}: {diff}");
+        }
+    }
+    let err = r.set_kernel("avx9").unwrap_err().to_string();
+    assert!(err.contains("avx9") && err.contains("scalar"), "{err}");
 }

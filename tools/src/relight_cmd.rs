@@ -84,7 +84,9 @@ pub struct RelightArgs {
     /// Frames to time (the image is the same each frame; reports the median
     /// wall time from lighting to finished image, each frame transforming
     /// its lighting anew; `--json` also gives the median of as many frames
-    /// that reuse the transform, as when only the number of terms changes).
+    /// that reuse the transform, as when only the number of terms changes;
+    /// each part of a frame, e.g. the multiply-add, is its median over the
+    /// timed frames).
     #[arg(long, default_value_t = 1, value_parser = crate::ranges::frames)]
     pub frames: usize,
     /// An exact image from `ltm reference` (same map and rotation): print the
@@ -208,12 +210,25 @@ pub fn run(a: RelightArgs) -> Result<()> {
         Ok(stats)
     };
     let mut times = Vec::with_capacity(a.frames);
-    let mut stats = Default::default();
+    let mut all_stats = Vec::with_capacity(a.frames);
     for _ in 0..a.frames {
         let t = std::time::Instant::now();
-        stats = frame(false)?;
+        all_stats.push(frame(false)?);
         times.push(t.elapsed());
     }
+    // Each part of a frame: its median over the timed frames.
+    let part = |f: fn(&ltm_relight::FrameStats) -> std::time::Duration| {
+        let mut v: Vec<_> = all_stats.iter().map(f).collect();
+        v.sort();
+        v.get(v.len() / 2).copied().unwrap_or_default()
+    };
+    let stats = ltm_relight::FrameStats {
+        light_transform: part(|s| s.light_transform),
+        selection: part(|s| s.selection),
+        multiply: part(|s| s.multiply),
+        inverse: part(|s| s.inverse),
+        ..all_stats.last().copied().unwrap_or_default()
+    };
     let mut reuse = Vec::with_capacity(a.frames);
     for _ in 0..a.frames {
         let t = std::time::Instant::now();

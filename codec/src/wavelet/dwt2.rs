@@ -234,46 +234,128 @@ pub fn inverse_step_lanes(
     } else {
         work[..wl].copy_from_slice(&data[..wl]);
     }
-    let ns = h.div_ceil(2);
-    let signal_row = |k: usize| {
-        if band_order && k % 2 == 1 {
-            ns + k / 2
-        } else if band_order {
-            k / 2
-        } else {
-            k
-        }
-    };
     // Horizontal: work rows -> data rows, lane by lane.
     let src = Rows::new(work, wl, wl, h);
     let src = src.view();
     let mut dst = Rows::new(data, sl, wl, h);
     for_each_row(&mut dst, parallel, |k, out| {
-        let bands = src.row(signal_row(k));
-        if w < 2 {
-            out.copy_from_slice(bands)
-        } else if lanes == 1 {
-            inverse_row(filter, bands, out)
-        } else if lanes == 4 {
-            inverse_row_lanes::<4>(filter, bands.as_chunks().0, out.as_chunks_mut().0)
-        } else if lanes == 3 {
-            inverse_row_lanes::<3>(filter, bands.as_chunks().0, out.as_chunks_mut().0)
-        } else {
-            LANE_ROWS.with_borrow_mut(|buf| {
-                buf.resize(2 * w, 0.0);
-                let (lane, done) = buf.split_at_mut(w);
-                for c in 0..lanes {
-                    for (l, b) in lane.iter_mut().zip(bands[c..].iter().step_by(lanes)) {
-                        *l = *b;
-                    }
-                    inverse_row(filter, lane, done);
-                    for (o, d) in out[c..].iter_mut().step_by(lanes).zip(done.iter()) {
-                        *o = *d;
-                    }
+        synthesize_row(filter, w, lanes, src.row(signal_row(k, h, band_order)), out)
+    });
+    Ok(())
+}
+
+/// Signal row `k` of a vertical synthesis's output in `work`: lifting
+/// leaves the rows in band order (low rows, then high rows).
+fn signal_row(k: usize, h: usize, band_order: bool) -> usize {
+    if band_order && k % 2 == 1 {
+        h.div_ceil(2) + k / 2
+    } else if band_order {
+        k / 2
+    } else {
+        k
+    }
+}
+
+/// The horizontal synthesis of one row of `lanes` interleaved images
+/// (`w` pixels) from its bands.
+fn synthesize_row(filter: Filter, w: usize, lanes: usize, bands: &[f32], out: &mut [f32]) {
+    if w < 2 {
+        out.copy_from_slice(bands)
+    } else if lanes == 1 {
+        inverse_row(filter, bands, out)
+    } else if lanes == 4 {
+        inverse_row_lanes::<4>(filter, bands.as_chunks().0, out.as_chunks_mut().0)
+    } else if lanes == 3 {
+        inverse_row_lanes::<3>(filter, bands.as_chunks().0, out.as_chunks_mut().0)
+    } else {
+        LANE_ROWS.with_borrow_mut(|buf| {
+            buf.resize(2 * w, 0.0);
+            let (lane, done) = buf.split_at_mut(w);
+            for c in 0..lanes {
+                for (l, b) in lane.iter_mut().zip(bands[c..].iter().step_by(lanes)) {
+                    *l = *b;
                 }
-            })
+                inverse_row(filter, lane, done);
+                for (o, d) in out[c..].iter_mut().step_by(lanes).zip(done.iter()) {
+                    *o = *d;
+                }
+            }
+        })
+    }
+}
+
+/// [`inverse_step_lanes`] that skips rows known to be zero.
+///
+/// `nonzero[y]` (at least `h` flags) says whether image row `y` (all
+/// `stride` pixels of it) may hold a nonzero value; a row marked `false`
+/// must be all zero. Rows that are zero in both of their band rows' inputs
+/// are neither filtered nor read, and come out zero. On return the first
+/// `h` flags describe the rows after the step the same way (a flag may be
+/// `true` for a row that happens to be zero, never the reverse).
+///
+/// The output equals [`inverse_step_lanes`]'s as f32 values: computed rows
+/// get the same arithmetic bit for bit; a skipped row is `+0.0` where the
+/// full step may give `−0.0`.
+#[allow(clippy::too_many_arguments)]
+pub fn inverse_step_lanes_sparse(
+    filter: Filter,
+    data: &mut [f32],
+    stride: usize,
+    w: usize,
+    h: usize,
+    lanes: usize,
+    work: &mut [f32],
+    nonzero: &mut [bool],
+) -> Result<()> {
+    if lanes == 0 {
+        return Err(Error::range("interleaved lanes", lanes, "at least 1"));
+    }
+    check_region(data, stride * lanes, w * lanes, h, work)?;
+    if nonzero.len() < h {
+        return Err(Error::BufferTooSmall {
+            what: "nonzero row flags",
+            len: nonzero.len(),
+            need: h,
+        });
+    }
+    let parallel = w * h >= PARALLEL_MIN / lanes;
+    let (wl, sl) = (w * lanes, stride * lanes);
+    let work = &mut work[..wl * h];
+    let rows_in = nonzero[..h].to_vec();
+    // Vertical: data rows -> work rows; `live[r]` says whether work row `r`
+    // was written (rows not written hold stale values and are not read).
+    let mut live = rows_in.clone();
+    let mut band_order = false;
+    if h >= 2 {
+        match filter.kind() {
+            Kind::Periodic(t) => {
+                periodic::inverse_rows_sparse(t, data, sl, work, wl, h, parallel, &mut live)
+            }
+            Kind::Lifting(s) => {
+                lifting::inverse_rows_sparse(s, data, sl, work, wl, h, parallel, &mut live);
+                band_order = true;
+            }
+        }
+    } else if live[0] {
+        work[..wl].copy_from_slice(&data[..wl]);
+    }
+    // Horizontal: live work rows -> data rows; dead rows are zeroed (or left
+    // alone when they already are).
+    let src = Rows::new(work, wl, wl, h);
+    let src = src.view();
+    let mut dst = Rows::new(data, sl, wl, h);
+    for_each_row(&mut dst, parallel, |k, out| {
+        let r = signal_row(k, h, band_order);
+        if live[r] {
+            synthesize_row(filter, w, lanes, src.row(r), out)
+        } else if rows_in[k] {
+            out.fill(0.0)
         }
     });
+    // A row's pixels right of the region (finer detail bands) are untouched.
+    for (k, flag) in nonzero[..h].iter_mut().enumerate() {
+        *flag = live[signal_row(k, h, band_order)] || (rows_in[k] && w < stride);
+    }
     Ok(())
 }
 

@@ -95,11 +95,13 @@ pub(crate) fn inverse_1d(scheme: &Scheme, bands: &[f32], out: &mut [f32]) {
     let n = bands.len();
     let ns = n.div_ceil(2);
     let (low, high) = bands.split_at(ns);
+    // Division by a scale of 1 is the identity: skipped (same bits).
+    let unscale = |v: f32, s: f32| if s == 1.0 { v } else { v / s };
     for (i, l) in low.iter().enumerate() {
-        out[2 * i] = *l / scheme.low_scale;
+        out[2 * i] = unscale(*l, scheme.low_scale);
     }
     for (i, h) in high.iter().enumerate() {
-        out[2 * i + 1] = *h / scheme.high_scale;
+        out[2 * i + 1] = unscale(*h, scheme.high_scale);
     }
     let last_even = 2 * (ns - 1);
     let last_odd = 2 * (n / 2) - 1;
@@ -130,11 +132,22 @@ pub(crate) fn inverse_1d_lanes<const L: usize>(
     let n = bands.len();
     let ns = n.div_ceil(2);
     let (low, high) = bands.split_at(ns);
-    for (i, l) in low.iter().enumerate() {
-        out[2 * i] = l.map(|v| v / scheme.low_scale);
-    }
-    for (i, h) in high.iter().enumerate() {
-        out[2 * i + 1] = h.map(|v| v / scheme.high_scale);
+    // Division by a scale of 1 is the identity: skipped (same bits).
+    if scheme.low_scale == 1.0 && scheme.high_scale == 1.0 {
+        for (o, (l, h)) in out.chunks_exact_mut(2).zip(low.iter().zip(high)) {
+            o[0] = *l;
+            o[1] = *h;
+        }
+        if n % 2 == 1 {
+            out[n - 1] = low[ns - 1];
+        }
+    } else {
+        for (i, l) in low.iter().enumerate() {
+            out[2 * i] = l.map(|v| v / scheme.low_scale);
+        }
+        for (i, h) in high.iter().enumerate() {
+            out[2 * i + 1] = h.map(|v| v / scheme.high_scale);
+        }
     }
     let last_even = 2 * (ns - 1);
     let last_odd = 2 * (n / 2) - 1;
@@ -252,5 +265,100 @@ pub(crate) fn inverse_rows(
             Step::Update(c) => Step::Update(-c),
         };
         lift_rows(&mut low, &mut high, inverse, parallel);
+    }
+}
+
+/// [`inverse_rows`] skipping zero rows. On entry `live[i]` says whether
+/// band row `i` of `src` (low rows first) may be nonzero (a row marked
+/// `false` is all zero); on return it says whether row `i` of `work` (band
+/// order) was written. Rows of `work` not written hold stale values: they
+/// are zero and are read as zero here. A lifting step on a row whose two
+/// sources are both zero is skipped (it would add `±0`).
+#[allow(clippy::too_many_arguments)]
+pub(crate) fn inverse_rows_sparse(
+    scheme: &Scheme,
+    src: &[f32],
+    stride: usize,
+    work: &mut [f32],
+    w: usize,
+    h: usize,
+    parallel: bool,
+    live: &mut [bool],
+) {
+    let ns = h.div_ceil(2);
+    let mut rows = Rows::new(&mut work[..h * w], w, w, h);
+    let flags: &[bool] = live;
+    for_each_row(&mut rows, parallel, |i, row| {
+        if flags[i] {
+            row.copy_from_slice(&src[i * stride..][..w]);
+        }
+    });
+    let (low, high) = work[..h * w].split_at_mut(ns * w);
+    let mut low = Rows::new(low, w, w, ns);
+    let mut high = Rows::new(high, w, w, h - ns);
+    let (live_low, live_high) = live[..h].split_at_mut(ns);
+    scale_live_rows(&mut low, 1.0 / scheme.low_scale, parallel, live_low);
+    scale_live_rows(&mut high, 1.0 / scheme.high_scale, parallel, live_high);
+    let zeros = vec![0.0f32; w];
+    for step in scheme.steps.iter().rev() {
+        match *step {
+            Step::Predict(c) => {
+                let sources = |i: usize| [i, (i + 1).min(ns - 1)];
+                lift_live_rows(
+                    &mut high, &low, -c, parallel, live_high, live_low, &zeros, sources,
+                )
+            }
+            Step::Update(c) => {
+                let nd = h - ns;
+                let sources = |i: usize| [i.saturating_sub(1), i.min(nd - 1)];
+                lift_live_rows(
+                    &mut low, &high, -c, parallel, live_low, live_high, &zeros, sources,
+                )
+            }
+        }
+    }
+}
+
+fn scale_live_rows(rows: &mut Rows, s: f32, parallel: bool, live: &[bool]) {
+    if s != 1.0 {
+        for_each_row(rows, parallel, |i, row| {
+            if live[i] {
+                row.iter_mut().for_each(|v| *v *= s)
+            }
+        });
+    }
+}
+
+/// One lifting step `dst[i] += c·(src[a] + src[b])` with `[a, b] =
+/// sources(i)`, on live rows only (dead sources read as `zeros`, a dead
+/// destination is zeroed before it is written).
+#[allow(clippy::too_many_arguments)]
+fn lift_live_rows<F>(
+    dst: &mut Rows,
+    src: &Rows,
+    c: f32,
+    parallel: bool,
+    live_dst: &mut [bool],
+    live_src: &[bool],
+    zeros: &[f32],
+    sources: F,
+) where
+    F: Fn(usize) -> [usize; 2] + Sync + Send,
+{
+    let view = src.view();
+    let pick = |i: usize| if live_src[i] { view.row(i) } else { zeros };
+    let was: &[bool] = live_dst;
+    for_each_row(dst, parallel, |i, row| {
+        let [a, b] = sources(i);
+        if live_src[a] || live_src[b] {
+            if !was[i] {
+                row.fill(0.0);
+            }
+            axpy2(row, c, pick(a), pick(b));
+        }
+    });
+    for (i, flag) in live_dst.iter_mut().enumerate() {
+        let [a, b] = sources(i);
+        *flag |= live_src[a] || live_src[b];
     }
 }

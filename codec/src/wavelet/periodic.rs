@@ -247,3 +247,55 @@ pub(crate) fn inverse_rows(
         }
     });
 }
+
+/// [`inverse_rows`] skipping zero rows. On entry `live[i]` says whether
+/// band row `i` of `src` may be nonzero (a row marked `false` is all zero);
+/// on return it says whether signal row `k` of `work` was written (a row
+/// none of whose taps reads a nonzero band row is zero and is not written).
+#[allow(clippy::too_many_arguments)]
+pub(crate) fn inverse_rows_sparse(
+    dec_lo: &[f64],
+    src: &[f32],
+    stride: usize,
+    work: &mut [f32],
+    w: usize,
+    h: usize,
+    parallel: bool,
+    live: &mut [bool],
+) {
+    let taps = Taps::new(dec_lo);
+    let m = h & !1;
+    let ns = h.div_ceil(2);
+    let rows_in = live[..h].to_vec();
+    for (k, flag) in live[..h].iter_mut().enumerate() {
+        *flag = if k >= m {
+            rows_in[m / 2]
+        } else {
+            (0..taps.len).any(|j| {
+                taps.band(k, j, m)
+                    .is_some_and(|o| rows_in[o] || rows_in[ns + o])
+            })
+        };
+    }
+    let written: &[bool] = live;
+    let src_row = |r: usize| &src[r * stride..][..w];
+    let mut rows = Rows::new(work, w, w, h);
+    for_each_row(&mut rows, parallel, |k, row| {
+        if !written[k] {
+            return;
+        }
+        if k >= m {
+            row.copy_from_slice(src_row(m / 2));
+            return;
+        }
+        row.fill(0.0);
+        for j in 0..taps.len {
+            if let Some(o) = taps.band(k, j, m) {
+                let (cl, ch) = (taps.lo[j], taps.hi[j]);
+                for ((d, a), b) in row.iter_mut().zip(src_row(o)).zip(src_row(ns + o)) {
+                    *d += cl * a + ch * b;
+                }
+            }
+        }
+    });
+}

@@ -14,6 +14,7 @@ use super::{CodeOptions, Target, Transposed};
 use crate::container::{EncodedColumn, Meta, SparseColumn};
 use crate::decode::ColumnDecoder;
 use crate::dims::Dims;
+use crate::entropy::ColumnShape;
 use crate::error::{Error, Result};
 use crate::quant::{decode_scale, levels, quantize, scale_groups, BandWeights};
 use crate::wavelet::{self, max_levels};
@@ -111,6 +112,11 @@ impl<'t> Coder<'t> {
                 .with_empty_rows(Some(transposed.empty_rows().clone())),
             meta,
         })
+    }
+
+    /// The shape the column coder sees: image size, channels, bits.
+    fn shape(&self) -> ColumnShape {
+        ColumnShape::of(&self.meta)
     }
 
     /// The coding options.
@@ -300,10 +306,9 @@ impl<'t> Coder<'t> {
             }
             _ => None,
         };
-        let channels = self.channels();
         let encoded = best
             .encoded
-            .unwrap_or_else(|| EncodedColumn::new(&best.col, channels, self.opts.zstd_level));
+            .unwrap_or_else(|| EncodedColumn::coded(&best.col, &self.shape(), self.opts.zstd_level));
         Ok((encoded, best.err, curve))
     }
 
@@ -373,7 +378,7 @@ impl<'t> Coder<'t> {
     /// over [`BYTES_PER_COEFFICIENT`] plus error over τ²; else the error.
     fn candidate(&self, col: SparseColumn, err: f64, tau_sq: f64) -> Candidate {
         if tau_sq > 0.0 {
-            let encoded = EncodedColumn::new(&col, self.channels(), self.opts.zstd_level);
+            let encoded = EncodedColumn::coded(&col, &self.shape(), self.opts.zstd_level);
             let cost = encoded.bytes.len() as f64 / BYTES_PER_COEFFICIENT + err / tau_sq;
             Candidate {
                 col,

@@ -1122,7 +1122,7 @@ fn check_column_entry(
         }
         _ => {
             return bad(format!(
-                "encoding {enc} in a version-{version} file (valid: 0 empty, 1 plain, 2 zstd)"
+                "encoding {enc} in a file of version {version} (valid: 0 empty, 1 plain, 2 zstd)"
             ))
         }
     };

@@ -132,7 +132,7 @@ impl Encoder {
     }
 
     /// Ends the stream: picks the value in the final interval with the most
-    /// trailing zero bits, flushes it and drops trailing zero bytes.
+    /// trailing zero bits, flushes it and drops up to 4 trailing zero bytes.
     pub fn finish(mut self) -> Vec<u8> {
         let (lo, hi) = (self.low, self.low + self.range as u64 - 1);
         let mut value = lo;
@@ -148,7 +148,12 @@ impl Encoder {
         for _ in 0..5 {
             self.shift_low();
         }
-        while self.out.last() == Some(&0) {
+        // Only the flush's own bytes may go: the decoder reads at most
+        // MAX_OVERRUN bytes past the end.
+        for _ in 0..MAX_OVERRUN {
+            if self.out.last() != Some(&0) {
+                break;
+            }
             self.out.pop();
         }
         self.out
@@ -292,6 +297,20 @@ mod tests {
         // Entropy of p = 0.01: 0.081 bit per bit, 101 bytes for 10000.
         let bytes = encode(&bits, 1);
         assert!(bytes.len() < 140, "{} bytes", bytes.len());
+    }
+
+    #[test]
+    fn streams_ending_in_zero_bytes_round_trip() {
+        // 0 bits under fresh contexts (p = 1/2) emit 0x00 bytes; the flush
+        // then adds zeros of its own, which alone may be dropped.
+        for n in [8, 40, 41, 64, 100, 333] {
+            let mut bits: Vec<(usize, bool)> = (0..50).map(|i| (0, i % 3 == 0)).collect();
+            bits.extend((0..n).map(|i| (1 + i, false)));
+            let bytes = encode(&bits, 1 + n);
+            let which: Vec<usize> = bits.iter().map(|b| b.0).collect();
+            let want: Vec<bool> = bits.iter().map(|b| b.1).collect();
+            assert_eq!(decode(&bytes, &which, 1 + n).unwrap(), want, "{n}");
+        }
     }
 
     #[test]

@@ -10,7 +10,7 @@
 use super::range::{Context, Decoder, Encoder};
 use crate::container::SparseColumn;
 use crate::error::{Error, Result};
-use crate::wavelet::band_size;
+use crate::wavelet::{band_size, max_levels};
 
 /// Side of the square blocks a band is scanned in.
 const BLOCK: usize = 4;
@@ -49,6 +49,8 @@ struct Rect {
 #[derive(Clone, Copy, Debug)]
 struct Band {
     rect: Rect,
+    /// Scale group: 0 for the low band, `k` for detail level `k`.
+    group: usize,
     class: usize,
     parent: Option<(Rect, u32)>,
 }
@@ -66,6 +68,7 @@ fn bands(width: usize, height: usize, depth: u32) -> Vec<Band> {
     };
     let mut out = vec![Band {
         rect: low,
+        group: 0,
         class: 0,
         parent: None,
     }];
@@ -82,6 +85,7 @@ fn bands(width: usize, height: usize, depth: u32) -> Vec<Band> {
         for (o, &rect) in rects.iter().enumerate() {
             out.push(Band {
                 rect,
+                group: k as usize,
                 class: (k as usize).min(CLASSES - 1),
                 parent: Some((parents[o], shift)),
             });
@@ -125,19 +129,22 @@ struct Model {
     /// Significance: class × (left + up, 0..=2) × (up-left + up-right,
     /// 0..=2) × parent.
     sig: [Context; CLASSES * 3 * 3 * 2],
-    /// Zero flag: channel (capped at 2) × whether channel 0 is zero.
-    zero: [Context; 3 * 2],
-    /// Sign: channel 0, or the sign of the last nonzero channel before
-    /// (none, +, −).
-    sign: [Context; 4],
+    /// Zero flag: 1 for channel 0, 2 for channel 1 (prediction 0 or
+    /// not), 4 for channel 2 (prediction 0, channel 1's residual 0).
+    zero: [Context; 7],
+    /// Sign: 1 for channel 0, 3 per later channel (prediction 0, +, −).
+    sign: [Context; 7],
     /// Exp-Golomb prefix: magnitude context × prefix position (capped 15).
     prefix: [[Context; 16]; MAG_CONTEXTS],
     /// Exp-Golomb suffix: prefix length × bit position.
     suffix: [[Context; 16]; 16],
 }
 
+/// Scale groups a column has at most (depth ≤ 15).
+const MAX_GROUPS: usize = 16;
+
 /// Magnitude contexts: class × neighbour bucket for channel 0, then 16
-/// per later channel (capped at 2) by the previous channel's bit length.
+/// per later channel by its prediction's bit length.
 const MAG_CONTEXTS: usize = CLASSES * 4 + 2 * 16;
 
 impl Model {
@@ -146,8 +153,8 @@ impl Model {
         Box::new(Model {
             block: [c; CLASSES * 3 * 2],
             sig: [c; CLASSES * 3 * 3 * 2],
-            zero: [c; 6],
-            sign: [c; 4],
+            zero: [c; 7],
+            sign: [c; 7],
             prefix: [[c; 16]; MAG_CONTEXTS],
             suffix: [[c; 16]; 16],
         })
@@ -169,6 +176,10 @@ struct Walk<'a, IO: BitIo, T: Fn(usize) -> Option<[i32; MAX_CHANNELS]>> {
     blocks: Vec<bool>,
     /// Kept pixels still to find.
     left: usize,
+    /// Per scale group: Σ q0² and Σ q_c·q0 (c = 1, 2) over the kept
+    /// positions coded so far.
+    sxx: [i64; MAX_GROUPS],
+    sxy: [[i64; 2]; MAX_GROUPS],
     found: &'a mut dyn FnMut(usize, [i32; MAX_CHANNELS]) -> Result<()>,
 }
 
@@ -279,7 +290,9 @@ impl<IO: BitIo, T: Fn(usize) -> Option<[i32; MAX_CHANNELS]>> Walk<'_, IO, T> {
         ((band.class * 3 + near) * 3 + diag) * 2 + parent
     }
 
-    /// Codes the values of a kept pixel; returns them.
+    /// Codes the values of a kept pixel; returns them. Channel 0 is coded
+    /// as it is; a later channel as its residual from the prediction
+    /// [`Walk::predict`] makes from channel 0.
     fn values(
         &mut self,
         band: &Band,
@@ -290,52 +303,82 @@ impl<IO: BitIo, T: Fn(usize) -> Option<[i32; MAX_CHANNELS]>> Walk<'_, IO, T> {
         let r = &band.rect;
         let left = if u > 0 { self.mag_at(r, u - 1, v) } else { 0 };
         let up = if v > 0 { self.mag_at(r, u, v - 1) } else { 0 };
-        let sum = left as u32 + up as u32;
-        let bucket = match sum {
+        let bucket = match left as u32 + up as u32 {
             0 => 0,
             1..=3 => 1,
             4..=7 => 2,
             _ => 3,
         };
-        let channels = self.shape.channels;
+        let max = (1i32 << (self.shape.bits - 1)) - 1;
         let mut out = [0i32; MAX_CHANNELS];
-        let (mut prev_len, mut prev_sign, mut any, mut widest) = (0u32, 0usize, false, 0u32);
-        for c in 0..channels {
-            let want = truth[c];
-            let zero_ctx = c.min(2) * 2 + usize::from(c > 0 && out[0] == 0);
-            let nonzero = if c + 1 == channels && !any {
-                true
+        let q0 = self.value(0, 0, band.class * 4 + bucket, self.shape.bits - 2, truth[0])?;
+        out[0] = q0;
+        let mut widest = bit_length(q0.unsigned_abs());
+        let mut prev_zero = false;
+        for c in 1..self.shape.channels {
+            let pred = self.predict(band.group, c, q0, max);
+            let zero_ctx = if c == 1 {
+                1 + usize::from(pred == 0)
             } else {
-                self.io.bit(&mut self.model.zero[zero_ctx], want != 0)?
+                3 + 2 * usize::from(pred == 0) + usize::from(prev_zero)
             };
-            if !nonzero {
-                prev_len = 0;
-                continue;
+            let sign_ctx = 1 + (c - 1) * 3 + pred.signum().rem_euclid(3) as usize;
+            let len = bit_length(pred.unsigned_abs()).min(15) as usize;
+            let mag_ctx = CLASSES * 4 + (c - 1) * 16 + len;
+            let res = self.value(zero_ctx, sign_ctx, mag_ctx, self.shape.bits - 1, truth[c] - pred)?;
+            let q = pred + res;
+            if q.abs() > max {
+                return Err(Error::corrupt(
+                    "column payload",
+                    format!("quantized value {q} outside ±{max}"),
+                ));
             }
-            any = true;
-            let sign_ctx = if c == 0 { 0 } else { 1 + prev_sign };
-            let negative = self.io.bit(&mut self.model.sign[sign_ctx], want < 0)?;
-            let mag_ctx = if c == 0 {
-                band.class * 4 + bucket
-            } else {
-                CLASSES * 4 + (c.min(2) - 1) * 16 + prev_len.min(15) as usize
-            };
-            let m = self.magnitude(mag_ctx, want.unsigned_abs())?;
-            out[c] = if negative { -(m as i32) } else { m as i32 };
-            prev_len = bit_length(m);
-            prev_sign = if negative { 2 } else { 1 };
-            widest = widest.max(prev_len);
+            out[c] = q;
+            prev_zero = res == 0;
+            widest = widest.max(bit_length(q.unsigned_abs()));
+            let g = band.group;
+            self.sxy[g][c - 1] += q as i64 * q0 as i64;
         }
+        self.sxx[band.group] += q0 as i64 * q0 as i64;
         let pixel = (r.y0 + v) * self.shape.width + r.x0 + u;
-        self.mag[pixel] = (widest as u8).min(MAX_MAG);
+        self.mag[pixel] = (widest as u8).clamp(1, MAX_MAG);
         Ok(out)
     }
 
-    /// Codes a magnitude `m ≥ 1` below `2^(bits − 1)`: its bit length
-    /// minus one `n` in unary (no terminator at the largest possible `n`),
-    /// then its `n` bits below the leading one, most significant first.
-    fn magnitude(&mut self, ctx: usize, want: u32) -> Result<u32> {
-        let max_n = self.shape.bits - 2;
+    /// The prediction of channel `c` from channel 0's value `q0` at a
+    /// position of scale group `g`: `q0` times the least-squares ratio of
+    /// the group's positions coded so far, rounded half up, within `±max`.
+    fn predict(&self, g: usize, c: usize, q0: i32, max: i32) -> i32 {
+        let sxx = self.sxx[g] as i128;
+        if sxx == 0 {
+            return 0;
+        }
+        let num = 2 * self.sxy[g][c - 1] as i128 * q0 as i128 + sxx;
+        num.div_euclid(2 * sxx).clamp(-max as i128, max as i128) as i32
+    }
+
+    /// Codes a value: a zero flag, then the sign and the magnitude (at
+    /// most `max_n + 1` bits long) of a nonzero one.
+    fn value(
+        &mut self,
+        zero_ctx: usize,
+        sign_ctx: usize,
+        mag_ctx: usize,
+        max_n: u32,
+        want: i32,
+    ) -> Result<i32> {
+        if !self.io.bit(&mut self.model.zero[zero_ctx], want != 0)? {
+            return Ok(0);
+        }
+        let negative = self.io.bit(&mut self.model.sign[sign_ctx], want < 0)?;
+        let m = self.magnitude(mag_ctx, max_n, want.unsigned_abs())? as i32;
+        Ok(if negative { -m } else { m })
+    }
+
+    /// Codes a magnitude `m ≥ 1` below `2^(max_n + 1)`: its bit length
+    /// minus one `n` in unary (no terminator at `n = max_n`), then its `n`
+    /// bits below the leading one, most significant first.
+    fn magnitude(&mut self, ctx: usize, max_n: u32, want: u32) -> Result<u32> {
         let want_n = bit_length(want).saturating_sub(1);
         let mut n = 0u32;
         while n < max_n {
@@ -358,8 +401,8 @@ impl<IO: BitIo, T: Fn(usize) -> Option<[i32; MAX_CHANNELS]>> Walk<'_, IO, T> {
 }
 
 /// Checks that the coder can represent `col`: at most 3 channels, every
-/// kept position with a nonzero value, every magnitude below
-/// `2^(bits − 1)`, positions inside the image.
+/// magnitude below `2^(bits − 1)`, positions inside the image, a depth
+/// the image has.
 fn representable(col: &SparseColumn, shape: &ColumnShape) -> bool {
     let c = shape.channels;
     let max = (1u32 << (shape.bits - 1)) - 1;
@@ -367,7 +410,8 @@ fn representable(col: &SparseColumn, shape: &ColumnShape) -> bool {
         && (2..=16).contains(&shape.bits)
         && col.values.len() == col.indices.len() * c
         && col.indices.iter().all(|&i| (i as usize) < shape.width * shape.height)
-        && col.values.chunks(c).all(|v| v.iter().any(|&x| x != 0))
+        && (col.depth as usize) < MAX_GROUPS
+        && col.depth <= max_levels(shape.width, shape.height)
         && col.values.iter().all(|&x| x.unsigned_abs() <= max)
 }
 
@@ -401,6 +445,8 @@ pub fn encode(col: &SparseColumn, shape: &ColumnShape) -> Option<Vec<u8>> {
         mag: vec![0; shape.width * shape.height],
         blocks: Vec::new(),
         left: col.indices.len(),
+        sxx: [0; MAX_GROUPS],
+        sxy: [[0; 2]; MAX_GROUPS],
         found: &mut sink,
     };
     walk.run(col.depth).ok()?;
@@ -434,6 +480,13 @@ pub fn decode(
             format!("{nnz} nonzeros (valid: 0..={pixels})"),
         ));
     }
+    if depth > max_levels(shape.width, shape.height) || depth as usize >= MAX_GROUPS {
+        return Err(Error::range(
+            "column depth",
+            depth,
+            format!("0..={}", max_levels(shape.width, shape.height)),
+        ));
+    }
     let groups = (depth as usize + 1) * c;
     if bytes.len() < 2 * groups {
         return Err(Error::corrupt(
@@ -460,6 +513,8 @@ pub fn decode(
         mag: vec![0; pixels],
         blocks: Vec::new(),
         left: nnz,
+        sxx: [0; MAX_GROUPS],
+        sxy: [[0; 2]; MAX_GROUPS],
         found: &mut sink,
     };
     walk.run(depth)?;
@@ -487,7 +542,6 @@ pub fn decode(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::wavelet::max_levels;
     use proptest::prelude::*;
 
     /// A random column: shape, depth, and about `density` of its positions
@@ -588,11 +642,13 @@ mod tests {
         let n = col.indices.len();
         assert!(decode(&bytes, n + 1, &shape, 3).is_err());
         assert!(decode(&bytes, shape.width * shape.height + 1, &shape, 3).is_err());
-        assert!(decode(&bytes[..bytes.len() - 1], n, &shape, 3).is_err());
+        // Shorter than its scale codes; far too short for its nonzeros.
+        assert!(decode(&bytes[..4 * 3 * 2 - 1], n, &shape, 3).is_err());
+        assert!(decode(&bytes[..4 * 3 * 2 + 2], n, &shape, 3).is_err());
     }
 
     #[test]
-    fn all_zero_positions_are_not_representable() {
+    fn all_zero_positions_round_trip() {
         let shape = ColumnShape {
             width: 4,
             height: 4,
@@ -605,7 +661,8 @@ mod tests {
             indices: vec![3],
             values: vec![0],
         };
-        assert!(encode(&col, &shape).is_none());
+        let bytes = encode(&col, &shape).unwrap();
+        assert_eq!(decode(&bytes, 1, &shape, 0).unwrap(), col);
     }
 
     #[test]

@@ -405,23 +405,28 @@ pub struct EncodedColumn {
 
 impl EncodedColumn {
     /// Encodes a column of a `width` × `height` column image quantized to
-    /// `bits` bits in the smallest of encodings 1 (plain), 2 (zstd) and 3
-    /// (range-coded).
+    /// `bits` bits: range-coded (encoding 3) when that is no larger than
+    /// the plain payload (zstd is then not tried: on these payloads it
+    /// gains less than range coding), else as [`EncodedColumn::new`].
     pub fn coded(col: &SparseColumn, shape: &ColumnShape, zstd_level: i32) -> EncodedColumn {
-        let mut best = EncodedColumn::new(col, shape.channels, zstd_level);
-        if best.entry.nnz == 0 {
-            return best;
-        }
-        if let Some(bytes) = entropy::encode(col, shape) {
-            if bytes.len() < best.bytes.len() {
-                best.entry.encoding = Encoding::Ranged;
-                best.entry.raw_len = bytes.len() as u32;
-                best.entry.stored_len = bytes.len() as u32;
-                best.entry.crc = crc32fast::hash(&bytes);
-                best.bytes = bytes;
+        let nnz = col.indices.len();
+        if nnz > 0 {
+            if let Some(bytes) = entropy::encode(col, shape) {
+                if bytes.len() <= col.to_payload(shape.channels).len() {
+                    let entry = ColumnEntry {
+                        offset: 0,
+                        stored_len: bytes.len() as u32,
+                        raw_len: bytes.len() as u32,
+                        nnz: nnz as u32,
+                        crc: crc32fast::hash(&bytes),
+                        depth: col.depth as u8,
+                        encoding: Encoding::Ranged,
+                    };
+                    return EncodedColumn { bytes, entry };
+                }
             }
         }
-        best
+        EncodedColumn::new(col, shape.channels, zstd_level)
     }
 
     /// Serializes and compresses a column (zstd when that is smaller),

@@ -104,21 +104,32 @@ fn bit_length(m: u32) -> u32 {
 /// Reads or writes one bit: the encoder codes the bit given, the decoder
 /// returns the bit decoded.
 trait BitIo {
-    fn bit(&mut self, ctx: &mut Context, bit: bool) -> Result<bool>;
+    /// True for the encoder (which knows the bits).
+    const ENCODES: bool;
+    fn bit(&mut self, ctx: &mut Context, bit: bool) -> bool;
+    /// Whether the decoder read past the stream's end (it then stops).
+    fn overrun(&self) -> bool {
+        false
+    }
 }
 
 impl BitIo for Encoder {
-    #[inline]
-    fn bit(&mut self, ctx: &mut Context, bit: bool) -> Result<bool> {
+    const ENCODES: bool = true;
+    #[inline(always)]
+    fn bit(&mut self, ctx: &mut Context, bit: bool) -> bool {
         Encoder::bit(self, ctx, bit);
-        Ok(bit)
+        bit
     }
 }
 
 impl BitIo for Decoder<'_> {
-    #[inline]
-    fn bit(&mut self, ctx: &mut Context, _bit: bool) -> Result<bool> {
+    const ENCODES: bool = false;
+    #[inline(always)]
+    fn bit(&mut self, ctx: &mut Context, _bit: bool) -> bool {
         Decoder::bit(self, ctx)
+    }
+    fn overrun(&self) -> bool {
+        Decoder::overrun(self)
     }
 }
 
@@ -220,6 +231,12 @@ impl<IO: BitIo, T: Fn(usize) -> Option<[i32; MAX_CHANNELS]>> Walk<'_, IO, T> {
                 if self.left == 0 {
                     return Ok(());
                 }
+                if self.io.overrun() {
+                    return Err(Error::corrupt(
+                        "column payload",
+                        "range-coded stream ends early",
+                    ));
+                }
                 let (u0, v0) = (bx * BLOCK, by * BLOCK);
                 let (u1, v1) = ((u0 + BLOCK).min(r.w), (v0 + BLOCK).min(r.h));
                 let any = self.block_truth(&r, u0, v0, u1, v1);
@@ -229,7 +246,7 @@ impl<IO: BitIo, T: Fn(usize) -> Option<[i32; MAX_CHANNELS]>> Walk<'_, IO, T> {
                     .iter()
                     .any(|&(u, v)| self.parent_mag(band, u, v) > 0);
                 let ctx = (band.class * 3 + near) * 2 + usize::from(parent);
-                let flag = self.io.bit(&mut self.model.block[ctx], any)?;
+                let flag = self.io.bit(&mut self.model.block[ctx], any);
                 self.blocks[by * bw + bx] = flag;
                 if flag {
                     self.block(band, u0, v0, u1, v1)?;
@@ -241,7 +258,8 @@ impl<IO: BitIo, T: Fn(usize) -> Option<[i32; MAX_CHANNELS]>> Walk<'_, IO, T> {
 
     /// Whether the encoder's block holds a kept pixel (false when decoding).
     fn block_truth(&self, r: &Rect, u0: usize, v0: usize, u1: usize, v1: usize) -> bool {
-        (v0..v1).any(|v| {
+        IO::ENCODES
+            && (v0..v1).any(|v| {
             (u0..u1).any(|u| (self.truth)((r.y0 + v) * self.shape.width + r.x0 + u).is_some())
         })
     }
@@ -261,7 +279,7 @@ impl<IO: BitIo, T: Fn(usize) -> Option<[i32; MAX_CHANNELS]>> Walk<'_, IO, T> {
                     true
                 } else {
                     let ctx = self.sig_context(band, u, v);
-                    self.io.bit(&mut self.model.sig[ctx], truth.is_some())?
+                    self.io.bit(&mut self.model.sig[ctx], truth.is_some())
                 };
                 if kept {
                     seen = true;
@@ -349,12 +367,19 @@ impl<IO: BitIo, T: Fn(usize) -> Option<[i32; MAX_CHANNELS]>> Walk<'_, IO, T> {
     /// position of scale group `g`: `q0` times the least-squares ratio of
     /// the group's positions coded so far, rounded half up, within `±max`.
     fn predict(&self, g: usize, c: usize, q0: i32, max: i32) -> i32 {
-        let sxx = self.sxx[g] as i128;
+        let (sxx, sxy) = (self.sxx[g], self.sxy[g][c - 1]);
         if sxx == 0 {
             return 0;
         }
-        let num = 2 * self.sxy[g][c - 1] as i128 * q0 as i128 + sxx;
-        num.div_euclid(2 * sxx).clamp(-max as i128, max as i128) as i32
+        // i64 when it cannot overflow (the usual case), else i128: the
+        // same exact value.
+        let fits = sxy.unsigned_abs() < 1 << 46 && sxx < 1 << 60;
+        let p = if fits {
+            (2 * sxy * q0 as i64 + sxx).div_euclid(2 * sxx) as i128
+        } else {
+            (2 * sxy as i128 * q0 as i128 + sxx as i128).div_euclid(2 * sxx as i128)
+        };
+        p.clamp(-max as i128, max as i128) as i32
     }
 
     /// Codes a value: a zero flag, then the sign and the magnitude (at
@@ -367,10 +392,10 @@ impl<IO: BitIo, T: Fn(usize) -> Option<[i32; MAX_CHANNELS]>> Walk<'_, IO, T> {
         max_n: u32,
         want: i32,
     ) -> Result<i32> {
-        if !self.io.bit(&mut self.model.zero[zero_ctx], want != 0)? {
+        if !self.io.bit(&mut self.model.zero[zero_ctx], want != 0) {
             return Ok(0);
         }
-        let negative = self.io.bit(&mut self.model.sign[sign_ctx], want < 0)?;
+        let negative = self.io.bit(&mut self.model.sign[sign_ctx], want < 0);
         let m = self.magnitude(mag_ctx, max_n, want.unsigned_abs())? as i32;
         Ok(if negative { -m } else { m })
     }
@@ -382,7 +407,7 @@ impl<IO: BitIo, T: Fn(usize) -> Option<[i32; MAX_CHANNELS]>> Walk<'_, IO, T> {
         let want_n = bit_length(want).saturating_sub(1);
         let mut n = 0u32;
         while n < max_n {
-            let more = self.io.bit(&mut self.model.prefix[ctx][n.min(15) as usize], want_n > n)?;
+            let more = self.io.bit(&mut self.model.prefix[ctx][n.min(15) as usize], want_n > n);
             if !more {
                 break;
             }
@@ -393,7 +418,7 @@ impl<IO: BitIo, T: Fn(usize) -> Option<[i32; MAX_CHANNELS]>> Walk<'_, IO, T> {
             let b = self.io.bit(
                 &mut self.model.suffix[n as usize][j as usize],
                 want >> j & 1 == 1,
-            )?;
+            );
             m = m << 1 | u32::from(b);
         }
         Ok(m)

@@ -18,6 +18,18 @@ const MAX_SHIFT: u32 = 5;
 /// encoder drops the flush's trailing zero bytes.
 const MAX_OVERRUN: usize = 4;
 
+/// `min(1 + ⌊log2(n + 1)⌋, 5)` for `n = 0..=32`.
+const SHIFTS: [u32; 33] = {
+    let mut t = [0u32; 33];
+    let mut n = 0;
+    while n < 33 {
+        let s = 1 + (31 - (n as u32 + 1).leading_zeros());
+        t[n] = if s < MAX_SHIFT { s } else { MAX_SHIFT };
+        n += 1;
+    }
+    t
+};
+
 /// One adaptive binary context: the probability of a 0 and how many bits
 /// it has seen (capped).
 #[derive(Clone, Copy, Debug)]
@@ -44,10 +56,10 @@ impl Context {
 
     /// Moves the probability towards the bit seen, by `1/2^shift` with
     /// `shift = min(1 + ⌊log2(n + 1)⌋, 5)`.
-    #[inline]
+    #[inline(always)]
     fn update(&mut self, bit: bool) {
         let n = self.n as u32;
-        let shift = (1 + (31 - (n + 1).leading_zeros())).min(MAX_SHIFT);
+        let shift = SHIFTS[n as usize];
         let p = self.p as u32;
         let p = if bit {
             p - (p >> shift)
@@ -179,30 +191,40 @@ impl<'a> Decoder<'a> {
             pos: 0,
         };
         for _ in 0..4 {
-            d.code = (d.code << 8) | d.next_byte()? as u32;
+            d.code = (d.code << 8) | d.next_byte() as u32;
         }
         Ok(d)
     }
 
-    #[inline]
-    fn next_byte(&mut self) -> Result<u8> {
+    /// The next byte, 0 past the end (counted: [`Decoder::finish`] and
+    /// [`Decoder::overrun`] check how far).
+    #[inline(always)]
+    fn next_byte(&mut self) -> u8 {
         let b = self.bytes.get(self.pos).copied().unwrap_or(0);
         self.pos += 1;
-        if self.pos > self.bytes.len() + MAX_OVERRUN {
-            return Err(Error::corrupt(
-                "column payload",
-                format!(
-                    "range-coded stream of {} bytes ends early",
-                    self.bytes.len()
-                ),
-            ));
-        }
-        Ok(b)
+        b
+    }
+
+    /// Whether more than [`MAX_OVERRUN`] bytes past the end were read:
+    /// the stream ended early. Decoding may go on (its bits are then
+    /// meaningless, and every caller's loop is bounded) but must fail.
+    pub fn overrun(&self) -> bool {
+        self.pos > self.bytes.len() + MAX_OVERRUN
+    }
+
+    fn overrun_error(&self) -> Error {
+        Error::corrupt(
+            "column payload",
+            format!(
+                "range-coded stream of {} bytes ends early",
+                self.bytes.len()
+            ),
+        )
     }
 
     /// Decodes a bit coded with `ctx`, then adapts `ctx`.
-    #[inline]
-    pub fn bit(&mut self, ctx: &mut Context) -> Result<bool> {
+    #[inline(always)]
+    pub fn bit(&mut self, ctx: &mut Context) -> bool {
         let bound = ctx.bound(self.range);
         let bit = if self.code < bound {
             self.range = bound;
@@ -215,13 +237,17 @@ impl<'a> Decoder<'a> {
         ctx.update(bit);
         while self.range < TOP {
             self.range <<= 8;
-            self.code = (self.code << 8) | self.next_byte()? as u32;
+            self.code = (self.code << 8) | self.next_byte() as u32;
         }
-        Ok(bit)
+        bit
     }
 
-    /// Checks that the stream was read to its end: no byte left unread.
+    /// Checks that the stream was read to its end: no byte left unread,
+    /// no more than [`MAX_OVERRUN`] read past it.
     pub fn finish(&self) -> Result<()> {
+        if self.overrun() {
+            return Err(self.overrun_error());
+        }
         if self.pos < self.bytes.len() {
             return Err(Error::corrupt(
                 "column payload",
@@ -252,10 +278,7 @@ mod tests {
     fn decode(bytes: &[u8], which: &[usize], contexts: usize) -> Result<Vec<bool>> {
         let mut ctx = vec![Context::default(); contexts];
         let mut d = Decoder::new(bytes)?;
-        let out = which
-            .iter()
-            .map(|&c| d.bit(&mut ctx[c]))
-            .collect::<Result<Vec<_>>>()?;
+        let out = which.iter().map(|&c| d.bit(&mut ctx[c])).collect();
         d.finish()?;
         Ok(out)
     }
@@ -332,9 +355,10 @@ mod tests {
     fn reading_far_past_the_end_is_an_error() {
         // Fresh contexts cost a bit each: 10 000 bits need 1250 bytes.
         let mut d = Decoder::new(&[0x55]).unwrap();
-        let r: Result<Vec<bool>> = (0..10000)
-            .map(|_| d.bit(&mut Context::default()))
-            .collect();
-        assert!(r.is_err());
+        for _ in 0..10000 {
+            d.bit(&mut Context::default());
+        }
+        assert!(d.overrun());
+        assert!(d.finish().is_err());
     }
 }

@@ -1094,7 +1094,13 @@ fn read_column_table(
         };
         let enc = r.u8()?;
         r.u16()?;
-        columns.push(check_column_entry(j, entry, (enc, version), meta, data_len)?);
+        columns.push(check_column_entry(
+            j,
+            entry,
+            (enc, version),
+            meta,
+            data_len,
+        )?);
     }
     Ok(columns)
 }

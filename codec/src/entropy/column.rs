@@ -77,9 +77,24 @@ fn bands(width: usize, height: usize, depth: u32) -> Vec<Band> {
         let (pw, ph) = band_size(width, height, k - 1);
         let (lw, lh) = band_size(width, height, k);
         let rects = [
-            Rect { x0: lw, y0: 0, w: pw - lw, h: lh },
-            Rect { x0: 0, y0: lh, w: lw, h: ph - lh },
-            Rect { x0: lw, y0: lh, w: pw - lw, h: ph - lh },
+            Rect {
+                x0: lw,
+                y0: 0,
+                w: pw - lw,
+                h: lh,
+            },
+            Rect {
+                x0: 0,
+                y0: lh,
+                w: lw,
+                h: ph - lh,
+            },
+            Rect {
+                x0: lw,
+                y0: lh,
+                w: pw - lw,
+                h: ph - lh,
+            },
         ];
         let shift = u32::from(k != depth);
         for (o, &rect) in rects.iter().enumerate() {
@@ -260,8 +275,8 @@ impl<IO: BitIo, T: Fn(usize) -> Option<[i32; MAX_CHANNELS]>> Walk<'_, IO, T> {
     fn block_truth(&self, r: &Rect, u0: usize, v0: usize, u1: usize, v1: usize) -> bool {
         IO::ENCODES
             && (v0..v1).any(|v| {
-            (u0..u1).any(|u| (self.truth)((r.y0 + v) * self.shape.width + r.x0 + u).is_some())
-        })
+                (u0..u1).any(|u| (self.truth)((r.y0 + v) * self.shape.width + r.x0 + u).is_some())
+            })
     }
 
     fn block(&mut self, band: &Band, u0: usize, v0: usize, u1: usize, v1: usize) -> Result<()> {
@@ -343,7 +358,13 @@ impl<IO: BitIo, T: Fn(usize) -> Option<[i32; MAX_CHANNELS]>> Walk<'_, IO, T> {
             let sign_ctx = 1 + (c - 1) * 3 + pred.signum().rem_euclid(3) as usize;
             let len = bit_length(pred.unsigned_abs()).min(15) as usize;
             let mag_ctx = CLASSES * 4 + (c - 1) * 16 + len;
-            let res = self.value(zero_ctx, sign_ctx, mag_ctx, self.shape.bits - 1, truth[c] - pred)?;
+            let res = self.value(
+                zero_ctx,
+                sign_ctx,
+                mag_ctx,
+                self.shape.bits - 1,
+                truth[c] - pred,
+            )?;
             let q = pred + res;
             if q.abs() > max {
                 return Err(Error::corrupt(
@@ -407,7 +428,9 @@ impl<IO: BitIo, T: Fn(usize) -> Option<[i32; MAX_CHANNELS]>> Walk<'_, IO, T> {
         let want_n = bit_length(want).saturating_sub(1);
         let mut n = 0u32;
         while n < max_n {
-            let more = self.io.bit(&mut self.model.prefix[ctx][n.min(15) as usize], want_n > n);
+            let more = self
+                .io
+                .bit(&mut self.model.prefix[ctx][n.min(15) as usize], want_n > n);
             if !more {
                 break;
             }
@@ -434,7 +457,10 @@ fn representable(col: &SparseColumn, shape: &ColumnShape) -> bool {
     (1..=MAX_CHANNELS).contains(&c)
         && (2..=16).contains(&shape.bits)
         && col.values.len() == col.indices.len() * c
-        && col.indices.iter().all(|&i| (i as usize) < shape.width * shape.height)
+        && col
+            .indices
+            .iter()
+            .all(|&i| (i as usize) < shape.width * shape.height)
         && (col.depth as usize) < MAX_GROUPS
         && col.depth <= max_levels(shape.width, shape.height)
         && col.values.iter().all(|&x| x.unsigned_abs() <= max)
@@ -488,12 +514,7 @@ pub fn encode(col: &SparseColumn, shape: &ColumnShape) -> Option<Vec<u8>> {
 
 /// Decodes a column of `nnz` kept positions at `depth` from `bytes`. The
 /// caller has checked `nnz` against the image's pixel count.
-pub fn decode(
-    bytes: &[u8],
-    nnz: usize,
-    shape: &ColumnShape,
-    depth: u32,
-) -> Result<SparseColumn> {
+pub fn decode(bytes: &[u8], nnz: usize, shape: &ColumnShape, depth: u32) -> Result<SparseColumn> {
     let c = shape.channels;
     if !(1..=MAX_CHANNELS).contains(&c) || !(2..=16).contains(&shape.bits) {
         return Err(Error::range("channels", c, "1..=3"));
@@ -619,7 +640,12 @@ mod tests {
     }
 
     fn shapes() -> impl Strategy<Value = (usize, usize, usize, u32)> {
-        (1usize..40, 1usize..40, prop::sample::select(vec![1usize, 3]), 2u32..=16)
+        (
+            1usize..40,
+            1usize..40,
+            prop::sample::select(vec![1usize, 3]),
+            2u32..=16,
+        )
     }
 
     proptest! {

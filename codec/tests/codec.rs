@@ -829,4 +829,4 @@ const GOLDEN_LTM_V1: u32 = 0x5832_3993;
 
 const GOLDEN_RAW: u32 = 0xf20f_83f3;
 /// The default options: adaptive, 10 bits, 1 % target.
-const GOLDEN_LTM: u32 = 0xa8ea_1e1e;
+const GOLDEN_LTM: u32 = 0x0c2f_934d;

@@ -20,6 +20,7 @@ use crate::bytes::{Reader, Writer};
 use crate::dims::Dims;
 use crate::eigen::{PcaModel, QuantizedMatrix};
 use crate::empty::EmptyRows;
+use crate::entropy::{self, ColumnShape};
 use crate::error::{Error, Result};
 use crate::limits::Limits;
 use crate::mmap;
@@ -34,10 +35,11 @@ use std::sync::Arc;
 
 /// File magic: `\x89LTM\r\n\x1a\n`.
 pub const MAGIC: [u8; 8] = *b"\x89LTM\r\n\x1a\n";
-/// Format version this build writes. It reads versions 1 and 2; version 2
+/// Format version this build writes. It reads versions 1 to 3; version 2
 /// adds the empty-row mask ([`FEATURE_EMPTY_ROWS`]) and the row layout with
 /// per-row surface data ([`FEATURE_SURFACE`]). A version-1 file has neither.
-pub const VERSION: u32 = 2;
+/// Version 3 adds column encoding 3 ([`Encoding::Ranged`]).
+pub const VERSION: u32 = 3;
 /// The oldest format version this build reads.
 pub const MIN_VERSION: u32 = 1;
 /// Feature flag: an RGB albedo image is stored (chunk ALBD).
@@ -49,8 +51,9 @@ pub const FEATURE_EMPTY_ROWS: u32 = 2;
 /// stored (chunk SURF).
 pub const FEATURE_SURFACE: u32 = 4;
 /// The feature flags a reader of each version knows, by version − 1.
-const KNOWN_FEATURES: [u32; 2] = [
+const KNOWN_FEATURES: [u32; 3] = [
     FEATURE_ALBEDO,
+    FEATURE_ALBEDO | FEATURE_EMPTY_ROWS | FEATURE_SURFACE,
     FEATURE_ALBEDO | FEATURE_EMPTY_ROWS | FEATURE_SURFACE,
 ];
 const HEADER_LEN: usize = 24;
@@ -236,6 +239,9 @@ pub enum Encoding {
     Plain = 1,
     /// Payload compressed with zstd.
     Zstd = 2,
+    /// Scale codes, then the coefficients range-coded with context
+    /// modelling (version 3; `crate::entropy`).
+    Ranged = 3,
 }
 
 /// One column's entry in the column table.
@@ -398,7 +404,33 @@ pub struct EncodedColumn {
 }
 
 impl EncodedColumn {
-    /// Serializes and compresses a column (zstd when that is smaller).
+    /// Encodes a column of a `width` × `height` column image quantized to
+    /// `bits` bits: range-coded (encoding 3) when that is no larger than
+    /// the plain payload (zstd is then not tried: on these payloads it
+    /// gains less than range coding), else as [`EncodedColumn::new`].
+    pub fn coded(col: &SparseColumn, shape: &ColumnShape, zstd_level: i32) -> EncodedColumn {
+        let nnz = col.indices.len();
+        if nnz > 0 {
+            if let Some(bytes) = entropy::encode(col, shape) {
+                if bytes.len() <= col.to_payload(shape.channels).len() {
+                    let entry = ColumnEntry {
+                        offset: 0,
+                        stored_len: bytes.len() as u32,
+                        raw_len: bytes.len() as u32,
+                        nnz: nnz as u32,
+                        crc: crc32fast::hash(&bytes),
+                        depth: col.depth as u8,
+                        encoding: Encoding::Ranged,
+                    };
+                    return EncodedColumn { bytes, entry };
+                }
+            }
+        }
+        EncodedColumn::new(col, shape.channels, zstd_level)
+    }
+
+    /// Serializes and compresses a column (zstd when that is smaller),
+    /// without range coding.
     pub fn new(col: &SparseColumn, channels: usize, zstd_level: i32) -> EncodedColumn {
         let nnz = col.indices.len();
         let mut entry = ColumnEntry {
@@ -793,7 +825,7 @@ impl LtmFile {
             .find(|d| &d.tag == b"DATA")
             .ok_or_else(|| missing("DATA"))?;
         let data = data_dir.offset as usize..(data_dir.offset + data_dir.len) as usize;
-        let columns = read_column_table(cols, &meta, data.len() as u64, limits)?;
+        let columns = read_column_table(cols, &meta, version, data.len() as u64, limits)?;
         Ok(LtmIndex {
             meta,
             columns,
@@ -1029,6 +1061,7 @@ fn read_empty_rows(chunk: Option<&[u8]>, flagged: bool, dims: &Dims) -> Result<O
 fn read_column_table(
     cols: &[u8],
     meta: &Meta,
+    version: u32,
     data_len: u64,
     limits: &Limits,
 ) -> Result<Vec<ColumnEntry>> {
@@ -1061,17 +1094,23 @@ fn read_column_table(
         };
         let enc = r.u8()?;
         r.u16()?;
-        columns.push(check_column_entry(j, entry, enc, meta, data_len)?);
+        columns.push(check_column_entry(
+            j,
+            entry,
+            (enc, version),
+            meta,
+            data_len,
+        )?);
     }
     Ok(columns)
 }
 
-/// Checks column `j`'s table entry (its encoding code `enc` still raw)
-/// against the metadata and the DATA chunk's length.
+/// Checks column `j`'s table entry (its encoding code `enc` still raw, in
+/// a file of `version`) against the metadata and the DATA chunk's length.
 fn check_column_entry(
     j: usize,
     mut e: ColumnEntry,
-    enc: u8,
+    (enc, version): (u8, u32),
     meta: &Meta,
     data_len: u64,
 ) -> Result<ColumnEntry> {
@@ -1086,7 +1125,17 @@ fn check_column_entry(
         0 => Encoding::Empty,
         1 => Encoding::Plain,
         2 => Encoding::Zstd,
-        _ => return bad(format!("encoding {enc} (valid: 0 empty, 1 plain, 2 zstd)")),
+        3 if version >= 3 => Encoding::Ranged,
+        _ if version >= 3 => {
+            return bad(format!(
+                "encoding {enc} (valid: 0 empty, 1 plain, 2 zstd, 3 range-coded)"
+            ))
+        }
+        _ => {
+            return bad(format!(
+                "encoding {enc} in a file of version {version} (valid: 0 empty, 1 plain, 2 zstd)"
+            ))
+        }
     };
     let max_depth = meta.max_depth();
     if depth as u32 > max_depth {
@@ -1102,9 +1151,17 @@ fn check_column_entry(
         return bad(format!("{nnz} nonzeros (valid: 0..={pixels})"));
     }
     // A payload holds 2 bytes per scale, then 1 to 5 bytes per position and
-    // per value.
+    // per value; a range-coded one 2 bytes per scale, then its stream.
     let channels = meta.dims.channels as u64;
     let scale_bytes = 2 * (depth as u64 + 1) * channels;
+    if e.encoding == Encoding::Ranged {
+        if nnz == 0 || raw_len != stored_len || (stored_len as u64) < scale_bytes {
+            return bad(format!(
+                "{nnz} nonzeros with encoding 3, stored length {stored_len} and payload length {raw_len} (valid: k ≥ 1, equal lengths ≥ {scale_bytes})"
+            ));
+        }
+        return check_payload_range(j, e, data_len);
+    }
     let (min_raw, max_raw) = (
         scale_bytes + nnz as u64 * (1 + channels),
         scale_bytes + nnz as u64 * 5 * (1 + channels),
@@ -1121,13 +1178,21 @@ fn check_column_entry(
             "stored length {stored_len} for encoding {enc} and payload length {raw_len}"
         ));
     }
+    check_payload_range(j, e, data_len)
+}
+
+/// Checks that column `j`'s payload lies inside the DATA chunk.
+fn check_payload_range(j: usize, e: ColumnEntry, data_len: u64) -> Result<ColumnEntry> {
     if e.offset
-        .checked_add(stored_len as u64)
+        .checked_add(e.stored_len as u64)
         .is_none_or(|end| end > data_len)
     {
-        return bad(format!(
-            "payload {}+{stored_len} outside the {data_len}-byte DATA chunk",
-            e.offset
+        return Err(Error::corrupt(
+            "COLS chunk",
+            format!(
+                "column {j}: payload {}+{} outside the {data_len}-byte DATA chunk",
+                e.offset, e.stored_len
+            ),
         ));
     }
     Ok(e)
@@ -1234,6 +1299,21 @@ pub(crate) fn read_column(
                     chunk: format!("column {j}"),
                     stored: e.crc,
                     computed: crc,
+                });
+            }
+            if e.encoding == Encoding::Ranged {
+                return entropy::decode(
+                    stored,
+                    e.nnz as usize,
+                    &ColumnShape::of(meta),
+                    e.depth as u32,
+                )
+                .map_err(|err| match err {
+                    Error::Corrupt { what, detail } => Error::Corrupt {
+                        what,
+                        detail: format!("column {j}: {detail}"),
+                    },
+                    other => other,
                 });
             }
             let payload;

@@ -19,6 +19,7 @@ mod decode;
 mod dims;
 pub mod eigen;
 mod empty;
+pub mod entropy;
 mod error;
 mod fileio;
 mod limits;

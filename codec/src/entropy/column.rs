@@ -1,0 +1,735 @@
+//! Column encoding 3: a column's sparse coefficients range-coded with
+//! context modelling. The bands of the column image are visited coarse to
+//! fine, each in 4 × 4 blocks: a block flag says whether the block holds a
+//! kept coefficient, then each of its pixels a significance bit, then each
+//! kept pixel its channels' values (zero flag, sign, exp-Golomb magnitude).
+//! Contexts come from the band's level, the already coded neighbours and
+//! the parent in the next coarser band. docs/FORMAT.md ("Encoding 3") is
+//! the specification.
+
+use super::range::{Context, Decoder, Encoder};
+use crate::container::SparseColumn;
+use crate::error::{Error, Result};
+use crate::wavelet::{band_size, max_levels};
+
+/// Side of the square blocks a band is scanned in.
+const BLOCK: usize = 4;
+/// Level classes: 0 for the low band, `min(k, 7)` for detail level `k`.
+const CLASSES: usize = 8;
+/// Most channels a column has.
+const MAX_CHANNELS: usize = 3;
+/// Magnitude classes kept per pixel (its bit length, capped).
+const MAX_MAG: u8 = 15;
+
+/// What the coder needs to know of a file: the column image's size, the
+/// channels per pixel and the quantizer's bits.
+#[derive(Clone, Copy, Debug)]
+pub struct ColumnShape {
+    /// Column image width.
+    pub width: usize,
+    /// Column image height.
+    pub height: usize,
+    /// Values per position (1 or 3).
+    pub channels: usize,
+    /// Quantization bits (2..=16): magnitudes are below `2^(bits − 1)`.
+    pub bits: u32,
+}
+
+/// A rectangle of the column image.
+#[derive(Clone, Copy, Debug)]
+struct Rect {
+    x0: usize,
+    y0: usize,
+    w: usize,
+    h: usize,
+}
+
+/// One band: its rectangle, level class, parent band and the shift from
+/// its coordinates to the parent's.
+#[derive(Clone, Copy, Debug)]
+struct Band {
+    rect: Rect,
+    /// Scale group: 0 for the low band, `k` for detail level `k`.
+    group: usize,
+    class: usize,
+    parent: Option<(Rect, u32)>,
+}
+
+/// The bands of a column image at `depth`, in coding order: the low band,
+/// then for `k = depth, …, 1` the bands right of (HL), below (LH) and
+/// diagonal to (HH) the level-`k` low band.
+fn bands(width: usize, height: usize, depth: u32) -> Vec<Band> {
+    let (lw, lh) = band_size(width, height, depth);
+    let low = Rect {
+        x0: 0,
+        y0: 0,
+        w: lw,
+        h: lh,
+    };
+    let mut out = vec![Band {
+        rect: low,
+        group: 0,
+        class: 0,
+        parent: None,
+    }];
+    let mut parents = [low; 3];
+    for k in (1..=depth).rev() {
+        let (pw, ph) = band_size(width, height, k - 1);
+        let (lw, lh) = band_size(width, height, k);
+        let rects = [
+            Rect {
+                x0: lw,
+                y0: 0,
+                w: pw - lw,
+                h: lh,
+            },
+            Rect {
+                x0: 0,
+                y0: lh,
+                w: lw,
+                h: ph - lh,
+            },
+            Rect {
+                x0: lw,
+                y0: lh,
+                w: pw - lw,
+                h: ph - lh,
+            },
+        ];
+        let shift = u32::from(k != depth);
+        for (o, &rect) in rects.iter().enumerate() {
+            out.push(Band {
+                rect,
+                group: k as usize,
+                class: (k as usize).min(CLASSES - 1),
+                parent: Some((parents[o], shift)),
+            });
+        }
+        parents = rects;
+    }
+    out
+}
+
+/// Bit length of a magnitude: 0 for 0, `⌊log2 m⌋ + 1` else.
+#[inline]
+fn bit_length(m: u32) -> u32 {
+    32 - m.leading_zeros()
+}
+
+/// Reads or writes one bit: the encoder codes the bit given, the decoder
+/// returns the bit decoded.
+trait BitIo {
+    /// True for the encoder (which knows the bits).
+    const ENCODES: bool;
+    fn bit(&mut self, ctx: &mut Context, bit: bool) -> bool;
+    /// Whether the decoder read past the stream's end (it then stops).
+    fn overrun(&self) -> bool {
+        false
+    }
+}
+
+impl BitIo for Encoder {
+    const ENCODES: bool = true;
+    #[inline(always)]
+    fn bit(&mut self, ctx: &mut Context, bit: bool) -> bool {
+        Encoder::bit(self, ctx, bit);
+        bit
+    }
+}
+
+impl BitIo for Decoder<'_> {
+    const ENCODES: bool = false;
+    #[inline(always)]
+    fn bit(&mut self, ctx: &mut Context, _bit: bool) -> bool {
+        Decoder::bit(self, ctx)
+    }
+    fn overrun(&self) -> bool {
+        Decoder::overrun(self)
+    }
+}
+
+/// The adaptive contexts of one column, all starting at p = 1/2.
+struct Model {
+    /// Block flags: class × (left + up block flags, 0..=2) × parent.
+    block: [Context; CLASSES * 3 * 2],
+    /// Significance: class × (left + up, 0..=2) × (up-left + up-right,
+    /// 0..=2) × parent.
+    sig: [Context; CLASSES * 3 * 3 * 2],
+    /// Zero flag: 1 for channel 0, 2 for channel 1 (prediction 0 or
+    /// not), 4 for channel 2 (prediction 0, channel 1's residual 0).
+    zero: [Context; 7],
+    /// Sign: 1 for channel 0, 3 per later channel (prediction 0, +, −).
+    sign: [Context; 7],
+    /// Exp-Golomb prefix: magnitude context × prefix position (capped 15).
+    prefix: [[Context; 16]; MAG_CONTEXTS],
+    /// Exp-Golomb suffix: prefix length × bit position.
+    suffix: [[Context; 16]; 16],
+}
+
+/// Scale groups a column has at most (depth ≤ 15).
+const MAX_GROUPS: usize = 16;
+
+/// Magnitude contexts: class × neighbour bucket for channel 0, then 16
+/// per later channel by its prediction's bit length.
+const MAG_CONTEXTS: usize = CLASSES * 4 + 2 * 16;
+
+impl Model {
+    fn new() -> Box<Model> {
+        let c = Context::default();
+        Box::new(Model {
+            block: [c; CLASSES * 3 * 2],
+            sig: [c; CLASSES * 3 * 3 * 2],
+            zero: [c; 7],
+            sign: [c; 7],
+            prefix: [[c; 16]; MAG_CONTEXTS],
+            suffix: [[c; 16]; 16],
+        })
+    }
+}
+
+/// The walk over a column's bands shared by the encoder and the decoder.
+/// `truth` gives the encoder's values at a pixel (`None` where not kept);
+/// `found` receives every kept pixel and its values in coding order.
+struct Walk<'a, IO: BitIo, T: Fn(usize) -> Option<[i32; MAX_CHANNELS]>> {
+    io: &'a mut IO,
+    truth: T,
+    shape: ColumnShape,
+    model: Box<Model>,
+    /// Per pixel: 0 if not kept, else the largest channel bit length
+    /// (capped at 15).
+    mag: Vec<u8>,
+    /// Block flags of the current band.
+    blocks: Vec<bool>,
+    /// Kept pixels still to find.
+    left: usize,
+    /// Per scale group: Σ q0² and Σ q_c·q0 (c = 1, 2) over the kept
+    /// positions coded so far.
+    sxx: [i64; MAX_GROUPS],
+    sxy: [[i64; 2]; MAX_GROUPS],
+    found: &'a mut dyn FnMut(usize, [i32; MAX_CHANNELS]) -> Result<()>,
+}
+
+impl<IO: BitIo, T: Fn(usize) -> Option<[i32; MAX_CHANNELS]>> Walk<'_, IO, T> {
+    fn run(&mut self, depth: u32) -> Result<()> {
+        for band in bands(self.shape.width, self.shape.height, depth) {
+            if self.left == 0 {
+                break;
+            }
+            self.band(&band)?;
+        }
+        Ok(())
+    }
+
+    #[inline]
+    fn mag_at(&self, r: &Rect, u: usize, v: usize) -> u8 {
+        self.mag[(r.y0 + v) * self.shape.width + r.x0 + u]
+    }
+
+    /// The parent's magnitude class of local pixel `(u, v)`.
+    #[inline]
+    fn parent_mag(&self, band: &Band, u: usize, v: usize) -> u8 {
+        match band.parent {
+            Some((p, s)) if p.w > 0 && p.h > 0 => {
+                self.mag_at(&p, (u >> s).min(p.w - 1), (v >> s).min(p.h - 1))
+            }
+            _ => 0,
+        }
+    }
+
+    fn band(&mut self, band: &Band) -> Result<()> {
+        let r = band.rect;
+        let (bw, bh) = (r.w.div_ceil(BLOCK), r.h.div_ceil(BLOCK));
+        self.blocks.clear();
+        self.blocks.resize(bw * bh, false);
+        for by in 0..bh {
+            for bx in 0..bw {
+                if self.left == 0 {
+                    return Ok(());
+                }
+                if self.io.overrun() {
+                    return Err(Error::corrupt(
+                        "column payload",
+                        "range-coded stream ends early",
+                    ));
+                }
+                let (u0, v0) = (bx * BLOCK, by * BLOCK);
+                let (u1, v1) = ((u0 + BLOCK).min(r.w), (v0 + BLOCK).min(r.h));
+                let any = self.block_truth(&r, u0, v0, u1, v1);
+                let near = usize::from(bx > 0 && self.blocks[by * bw + bx - 1])
+                    + usize::from(by > 0 && self.blocks[(by - 1) * bw + bx]);
+                let parent = [(u0, v0), (u1 - 1, v0), (u0, v1 - 1), (u1 - 1, v1 - 1)]
+                    .iter()
+                    .any(|&(u, v)| self.parent_mag(band, u, v) > 0);
+                let ctx = (band.class * 3 + near) * 2 + usize::from(parent);
+                let flag = self.io.bit(&mut self.model.block[ctx], any);
+                self.blocks[by * bw + bx] = flag;
+                if flag {
+                    self.block(band, u0, v0, u1, v1)?;
+                }
+            }
+        }
+        Ok(())
+    }
+
+    /// Whether the encoder's block holds a kept pixel (false when decoding).
+    fn block_truth(&self, r: &Rect, u0: usize, v0: usize, u1: usize, v1: usize) -> bool {
+        IO::ENCODES
+            && (v0..v1).any(|v| {
+                (u0..u1).any(|u| (self.truth)((r.y0 + v) * self.shape.width + r.x0 + u).is_some())
+            })
+    }
+
+    fn block(&mut self, band: &Band, u0: usize, v0: usize, u1: usize, v1: usize) -> Result<()> {
+        let r = band.rect;
+        let mut seen = false;
+        for v in v0..v1 {
+            for u in u0..u1 {
+                if self.left == 0 {
+                    return Ok(());
+                }
+                let pixel = (r.y0 + v) * self.shape.width + r.x0 + u;
+                let truth = (self.truth)(pixel);
+                let last = v == v1 - 1 && u == u1 - 1;
+                let kept = if last && !seen {
+                    true
+                } else {
+                    let ctx = self.sig_context(band, u, v);
+                    self.io.bit(&mut self.model.sig[ctx], truth.is_some())
+                };
+                if kept {
+                    seen = true;
+                    let values = self.values(band, u, v, truth.unwrap_or_default())?;
+                    self.left -= 1;
+                    (self.found)(pixel, values)?;
+                }
+            }
+        }
+        Ok(())
+    }
+
+    fn sig_context(&self, band: &Band, u: usize, v: usize) -> usize {
+        let r = &band.rect;
+        let on = |du: isize, dv: isize| -> usize {
+            let (x, y) = (u as isize + du, v as isize + dv);
+            if x < 0 || y < 0 || x as usize >= r.w {
+                0
+            } else {
+                usize::from(self.mag_at(r, x as usize, y as usize) > 0)
+            }
+        };
+        let near = on(-1, 0) + on(0, -1);
+        let diag = on(-1, -1) + on(1, -1);
+        let parent = usize::from(self.parent_mag(band, u, v) > 0);
+        ((band.class * 3 + near) * 3 + diag) * 2 + parent
+    }
+
+    /// Codes the values of a kept pixel; returns them. Channel 0 is coded
+    /// as it is; a later channel as its residual from the prediction
+    /// [`Walk::predict`] makes from channel 0.
+    fn values(
+        &mut self,
+        band: &Band,
+        u: usize,
+        v: usize,
+        truth: [i32; MAX_CHANNELS],
+    ) -> Result<[i32; MAX_CHANNELS]> {
+        let r = &band.rect;
+        let left = if u > 0 { self.mag_at(r, u - 1, v) } else { 0 };
+        let up = if v > 0 { self.mag_at(r, u, v - 1) } else { 0 };
+        let bucket = match left as u32 + up as u32 {
+            0 => 0,
+            1..=3 => 1,
+            4..=7 => 2,
+            _ => 3,
+        };
+        let max = (1i32 << (self.shape.bits - 1)) - 1;
+        let mut out = [0i32; MAX_CHANNELS];
+        let q0 = self.value(0, 0, band.class * 4 + bucket, self.shape.bits - 2, truth[0])?;
+        out[0] = q0;
+        let mut widest = bit_length(q0.unsigned_abs());
+        let mut prev_zero = false;
+        for c in 1..self.shape.channels {
+            let pred = self.predict(band.group, c, q0, max);
+            let zero_ctx = if c == 1 {
+                1 + usize::from(pred == 0)
+            } else {
+                3 + 2 * usize::from(pred == 0) + usize::from(prev_zero)
+            };
+            let sign_ctx = 1 + (c - 1) * 3 + pred.signum().rem_euclid(3) as usize;
+            let len = bit_length(pred.unsigned_abs()).min(15) as usize;
+            let mag_ctx = CLASSES * 4 + (c - 1) * 16 + len;
+            let res = self.value(
+                zero_ctx,
+                sign_ctx,
+                mag_ctx,
+                self.shape.bits - 1,
+                truth[c] - pred,
+            )?;
+            let q = pred + res;
+            if q.abs() > max {
+                return Err(Error::corrupt(
+                    "column payload",
+                    format!("quantized value {q} outside ±{max}"),
+                ));
+            }
+            out[c] = q;
+            prev_zero = res == 0;
+            widest = widest.max(bit_length(q.unsigned_abs()));
+            let g = band.group;
+            self.sxy[g][c - 1] += q as i64 * q0 as i64;
+        }
+        self.sxx[band.group] += q0 as i64 * q0 as i64;
+        let pixel = (r.y0 + v) * self.shape.width + r.x0 + u;
+        self.mag[pixel] = (widest as u8).clamp(1, MAX_MAG);
+        Ok(out)
+    }
+
+    /// The prediction of channel `c` from channel 0's value `q0` at a
+    /// position of scale group `g`: `q0` times the least-squares ratio of
+    /// the group's positions coded so far, rounded half up, within `±max`.
+    fn predict(&self, g: usize, c: usize, q0: i32, max: i32) -> i32 {
+        let (sxx, sxy) = (self.sxx[g], self.sxy[g][c - 1]);
+        if sxx == 0 {
+            return 0;
+        }
+        // i64 when it cannot overflow (the usual case), else i128: the
+        // same exact value.
+        let fits = sxy.unsigned_abs() < 1 << 46 && sxx < 1 << 60;
+        let p = if fits {
+            (2 * sxy * q0 as i64 + sxx).div_euclid(2 * sxx) as i128
+        } else {
+            (2 * sxy as i128 * q0 as i128 + sxx as i128).div_euclid(2 * sxx as i128)
+        };
+        p.clamp(-max as i128, max as i128) as i32
+    }
+
+    /// Codes a value: a zero flag, then the sign and the magnitude (at
+    /// most `max_n + 1` bits long) of a nonzero one.
+    fn value(
+        &mut self,
+        zero_ctx: usize,
+        sign_ctx: usize,
+        mag_ctx: usize,
+        max_n: u32,
+        want: i32,
+    ) -> Result<i32> {
+        if !self.io.bit(&mut self.model.zero[zero_ctx], want != 0) {
+            return Ok(0);
+        }
+        let negative = self.io.bit(&mut self.model.sign[sign_ctx], want < 0);
+        let m = self.magnitude(mag_ctx, max_n, want.unsigned_abs())? as i32;
+        Ok(if negative { -m } else { m })
+    }
+
+    /// Codes a magnitude `m ≥ 1` below `2^(max_n + 1)`: its bit length
+    /// minus one `n` in unary (no terminator at `n = max_n`), then its `n`
+    /// bits below the leading one, most significant first.
+    fn magnitude(&mut self, ctx: usize, max_n: u32, want: u32) -> Result<u32> {
+        let want_n = bit_length(want).saturating_sub(1);
+        let mut n = 0u32;
+        while n < max_n {
+            let more = self
+                .io
+                .bit(&mut self.model.prefix[ctx][n.min(15) as usize], want_n > n);
+            if !more {
+                break;
+            }
+            n += 1;
+        }
+        let mut m = 1u32;
+        for j in (0..n).rev() {
+            let b = self.io.bit(
+                &mut self.model.suffix[n as usize][j as usize],
+                want >> j & 1 == 1,
+            );
+            m = m << 1 | u32::from(b);
+        }
+        Ok(m)
+    }
+}
+
+/// Checks that the coder can represent `col`: at most 3 channels, every
+/// magnitude below `2^(bits − 1)`, positions inside the image, a depth
+/// the image has.
+fn representable(col: &SparseColumn, shape: &ColumnShape) -> bool {
+    let c = shape.channels;
+    let max = (1u32 << (shape.bits - 1)) - 1;
+    (1..=MAX_CHANNELS).contains(&c)
+        && (2..=16).contains(&shape.bits)
+        && col.values.len() == col.indices.len() * c
+        && col
+            .indices
+            .iter()
+            .all(|&i| (i as usize) < shape.width * shape.height)
+        && (col.depth as usize) < MAX_GROUPS
+        && col.depth <= max_levels(shape.width, shape.height)
+        && col.values.iter().all(|&x| x.unsigned_abs() <= max)
+}
+
+/// Encodes a column: its scale codes (2 bytes each, little-endian), then
+/// the range-coded stream. `None` when the column cannot be represented
+/// (see [`representable`]); the caller then stores it otherwise.
+pub fn encode(col: &SparseColumn, shape: &ColumnShape) -> Option<Vec<u8>> {
+    if !representable(col, shape) {
+        return None;
+    }
+    let c = shape.channels;
+    let mut dense = vec![u32::MAX; shape.width * shape.height];
+    for (k, &i) in col.indices.iter().enumerate() {
+        dense[i as usize] = k as u32;
+    }
+    let truth = |pixel: usize| {
+        let k = dense[pixel];
+        (k != u32::MAX).then(|| {
+            let mut v = [0i32; MAX_CHANNELS];
+            v[..c].copy_from_slice(&col.values[k as usize * c..(k as usize + 1) * c]);
+            v
+        })
+    };
+    let mut enc = Encoder::new();
+    let mut sink = |_: usize, _: [i32; MAX_CHANNELS]| Ok(());
+    let mut walk = Walk {
+        io: &mut enc,
+        truth,
+        shape: *shape,
+        model: Model::new(),
+        mag: vec![0; shape.width * shape.height],
+        blocks: Vec::new(),
+        left: col.indices.len(),
+        sxx: [0; MAX_GROUPS],
+        sxy: [[0; 2]; MAX_GROUPS],
+        found: &mut sink,
+    };
+    walk.run(col.depth).ok()?;
+    if walk.left != 0 {
+        return None;
+    }
+    let mut out = Vec::with_capacity(2 * col.scale_codes.len());
+    for e in &col.scale_codes {
+        out.extend_from_slice(&e.to_le_bytes());
+    }
+    out.extend_from_slice(&enc.finish());
+    Some(out)
+}
+
+/// Decodes a column of `nnz` kept positions at `depth` from `bytes`. The
+/// caller has checked `nnz` against the image's pixel count.
+pub fn decode(bytes: &[u8], nnz: usize, shape: &ColumnShape, depth: u32) -> Result<SparseColumn> {
+    let c = shape.channels;
+    if !(1..=MAX_CHANNELS).contains(&c) || !(2..=16).contains(&shape.bits) {
+        return Err(Error::range("channels", c, "1..=3"));
+    }
+    let pixels = shape.width * shape.height;
+    if nnz > pixels {
+        return Err(Error::corrupt(
+            "column payload",
+            format!("{nnz} nonzeros (valid: 0..={pixels})"),
+        ));
+    }
+    if depth > max_levels(shape.width, shape.height) || depth as usize >= MAX_GROUPS {
+        return Err(Error::range(
+            "column depth",
+            depth,
+            format!("0..={}", max_levels(shape.width, shape.height)),
+        ));
+    }
+    let groups = (depth as usize + 1) * c;
+    if bytes.len() < 2 * groups {
+        return Err(Error::corrupt(
+            "column payload",
+            format!("{} bytes, fewer than the {groups} scale codes", bytes.len()),
+        ));
+    }
+    let (scales, stream) = bytes.split_at(2 * groups);
+    let scale_codes = scales
+        .chunks_exact(2)
+        .map(|b| u16::from_le_bytes([b[0], b[1]]))
+        .collect();
+    let mut dec = Decoder::new(stream)?;
+    let mut order: Vec<(u32, [i32; MAX_CHANNELS])> = Vec::with_capacity(nnz);
+    let mut sink = |pixel: usize, v: [i32; MAX_CHANNELS]| {
+        order.push((pixel as u32, v));
+        Ok(())
+    };
+    let mut walk = Walk {
+        io: &mut dec,
+        truth: |_| None,
+        shape: *shape,
+        model: Model::new(),
+        mag: vec![0; pixels],
+        blocks: Vec::new(),
+        left: nnz,
+        sxx: [0; MAX_GROUPS],
+        sxy: [[0; 2]; MAX_GROUPS],
+        found: &mut sink,
+    };
+    walk.run(depth)?;
+    if walk.left != 0 {
+        return Err(Error::corrupt(
+            "column payload",
+            format!("{} of {nnz} nonzeros found", nnz - walk.left),
+        ));
+    }
+    dec.finish()?;
+    order.sort_unstable_by_key(|e| e.0);
+    let mut col = SparseColumn {
+        depth,
+        scale_codes,
+        indices: Vec::with_capacity(nnz),
+        values: Vec::with_capacity(nnz * c),
+    };
+    for (i, v) in order {
+        col.indices.push(i);
+        col.values.extend_from_slice(&v[..c]);
+    }
+    Ok(col)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use proptest::prelude::*;
+
+    /// A random column: shape, depth, and about `density` of its positions
+    /// kept with values whose bit lengths follow `spread`.
+    fn column(
+        (w, h, channels, bits): (usize, usize, usize, u32),
+        depth_pick: u32,
+        density: f64,
+        seed: u64,
+    ) -> (SparseColumn, ColumnShape) {
+        let shape = ColumnShape {
+            width: w,
+            height: h,
+            channels,
+            bits,
+        };
+        let depth = depth_pick % (max_levels(w, h) + 1);
+        let mut s = seed | 1;
+        let mut next = || {
+            s ^= s << 13;
+            s ^= s >> 7;
+            s ^= s << 17;
+            s
+        };
+        let max = (1i64 << (bits - 1)) - 1;
+        let mut col = SparseColumn {
+            depth,
+            scale_codes: (0..(depth as usize + 1) * channels)
+                .map(|_| next() as u16)
+                .collect(),
+            ..Default::default()
+        };
+        for i in 0..w * h {
+            if (next() % 10_000) as f64 >= density * 10_000.0 {
+                continue;
+            }
+            let mut vals = [0i32; MAX_CHANNELS];
+            while vals[..channels].iter().all(|&v| v == 0) {
+                for v in vals.iter_mut().take(channels) {
+                    let len = next() % bits as u64;
+                    let m = (next() % (1 << len)) as i64;
+                    let m = m.min(max);
+                    *v = if next() % 2 == 0 { m as i32 } else { -m as i32 };
+                }
+            }
+            col.indices.push(i as u32);
+            col.values.extend_from_slice(&vals[..channels]);
+        }
+        (col, shape)
+    }
+
+    fn shapes() -> impl Strategy<Value = (usize, usize, usize, u32)> {
+        (
+            1usize..40,
+            1usize..40,
+            prop::sample::select(vec![1usize, 3]),
+            2u32..=16,
+        )
+    }
+
+    proptest! {
+        #[test]
+        fn columns_round_trip(shape in shapes(), d in 0u32..8, density in 0.0f64..1.0, seed in any::<u64>()) {
+            let (col, shape) = column(shape, d, density, seed);
+            let bytes = encode(&col, &shape).unwrap();
+            let back = decode(&bytes, col.indices.len(), &shape, col.depth).unwrap();
+            prop_assert_eq!(back, col);
+        }
+
+        #[test]
+        fn truncated_or_altered_payloads_fail_cleanly(shape in shapes(), d in 0u32..8, density in 0.01f64..0.5, seed in any::<u64>(), cut in any::<prop::sample::Index>(), flip in any::<prop::sample::Index>()) {
+            let (col, shape) = column(shape, d, density, seed);
+            let bytes = encode(&col, &shape).unwrap();
+            let n = col.indices.len();
+            let _ = decode(&bytes[..cut.index(bytes.len() + 1)], n, &shape, col.depth);
+            let mut altered = bytes.clone();
+            if !altered.is_empty() {
+                let k = flip.index(altered.len());
+                altered[k] ^= 0x5A;
+            }
+            if let Ok(back) = decode(&altered, n, &shape, col.depth) {
+                // Whatever decodes is a valid column of the shape.
+                prop_assert_eq!(back.indices.len(), n);
+                prop_assert!(back.indices.windows(2).all(|p| p[0] < p[1]));
+                prop_assert!(back.indices.iter().all(|&i| (i as usize) < shape.width * shape.height));
+                let max = (1i32 << (shape.bits - 1)) - 1;
+                prop_assert!(back.values.iter().all(|v| v.abs() <= max));
+            }
+        }
+
+        #[test]
+        fn random_bytes_never_panic(bytes in prop::collection::vec(any::<u8>(), 0..200), shape in shapes(), d in 0u32..8, nnz in 0usize..2000) {
+            let depth = d % (max_levels(shape.0, shape.1) + 1);
+            let shape = ColumnShape { width: shape.0, height: shape.1, channels: shape.2, bits: shape.3 };
+            let _ = decode(&bytes, nnz, &shape, depth);
+        }
+    }
+
+    #[test]
+    fn a_wrong_count_is_an_error() {
+        let (col, shape) = column((32, 24, 3, 12), 3, 0.1, 7);
+        let bytes = encode(&col, &shape).unwrap();
+        let n = col.indices.len();
+        assert!(decode(&bytes, n + 1, &shape, 3).is_err());
+        assert!(decode(&bytes, shape.width * shape.height + 1, &shape, 3).is_err());
+        // Shorter than its scale codes; far too short for its nonzeros.
+        assert!(decode(&bytes[..4 * 3 * 2 - 1], n, &shape, 3).is_err());
+        assert!(decode(&bytes[..4 * 3 * 2 + 2], n, &shape, 3).is_err());
+    }
+
+    #[test]
+    fn all_zero_positions_round_trip() {
+        let shape = ColumnShape {
+            width: 4,
+            height: 4,
+            channels: 1,
+            bits: 8,
+        };
+        let col = SparseColumn {
+            depth: 0,
+            scale_codes: vec![1],
+            indices: vec![3],
+            values: vec![0],
+        };
+        let bytes = encode(&col, &shape).unwrap();
+        assert_eq!(decode(&bytes, 1, &shape, 0).unwrap(), col);
+    }
+
+    #[test]
+    fn bands_tile_the_image() {
+        for (w, h) in [(1, 1), (5, 3), (16, 16), (33, 7), (96, 72)] {
+            for depth in 0..=max_levels(w, h) {
+                let mut hits = vec![0u8; w * h];
+                for b in bands(w, h, depth) {
+                    for y in b.rect.y0..b.rect.y0 + b.rect.h {
+                        for x in b.rect.x0..b.rect.x0 + b.rect.w {
+                            hits[y * w + x] += 1;
+                        }
+                    }
+                }
+                assert!(hits.iter().all(|&c| c == 1), "{w}×{h} at depth {depth}");
+            }
+        }
+    }
+}

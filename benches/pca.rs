@@ -43,18 +43,8 @@ fn pca_dot(c: &mut Criterion) {
             weighting: Weighting::Transport,
         };
         group.throughput(Throughput::Bytes(relighter.coefficient_bytes(k) as u64));
-        group.bench_function(BenchmarkId::from_parameter(k), |b| {
-            b.iter_custom(|iters| {
-                (0..iters)
-                    .map(|_| {
-                        relighter
-                            .relight(&light, &request, &mut frame)
-                            .unwrap()
-                            .multiply
-                    })
-                    .sum()
-            })
-        });
+        let id = BenchmarkId::from_parameter(k);
+        common::bench_multiply(&mut group, id, &relighter, &light, &request, &mut frame);
     }
     common::stream_probe(&mut group);
     group.finish();

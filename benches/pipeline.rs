@@ -289,18 +289,7 @@ fn multiply_add(c: &mut Criterion) {
             for kernel in Relighter::kernels() {
                 relighter.set_kernel(kernel).unwrap();
                 let id = BenchmarkId::new(format!("{name}-{kernel}"), n);
-                group.bench_function(id, |b| {
-                    b.iter_custom(|iters| {
-                        (0..iters)
-                            .map(|_| {
-                                relighter
-                                    .relight(&light, &request, &mut frame)
-                                    .unwrap()
-                                    .multiply
-                            })
-                            .sum()
-                    })
-                });
+                common::bench_multiply(&mut group, id, &relighter, &light, &request, &mut frame);
             }
         }
     }

@@ -2,8 +2,9 @@
 //! probe that kernels are compared with.
 
 use criterion::measurement::WallTime;
-use criterion::{BenchmarkGroup, Throughput};
+use criterion::{BenchmarkGroup, BenchmarkId, Throughput};
 use ltm::bake::{bake, BakeOptions, Overrides, Scene, SceneDesc};
+use ltm::relight::{Frame, Relight, Request};
 use rayon::prelude::*;
 use std::path::{Path, PathBuf};
 
@@ -39,6 +40,25 @@ pub fn stream_probe(group: &mut BenchmarkGroup<'_, WallTime>) {
                 .par_chunks(1 << 16)
                 .map(|c| c.iter().fold(0u64, |a, &v| a.wrapping_add(v)))
                 .reduce(|| 0, u64::wrapping_add)
+        })
+    });
+}
+
+/// Benchmarks the multiply part of `relighter`'s frames under `light` (the
+/// frames' own split of their time, summed over the iterations).
+pub fn bench_multiply(
+    group: &mut BenchmarkGroup<'_, WallTime>,
+    id: BenchmarkId,
+    relighter: &dyn Relight,
+    light: &[[f32; 3]],
+    request: &Request,
+    frame: &mut Frame,
+) {
+    group.bench_function(id, |b| {
+        b.iter_custom(|iters| {
+            (0..iters)
+                .map(|_| relighter.relight(light, request, frame).unwrap().multiply)
+                .sum()
         })
     });
 }

@@ -5,19 +5,21 @@
 //! product of its coefficients per colour channel. Grey files (`C = 1`)
 //! project each light channel on the same basis, then multiply the albedo.
 //!
-//! The coefficients are held in component blocks ([`crate::pca_blocks`]), so
-//! a frame with the first `k` components streams just those, eight pixels
-//! at a time with vector multiply-adds; [`PcaRelighter::relight_scalar`] is
-//! the plain f64 loop it is tested against.
+//! The coefficients are held in component blocks of pixel tiles
+//! ([`crate::pca_blocks`]), so a frame with the first `k` components streams
+//! just those, 24 pixels at a time with fused vector multiply-adds;
+//! [`PcaRelighter::relight_scalar`] is the plain f64 loop it is tested
+//! against.
 
 use crate::error::{RelightError, Result};
 use crate::frame::{check_light, Frame, FrameStats, Relight, Request};
 use crate::image_io::Image;
-use crate::pca_blocks::{Blocks, Path as DotPath, LANES};
+use crate::pca_blocks::{Blocks, Path as DotPath};
 use crate::point::{point_light_taps, Lookup, PointLight, SurfaceSample, Taps};
 use ltm_codec::{Dims, Limits, LtmFile};
 use rayon::prelude::*;
 use std::path::Path;
+use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::OnceLock;
 use std::time::Instant;
 
@@ -137,6 +139,7 @@ impl PcaRelighter {
     }
 
     /// The pixel's value times its albedo; 0 for an empty row.
+    #[inline]
     fn albedo_times(&self, p: usize, mut v: [f64; 3]) -> [f32; 3] {
         if self.empty.as_ref().is_some_and(|e| e.is_empty_row(p)) {
             return [0.0; 3];
@@ -276,11 +279,44 @@ impl PcaRelighter {
     /// Every pixel's dot product of its first `k` coefficients with the
     /// planar projected lighting ([`Blocks::scaled_light`]), plus the mean's
     /// projection `base`.
-    fn dot_rows(&self, planar: &[f32], k: usize, base: [f64; 3], image: &mut Image) {
+    /// Returns whether every pixel is finite.
+    fn dot_rows(&self, planar: &[f32], k: usize, base: [f64; 3], image: &mut Image) -> bool {
+        let finite = AtomicBool::new(true);
         self.coefficients
-            .dot_rows(self.path, planar, k, &mut image.data, |p, v| {
-                self.albedo_times(p, [0, 1, 2].map(|c| base[c] + v[c] as f64))
+            .dot_rows(self.path, planar, k, &mut image.data, |p0, pixels| {
+                if !self.finish_rows(p0, pixels, base) {
+                    finite.store(false, Ordering::Relaxed);
+                }
             });
+        finite.into_inner()
+    }
+
+    /// Pixels `p0 ..` from their dot products: plus `base`, times the
+    /// albedo (in f64, rounded once, as [`PcaRelighter::albedo_times`]), 0
+    /// in empty rows. Returns whether all are finite. Written as straight
+    /// loops over slices, which the compiler vectorizes.
+    fn finish_rows(&self, p0: usize, pixels: &mut [[f32; 3]], base: [f64; 3]) -> bool {
+        let plus = |v: &[f32; 3]| [0, 1, 2].map(|c| base[c] + v[c] as f64);
+        match &self.albedo {
+            Some(a) => {
+                let a = &a[3 * p0..3 * (p0 + pixels.len())];
+                for (v, a) in pixels.iter_mut().zip(a.chunks_exact(3)) {
+                    let x = plus(v);
+                    *v = [0, 1, 2].map(|c| (x[c] * a[c] as f64) as f32);
+                }
+            }
+            None => pixels
+                .iter_mut()
+                .for_each(|v| *v = plus(v).map(|x| x as f32)),
+        }
+        if let Some(e) = &self.empty {
+            for (p, v) in (p0..).zip(pixels.iter_mut()) {
+                if e.is_empty_row(p) {
+                    *v = [0.0; 3];
+                }
+            }
+        }
+        pixels.iter().flatten().all(|x| x.is_finite())
     }
 
     /// Bytes of coefficients a frame with `terms` components reads.
@@ -317,7 +353,7 @@ impl Relight for PcaRelighter {
         Frame {
             image: Image::new(w, h),
             projected: Vec::with_capacity(self.rank + 1),
-            planar: Vec::with_capacity(3 * self.rank.next_multiple_of(LANES)),
+            planar: Vec::with_capacity(3 * self.rank),
             ..Frame::default()
         }
     }
@@ -338,8 +374,13 @@ impl Relight for PcaRelighter {
         self.coefficients
             .scaled_light(&frame.projected[1..], k, &mut frame.planar);
         let t1 = Instant::now();
-        self.dot_rows(&frame.planar, k, frame.projected[0], &mut frame.image);
-        if let Some((x, y)) = frame.image.first_non_finite() {
+        let finite = self.dot_rows(&frame.planar, k, frame.projected[0], &mut frame.image);
+        let bad = if finite {
+            None
+        } else {
+            frame.image.first_non_finite()
+        };
+        if let Some((x, y)) = bad {
             return Err(RelightError::Invalid(format!(
                 "relit pixel ({x}, {y}) is not finite (exceeds the f32 range)"
             )));

@@ -3,7 +3,7 @@
 //!   eigen-transports of `LTM_BENCH_PCA` (a `pca` `.ltm` file, e.g. the
 //!   default scene at 256² with `--rank 256`; without it, a rank-64 file of
 //!   the 64×64 scene made here), timed from the frames' own split;
-//!   throughput in coefficient bytes read (`P·⌈K/8⌉·8·4`);
+//!   throughput in coefficient bytes read (2 per pixel and component used);
 //! - `pca_dot/stream_probe`: a parallel read of a 256 MiB buffer, the bound
 //!   those bytes are compared with.
 

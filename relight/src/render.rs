@@ -230,6 +230,14 @@ impl TexturedMesh {
         self.triangles.len()
     }
 
+    /// The box around the valid texels' points (lowest and highest corner),
+    /// or `None` when no texel is valid.
+    pub fn bounds(&self) -> Option<(DVec3, DVec3)> {
+        let mut valid = self.positions.iter().zip(&self.valid).filter(|(_, &v)| v);
+        let first = *valid.next()?.0;
+        Some(valid.fold((first, first), |(lo, hi), (&p, _)| (lo.min(p), hi.max(p))))
+    }
+
     fn triangulate(&mut self, fold_border: bool) {
         let s = self.size;
         let id = |x: usize, y: usize| (y * s + x) as u32;

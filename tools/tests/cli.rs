@@ -109,8 +109,11 @@ fn report_quick_writes_every_section() {
             "index.md does not show {svg}"
         );
     }
+    // An image-space matrix has no geometry section.
+    assert!(!index.contains("Geometry relighting") && !out.join("texture.png").exists());
     let r: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(out.join("results.json")).unwrap()).unwrap();
+    assert!(r["texture"].is_null());
     let all = r["codings"].as_array().unwrap();
     let (pca, codings): (Vec<_>, Vec<_>) = all.iter().partition(|c| c["mode"] == "pca");
     // 3 wavelet modes × 1 bit depth × 2 target errors; the pair is among them.

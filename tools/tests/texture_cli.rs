@@ -265,3 +265,65 @@ fn bad_texture_scenes_are_refused_by_bake() {
         assert!(!Path::new(out).exists());
     }
 }
+
+/// Width and height from a PNG file's IHDR chunk.
+fn png_size(path: &Path) -> (u32, u32) {
+    let bytes = std::fs::read(path).unwrap();
+    assert!(bytes.starts_with(b"\x89PNG\r\n\x1a\n") && &bytes[12..16] == b"IHDR");
+    let be = |i: usize| u32::from_be_bytes(bytes[i..i + 4].try_into().unwrap());
+    (be(16), be(20))
+}
+
+/// `ltm report` on a texture-space matrix adds the geometry section: the
+/// relit texture (S × S) and two views of the mesh, with the relight and
+/// relight-plus-view times; an image-space report has none
+/// (`report_quick_writes_every_section` in cli.rs).
+#[test]
+fn report_on_a_texture_space_matrix_shows_the_texture_and_two_views() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    std::fs::write(d.join("sphere.obj"), sphere_obj(2, "")).unwrap();
+    let scene = write_scene(d, "tex.toml", "sphere.obj", TEXTURE);
+    let raw = d.join("tex.raw");
+    assert!(ltm(&["bake", &scene, "-o", raw.to_str().unwrap()]).0);
+    let out = d.join("report");
+    let (ok, stderr) = ltm(&[
+        "report",
+        "--quick",
+        "--raw",
+        raw.to_str().unwrap(),
+        "--env",
+        &env_map(),
+        "-o",
+        out.to_str().unwrap(),
+    ]);
+    assert!(ok, "{stderr}");
+    let index = std::fs::read_to_string(out.join("index.md")).unwrap();
+    assert!(index.contains("## 6. Geometry relighting"), "{index}");
+    let r: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("results.json")).unwrap()).unwrap();
+    let t = &r["texture"];
+    assert_eq!(t["texture_side"], 16);
+    assert!(t["triangles"].as_u64().unwrap() > 0);
+    let (alone, with_view) = (
+        t["relight_ms"].as_f64().unwrap(),
+        t["relight_view_ms"].as_f64().unwrap(),
+    );
+    assert!(alone > 0.0 && with_view > 0.0 && alone.is_finite() && with_view.is_finite());
+    let images: Vec<&str> = t["images"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|v| v.as_str().unwrap())
+        .collect();
+    assert_eq!(images, ["texture.png", "view-front.png", "view-back.png"]);
+    assert_eq!(png_size(&out.join("texture.png")), (16, 16));
+    for view in &images[1..] {
+        assert_eq!(png_size(&out.join(view)), (512, 512), "{view}");
+        assert!(
+            index.contains(&format!("]({view})")),
+            "index.md does not show {view}"
+        );
+    }
+    assert!(out.join(t["file"].as_str().unwrap()).is_file());
+}

@@ -10,6 +10,7 @@ pub mod baselines;
 mod page;
 pub mod peers;
 pub mod plot;
+pub mod texture;
 
 use crate::codec_cmds::{default_mem_budget, parse_size};
 use crate::demo::{assets_dir, bake_cached, env_maps, load_maps};
@@ -36,7 +37,7 @@ use std::time::Instant;
 
 The matrix (a baked scene or --raw) is row-transformed and transposed once; every wavelet mode (2d, 4d, adaptive) × --bits × --errors is coded from it, relit under every --env at every --terms N, and compared with the exact product T·L. The pca mode (Eigentransport) is coded at every --errors target and relit with the first N of its components for N in --pca-ranks. Baselines on the same matrix: lossless zstd of the raw matrix and spherical harmonics (order L).
 
-Writes OUTPUT/index.md (machine, date, settings, headline table and five sections: size against matrix error, relit error against N for the three light weightings and SH, frame time and dynamic compression against N, average column depth by row level, speed against error with Pareto fronts), the SVG plots, and OUTPUT/results.json with every measured point. OUTPUT/files/ keeps the 2d and adaptive files compared at equal quality.
+Writes OUTPUT/index.md (machine, date, settings, headline table and five sections: size against matrix error, relit error against N for the three light weightings and SH, frame time and dynamic compression against N, average column depth by row level, speed against error with Pareto fronts; for a texture-space matrix a sixth, geometry relighting: the relit texture and the mesh from two sides, OUTPUT/texture.png and OUTPUT/view-{front,back}.png, with relight and relight-plus-view times), the SVG plots, and OUTPUT/results.json with every measured point. OUTPUT/files/ keeps the 2d and adaptive files compared at equal quality.
 
 A full run on the default 128² scene takes about a minute on 2 cores; --quick takes seconds."
 )]
@@ -231,6 +232,9 @@ pub struct Results {
     #[serde(default)]
     pub peers: Vec<peers::PeerPoint>,
     pub sh_relight: Vec<ShRelightPoint>,
+    /// Texture-space matrices: the relit texture and two views.
+    #[serde(default)]
+    pub texture: Option<texture::TexturePoint>,
     pub timings: Timings,
 }
 
@@ -510,6 +514,17 @@ pub fn run(a: ReportArgs) -> Result<()> {
         codings.extend(code_and_relight_pca(&raw, err, &label, &s, &envs, files)?);
     }
 
+    // Texture-space matrices: the relit texture and two views of the
+    // equal-quality adaptive file.
+    let texture = match (dims.rows.is_texture(), envs.first()) {
+        (true, Some(env)) => {
+            let file = files_dir.join(file_name(Mode::Adaptive, s.quality_bits, s.quality));
+            let map = (env.name.as_str(), env.light.as_slice());
+            Some(texture::measure(&a.output, &file, map, s.frames)?)
+        }
+        _ => None,
+    };
+
     // 5. Baselines on the same matrix.
     let t = Instant::now();
     eprintln!("baselines: zstd of the raw matrix, spherical harmonics");
@@ -529,6 +544,7 @@ pub fn run(a: ReportArgs) -> Result<()> {
         baselines,
         peers,
         sh_relight,
+        texture,
         timings: Timings {
             bake_or_open_s,
             references_s,

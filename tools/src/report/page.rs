@@ -252,6 +252,7 @@ pub fn write(dir: &Path, r: &Results) -> Result<()> {
     frame_time(&mut md, dir, r)?;
     depth_by_level(&mut md, dir, r)?;
     speed_error(&mut md, dir, r)?;
+    geometry(&mut md, r)?;
 
     let t = &r.timings;
     writeln!(md, "## Run time\n")?;
@@ -764,6 +765,33 @@ fn depth_by_level(md: &mut String, dir: &Path, r: &Results) -> Result<()> {
         writeln!(md)?;
     }
     writeln!(md)?;
+    Ok(())
+}
+
+/// Texture-space matrices: the relit texture and two views of the mesh.
+fn geometry(md: &mut String, r: &Results) -> Result<()> {
+    let Some(t) = &r.texture else {
+        return Ok(());
+    };
+    writeln!(md, "## 6. Geometry relighting\n")?;
+    writeln!(
+        md,
+        "The rows are the texels of a {s}×{s} geometry image, so one relight gives a texture that the mesh ({} triangles) is drawn with from any camera. `{}` relit under {} with N = {} transport-weighted wavelet lights: **{:.2} ms** per relight (median, {:.0} frames/s); relight plus one {v}×{v} view: **{:.2} ms** ({:.0} frames/s). Views: front and back of an orbit, drawn from the same relit texture.\n",
+        t.triangles,
+        t.file,
+        t.env,
+        t.terms,
+        t.relight_ms,
+        1e3 / t.relight_ms,
+        t.relight_view_ms,
+        1e3 / t.relight_view_ms,
+        s = t.texture_side,
+        v = super::texture::VIEW_SIDE,
+    )?;
+    for image in &t.images {
+        write!(md, "![{image}]({image}) ")?;
+    }
+    writeln!(md, "\n")?;
     Ok(())
 }
 

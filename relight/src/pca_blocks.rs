@@ -189,15 +189,13 @@ impl Blocks {
             let block_light = light.map(|l| &l[a0..a1]);
             let start = (b * self.tiles + t0) * BLOCK * TILE;
             let run = &self.data[start..start + n * BLOCK * TILE];
-            let m = a1 - a0;
-            let tiles = run.chunks_exact(BLOCK * TILE);
-            let ahead = run.chunks_exact(BLOCK * TILE).skip(PREFETCH_TILES);
-            let mut ahead = ahead.map(Some).chain(std::iter::repeat(None));
-            for (s, tile) in sums.iter_mut().zip(tiles) {
-                if let Some(next) = ahead.next().flatten() {
-                    prefetch(path, &next[..m * TILE]);
+            // Tile `i`'s used values within the run, if it is in the chunk.
+            let used = |i: usize| run.get(i * BLOCK * TILE..i * BLOCK * TILE + (a1 - a0) * TILE);
+            for (i, s) in sums.iter_mut().enumerate() {
+                if let Some(ahead) = used(i + PREFETCH_TILES) {
+                    prefetch(path, ahead);
                 }
-                add_components(path, &tile[..m * TILE], block_light, s);
+                add_components(path, used(i).expect("a tile of the chunk"), block_light, s);
             }
         }
     }
@@ -323,9 +321,9 @@ mod tests {
         }
     }
 
-    /// Each path against a plain in-order f32 fused sum of `q · scaled light`, bit
-    /// for bit, over odd pixel counts, partial tiles and blocks, `k` below the rank,
-    /// extreme integers and more than one task.
+    /// Each path against a plain in-order f32 fused sum of `q · scaled
+    /// light`, bit for bit, over odd pixel counts, partial tiles and blocks,
+    /// `k` below the rank, the `i16` range's ends and more than one task.
     #[test]
     fn every_path_gives_the_in_order_sums_bit_for_bit() {
         let mut paths = vec![Path::Baseline];

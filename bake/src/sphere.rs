@@ -38,10 +38,11 @@
 //!    energy) is smoothed over the current spherical mesh by solving
 //!    `(M + τ·K) G = g`, so a region moves as a whole; each step is
 //!    backtracked until it flips nothing (a flip has infinite energy) and
-//!    lowers the energy. A few one-ring passes along each vertex's own
-//!    gradient then polish the result. On the Stanford bunny this takes
-//!    the L2 stretch from mean 68 / max 500 (after step 5) to about
-//!    3 / 10.
+//!    lowers the energy, for up to 450 steps, stopping early once 20 steps
+//!    lowered it by less than 0.01 %. A few one-ring passes along each
+//!    vertex's own gradient then polish the result. On the Stanford bunny
+//!    this takes the L2 stretch from mean 68 / max 500 (after step 5) to
+//!    about 1.6 / 4.3.
 //! 7. A final flip count must be 0, else the build is an error rather than
 //!    a bad geometry image.
 //!
@@ -73,10 +74,14 @@ const EQUALIZE_TOLERANCE: f64 = 0.1;
 /// Sobolev descent steps, the smoothing time of its gradient (unit
 /// sphere), the steps between rebuilds of the smoothing matrix, and the
 /// relative residual of its solves.
-const SOBOLEV_STEPS: usize = 150;
+const SOBOLEV_STEPS: usize = 450;
 const SOBOLEV_TAU: f64 = 1e-2;
 const SOBOLEV_REBUILD: usize = 10;
 const SOBOLEV_TOLERANCE: f64 = 1e-3;
+/// The descent stops early once [`SOBOLEV_WINDOW`] steps lowered the
+/// energy by less than this fraction.
+const SOBOLEV_CONVERGED: f64 = 1e-4;
+const SOBOLEV_WINDOW: usize = 20;
 /// Gradient relaxation passes at the end.
 const GRADIENT_PASSES: usize = 10;
 /// Untangling passes before giving up.
@@ -820,9 +825,16 @@ fn sobolev_descent(d: &mut [DVec3], mesh: &SurfaceMesh, iterations: usize, tau: 
     let mut step = 1e-2;
     let (mut stiff, mut m) = (stiffness(mesh), Vec::new());
     let mut big = vec![DVec3::ZERO; n];
+    let mut window_start = e;
     for it in 0..iterations {
         if !e.is_finite() {
             return;
+        }
+        if it > 0 && it % SOBOLEV_WINDOW == 0 {
+            if window_start - e < SOBOLEV_CONVERGED * window_start {
+                return;
+            }
+            window_start = e;
         }
         let k = total / flat_sphere_area(d, &mesh.triangles);
         let g = energy_gradient(d, mesh, &r, &area, k);

@@ -14,6 +14,16 @@ use crate::wavelet::{self, band_size};
 /// at most 2^100), so its files decode with the f32 product.
 const F64_SCALE: f32 = (1u128 << 100) as f32;
 
+/// A quantized value `q` times its scale `s`, over the levels `q_levels`.
+#[inline]
+fn scaled(q: i32, s: f32, q_levels: f32) -> f32 {
+    if s <= F64_SCALE {
+        q as f32 * s / q_levels
+    } else {
+        (q as f64 * s as f64 / q_levels as f64) as f32
+    }
+}
+
 /// Decoding state for one file's column filter and image size.
 pub struct ColumnDecoder {
     meta: Meta,
@@ -89,15 +99,30 @@ impl ColumnDecoder {
             .get(group * channels + channel)
             .copied()
             .unwrap_or(0);
-        let (q, s) = (
-            col.values[k * channels + channel] as f32,
+        scaled(
+            col.values[k * channels + channel],
             decode_scale(code),
-        );
-        if s <= F64_SCALE {
-            q * s / levels(self.meta.bits)
-        } else {
-            (q as f64 * s as f64 / levels(self.meta.bits) as f64) as f32
+            levels(self.meta.bits),
+        )
+    }
+
+    /// The L2 norm of `col`'s weighted values: the root of the sum of the
+    /// squared [`ColumnDecoder::dequantize`] values, in f64, with each
+    /// scale decoded once.
+    pub fn weighted_norm(&self, col: &SparseColumn) -> f64 {
+        let channels = self.meta.dims.channels as usize;
+        let (q_levels, groups) = (levels(self.meta.bits), &self.groups[col.depth as usize]);
+        let scales: Vec<f32> = col.scale_codes.iter().map(|&e| decode_scale(e)).collect();
+        let mut sum = 0.0f64;
+        for (k, &i) in col.indices.iter().enumerate() {
+            let group = groups[i as usize] as usize;
+            for c in 0..channels {
+                let s = scales.get(group * channels + c).copied().unwrap_or(0.0);
+                let v = scaled(col.values[k * channels + c], s, q_levels);
+                sum += (v as f64).powi(2);
+            }
         }
+        sum.sqrt()
     }
 
     /// The dequantization step `s/Q` of scale group `group`, channel

@@ -296,7 +296,6 @@ fn arena_column(
         factors.push(f);
     }
     let mut entries = Vec::with_capacity(col.indices.len() * (channels + 1));
-    let mut norm_sq = 0.0f64;
     for (k, &i) in col.indices.iter().enumerate() {
         for c in 0..channels {
             let v = col.values[k * channels + c];
@@ -307,7 +306,6 @@ fn arena_column(
                 ))
             })?;
             entries.push(q);
-            norm_sq += (decoder.dequantize(col, k, c) as f64).powi(2);
         }
         let i = i as usize;
         let offset = i % layout.block_pixels;
@@ -326,7 +324,7 @@ fn arena_column(
         block_index,
         factors,
         depth: col.depth as u8,
-        norm: norm_sq.sqrt() as f32,
+        norm: decoder.weighted_norm(col) as f32,
     })
 }
 
@@ -441,6 +439,13 @@ mod file_tests {
                     let col = file.column(j).unwrap();
                     let map = band_map(w as usize, h as usize, col.depth);
                     assert_eq!(arena.starts[j + 1] - arena.starts[j], col.indices.len());
+                    // The norm, from scales decoded once per group, is the
+                    // per-value dequantization's, exactly.
+                    let per_value: f64 = (0..col.indices.len())
+                        .flat_map(|k| (0..channels as usize).map(move |c| (k, c)))
+                        .map(|(k, c)| (decoder.dequantize(&col, k, c) as f64).powi(2))
+                        .sum();
+                    assert_eq!(arena.norms[j], per_value.sqrt() as f32);
                     for (k, &i) in col.indices.iter().enumerate() {
                         let i = i as usize;
                         let e = &arena.entries[(channels as usize + 1) * (arena.starts[j] + k)..];

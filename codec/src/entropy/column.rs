@@ -190,7 +190,12 @@ impl Model {
 /// The walk over a column's bands shared by the encoder and the decoder.
 /// `truth` gives the encoder's values at a pixel (`None` where not kept);
 /// `found` receives every kept pixel and its values in coding order.
-struct Walk<'a, IO: BitIo, T: Fn(usize) -> Option<[i32; MAX_CHANNELS]>> {
+struct Walk<'a, IO, T, F>
+where
+    IO: BitIo,
+    T: Fn(usize) -> Option<[i32; MAX_CHANNELS]>,
+    F: FnMut(usize, [i32; MAX_CHANNELS]),
+{
     io: &'a mut IO,
     truth: T,
     shape: ColumnShape,
@@ -206,10 +211,15 @@ struct Walk<'a, IO: BitIo, T: Fn(usize) -> Option<[i32; MAX_CHANNELS]>> {
     /// positions coded so far.
     sxx: [i64; MAX_GROUPS],
     sxy: [[i64; 2]; MAX_GROUPS],
-    found: &'a mut dyn FnMut(usize, [i32; MAX_CHANNELS]) -> Result<()>,
+    found: F,
 }
 
-impl<IO: BitIo, T: Fn(usize) -> Option<[i32; MAX_CHANNELS]>> Walk<'_, IO, T> {
+impl<IO, T, F> Walk<'_, IO, T, F>
+where
+    IO: BitIo,
+    T: Fn(usize) -> Option<[i32; MAX_CHANNELS]>,
+    F: FnMut(usize, [i32; MAX_CHANNELS]),
+{
     fn run(&mut self, depth: u32) -> Result<()> {
         for band in bands(self.shape.width, self.shape.height, depth) {
             if self.left == 0 {
@@ -300,7 +310,7 @@ impl<IO: BitIo, T: Fn(usize) -> Option<[i32; MAX_CHANNELS]>> Walk<'_, IO, T> {
                     seen = true;
                     let values = self.values(band, u, v, truth.unwrap_or_default())?;
                     self.left -= 1;
-                    (self.found)(pixel, values)?;
+                    (self.found)(pixel, values);
                 }
             }
         }
@@ -487,7 +497,6 @@ pub fn encode(col: &SparseColumn, shape: &ColumnShape) -> Option<Vec<u8>> {
         })
     };
     let mut enc = Encoder::new();
-    let mut sink = |_: usize, _: [i32; MAX_CHANNELS]| Ok(());
     let mut walk = Walk {
         io: &mut enc,
         truth,
@@ -498,7 +507,7 @@ pub fn encode(col: &SparseColumn, shape: &ColumnShape) -> Option<Vec<u8>> {
         left: col.indices.len(),
         sxx: [0; MAX_GROUPS],
         sxy: [[0; 2]; MAX_GROUPS],
-        found: &mut sink,
+        found: |_, _| {},
     };
     walk.run(col.depth).ok()?;
     if walk.left != 0 {
@@ -546,11 +555,9 @@ pub fn decode(bytes: &[u8], nnz: usize, shape: &ColumnShape, depth: u32) -> Resu
         .map(|b| u16::from_le_bytes([b[0], b[1]]))
         .collect();
     let mut dec = Decoder::new(stream)?;
-    let mut order: Vec<(u32, [i32; MAX_CHANNELS])> = Vec::with_capacity(nnz);
-    let mut sink = |pixel: usize, v: [i32; MAX_CHANNELS]| {
-        order.push((pixel as u32, v));
-        Ok(())
-    };
+    // Values in coding order, and each kept pixel's place among them.
+    let mut order: Vec<[i32; MAX_CHANNELS]> = Vec::with_capacity(nnz);
+    let mut slot = vec![0u32; pixels];
     let mut walk = Walk {
         io: &mut dec,
         truth: |_| None,
@@ -561,26 +568,40 @@ pub fn decode(bytes: &[u8], nnz: usize, shape: &ColumnShape, depth: u32) -> Resu
         left: nnz,
         sxx: [0; MAX_GROUPS],
         sxy: [[0; 2]; MAX_GROUPS],
-        found: &mut sink,
+        found: |pixel: usize, v| {
+            slot[pixel] = order.len() as u32;
+            order.push(v);
+        },
     };
     walk.run(depth)?;
-    if walk.left != 0 {
+    let Walk { left, mag, .. } = walk;
+    if left != 0 {
         return Err(Error::corrupt(
             "column payload",
-            format!("{} of {nnz} nonzeros found", nnz - walk.left),
+            format!("{} of {nnz} nonzeros found", nnz - left),
         ));
     }
     dec.finish()?;
-    order.sort_unstable_by_key(|e| e.0);
     let mut col = SparseColumn {
         depth,
         scale_codes,
         indices: Vec::with_capacity(nnz),
         values: Vec::with_capacity(nnz * c),
     };
-    for (i, v) in order {
-        col.indices.push(i);
-        col.values.extend_from_slice(&v[..c]);
+    // Kept pixels are those with a magnitude class: gather them in raster
+    // order, skipping 8 empty pixels at a time.
+    for (w, word) in mag.chunks(8).enumerate() {
+        if word.iter().all(|&m| m == 0) {
+            continue;
+        }
+        for (k, &m) in word.iter().enumerate() {
+            if m != 0 {
+                let pixel = w * 8 + k;
+                col.indices.push(pixel as u32);
+                col.values
+                    .extend_from_slice(&order[slot[pixel] as usize][..c]);
+            }
+        }
     }
     Ok(col)
 }

@@ -125,6 +125,32 @@ impl std::str::FromStr for Mode {
     }
 }
 
+/// How the encoder stores column payloads.
+#[non_exhaustive]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum Entropy {
+    /// Range-coded with context modelling (encoding 3) where that is no
+    /// larger than the plain payload: the smallest files.
+    #[default]
+    Range,
+    /// zstd frames (encoding 2), as format versions 1 and 2 wrote: larger
+    /// files that decode, and so open, several times faster.
+    Zstd,
+}
+
+impl std::str::FromStr for Entropy {
+    type Err = String;
+    fn from_str(s: &str) -> std::result::Result<Entropy, String> {
+        match s {
+            "range" => Ok(Entropy::Range),
+            "zstd" => Ok(Entropy::Zstd),
+            _ => Err(format!(
+                "unknown entropy coder '{s}' (expected range or zstd)"
+            )),
+        }
+    }
+}
+
 /// Everything about a file except its columns.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Meta {
@@ -405,12 +431,18 @@ pub struct EncodedColumn {
 
 impl EncodedColumn {
     /// Encodes a column of a `width` × `height` column image quantized to
-    /// `bits` bits: range-coded (encoding 3) when that is no larger than
+    /// `bits` bits: with [`Entropy::Range`], range-coded (encoding 3) when
+    /// that is no larger than
     /// the plain payload (zstd is then not tried: on these payloads it
     /// gains less than range coding), else as [`EncodedColumn::new`].
-    pub fn coded(col: &SparseColumn, shape: &ColumnShape, zstd_level: i32) -> EncodedColumn {
+    pub fn coded(
+        col: &SparseColumn,
+        shape: &ColumnShape,
+        entropy: Entropy,
+        zstd_level: i32,
+    ) -> EncodedColumn {
         let nnz = col.indices.len();
-        if nnz > 0 {
+        if nnz > 0 && entropy == Entropy::Range {
             if let Some(bytes) = entropy::encode(col, shape) {
                 if bytes.len() <= col.to_payload(shape.channels).len() {
                     let entry = ColumnEntry {

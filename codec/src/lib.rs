@@ -42,7 +42,7 @@ pub use compress::{
     compress, Analysis, CodeOptions, Coder, CompressOptions, CompressStats, Plan, Stage, Target,
     TransposeOptions, Transposed,
 };
-pub use container::{LtmFile, LtmWriter, Meta, Mode, OptionalChunks, SparseColumn};
+pub use container::{Entropy, LtmFile, LtmWriter, Meta, Mode, OptionalChunks, SparseColumn};
 pub use decode::ColumnDecoder;
 pub use dims::{
     Dims, LightBasis, Parameterization, RowLayout, MAX_FACE_RES, MAX_PIXELS, MAX_SIDE,

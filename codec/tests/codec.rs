@@ -5,7 +5,7 @@
 use ltm_codec::compress::{
     compress, CodeOptions, Coder, CompressOptions, ErrorCurve, Plan, Target, TransposeOptions,
 };
-use ltm_codec::container::{LtmFile, Mode};
+use ltm_codec::container::{Entropy, LtmFile, Mode};
 use ltm_codec::cubemap::{texel_direction, texel_solid_angle};
 use ltm_codec::npy::decode_matrix;
 use ltm_codec::{
@@ -235,6 +235,56 @@ fn version_2_files_still_decode() {
         (err - file.meta().achieved_error as f64).abs() <= 1e-4 + 1e-3 * err,
         "decoded error {err} vs recorded {}",
         file.meta().achieved_error
+    );
+}
+
+/// `Entropy::Zstd` stores no range-coded column (the faster-opening
+/// files), meets the same target, and decodes to the error it records;
+/// the default range-coded file of the same matrix is smaller.
+#[test]
+fn zstd_entropy_writes_no_range_coded_columns() {
+    let dir = tempfile::tempdir().unwrap();
+    let dims = Dims::image(40, 28, 4, 3);
+    let raw = write_raw(dir.path(), "z.raw", dims, &scene(dims));
+    let mut sizes = Vec::new();
+    for entropy in [Entropy::Zstd, Entropy::Range] {
+        let opts: CompressOptions = CodeOptions {
+            entropy,
+            target: Target::MaxError(0.01),
+            bits: 12,
+            ..Default::default()
+        }
+        .into();
+        let (out, stats) = run(dir.path(), &raw, &opts, "z.ltm");
+        let file = LtmFile::open(&out).unwrap();
+        let ranged = file
+            .columns()
+            .iter()
+            .filter(|c| c.encoding == ltm_codec::container::Encoding::Ranged)
+            .count();
+        assert_eq!(
+            ranged == 0,
+            entropy == Entropy::Zstd,
+            "{entropy:?}: {ranged} ranged"
+        );
+        assert!(
+            stats.target_met && stats.achieved_error <= 0.01,
+            "{entropy:?}"
+        );
+        let dense = decode_matrix(&file, &Limits::default()).unwrap();
+        let err = rel_error(&dense, &scene(dims));
+        assert!(
+            (err - stats.achieved_error).abs() <= 1e-4,
+            "{err} vs {}",
+            stats.achieved_error
+        );
+        sizes.push(stats.file_bytes);
+    }
+    assert!(
+        sizes[1] < sizes[0],
+        "range {} vs zstd {}",
+        sizes[1],
+        sizes[0]
     );
 }
 

@@ -8,7 +8,7 @@ use ltm_codec::compress::{
     compress, CodeOptions, CompressOptions, Stage, Target, TransposeOptions, DEFAULT_BITS,
     DEFAULT_MAX_ERROR,
 };
-use ltm_codec::container::{LtmFile, Mode};
+use ltm_codec::container::{Entropy, LtmFile, Mode};
 use ltm_codec::npy::{export_npy, import_npy};
 use ltm_codec::wavelet::row_level;
 use ltm_codec::{compress_pca, Filter, PcaOptions, RawStore};
@@ -113,6 +113,12 @@ pub struct CompressArgs {
     /// Dither seed.
     #[arg(long, default_value_t = 0x6c74_6d00)]
     pub seed: u64,
+    /// Column payloads: `range` (context-modelled range coding, the
+    /// smallest files) or `zstd` (larger files that open several times
+    /// faster; what format versions 1 and 2 wrote). Wavelet modes only
+    /// [default: range].
+    #[arg(long)]
+    pub entropy: Option<Entropy>,
 }
 
 /// Parses `512M`, `4G`, `100000`…
@@ -192,6 +198,7 @@ pub fn compress_cmd(a: CompressArgs) -> Result<()> {
             raise_bits: a.bits.is_none(),
             target,
             seed: a.seed,
+            entropy: a.entropy.unwrap_or_default(),
             ..Default::default()
         },
     };
@@ -248,6 +255,9 @@ pub fn compress_cmd(a: CompressArgs) -> Result<()> {
 fn compress_pca_cmd(a: &CompressArgs, raw: &RawStore) -> Result<()> {
     if a.keep.is_some() {
         bail!("--keep counts wavelet coefficients per column; --mode pca takes --rank K or --max-error E");
+    }
+    if a.entropy.is_some() {
+        bail!("--entropy chooses how wavelet columns are stored; --mode pca stores its basis and coefficients with zstd");
     }
     let mem_budget = a
         .mem_budget

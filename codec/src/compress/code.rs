@@ -308,7 +308,12 @@ impl<'t> Coder<'t> {
             _ => None,
         };
         let encoded = best.encoded.unwrap_or_else(|| {
-            EncodedColumn::coded(&best.col, &self.shape(), self.opts.zstd_level)
+            EncodedColumn::coded(
+                &best.col,
+                &self.shape(),
+                self.opts.entropy,
+                self.opts.zstd_level,
+            )
         });
         Ok((encoded, best.err, curve))
     }
@@ -379,7 +384,8 @@ impl<'t> Coder<'t> {
     /// over [`BYTES_PER_COEFFICIENT`] plus error over τ²; else the error.
     fn candidate(&self, col: SparseColumn, err: f64, tau_sq: f64) -> Candidate {
         if tau_sq > 0.0 {
-            let encoded = EncodedColumn::coded(&col, &self.shape(), self.opts.zstd_level);
+            let encoded =
+                EncodedColumn::coded(&col, &self.shape(), self.opts.entropy, self.opts.zstd_level);
             let cost = encoded.bytes.len() as f64 / BYTES_PER_COEFFICIENT + err / tau_sq;
             Candidate {
                 col,

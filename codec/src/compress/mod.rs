@@ -41,7 +41,7 @@ pub use code::{CodedColumns, Coder};
 pub use plan::{ErrorCurve, Plan};
 pub use transpose::{Transposed, MAX_NORM, MIN_NONZERO_RMS};
 
-use crate::container::{LtmWriter, Mode, OptionalChunks};
+use crate::container::{Entropy, LtmWriter, Mode, OptionalChunks};
 use crate::error::{Error, Result};
 use crate::raw::RawStore;
 use crate::wavelet::Filter;
@@ -145,6 +145,9 @@ pub struct CodeOptions {
     pub target: Target,
     /// Dither seed.
     pub seed: u64,
+    /// How column payloads are stored: range-coded (smallest) or zstd
+    /// (faster to open).
+    pub entropy: Entropy,
     /// zstd level of column payloads.
     pub zstd_level: i32,
 }
@@ -158,6 +161,7 @@ impl Default for CodeOptions {
             raise_bits: false,
             target: Target::MaxError(DEFAULT_MAX_ERROR),
             seed: 0x6c74_6d00,
+            entropy: Entropy::Range,
             zstd_level: 9,
         }
     }

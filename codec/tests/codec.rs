@@ -288,6 +288,38 @@ fn zstd_entropy_writes_no_range_coded_columns() {
     );
 }
 
+/// With `raise_bits`, bits whose quantization floor misses the target are
+/// skipped or re-coded with 2 more bits, and the file is the one coded
+/// at the final bits directly.
+#[test]
+fn raised_bits_give_the_file_of_the_final_bits() {
+    let dir = tempfile::tempdir().unwrap();
+    let dims = Dims::image(31, 17, 4, 3);
+    let raw = write_raw(dir.path(), "r.raw", dims, &scene(dims));
+    let options = |bits, raise_bits| -> CompressOptions {
+        CodeOptions {
+            bits,
+            raise_bits,
+            target: Target::MaxError(0.002),
+            ..Default::default()
+        }
+        .into()
+    };
+    let (_, raised) = run(dir.path(), &raw, &options(4, true), "a.ltm");
+    assert!(raised.bits > 4 && raised.target_met, "{raised:?}");
+    assert!(raised.achieved_error <= 0.002, "{raised:?}");
+    let (_, direct) = run(dir.path(), &raw, &options(raised.bits, false), "b.ltm");
+    assert_eq!(
+        (raised.file_bytes, raised.achieved_error),
+        (direct.file_bytes, direct.achieved_error)
+    );
+    let (a, b) = (
+        std::fs::read(dir.path().join("a.ltm")).unwrap(),
+        std::fs::read(dir.path().join("b.ltm")).unwrap(),
+    );
+    assert!(a == b, "the raised file differs from the direct one");
+}
+
 /// A file asked for E lands in [0.97·E, E] measured, in every mode, on odd
 /// sizes and both channel counts, (2 or 3 codings here but for one case of 5).
 #[test]

@@ -232,7 +232,7 @@ pub fn compress_cmd(a: CompressArgs) -> Result<()> {
     );
     if opts.code.raise_bits && stats.bits > opts.code.bits {
         eprintln!(
-            "coded at {} bits: {} missed the target",
+            "coded at {} bits: {} miss the target (too coarse a quantization)",
             stats.bits,
             (opts.code.bits..stats.bits)
                 .step_by(2)

@@ -301,10 +301,19 @@ impl Transposed<'_> {
             Target::Keep(_) => None,
         };
         loop {
-            let stats = code_at_bits(&coder, out, analysis.as_ref(), progress)?;
             let bits = coder.options().bits;
-            if stats.target_met || !opts.raise_bits || bits >= 16 {
-                return Ok(stats);
+            let can_raise = opts.raise_bits && bits < 16;
+            // Bits whose estimated quantization floor alone misses the
+            // target are skipped without a coding.
+            let hopeless = match (&analysis, can_raise) {
+                (Some(a), true) => below_floor(a, bits, coder.budget())?,
+                _ => false,
+            };
+            if !hopeless {
+                let stats = code_at_bits(&coder, out, analysis.as_ref(), progress)?;
+                if stats.target_met || !can_raise {
+                    return Ok(stats);
+                }
             }
             let raised = CodeOptions {
                 bits: (bits + 2).min(16),
@@ -314,6 +323,19 @@ impl Transposed<'_> {
         }
     }
 }
+
+/// Whether even keeping every coefficient at `bits` is estimated to miss
+/// the squared-error `budget` (the quantization floor of `bits`): the
+/// analysis's plan at τ = 0 exceeds the budget by more than the plan's
+/// usual estimation error.
+fn below_floor(analysis: &Analysis, bits: u32, budget: f64) -> Result<bool> {
+    let plan = Plan::new(analysis, bits, budget)?;
+    Ok(plan.tau_sq() == 0.0 && plan.estimated_error() > FLOOR_MARGIN * budget)
+}
+
+/// How far the estimated floor must exceed the budget before [`below_floor`]
+/// skips the bits without trying them.
+const FLOOR_MARGIN: f64 = 1.5;
 
 /// The error-feedback loop at the coder's bits. The first coding follows
 /// the plan for [`TARGET_AIM`]·E; when its measured error lands outside

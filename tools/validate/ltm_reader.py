@@ -1,0 +1,691 @@
+#!/usr/bin/env python3
+"""Independent reader for wavelet-mode `.ltm` files, written from docs/FORMAT.md alone.
+
+This file was written only from the specification in docs/FORMAT.md (no Rust source
+was consulted). It checks that the specification is complete: it decodes a `.ltm`
+file of mode 2d, 4d or adaptive to the dense transport matrix exactly as
+`ltm export` writes it (float32, shape (P, M, C), or (P, M) when C = 1).
+`pca` files (mode 3) are refused.
+
+Usage:
+    python3 tools/validate/ltm_reader.py FILE.ltm [--compare EXPORT.npy] [--out OUT.npy]
+
+Prints the shape; with --compare, the max abs difference and the relative L2
+difference against an `ltm export` of the same file, and exits with status 1 if
+the relative L2 difference exceeds 1e-5.
+
+Stages (one function each):
+  read_container      header, chunk directory, CRCs
+  parse_meta          META chunk
+  parse_empty_rows    EMPT chunk
+  parse_column_table  COLS chunk
+  decode_payload_plain / decode_payload_range   column payload -> sparse column
+  RangeDecoder, decode_range_stream             "Encoding 3" binary coder and context walk
+  dequantize_column   scale codes, u = q*s/Q, division by band weights
+  band_weights        per-band synthesis norms for the lifting filters
+  inverse_2d / inverse_1d_*                     inverse column and row transforms
+  decode_matrix       the whole pipeline
+Only numpy, the standard library and (for encoding 2) `zstandard` are used.
+"""
+
+import argparse
+import struct
+import sys
+import zlib
+
+import numpy as np
+
+MAGIC = b"\x89LTM\r\n\x1a\n"
+
+# PyWavelets' dec_lo (FORMAT.md "Wavelets": "lo is PyWavelets' dec_lo").
+DEC_LO = {
+    0: [0.7071067811865476, 0.7071067811865476],  # haar
+    1: [-0.12940952255126037, 0.22414386804185735, 0.836516303737469,
+        0.48296291314469025],  # d4 = db2
+    2: [0.035226291882100656, -0.08544127388224149, -0.13501102001039084,
+        0.4598775021193313, 0.8068915093133388, 0.3326705529509569],  # d6 = db3
+    3: [-0.010597401784997278, 0.032883011666982945, 0.030841381835986965,
+        -0.18703481171888114, -0.02798376941698385, 0.6308807679295904,
+        0.7148465705525415, 0.23037781330885523],  # d8 = db4
+}
+FILTER_NAMES = {0: "haar", 1: "d4", 2: "d6", 3: "d8", 4: "legall53", 5: "cdf97"}
+
+# Lifting filters: list of (kind, constant) in forward order, and the final scales.
+CDF97_K = float(np.float32(1.230174104914001))
+LIFTING = {
+    4: ([("predict", -0.5), ("update", 0.25)], 1.0, 1.0),
+    5: ([("predict", float(np.float32(-1.586134342059924))),
+         ("update", float(np.float32(-0.052980118572961))),
+         ("predict", float(np.float32(0.882911075530934))),
+         ("update", float(np.float32(0.443506852043971)))],
+        1.0 / CDF97_K, CDF97_K),  # forward: low *= 1/K, high *= K
+}
+
+
+class FormatError(Exception):
+    pass
+
+
+def crc32(b):
+    return zlib.crc32(b) & 0xFFFFFFFF
+
+
+# ----------------------------------------------------------------------------
+# Container
+
+
+def read_container(buf):
+    """Validate the header and chunk directory; return {tag: bytes}, version, features."""
+    if len(buf) < 28 or buf[:8] != MAGIC:
+        raise FormatError("not an .ltm file (bad magic)")
+    version, features, k, reserved = struct.unpack_from("<4I", buf, 8)
+    if version not in (1, 2, 3):
+        raise FormatError(f"unsupported format version {version}")
+    if reserved != 0:
+        raise FormatError("reserved header field is not 0")
+    if features & ~7:
+        raise FormatError(f"unknown feature bits {features:#x}")
+    if version == 1 and features & ~1:
+        raise FormatError("feature bits 1/2 in a version-1 file")
+    if not 3 <= k <= 7:
+        raise FormatError(f"bad chunk count {k}")
+    end = 24 + 32 * k
+    if len(buf) < end + 4:
+        raise FormatError("truncated directory")
+    stored_crc, = struct.unpack_from("<I", buf, end)
+    if crc32(buf[:end]) != stored_crc:
+        raise FormatError("header/directory CRC mismatch")
+    chunks, last_end = {}, end + 4
+    for e in range(k):
+        base = 24 + 32 * e
+        tag = bytes(buf[base:base + 4])
+        _r1, off, ln, ccrc, _r2 = struct.unpack_from("<IQQII", buf, base + 4)
+        if tag in chunks:
+            raise FormatError(f"duplicate chunk {tag!r}")
+        if off < last_end or off + ln > len(buf):
+            raise FormatError(f"chunk {tag!r} overlaps or lies outside the file")
+        last_end = off + ln
+        data = buf[off:off + ln]
+        if tag != b"DATA" and crc32(data) != ccrc:
+            raise FormatError(f"chunk {tag!r} CRC mismatch")
+        chunks[tag] = data
+    want = {b"META"}
+    if features & 1:
+        want.add(b"ALBD")
+    if features & 2:
+        want.add(b"EMPT")
+    if features & 4:
+        want.add(b"SURF")
+    if b"PCAM" in chunks or b"PCAB" in chunks or b"PCAC" in chunks:
+        raise FormatError("this is a pca file (mode 3): not supported by this reader")
+    want |= {b"COLS", b"DATA"}
+    if set(chunks) != want:
+        raise FormatError(f"chunks {sorted(chunks)} do not match feature bits {features}")
+    return chunks, version, features
+
+
+def parse_meta(meta):
+    if len(meta) != 64:
+        raise FormatError("META is not 64 bytes")
+    W, H, n, C = struct.unpack_from("<4I", meta, 0)
+    mode, row_filter, col_filter, bits = meta[16], meta[17], meta[18], meta[19]
+    seed, = struct.unpack_from("<Q", meta, 20)
+    target, measured, keep = struct.unpack_from("<ffI", meta, 28)
+    norm, = struct.unpack_from("<d", meta, 40)
+    if mode == 3:
+        raise FormatError("this is a pca file (mode 3): not supported by this reader")
+    if mode not in (0, 1, 2):
+        raise FormatError(f"bad mode {mode}")
+    if not (1 <= W <= 32768 and 1 <= H <= 32768 and W * H <= 1 << 26):
+        raise FormatError("bad image size")
+    if not (1 <= n <= 1024 and n & (n - 1) == 0):
+        raise FormatError("bad face resolution")
+    if C not in (1, 3):
+        raise FormatError("bad channel count")
+    if row_filter not in (0, 1, 2, 3):
+        raise FormatError("row filter must be orthonormal (0..3)")
+    if col_filter not in FILTER_NAMES:
+        raise FormatError("bad column filter")
+    if not 2 <= bits <= 16:
+        raise FormatError("bad bits")
+    return dict(W=W, H=H, n=n, C=C, mode=mode, row_filter=row_filter,
+                col_filter=col_filter, bits=bits, seed=seed, target=target,
+                measured=measured, keep=keep, norm=norm)
+
+
+def parse_empty_rows(empt, P):
+    if len(empt) != (P + 7) // 8:
+        raise FormatError("EMPT has the wrong length")
+    bits = np.unpackbits(np.frombuffer(empt, np.uint8), bitorder="little")
+    if bits[P:].any():
+        raise FormatError("EMPT bits past the last row are set")
+    return bits[:P].astype(bool)
+
+
+def full_depth(W, H):
+    m = max(W, H)
+    return (m - 1).bit_length()  # ceil(log2(m)), 0 for m = 1
+
+
+def parse_column_table(cols, M, P, W, H, version):
+    if len(cols) != 28 * M:
+        raise FormatError("COLS has the wrong length")
+    table = []
+    for j in range(M):
+        off, slen, ulen, k, ccrc, d, enc, z = struct.unpack_from("<QIIIIBBH", cols, 28 * j)
+        if z != 0 or k > P or d > full_depth(W, H) or enc > 3 or (enc == 3 and version < 3):
+            raise FormatError(f"bad column table entry {j}")
+        table.append(dict(off=off, slen=slen, ulen=ulen, k=k, crc=ccrc, d=d, enc=enc))
+    return table
+
+
+# ----------------------------------------------------------------------------
+# Geometry: band sizes and bands
+
+
+def band_size(W, H, l):
+    for _ in range(l):
+        W, H = (W + 1) // 2, (H + 1) // 2
+    return W, H
+
+
+def bands(W, H, d):
+    """Bands in coding order: (x0, x1, y0, y1, group, orientation).
+
+    Orientation 0 = low band, 1 = high x low y, 2 = low x high y, 3 = high x high y.
+    Empty bands are included (callers skip them)."""
+    bw_d, bh_d = band_size(W, H, d)
+    out = [(0, bw_d, 0, bh_d, 0, 0)]
+    for k in range(d, 0, -1):
+        bw, bh = band_size(W, H, k)
+        pw, ph = band_size(W, H, k - 1)
+        out.append((bw, pw, 0, bh, k, 1))
+        out.append((0, bw, bh, ph, k, 2))
+        out.append((bw, pw, bh, ph, k, 3))
+    return out
+
+
+def group_map(W, H, d):
+    """Scale group of every position i = y*W + x of the column image at depth d."""
+    g = np.zeros((H, W), np.int64)
+    for x0, x1, y0, y1, grp, _o in bands(W, H, d):
+        g[y0:y1, x0:x1] = grp
+    return g.reshape(-1)
+
+
+# ----------------------------------------------------------------------------
+# Varints
+
+
+def read_varint(b, pos):
+    v, shift = 0, 0
+    while True:
+        if pos >= len(b):
+            raise FormatError("truncated varint")
+        byte = b[pos]
+        pos += 1
+        v |= (byte & 0x7F) << shift
+        shift += 7
+        if byte < 0x80:
+            return v, pos
+        if shift >= 35:
+            raise FormatError("varint too long")
+
+
+# ----------------------------------------------------------------------------
+# Column payloads, encodings 1 and 2
+
+
+def decode_payload_plain(payload, d, C, k, Q):
+    """Return (scale codes (d+1, C), positions (k,), values (k, C))."""
+    ns = (d + 1) * C
+    codes = np.frombuffer(payload, "<u2", ns, 0).reshape(d + 1, C)
+    pos = 2 * ns
+    positions = np.empty(k, np.int64)
+    prev = -1
+    for i in range(k):
+        gap, pos = read_varint(payload, pos)
+        prev = prev + gap + 1
+        positions[i] = prev
+    vals = np.empty(k * C, np.int64)
+    for i in range(k * C):
+        z, pos = read_varint(payload, pos)
+        vals[i] = (z >> 1) ^ -(z & 1)
+    if pos != len(payload):
+        raise FormatError("trailing bytes in column payload")
+    if np.abs(vals).max(initial=0) > Q:
+        raise FormatError("quantized value out of range")
+    return codes, positions, vals.reshape(k, C)
+
+
+# ----------------------------------------------------------------------------
+# Encoding 3: the binary range decoder and the context walk
+
+
+class RangeDecoder:
+    """FORMAT.md "The binary coder". Contexts are two parallel lists p, n."""
+
+    def __init__(self, stream):
+        self.s = stream
+        self.pos = 0
+        self.virtual = 0  # bytes read past the end (zeros), at most 4
+        self.range = 0xFFFFFFFF
+        self.code = 0
+        for _ in range(4):
+            self.code = (self.code << 8) | self._byte()
+
+    def _byte(self):
+        if self.pos < len(self.s):
+            b = self.s[self.pos]
+            self.pos += 1
+            return b
+        self.virtual += 1
+        if self.virtual > 4:
+            raise FormatError("range decoder read past the end of the stream")
+        return 0
+
+    def bit(self, P, N, c):
+        p = P[c]
+        bound = (self.range >> 15) * p
+        n = N[c]
+        shift = min((n + 1).bit_length(), 5)  # min(1 + floor(log2(n + 1)), 5)
+        if self.code < bound:
+            self.range = bound
+            p += (32768 - p) >> shift
+            bit = 0
+        else:
+            self.code -= bound
+            self.range -= bound
+            p -= p >> shift
+            bit = 1
+        P[c] = 31 if p < 31 else (32737 if p > 32737 else p)
+        if n < 32:
+            N[c] = n + 1
+        while self.range < (1 << 24):
+            self.range = (self.range << 8) & 0xFFFFFFFF
+            self.code = ((self.code << 8) | self._byte()) & 0xFFFFFFFF
+        return bit
+
+
+# Context table offsets within one flat list.
+CTX_BLOCK = 0                   # 48
+CTX_SIG = CTX_BLOCK + 48        # 144
+CTX_ZERO = CTX_SIG + 144        # 7
+CTX_SIGN = CTX_ZERO + 7         # 7
+CTX_PREFIX = CTX_SIGN + 7       # 64 x 16
+CTX_SUFFIX = CTX_PREFIX + 64 * 16  # 16 x 16
+CTX_TOTAL = CTX_SUFFIX + 16 * 16
+
+
+def decode_value(dec, P, N, zc, sc, pc, nmax):
+    """value(zc, sc, pc, N): zero flag, sign, unary prefix, suffix bits."""
+    if not dec.bit(P, N, CTX_ZERO + zc):
+        return 0
+    neg = dec.bit(P, N, CTX_SIGN + sc)
+    n = 0
+    while n < nmax:
+        if not dec.bit(P, N, CTX_PREFIX + pc * 16 + min(n, 15)):
+            break
+        n += 1
+    m = 1
+    for j in range(n - 1, -1, -1):
+        m = 2 * m + dec.bit(P, N, CTX_SUFFIX + n * 16 + j)
+    return -m if neg else m
+
+
+def bitlen(v):
+    return abs(v).bit_length()
+
+
+def decode_range_stream(stream, W, H, d, C, B, k):
+    """Context walk of FORMAT.md "Encoding 3". Returns (positions, values (k, C))."""
+    Q = (1 << (B - 1)) - 1
+    dec = RangeDecoder(stream)
+    P = [16384] * CTX_TOTAL
+    N = [0] * CTX_TOTAL
+    mag = [0] * (W * H)
+    positions, values = [], []
+    left = k
+    Sxx = [0] * (d + 1)
+    Sxy = [[0] * C for _ in range(d + 1)]
+    blist = bands(W, H, d)
+    # parent of each band: index into blist and shift
+    parent = [None]
+    for bi in range(1, len(blist)):
+        grp, orient = blist[bi][4], blist[bi][5]
+        if grp == d:
+            parent.append((0, 0))
+        else:
+            # same orientation at level grp + 1: appears 3 entries earlier
+            parent.append((bi - 3, 1))
+    for bi, (x0, x1, y0, y1, grp, orient) in enumerate(blist):
+        if left == 0:
+            break
+        bw, bh = x1 - x0, y1 - y0
+        if bw <= 0 or bh <= 0:
+            continue
+        cls = 0 if bi == 0 else min(grp, 7)
+        par = parent[bi]
+        if par is not None:
+            px0, px1, py0, py1 = blist[par[0]][:4]
+            pw, ph, shift = px1 - px0, py1 - py0, par[1]
+            if pw <= 0 or ph <= 0:
+                par = None
+
+        def pmag(u, v):
+            if par is None:
+                return 0
+            return mag[(py0 + min(v >> shift, ph - 1)) * W + px0 + min(u >> shift, pw - 1)]
+
+        def nb(u, v):  # neighbour magnitude within the band, 0 outside
+            if 0 <= u < bw and 0 <= v < bh:
+                return mag[(y0 + v) * W + x0 + u]
+            return 0
+
+        nbx, nby = (bw + 3) // 4, (bh + 3) // 4
+        flags = [[0] * nbx for _ in range(nby)]
+        for by in range(nby):
+            if left == 0:
+                break
+            for bx in range(nbx):
+                if left == 0:
+                    break
+                a = (flags[by][bx - 1] if bx > 0 else 0) + (flags[by - 1][bx] if by > 0 else 0)
+                u0, v0 = 4 * bx, 4 * by
+                u1, v1 = min(u0 + 3, bw - 1), min(v0 + 3, bh - 1)
+                b = 1 if (pmag(u0, v0) or pmag(u1, v0) or pmag(u0, v1) or pmag(u1, v1)) else 0
+                f = dec.bit(P, N, CTX_BLOCK + (cls * 3 + a) * 2 + b)
+                flags[by][bx] = f
+                if not f:
+                    continue
+                any_kept = False
+                for v in range(v0, v1 + 1):
+                    if left == 0:
+                        break
+                    for u in range(u0, u1 + 1):
+                        if u == u1 and v == v1 and not any_kept:
+                            kept = 1
+                        else:
+                            a2 = (nb(u - 1, v) > 0) + (nb(u, v - 1) > 0)
+                            e2 = (nb(u - 1, v - 1) > 0) + (nb(u + 1, v - 1) > 0)
+                            b2 = 1 if pmag(u, v) else 0
+                            kept = dec.bit(P, N, CTX_SIG + ((cls * 3 + a2) * 3 + e2) * 2 + b2)
+                        if not kept:
+                            continue
+                        any_kept = True
+                        # values of a kept pixel
+                        s = nb(u - 1, v) + nb(u, v - 1)
+                        t = 0 if s == 0 else (1 if s <= 3 else (2 if s <= 7 else 3))
+                        q0 = decode_value(dec, P, N, 0, 0, cls * 4 + t, B - 2)
+                        q = [q0]
+                        r1 = 0
+                        for c in range(1, C):
+                            if Sxx[grp] == 0:
+                                pi = 0
+                            else:
+                                pi = (2 * Sxy[grp][c] * q0 + Sxx[grp]) // (2 * Sxx[grp])
+                                pi = max(-Q, min(Q, pi))
+                            sigma = 0 if pi == 0 else (1 if pi > 0 else 2)
+                            if c == 1:
+                                z = 1 + (pi == 0)
+                            else:
+                                z = 3 + 2 * (pi == 0) + (r1 == 0)
+                            r = decode_value(dec, P, N, z, 1 + 3 * (c - 1) + sigma,
+                                             32 + 16 * (c - 1) + min(bitlen(pi), 15), B - 1)
+                            if c == 1:
+                                r1 = r
+                            qc = pi + r
+                            if abs(qc) > Q:
+                                raise FormatError("decoded value out of range")
+                            q.append(qc)
+                        if abs(q0) > Q:
+                            raise FormatError("decoded value out of range")
+                        for c in range(1, C):
+                            Sxy[grp][c] += q[c] * q0
+                        Sxx[grp] += q0 * q0
+                        i = (y0 + v) * W + x0 + u
+                        L = max(bitlen(x) for x in q)
+                        mag[i] = min(max(1, L), 15)
+                        positions.append(i)
+                        values.append(q)
+                        left -= 1
+                        if left == 0:
+                            break
+    if left != 0:
+        raise FormatError("range-coded column ended before all positions were found")
+    if dec.pos != len(stream):
+        raise FormatError(f"range-coded column: {len(stream) - dec.pos} stream bytes unread")
+    order = np.argsort(positions, kind="stable")
+    return (np.asarray(positions, np.int64)[order],
+            np.asarray(values, np.int64).reshape(k, C)[order])
+
+
+def decode_payload_range(payload, W, H, d, C, B, k):
+    ns = (d + 1) * C
+    if len(payload) < 2 * ns:
+        raise FormatError("range-coded payload shorter than its scale codes")
+    codes = np.frombuffer(payload, "<u2", ns, 0).reshape(d + 1, C)
+    positions, values = decode_range_stream(payload[2 * ns:], W, H, d, C, B, k)
+    return codes, positions, values
+
+
+# ----------------------------------------------------------------------------
+# Inverse transforms
+
+
+def inverse_1d_periodic(x, n, lo):
+    """Inverse 1D step along axis 0 of x[:n], in place, in x's precision."""
+    F = len(lo)
+    hi = [(-1) ** (j + 1) * lo[F - 1 - j] for j in range(F)]
+    lo = [x.dtype.type(t) for t in lo]
+    hi = [x.dtype.type(t) for t in hi]
+    nl = (n + 1) // 2
+    low = x[:nl].copy()
+    high = x[nl:n].copy()
+    m = n - (n & 1)
+    h = m // 2
+    out = np.zeros_like(x[:n])
+    o = np.arange(h)
+    for j in range(F):
+        idx = (2 * o + F // 2 - j) % m
+        out[idx] += lo[j] * low[:h] + hi[j] * high[:h]
+    if n & 1:
+        out[n - 1] = low[(n - 1) // 2]
+    x[:n] = out
+
+
+def inverse_1d_lifting(x, n, filt):
+    steps, low_scale, high_scale = LIFTING[filt]
+    t = x.dtype.type  # constants rounded to the working precision (f32 in ltm)
+    nl = (n + 1) // 2
+    y = np.empty_like(x[:n])
+    y[0::2] = x[:nl] / t(low_scale)
+    y[1::2] = x[nl:n] / t(high_scale)
+    e = (n - 1) if (n - 1) % 2 == 0 else n - 2  # last even index
+    o = (n - 1) if (n - 1) % 2 == 1 else n - 2  # last odd index
+    for kind, c in reversed(steps):
+        c = t(c)
+        if kind == "predict":
+            k = np.arange(1, n, 2)
+            y[k] -= c * (y[k - 1] + y[np.minimum(k + 1, e)])
+        else:
+            k = np.arange(0, n, 2)
+            left = np.where(k - 1 < 0, 1, k - 1)
+            y[k] -= c * (y[left] + y[np.minimum(k + 1, o)])
+    x[:n] = y
+
+
+def inverse_1d(x, n, filt):
+    if filt in LIFTING:
+        inverse_1d_lifting(x, n, filt)
+    else:
+        inverse_1d_periodic(x, n, DEC_LO[filt])
+
+
+def inverse_2d(img, levels, filt):
+    """Inverse of `levels` 2D steps; img has shape (H, W, ...) and is modified in place."""
+    H, W = img.shape[0], img.shape[1]
+    for k in range(levels - 1, -1, -1):
+        w, h = band_size(W, H, k)
+        if h >= 2:  # every column of the region
+            inverse_1d(img[:h, :w], h, filt)
+        if w >= 2:  # every row of the region
+            region = np.swapaxes(img[:h, :w], 0, 1)  # a view: (w, h, ...)
+            inverse_1d(region, w, filt)
+    return img
+
+
+# ----------------------------------------------------------------------------
+# Dequantization and band weights
+
+_weight_cache = {}
+
+
+def band_weights(W, H, d, filt, dt):
+    """w_d per position (H*W,), FORMAT.md "Band weights".
+
+    In f32 the sum of squares is accumulated sequentially in raster order, which
+    reproduces ltm's weights bit for bit on the test files."""
+    key = (W, H, d, filt, dt)
+    if key in _weight_cache:
+        return _weight_cache[key]
+    w = np.ones((H, W), dt)
+    if d > 0 and filt in LIFTING:
+        for x0, x1, y0, y1, _g, _orient in bands(W, H, d):
+            if x0 >= x1 or y0 >= y1:
+                continue
+            cx, cy = (x0 + x1) // 2, (y0 + y1) // 2
+            imp = np.zeros((H, W), dt)
+            imp[cy, cx] = 1
+            inverse_2d(imp, d, filt)
+            sumsq = np.cumsum((imp * imp).ravel(), dtype=dt)[-1]
+            w[y0:y1, x0:x1] = max(dt(1e-6), np.sqrt(sumsq))
+    w = w.reshape(-1)
+    _weight_cache[key] = w
+    return w
+
+
+def scales_from_codes(codes, dt):
+    e = codes.astype(np.float64)
+    s = np.exp2((e - 32768.0) / 256.0)
+    s[codes == 0] = 0.0
+    return s.astype(dt)
+
+
+def dequantize_column(codes, positions, values, W, H, d, C, B, filt, dt):
+    """Column image coefficients v (H*W, C), before the inverse column transform.
+
+    FORMAT.md writes v = u / w; ltm evidently multiplies by the reciprocal 1/w
+    (identical in f64 up to rounding; in f32 only this matches bit for bit)."""
+    Q = (1 << (B - 1)) - 1
+    s = scales_from_codes(codes, dt)                  # (d+1, C)
+    g = group_map(W, H, d)[positions]                 # (k,)
+    u = np.zeros((W * H, C), dt)
+    u[positions] = values.astype(dt) * s[g] / dt(Q)
+    return u * (dt(1) / band_weights(W, H, d, filt, dt))[:, None]
+
+
+# ----------------------------------------------------------------------------
+# The pipeline
+
+
+def decode_matrix(path, verbose=False, dt=np.float32):
+    buf = open(path, "rb").read()
+    chunks, version, features = read_container(buf)
+    meta = parse_meta(chunks[b"META"])
+    W, H, n, C, B = meta["W"], meta["H"], meta["n"], meta["C"], meta["bits"]
+    P, M = W * H, 6 * n * n
+    Q = (1 << (B - 1)) - 1
+    empty = parse_empty_rows(chunks[b"EMPT"], P) if b"EMPT" in chunks else None
+    table = parse_column_table(chunks[b"COLS"], M, P, W, H, version)
+    data = chunks[b"DATA"]
+    if verbose:
+        print(f"version {version}, features {features}, W={W} H={H} n={n} C={C} B={B} "
+              f"mode={meta['mode']} rows={FILTER_NAMES[meta['row_filter']]} "
+              f"columns={FILTER_NAMES[meta['col_filter']]}", file=sys.stderr)
+
+    # Coefficients of T.R^T, grouped by column depth: by_depth[d] = list of (j, v (P, C))
+    by_depth = {}
+    for j, ent in enumerate(table):
+        d, k, enc = ent["d"], ent["k"], ent["enc"]
+        if enc == 0:
+            if k != 0 or ent["slen"] != 0:
+                raise FormatError(f"column {j}: empty column with a payload")
+            continue
+        stored = data[ent["off"]:ent["off"] + ent["slen"]]
+        if len(stored) != ent["slen"] or crc32(stored) != ent["crc"]:
+            raise FormatError(f"column {j}: payload outside DATA or CRC mismatch")
+        if enc == 2:
+            import zstandard
+            payload = zstandard.ZstdDecompressor().decompress(stored, max_output_size=ent["ulen"])
+        else:
+            payload = stored
+        if len(payload) != ent["ulen"]:
+            raise FormatError(f"column {j}: decompressed length mismatch")
+        if enc == 3:
+            if k < 1 or ent["slen"] != ent["ulen"]:
+                raise FormatError(f"column {j}: bad encoding-3 entry")
+            codes, positions, values = decode_payload_range(payload, W, H, d, C, B, k)
+        else:
+            codes, positions, values = decode_payload_plain(payload, d, C, k, Q)
+        if len(positions) and (positions[-1] >= P or positions[0] < 0):
+            raise FormatError(f"column {j}: position out of range")
+        v = dequantize_column(codes, positions, values, W, H, d, C, B, meta["col_filter"], dt)
+        by_depth.setdefault(d, []).append((j, v))
+
+    A = np.zeros((P, M, C), dt)  # T.R^T
+    for d, cols in by_depth.items():
+        js = [j for j, _ in cols]
+        stack = np.stack([v for _, v in cols], axis=1)        # (P, ncols, C)
+        img = stack.reshape(H, W, len(js) * C)
+        inverse_2d(img, d, meta["col_filter"])
+        A[:, js, :] = img.reshape(P, len(js), C)
+    if empty is not None:
+        A[empty] = 0.0
+
+    # Inverse row transform over every cube face (log2(n) levels, row filter).
+    levels = n.bit_length() - 1
+    faces = A.reshape(P, 6, n, n, C).transpose(2, 3, 0, 1, 4).copy()  # (row, col, P, 6, C)
+    inverse_2d(faces, levels, meta["row_filter"])
+    T = faces.transpose(2, 3, 0, 1, 4).reshape(P, M, C)
+    if empty is not None:
+        T[empty] = 0.0
+    T = T.astype(np.float32)
+    return T[:, :, 0] if C == 1 else T
+
+
+def main(argv=None):
+    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap.add_argument("file")
+    ap.add_argument("--compare", help="an `ltm export` .npy of the same file")
+    ap.add_argument("--out", help="write the decoded matrix as .npy")
+    ap.add_argument("--f64", action="store_true",
+                    help="compute in float64 (default: float32, as ltm does)")
+    ap.add_argument("-v", "--verbose", action="store_true")
+    args = ap.parse_args(argv)
+    try:
+        T = decode_matrix(args.file, args.verbose, np.float64 if args.f64 else np.float32)
+    except FormatError as e:
+        print(f"{args.file}: {e}", file=sys.stderr)
+        return 2
+    print("shape", T.shape)
+    if args.out:
+        np.save(args.out, T)
+    if args.compare:
+        ref = np.load(args.compare)
+        if ref.shape != T.shape:
+            print(f"shape mismatch: export has {ref.shape}")
+            return 1
+        diff = T.astype(np.float64) - ref.astype(np.float64)
+        mx = float(np.abs(diff).max()) if diff.size else 0.0
+        nr = float(np.linalg.norm(ref.astype(np.float64)))
+        rel = float(np.linalg.norm(diff)) / nr if nr > 0 else float(np.linalg.norm(diff))
+        print(f"max abs diff {mx:.6g}  relative L2 diff {rel:.6g}  "
+              f"(bit-exact entries {np.mean(diff == 0) * 100:.2f}%)")
+        if not rel <= 1e-5:
+            return 1
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -420,5 +420,7 @@ fn scanned_bunny_parameterizes_with_low_stretch() {
     let st = scene.unwrap().texel_map().unwrap().stats().clone();
     assert_eq!(st.flipped_triangles, 0);
     let (mean, max) = (st.stretch_mean.unwrap(), st.stretch_max.unwrap());
-    assert!(mean < 2.5 && max < 12.0, "stretch mean {mean} max {max}");
+    // 1.49 / 4.92 with the converged descent (1.60 / 5.9 after 150 steps;
+    // 3.52 / 22.8 without it).
+    assert!(mean < 2.0 && max < 8.0, "stretch mean {mean} max {max}");
 }

@@ -54,6 +54,20 @@ impl Context {
         (range >> PROB_BITS) * self.p as u32
     }
 
+    /// [`Context::update`] for the bit whose `mask` is all ones for a 1 and
+    /// 0 for a 0, without a branch on it.
+    #[inline(always)]
+    fn update_masked(&mut self, mask: u32) {
+        let n = self.n as u32;
+        let shift = SHIFTS[n as usize];
+        let p = self.p as u32;
+        let down = p - (p >> shift);
+        let up = p + ((PROB_ONE - p) >> shift);
+        let p = (down & mask) | (up & !mask);
+        self.p = p.clamp(PROB_MIN, PROB_ONE - PROB_MIN) as u16;
+        self.n += u16::from(n < (1 << MAX_SHIFT));
+    }
+
     /// Moves the probability towards the bit seen, by `1/2^shift` with
     /// `shift = min(1 + ⌊log2(n + 1)⌋, 5)`.
     #[inline(always)]
@@ -225,16 +239,14 @@ impl<'a> Decoder<'a> {
     /// Decodes a bit coded with `ctx`, then adapts `ctx`.
     #[inline(always)]
     pub fn bit(&mut self, ctx: &mut Context) -> bool {
+        // Branch-free selects (the bit is as unpredictable as the data):
+        // `mask` is all ones for a 1.
         let bound = ctx.bound(self.range);
-        let bit = if self.code < bound {
-            self.range = bound;
-            false
-        } else {
-            self.code -= bound;
-            self.range -= bound;
-            true
-        };
-        ctx.update(bit);
+        let bit = self.code >= bound;
+        let mask = 0u32.wrapping_sub(bit as u32);
+        self.code -= bound & mask;
+        self.range = (bound & !mask) | (self.range.wrapping_sub(bound) & mask);
+        ctx.update_masked(mask);
         while self.range < TOP {
             self.range <<= 8;
             self.code = (self.code << 8) | self.next_byte() as u32;
@@ -265,6 +277,23 @@ impl<'a> Decoder<'a> {
 mod tests {
     use super::*;
     use proptest::prelude::*;
+
+    /// The decoder's branch-free adaptation is the encoder's, in every
+    /// state a context can reach.
+    #[test]
+    fn masked_update_matches_update() {
+        for p in PROB_MIN..=PROB_ONE - PROB_MIN {
+            for n in 0..=(1u16 << MAX_SHIFT) {
+                for bit in [false, true] {
+                    let start = Context { p: p as u16, n };
+                    let (mut a, mut b) = (start, start);
+                    a.update(bit);
+                    b.update_masked(0u32.wrapping_sub(bit as u32));
+                    assert_eq!((a.p, a.n), (b.p, b.n), "p {p} n {n} bit {bit}");
+                }
+            }
+        }
+    }
 
     fn encode(bits: &[(usize, bool)], contexts: usize) -> Vec<u8> {
         let mut ctx = vec![Context::default(); contexts];

@@ -327,7 +327,8 @@ fn write_npy(path: &Path, rows: usize, cols: usize, values: &[f32]) {
 
 /// `ltm compress --keep N` keeps N coefficients per column; the old
 /// spelling `--terms` (which `ltm relight` uses for lights per frame) is
-/// refused with a message that names `--keep`, with or without a value.
+/// refused with a message that names `--keep`, with or without a value;
+/// an unknown `--entropy`, or one given to `--mode pca`, is refused.
 #[test]
 fn compress_keep_and_the_renamed_terms_flag() {
     let dir = tempfile::tempdir().unwrap();
@@ -360,14 +361,16 @@ fn compress_keep_and_the_renamed_terms_flag() {
         args.extend_from_slice(extra);
         ltm(&args)
     };
-    for extra in [
-        &["--terms", "5"][..],
-        &["--terms"],
-        &["--keep", "5", "--terms", "5"],
+    for (extra, needle) in [
+        (&["--terms", "5"][..], "--keep"),
+        (&["--terms"], "--keep"),
+        (&["--keep", "5", "--terms", "5"], "--keep"),
+        (&["--entropy", "lz4"], "range or zstd"),
+        (&["--mode", "pca", "--entropy", "zstd"], "--entropy"),
     ] {
         let (ok, _, stderr) = compress(extra);
         assert!(!ok, "{extra:?} succeeded");
-        assert!(stderr.contains("--keep"), "{extra:?}: {stderr}");
+        assert!(stderr.contains(needle), "{extra:?}: {stderr}");
         assert!(!stderr.contains("panicked"), "{extra:?}: {stderr}");
         assert!(!out.exists());
     }

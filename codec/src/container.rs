@@ -432,9 +432,9 @@ pub struct EncodedColumn {
 impl EncodedColumn {
     /// Encodes a column of a `width` × `height` column image quantized to
     /// `bits` bits: with [`Entropy::Range`], range-coded (encoding 3) when
-    /// that is no larger than
-    /// the plain payload (zstd is then not tried: on these payloads it
-    /// gains less than range coding), else as [`EncodedColumn::new`].
+    /// that is no larger than the plain payload (zstd is then not tried: on
+    /// these payloads it gains less than range coding), else (and always
+    /// with [`Entropy::Zstd`]) as [`EncodedColumn::new`].
     pub fn coded(
         col: &SparseColumn,
         shape: &ColumnShape,

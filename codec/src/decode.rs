@@ -222,6 +222,30 @@ impl ColumnDecoder {
         )
     }
 
+    /// The last inverse step (from depth 1, whose region is the whole
+    /// image) as [`ColumnDecoder::inverse_step_lanes_sparse`], written to
+    /// `out` instead of in place; `planes` is left as scratch (see
+    /// [`wavelet::inverse_step_lanes_sparse_into`]).
+    pub fn last_inverse_step_lanes_sparse(
+        &self,
+        planes: &mut [f32],
+        lanes: usize,
+        out: &mut [f32],
+        nonzero: &mut [bool],
+    ) -> Result<()> {
+        let (w, bw, bh) = self.step_band(1)?;
+        debug_assert_eq!(w, bw);
+        wavelet::inverse_step_lanes_sparse_into(
+            self.meta.col_filter,
+            planes,
+            bw,
+            bh,
+            lanes,
+            out,
+            nonzero,
+        )
+    }
+
     /// Decodes channel `channel` of a column into `plane` (overwritten), in
     /// the row-wavelet lighting basis, with the empty rows exactly 0. `work` needs `width·height` values.
     /// A column that decodes to a value beyond [`ColumnDecoder::MAX_DECODED`] (or not a

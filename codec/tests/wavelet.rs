@@ -428,7 +428,8 @@ fn interleaved_inverse_steps_match_single_images_bit_for_bit() {
 /// 1, 3 and 4 lanes, with runs of zero rows (none, some, all but one, all),
 /// exact and conservative flags, and the scratch poisoned with NaN so that
 /// a skipped row that was read would show. Flags stay conservative: a row
-/// marked zero is zero.
+/// marked zero is zero. The last step is also run into a second buffer
+/// (poisoned too) with [`wavelet::inverse_step_lanes_sparse_into`].
 #[test]
 fn row_skipping_inverse_steps_equal_the_dense_ones() {
     let mut seed = 0x0bad_cafe_1234_5678u64;
@@ -485,6 +486,30 @@ fn row_skipping_inverse_steps_equal_the_dense_ones() {
                         )
                         .unwrap();
                         work.fill(f32::NAN);
+                        if level == 0 {
+                            // The whole image, into a second buffer.
+                            let mut into_flags = flags.clone();
+                            let mut scratch = data.clone();
+                            let mut out = vec![f32::NAN; data.len()];
+                            wavelet::inverse_step_lanes_sparse_into(
+                                filter,
+                                &mut scratch,
+                                w,
+                                h,
+                                lanes,
+                                &mut out,
+                                &mut into_flags,
+                            )
+                            .unwrap();
+                            for (i, (a, b)) in dense.iter().zip(&out).enumerate() {
+                                let what = format!("into: {filter} {w}x{h} {lanes} lanes, pattern {pattern}, sample {i}");
+                                assert!(a == b, "{what}: dense {a} vs into {b}");
+                                assert!(
+                                    into_flags[i / (w * lanes)] || *b == 0.0,
+                                    "{what}: flagged zero"
+                                );
+                            }
+                        }
                         wavelet::inverse_step_lanes_sparse(
                             filter, &mut data, w, bw, bh, lanes, &mut work, &mut flags,
                         )

@@ -53,7 +53,7 @@ pub struct Relighter {
 pub(crate) struct WaveletScratch {
     light: Vec<[f32; 3]>,
     plane: Vec<f32>,
-    work: Vec<f32>,
+    work: Vec<[f32; LANES]>,
     /// The image being summed, pixels interleaved `[r, g, b, 0]`.
     pixels: Vec<[f32; LANES]>,
     selected: Vec<u32>,
@@ -184,7 +184,7 @@ impl Relighter {
         WaveletScratch {
             light: vec![[0.0; 3]; dims.lights()],
             plane: vec![0.0; dims.lights()],
-            work: vec![0.0; (LANES * p).max(n * n)],
+            work: vec![[0.0; LANES]; p.max((n * n).div_ceil(LANES))],
             pixels: vec![[0.0; LANES]; p],
             selected: Vec::with_capacity(dims.lights()),
             order: Vec::with_capacity(dims.lights()),
@@ -203,7 +203,7 @@ impl Relighter {
         let (p, n) = (dims.pixels(), dims.face_res() as usize);
         s.light.len() == dims.lights()
             && s.plane.len() == dims.lights()
-            && s.work.len() == (LANES * p).max(n * n)
+            && s.work.len() == p.max((n * n).div_ceil(LANES))
             && s.pixels.len() == p
             && s.rows.len() == dims.height() as usize
     }
@@ -216,7 +216,7 @@ impl Relighter {
             for (v, l) in s.plane.iter_mut().zip(light) {
                 *v = l[c];
             }
-            row_forward(meta.row_filter, n, &mut s.plane, &mut s.work)?;
+            row_forward(meta.row_filter, n, &mut s.plane, s.work.as_flattened_mut())?;
             for (l, v) in s.light.iter_mut().zip(&s.plane) {
                 l[c] = *v;
             }
@@ -291,12 +291,22 @@ impl Relighter {
             }
             let ti = Instant::now();
             stats.multiply += ti - tm;
-            if depth > 0 {
+            if depth == 1 && s.work.len() == s.pixels.len() {
+                // The whole image: synthesized into `work`, which becomes
+                // the pixels (no copy back).
+                self.decoder.last_inverse_step_lanes_sparse(
+                    s.pixels.as_flattened_mut(),
+                    LANES,
+                    s.work.as_flattened_mut(),
+                    &mut s.rows,
+                )?;
+                std::mem::swap(&mut s.pixels, &mut s.work);
+            } else if depth > 0 {
                 self.decoder.inverse_step_lanes_sparse(
                     depth as u32,
                     s.pixels.as_flattened_mut(),
                     LANES,
-                    &mut s.work,
+                    s.work.as_flattened_mut(),
                     &mut s.rows,
                 )?;
             }
@@ -454,7 +464,8 @@ impl Relighter {
         for &j in &s.selected {
             let col = self.file.column(j as usize)?;
             for fc in 0..channels {
-                self.decoder.decode(&col, fc, &mut plane, &mut s.work)?;
+                self.decoder
+                    .decode(&col, fc, &mut plane, s.work.as_flattened_mut())?;
                 for (c, plane_acc) in acc.iter_mut().enumerate() {
                     if channels == 1 || c == fc {
                         let l = s.light[j as usize][c] as f64;

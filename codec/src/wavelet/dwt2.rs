@@ -325,41 +325,225 @@ pub fn inverse_step_lanes_sparse(
     // Vertical: data rows -> work rows; `live[r]` says whether work row `r`
     // was written (rows not written hold stale values and are not read).
     let mut live = rows_in.clone();
-    let mut band_order = false;
-    if h >= 2 {
-        match filter.kind() {
-            Kind::Periodic(t) => {
-                periodic::inverse_rows_sparse(t, data, sl, work, wl, h, parallel, &mut live)
-            }
-            Kind::Lifting(s) => {
-                lifting::inverse_rows_sparse(s, data, sl, work, wl, h, parallel, &mut live);
-                band_order = true;
-            }
+    match (filter.kind(), h >= 2) {
+        (Kind::Lifting(scheme), true) => {
+            // Lifting: vertical and horizontal together, strip by strip.
+            let region = Region {
+                filter,
+                scheme,
+                w,
+                h,
+                lanes,
+                stride: sl,
+            };
+            live = region.synthesize_strips(data, work, &rows_in, parallel, false);
+            region.write_back(data, work, &rows_in, &live, parallel);
         }
-    } else if live[0] {
-        work[..wl].copy_from_slice(&data[..wl]);
+        (Kind::Periodic(t), true) => {
+            periodic::inverse_rows_sparse(t, data, sl, work, wl, h, parallel, &mut live);
+            synthesize_live_rows(
+                filter, data, sl, work, w, h, lanes, &rows_in, &live, parallel,
+            );
+        }
+        (_, false) => {
+            if live[0] {
+                work[..wl].copy_from_slice(&data[..wl]);
+            }
+            synthesize_live_rows(
+                filter, data, sl, work, w, h, lanes, &rows_in, &live, parallel,
+            );
+        }
     }
-    // Horizontal: live work rows -> data rows; dead rows are zeroed (or left
-    // alone when they already are).
-    let src = Rows::new(work, wl, wl, h);
-    let src = src.view();
-    let mut dst = Rows::new(data, sl, wl, h);
-    for_each_row(&mut dst, parallel, |k, out| {
-        let r = signal_row(k, h, band_order);
-        if live[r] {
-            synthesize_row(filter, w, lanes, src.row(r), out)
-        } else if rows_in[k] {
-            out.fill(0.0)
-        }
-    });
     // A row's pixels right of the region (finer detail bands) are untouched.
     for (k, flag) in nonzero[..h].iter_mut().enumerate() {
-        *flag = live[signal_row(k, h, band_order)] || (rows_in[k] && w < stride);
+        *flag = live[k] || (rows_in[k] && w < stride);
     }
     Ok(())
 }
 
+/// The horizontal pass of [`inverse_step_lanes_sparse`]: live work rows
+/// (signal order) -> data rows; dead rows are zeroed (or left alone when
+/// they already are).
+#[allow(clippy::too_many_arguments)]
+fn synthesize_live_rows(
+    filter: Filter,
+    data: &mut [f32],
+    stride: usize,
+    work: &[f32],
+    w: usize,
+    h: usize,
+    lanes: usize,
+    rows_in: &[bool],
+    live: &[bool],
+    parallel: bool,
+) {
+    let wl = w * lanes;
+    let mut dst = Rows::new(data, stride, wl, h);
+    for_each_row(&mut dst, parallel, |k, out| {
+        if live[k] {
+            synthesize_row(filter, w, lanes, &work[k * wl..][..wl], out)
+        } else if rows_in[k] {
+            out.fill(0.0)
+        }
+    });
+}
+
+/// [`inverse_step_lanes_sparse`] of a whole image (`w` pixels per row, no
+/// stride) into `out` instead of in place: `out` gets every row of the
+/// result (zero where `nonzero` comes back `false`), and `data` is left as
+/// scratch (its values afterwards are unspecified). For a lifting filter
+/// this is one pass, where the in-place step also copies its result back.
+/// `out` needs `w · h · lanes` values; the result equals the in-place
+/// step's as f32 values.
+#[allow(clippy::too_many_arguments)]
+pub fn inverse_step_lanes_sparse_into(
+    filter: Filter,
+    data: &mut [f32],
+    w: usize,
+    h: usize,
+    lanes: usize,
+    out: &mut [f32],
+    nonzero: &mut [bool],
+) -> Result<()> {
+    if lanes == 0 {
+        return Err(Error::range("interleaved lanes", lanes, "at least 1"));
+    }
+    let wl = w * lanes;
+    check_region(data, wl, wl, h, out)?;
+    if nonzero.len() < h {
+        return Err(Error::BufferTooSmall {
+            what: "nonzero row flags",
+            len: nonzero.len(),
+            need: h,
+        });
+    }
+    let (data, out) = (&mut data[..wl * h], &mut out[..wl * h]);
+    if let (Kind::Lifting(scheme), true) = (filter.kind(), h >= 2) {
+        let region = Region {
+            filter,
+            scheme,
+            w,
+            h,
+            lanes,
+            stride: wl,
+        };
+        let parallel = w * h >= PARALLEL_MIN / lanes;
+        let live = region.synthesize_strips(data, out, &nonzero[..h], parallel, true);
+        nonzero[..h].copy_from_slice(&live);
+        return Ok(());
+    }
+    out.copy_from_slice(data);
+    inverse_step_lanes_sparse(filter, out, w, w, h, lanes, data, nonzero)
+}
+
+/// Samples of a strip's window, at most (256 KiB: a core's L2 holds it).
+const STRIP_SAMPLES: usize = 1 << 16;
+
+/// A lifting region of [`inverse_step_lanes_sparse`], synthesized in
+/// horizontal strips: each strip's rows are lifted vertically in a window
+/// of their own (a few rows wider, [`lifting::inverse_rows_window`]) and
+/// synthesized horizontally while the window is in cache, into `work`; then
+/// `work` is copied back. Two passes over the region, each one parallel
+/// task set, where the row-by-row path makes one per lifting step.
+struct Region<'a> {
+    filter: Filter,
+    scheme: &'a lifting::Scheme,
+    w: usize,
+    h: usize,
+    lanes: usize,
+    /// Samples between rows of `data`.
+    stride: usize,
+}
+
+impl Region<'_> {
+    /// Rows per strip: a window within [`STRIP_SAMPLES`], and at least two
+    /// strips per thread when the region has the rows.
+    fn strip_rows(&self) -> usize {
+        let wl = self.w * self.lanes;
+        let fits = (STRIP_SAMPLES / wl).saturating_sub(2 * self.scheme.steps.len());
+        let spread = self.h.div_ceil(2 * rayon::current_num_threads());
+        fits.min(spread).max(8)
+    }
+
+    /// Every strip into `work` (compact rows of `w · lanes`, signal order);
+    /// returns which output rows may be nonzero (the others are zeroed with
+    /// `zero_dead`, else not written).
+    fn synthesize_strips(
+        &self,
+        data: &[f32],
+        work: &mut [f32],
+        rows_in: &[bool],
+        parallel: bool,
+        zero_dead: bool,
+    ) -> Vec<bool> {
+        let (wl, h) = (self.w * self.lanes, self.h);
+        let strip = self.strip_rows();
+        let mut live = vec![false; h];
+        let task = |(i, (out, live)): (usize, (&mut [f32], &mut [bool]))| {
+            WINDOW.with_borrow_mut(|(buf, flags)| {
+                let a = i * strip;
+                let rows = a..a + live.len();
+                let w0 = lifting::inverse_rows_window(
+                    self.scheme,
+                    data,
+                    self.stride,
+                    wl,
+                    h,
+                    rows_in,
+                    rows,
+                    buf,
+                    flags,
+                );
+                for (k, (o, l)) in out.chunks_exact_mut(wl).zip(live.iter_mut()).enumerate() {
+                    let r = a + k - w0;
+                    *l = flags[r];
+                    if *l {
+                        synthesize_row(self.filter, self.w, self.lanes, &buf[r * wl..][..wl], o);
+                    } else if zero_dead {
+                        o.fill(0.0);
+                    }
+                }
+            })
+        };
+        let strips = work[..wl * h]
+            .chunks_mut(strip * wl)
+            .zip(live.chunks_mut(strip));
+        if parallel {
+            let strips: Vec<_> = strips.collect();
+            strips.into_par_iter().enumerate().for_each(task);
+        } else {
+            strips.enumerate().for_each(task);
+        }
+        live
+    }
+
+    /// The synthesized rows from `work` into `data`; rows not live are
+    /// zeroed where they held values.
+    fn write_back(
+        &self,
+        data: &mut [f32],
+        work: &[f32],
+        rows_in: &[bool],
+        live: &[bool],
+        parallel: bool,
+    ) {
+        let wl = self.w * self.lanes;
+        let mut dst = Rows::new(data, self.stride, wl, self.h);
+        for_each_row(&mut dst, parallel, |k, out| {
+            if live[k] {
+                lifting::copy_scaled(out, &work[k * wl..][..wl], 1.0)
+            } else if rows_in[k] {
+                out.fill(0.0)
+            }
+        });
+    }
+}
+
 thread_local! {
+    /// A strip's window rows and flags, per thread, for [`Region`].
+    #[allow(clippy::type_complexity)]
+    static WINDOW: std::cell::RefCell<(Vec<f32>, Vec<bool>)> =
+        const { std::cell::RefCell::new((Vec::new(), Vec::new())) };
     /// One lane's row and its synthesis, per thread, for [`inverse_step_lanes`].
     static LANE_ROWS: std::cell::RefCell<Vec<f32>> = const { std::cell::RefCell::new(Vec::new()) };
 }

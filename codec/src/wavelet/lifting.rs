@@ -177,6 +177,9 @@ pub(crate) fn inverse_1d_lanes<const L: usize>(
 
 // ---- Vertical: one sample per image row, applied to whole rows ----
 
+/// `dst += c·(a + b)`. Not inlined: as a call its slices are known not to
+/// overlap, which lets it vectorize wherever it is used.
+#[inline(never)]
 fn axpy2(dst: &mut [f32], c: f32, a: &[f32], b: &[f32]) {
     for ((d, a), b) in dst.iter_mut().zip(a).zip(b) {
         *d += c * (a + b);
@@ -268,97 +271,116 @@ pub(crate) fn inverse_rows(
     }
 }
 
-/// [`inverse_rows`] skipping zero rows. On entry `live[i]` says whether
-/// band row `i` of `src` (low rows first) may be nonzero (a row marked
-/// `false` is all zero); on return it says whether row `i` of `work` (band
-/// order) was written. Rows of `work` not written hold stale values: they
-/// are zero and are read as zero here. A lifting step on a row whose two
-/// sources are both zero is skipped (it would add `±0`).
+/// The signal rows `rows` of a vertical synthesis ([`inverse_rows`]),
+/// computed in a window of rows alone: `src` holds the `h` band rows
+/// (`stride` apart, `w` used, low rows first) and `live_in` their flags (a
+/// row marked `false` is all zero and is not read). The window `[w0, w1)`
+/// (returned as `w0`) widens `rows` by one row per lifting step; `buf` gets
+/// its rows in signal order and `flags` whether each may be nonzero. A
+/// lifting step whose two sources are zero is skipped (it would add `±0`);
+/// every other row gets exactly the arithmetic of [`inverse_rows`] (and of
+/// [`inverse_1d`] down the columns), so splitting a region into windows
+/// changes no bit.
 #[allow(clippy::too_many_arguments)]
-pub(crate) fn inverse_rows_sparse(
+pub(crate) fn inverse_rows_window(
     scheme: &Scheme,
     src: &[f32],
     stride: usize,
-    work: &mut [f32],
     w: usize,
     h: usize,
-    parallel: bool,
-    live: &mut [bool],
-) {
+    live_in: &[bool],
+    rows: std::ops::Range<usize>,
+    buf: &mut Vec<f32>,
+    flags: &mut Vec<bool>,
+) -> usize {
+    let steps = scheme.steps.len();
     let ns = h.div_ceil(2);
-    let mut rows = Rows::new(&mut work[..h * w], w, w, h);
-    let flags: &[bool] = live;
-    for_each_row(&mut rows, parallel, |i, row| {
-        if flags[i] {
-            row.copy_from_slice(&src[i * stride..][..w]);
-        }
-    });
-    let (low, high) = work[..h * w].split_at_mut(ns * w);
-    let mut low = Rows::new(low, w, w, ns);
-    let mut high = Rows::new(high, w, w, h - ns);
-    let (live_low, live_high) = live[..h].split_at_mut(ns);
-    scale_live_rows(&mut low, 1.0 / scheme.low_scale, parallel, live_low);
-    scale_live_rows(&mut high, 1.0 / scheme.high_scale, parallel, live_high);
-    let zeros = vec![0.0f32; w];
-    for step in scheme.steps.iter().rev() {
-        match *step {
-            Step::Predict(c) => {
-                let sources = |i: usize| [i, (i + 1).min(ns - 1)];
-                lift_live_rows(
-                    &mut high, &low, -c, parallel, live_high, live_low, &zeros, sources,
-                )
-            }
-            Step::Update(c) => {
-                let nd = h - ns;
-                let sources = |i: usize| [i.saturating_sub(1), i.min(nd - 1)];
-                lift_live_rows(
-                    &mut low, &high, -c, parallel, live_low, live_high, &zeros, sources,
-                )
+    let (w0, w1) = (rows.start.saturating_sub(steps), (rows.end + steps).min(h));
+    gather_window(scheme, src, stride, w, ns, live_in, w0..w1, buf, flags);
+    let (last_even, last_odd) = (2 * (ns - 1), 2 * (h / 2) - 1);
+    for (t, step) in scheme.steps.iter().rev().enumerate() {
+        // Rows still needed after this step: `rows` widened by the steps left.
+        let margin = steps - 1 - t;
+        let (lo, hi) = (
+            rows.start.saturating_sub(margin),
+            (rows.end + margin).min(h),
+        );
+        let (parity, c) = match *step {
+            Step::Predict(c) => (1, -c),
+            Step::Update(c) => (0, -c),
+        };
+        for k in (lo + usize::from(lo % 2 != parity)..hi).step_by(2) {
+            let (x, y) = match parity {
+                1 => (k - 1, (k + 1).min(last_even)),
+                _ => (if k == 0 { 1 } else { k - 1 }, (k + 1).min(last_odd)),
+            };
+            if flags[x - w0] || flags[y - w0] {
+                let (row, a, b) = row_and_sources(buf, w, k - w0, x - w0, y - w0);
+                axpy2(row, c, a, b);
+                flags[k - w0] = true;
             }
         }
     }
+    w0
 }
 
-fn scale_live_rows(rows: &mut Rows, s: f32, parallel: bool, live: &[bool]) {
-    if s != 1.0 {
-        for_each_row(rows, parallel, |i, row| {
-            if live[i] {
-                row.iter_mut().for_each(|v| *v *= s)
-            }
-        });
-    }
-}
-
-/// One lifting step `dst[i] += c·(src[a] + src[b])` with `[a, b] =
-/// sources(i)`, on live rows only (dead sources read as `zeros`, a dead
-/// destination is zeroed before it is written).
+/// The band rows of the signal rows `window` into `buf` (signal order),
+/// unscaled; rows not live are written as zeros.
 #[allow(clippy::too_many_arguments)]
-fn lift_live_rows<F>(
-    dst: &mut Rows,
-    src: &Rows,
-    c: f32,
-    parallel: bool,
-    live_dst: &mut [bool],
-    live_src: &[bool],
-    zeros: &[f32],
-    sources: F,
-) where
-    F: Fn(usize) -> [usize; 2] + Sync + Send,
-{
-    let view = src.view();
-    let pick = |i: usize| if live_src[i] { view.row(i) } else { zeros };
-    let was: &[bool] = live_dst;
-    for_each_row(dst, parallel, |i, row| {
-        let [a, b] = sources(i);
-        if live_src[a] || live_src[b] {
-            if !was[i] {
-                row.fill(0.0);
-            }
-            axpy2(row, c, pick(a), pick(b));
+fn gather_window(
+    scheme: &Scheme,
+    src: &[f32],
+    stride: usize,
+    w: usize,
+    ns: usize,
+    live_in: &[bool],
+    window: std::ops::Range<usize>,
+    buf: &mut Vec<f32>,
+    flags: &mut Vec<bool>,
+) {
+    let inverse = [1.0 / scheme.low_scale, 1.0 / scheme.high_scale];
+    buf.resize(window.len() * w, 0.0);
+    flags.clear();
+    for (k, row) in window.zip(buf.chunks_exact_mut(w)) {
+        let band = if k % 2 == 0 { k / 2 } else { ns + k / 2 };
+        flags.push(live_in[band]);
+        if !live_in[band] {
+            row.fill(0.0);
+            continue;
         }
-    });
-    for (i, flag) in live_dst.iter_mut().enumerate() {
-        let [a, b] = sources(i);
-        *flag |= live_src[a] || live_src[b];
+        let from = &src[band * stride..][..w];
+        copy_scaled(row, from, inverse[k % 2]);
     }
+}
+
+/// Row `k` of `buf` (rows of `w`) mutably, with rows `x` and `y` (both not
+/// `k`) to read.
+fn row_and_sources(
+    buf: &mut [f32],
+    w: usize,
+    k: usize,
+    x: usize,
+    y: usize,
+) -> (&mut [f32], &[f32], &[f32]) {
+    let (before, rest) = buf.split_at_mut(k * w);
+    let (row, after) = rest.split_at_mut(w);
+    let (before, after) = (&*before, &*after);
+    let pick = |i: usize| {
+        if i < k {
+            &before[i * w..][..w]
+        } else {
+            &after[(i - k - 1) * w..][..w]
+        }
+    };
+    (row, pick(x), pick(y))
+}
+
+/// `dst = src·s` (bit-exact copies for `s = 1`). The factor is opaque to
+/// the optimizer, so that the loop stays a vector loop instead of becoming
+/// a `memmove` call: glibc's `rep movsb` path runs these row copies
+/// between page-aligned buffers several times slower on the AMD CPUs we
+/// measured.
+pub(crate) fn copy_scaled(dst: &mut [f32], src: &[f32], s: f32) {
+    let s = std::hint::black_box(s);
+    dst.iter_mut().zip(src).for_each(|(d, v)| *d = v * s);
 }

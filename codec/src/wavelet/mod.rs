@@ -35,7 +35,7 @@ mod periodic;
 pub use cube::{row_forward, row_inverse, row_level};
 pub use dwt2::{
     band_size, forward, forward_1d, forward_step, inverse, inverse_1d, inverse_step,
-    inverse_step_lanes, inverse_step_lanes_sparse, max_levels,
+    inverse_step_lanes, inverse_step_lanes_sparse, inverse_step_lanes_sparse_into, max_levels,
 };
 
 use std::fmt;

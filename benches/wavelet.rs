@@ -2,7 +2,9 @@
 //! a 512×512 image, in pixels per second. `rgb_inverse_256`: a relighting
 //! frame's inverse column steps (every level of a 256×256 RGB image, LeGall
 //! 5/3 and D4) as three single-plane steps per level against one step of
-//! the interleaved `[r, g, b, 0]` pixels (`inverse_step_lanes`).
+//! the interleaved `[r, g, b, 0]` pixels (`inverse_step_lanes`), and as a
+//! frame runs them (`frame_steps`: the row-skipping steps, every row live,
+//! the last into a second buffer).
 
 use criterion::{criterion_group, criterion_main, BenchmarkId, Criterion, Throughput};
 use ltm::codec::wavelet::{self, max_levels};
@@ -93,6 +95,28 @@ fn rgb_inverse(c: &mut Criterion) {
                     let (w, h) = wavelet::band_size(S, S, level);
                     wavelet::inverse_step_lanes(filter, &mut inter, S, w, h, 4, &mut work).unwrap();
                 }
+            })
+        });
+        // As a relighting frame runs them: the row-skipping steps (every row
+        // live here; lifting filters in strips), the last one into a second
+        // buffer.
+        let mut flags = vec![true; S];
+        let mut out = pixels.clone();
+        group.bench_function(BenchmarkId::new("frame_steps", filter), |b| {
+            b.iter(|| {
+                inter.copy_from_slice(&pixels);
+                flags.fill(true);
+                for level in (1..levels).rev() {
+                    let (w, h) = wavelet::band_size(S, S, level);
+                    wavelet::inverse_step_lanes_sparse(
+                        filter, &mut inter, S, w, h, 4, &mut work, &mut flags,
+                    )
+                    .unwrap();
+                }
+                wavelet::inverse_step_lanes_sparse_into(
+                    filter, &mut inter, S, S, 4, &mut out, &mut flags,
+                )
+                .unwrap();
             })
         });
     }

@@ -223,27 +223,28 @@ impl ColumnDecoder {
     }
 
     /// The last inverse step (from depth 1, whose region is the whole
-    /// image) as [`ColumnDecoder::inverse_step_lanes_sparse`], written to
-    /// `out` instead of in place; `planes` is left as scratch (see
-    /// [`wavelet::inverse_step_lanes_sparse_into`]).
+    /// image) as [`ColumnDecoder::inverse_step_lanes_sparse`]. With a
+    /// lifting column filter the result goes to `out` in one pass and
+    /// `planes` is left as scratch (see
+    /// [`wavelet::inverse_step_lanes_sparse_into`]); with the others the
+    /// step runs in place in `planes`, with `out` as its scratch. Returns
+    /// whether the result is in `out`.
     pub fn last_inverse_step_lanes_sparse(
         &self,
         planes: &mut [f32],
         lanes: usize,
         out: &mut [f32],
         nonzero: &mut [bool],
-    ) -> Result<()> {
+    ) -> Result<bool> {
+        let filter = self.meta.col_filter;
+        if !filter.is_lifting() {
+            self.inverse_step_lanes_sparse(1, planes, lanes, out, nonzero)?;
+            return Ok(false);
+        }
         let (w, bw, bh) = self.step_band(1)?;
         debug_assert_eq!(w, bw);
-        wavelet::inverse_step_lanes_sparse_into(
-            self.meta.col_filter,
-            planes,
-            bw,
-            bh,
-            lanes,
-            out,
-            nonzero,
-        )
+        wavelet::inverse_step_lanes_sparse_into(filter, planes, bw, bh, lanes, out, nonzero)?;
+        Ok(true)
     }
 
     /// Decodes channel `channel` of a column into `plane` (overwritten), in

@@ -292,15 +292,17 @@ impl Relighter {
             let ti = Instant::now();
             stats.multiply += ti - tm;
             if depth == 1 && s.work.len() == s.pixels.len() {
-                // The whole image: synthesized into `work`, which becomes
-                // the pixels (no copy back).
-                self.decoder.last_inverse_step_lanes_sparse(
+                // The whole image: with a lifting filter synthesized into
+                // `work`, which becomes the pixels (no copy back).
+                let into_work = self.decoder.last_inverse_step_lanes_sparse(
                     s.pixels.as_flattened_mut(),
                     LANES,
                     s.work.as_flattened_mut(),
                     &mut s.rows,
                 )?;
-                std::mem::swap(&mut s.pixels, &mut s.work);
+                if into_work {
+                    std::mem::swap(&mut s.pixels, &mut s.work);
+                }
             } else if depth > 0 {
                 self.decoder.inverse_step_lanes_sparse(
                     depth as u32,

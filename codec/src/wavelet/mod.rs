@@ -109,6 +109,11 @@ impl Filter {
         Filter::ALL.into_iter().find(|f| f.code() == code)
     }
 
+    /// True for the filters computed by lifting (LeGall 5/3, CDF 9/7).
+    pub fn is_lifting(self) -> bool {
+        matches!(self.kind(), Kind::Lifting(_))
+    }
+
     /// True for the energy-preserving filters (Haar, D4, D6, D8).
     pub fn is_orthonormal(self) -> bool {
         matches!(self.kind(), Kind::Periodic(_))

@@ -20,6 +20,21 @@ pub(crate) struct Scheme {
     pub high_scale: f32,
 }
 
+impl Scheme {
+    /// `(predict, update)` coefficients of a scheme of one predict step, one
+    /// update step and unit scales (LeGall 5/3), which has one-pass inverses.
+    pub(crate) fn two_step(&self) -> Option<(f32, f32)> {
+        match self.steps {
+            [Step::Predict(cp), Step::Update(cu)]
+                if self.low_scale == 1.0 && self.high_scale == 1.0 =>
+            {
+                Some((*cp, *cu))
+            }
+            _ => None,
+        }
+    }
+}
+
 /// LeGall 5/3: DC gain 1, Nyquist gain 2.
 pub(crate) static LEGALL53: Scheme = Scheme {
     steps: &[Step::Predict(-0.5), Step::Update(0.25)],
@@ -129,6 +144,9 @@ pub(crate) fn inverse_1d_lanes<const L: usize>(
     bands: &[[f32; L]],
     out: &mut [[f32; L]],
 ) {
+    if let Some((cp, cu)) = scheme.two_step() {
+        return two_step_1d_lanes(cp, cu, bands, out);
+    }
     let n = bands.len();
     let ns = n.div_ceil(2);
     let (low, high) = bands.split_at(ns);
@@ -172,6 +190,35 @@ pub(crate) fn inverse_1d_lanes<const L: usize>(
                 }
             }
         }
+    }
+}
+
+/// [`inverse_1d_lanes`] of a [`Scheme::two_step`] scheme in one sweep: each
+/// even sample `e_i = low_i − cu·(high_{i−1} + high_i)` is made once and
+/// kept for the odd sample `high_i − cp·(e_i + e_{i+1})` (mirrored at both
+/// ends as in [`inverse_1d`]): the same operations on the same values.
+fn two_step_1d_lanes<const L: usize>(cp: f32, cu: f32, bands: &[[f32; L]], out: &mut [[f32; L]]) {
+    let n = bands.len();
+    let ns = n.div_ceil(2);
+    let nd = n - ns;
+    let (low, high) = bands.split_at(ns);
+    let lift = |x: [f32; L], c: f32, a: [f32; L], b: [f32; L]| {
+        let mut x = x;
+        for ((x, a), b) in x.iter_mut().zip(a).zip(b) {
+            *x -= c * (a + b);
+        }
+        x
+    };
+    let even = |i: usize| lift(low[i], cu, high[i.saturating_sub(1)], high[i.min(nd - 1)]);
+    let mut e = even(0);
+    for (i, pair) in out[..2 * nd].chunks_exact_mut(2).enumerate() {
+        let next = if i + 1 < ns { even(i + 1) } else { e };
+        pair[0] = e;
+        pair[1] = lift(high[i], cp, e, next);
+        e = next;
+    }
+    if ns > nd {
+        out[n - 1] = e;
     }
 }
 
@@ -293,6 +340,9 @@ pub(crate) fn inverse_rows_window(
     buf: &mut Vec<f32>,
     flags: &mut Vec<bool>,
 ) -> usize {
+    if let Some((cp, cu)) = scheme.two_step() {
+        return two_step_window(cp, cu, src, stride, w, h, live_in, rows, buf, flags);
+    }
     let steps = scheme.steps.len();
     let ns = h.div_ceil(2);
     let (w0, w1) = (rows.start.saturating_sub(steps), (rows.end + steps).min(h));
@@ -383,4 +433,89 @@ fn row_and_sources(
 pub(crate) fn copy_scaled(dst: &mut [f32], src: &[f32], s: f32) {
     let s = std::hint::black_box(s);
     dst.iter_mut().zip(src).for_each(|(d, v)| *d = v * s);
+}
+
+/// [`inverse_rows_window`] for a [`Scheme::two_step`] scheme: each window
+/// row is written once, straight from the band rows (no gather): the even
+/// rows of `[start − 1, end + 1)` by the update, then the odd rows of
+/// `rows` by the predict. The same arithmetic as the general path: a row
+/// is `own + (−c)·(a + b)`, with rows that are not live read as `+0.0`, and
+/// left as it is when both sources are not live.
+#[allow(clippy::too_many_arguments)]
+fn two_step_window(
+    cp: f32,
+    cu: f32,
+    src: &[f32],
+    stride: usize,
+    w: usize,
+    h: usize,
+    live_in: &[bool],
+    rows: std::ops::Range<usize>,
+    buf: &mut Vec<f32>,
+    flags: &mut Vec<bool>,
+) -> usize {
+    let ns = h.div_ceil(2);
+    let (last_even, last_odd) = (2 * (ns - 1), 2 * (h / 2) - 1);
+    let (w0, w1) = (rows.start.saturating_sub(2), (rows.end + 2).min(h));
+    buf.resize((w1 - w0) * w, 0.0);
+    flags.clear();
+    flags.resize(w1 - w0, false);
+    let zeros = vec![0.0f32; w];
+    let band = |k: usize| {
+        if k.is_multiple_of(2) {
+            k / 2
+        } else {
+            ns + k / 2
+        }
+    };
+    let input = |k: usize| {
+        let b = band(k);
+        live_in[b].then(|| &src[b * stride..][..w])
+    };
+    // Update: even rows from the band rows.
+    let (lo, hi) = (rows.start.saturating_sub(1), (rows.end + 1).min(h));
+    for k in (lo + lo % 2..hi).step_by(2) {
+        let (x, y) = (if k == 0 { 1 } else { k - 1 }, (k + 1).min(last_odd));
+        let dst = &mut buf[(k - w0) * w..][..w];
+        let own = input(k);
+        flags[k - w0] = match (input(x), input(y)) {
+            (None, None) => {
+                copy_scaled(dst, own.unwrap_or(&zeros), 1.0);
+                own.is_some()
+            }
+            (a, b) => {
+                lift_into(
+                    dst,
+                    own.unwrap_or(&zeros),
+                    -cu,
+                    a.unwrap_or(&zeros),
+                    b.unwrap_or(&zeros),
+                );
+                true
+            }
+        };
+    }
+    // Predict: odd rows of `rows` from the even rows just made.
+    for k in (rows.start + (1 - rows.start % 2)..rows.end).step_by(2) {
+        let (x, y) = (k - 1, (k + 1).min(last_even));
+        let own = input(k);
+        let (row, a, b) = row_and_sources(buf, w, k - w0, x - w0, y - w0);
+        flags[k - w0] = if flags[x - w0] || flags[y - w0] {
+            lift_into(row, own.unwrap_or(&zeros), -cp, a, b);
+            true
+        } else {
+            copy_scaled(row, own.unwrap_or(&zeros), 1.0);
+            own.is_some()
+        };
+    }
+    w0
+}
+
+/// `dst = own + c·(a + b)`. Not inlined, so that it vectorizes (see
+/// [`axpy2`]).
+#[inline(never)]
+fn lift_into(dst: &mut [f32], own: &[f32], c: f32, a: &[f32], b: &[f32]) {
+    for (((d, o), a), b) in dst.iter_mut().zip(own).zip(a).zip(b) {
+        *d = o + c * (a + b);
+    }
 }

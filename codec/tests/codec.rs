@@ -363,6 +363,66 @@ fn target_errors_land_within_three_percent_below_the_target() {
     assert!(failures.is_empty(), "{failures:#?}");
 }
 
+/// Targets just above the quantization floor `F` of few bits (measured by
+/// keeping every coefficient at the same bits), where the floor's model
+/// can be off by a few times: a 512² 2d file asked for 1 % landed at
+/// 0.66 % before the re-coding calibrated the quantization model apart
+/// from the dropped energy. 2d files land in [0.97·E, E]; 4d and adaptive
+/// ones, whose depths and scale groups move with the threshold, never
+/// above E and not below 0.8·E (measured 0.81–1.0 here; before the change
+/// 29 of the 48 cases missed 0.97·E, now 18, none of them 2d).
+#[test]
+fn targets_near_the_quantization_floor_land_close_below_them() {
+    let dir = tempfile::tempdir().unwrap();
+    let mut failures = Vec::new();
+    for dims in [Dims::image(31, 17, 4, 3), Dims::image(24, 20, 4, 1)] {
+        let t = scene(dims);
+        let raw = write_raw(dir.path(), "f.raw", dims, &t);
+        for mode in [Mode::TwoD, Mode::FourD, Mode::Adaptive] {
+            for bits in [6, 8] {
+                let options = |target| -> CompressOptions {
+                    CodeOptions {
+                        mode,
+                        bits,
+                        target,
+                        ..Default::default()
+                    }
+                    .into()
+                };
+                let (_, all) = run(
+                    dir.path(),
+                    &raw,
+                    &options(Target::Keep(dims.pixels())),
+                    "f.ltm",
+                );
+                let floor = all.achieved_error;
+                for factor in [1.1, 1.3, 1.7, 2.5] {
+                    let target = floor * factor;
+                    let (_, stats) = run(
+                        dir.path(),
+                        &raw,
+                        &options(Target::MaxError(target)),
+                        "f.ltm",
+                    );
+                    let err = stats.achieved_error;
+                    let low = if mode == Mode::TwoD { 0.97 } else { 0.8 };
+                    if !(low * target..=target * 1.00005).contains(&err) || stats.codings > 8 {
+                        failures.push(format!(
+                            "{}x{}x{} {mode:?} {bits} bits, floor {floor:.5}, target {factor}·floor: error {:.4} of it, {} codings",
+                            dims.width(),
+                            dims.height(),
+                            dims.channels,
+                            err / target,
+                            stats.codings
+                        ));
+                    }
+                }
+            }
+        }
+    }
+    assert!(failures.is_empty(), "{failures:#?}");
+}
+
 #[test]
 fn near_lossless_at_16_bits() {
     let dir = tempfile::tempdir().unwrap();

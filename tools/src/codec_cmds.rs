@@ -218,7 +218,7 @@ pub fn compress_cmd(a: CompressArgs) -> Result<()> {
     bar.lock().expect("progress lock").0.finish_and_clear();
     let secs = start.elapsed().as_secs_f64();
     eprintln!(
-        "wrote {}: {} bytes ({:.1}x smaller than {} raw), {} bits, {} nonzeros, relative L2 error {:.5}, {:.1} s ({:.1} MB/s of raw matrix){}",
+        "wrote {}: {} bytes ({:.1}x smaller than {} raw), {} bits, {} nonzeros, relative L2 error {:.5}, {} coding{}, {:.1} s ({:.1} MB/s of raw matrix){}",
         a.output.display(),
         stats.file_bytes,
         stats.raw_bytes as f64 / stats.file_bytes as f64,
@@ -226,6 +226,8 @@ pub fn compress_cmd(a: CompressArgs) -> Result<()> {
         stats.bits,
         stats.nonzeros,
         stats.achieved_error,
+        stats.codings,
+        if stats.codings == 1 { "" } else { "s" },
         secs,
         stats.raw_bytes as f64 / 1e6 / secs,
         if stats.out_of_core { ", out of core" } else { "" }

@@ -25,9 +25,9 @@
 //!    error/τ²) is kept; the measured errors give the file's error.
 //!
 //! [`Transposed::code`] drives stages 3–5: when the measured error lands
-//! outside `[0.97·E, E]`, the plan's error estimate is calibrated by the
-//! measured error and the columns are planned and coded once more (a
-//! further re-coding only if that one exceeds E); when the bits are too few for the
+//! outside `[0.97·E, E]`, the columns are planned and coded again at the
+//! threshold the measured error calls for (at most [`MAX_CODINGS`] codings);
+//! when the bits are too few for the
 //! target and [`CodeOptions::raise_bits`] is set, it codes again with 2 more
 //! bits. [`compress`] runs the whole pipeline.
 
@@ -38,7 +38,7 @@ mod transpose;
 
 pub use analysis::{Analysis, AnalysisSettings};
 pub use code::{CodedColumns, Coder};
-pub use plan::{ErrorCurve, Plan};
+pub use plan::{Calibration, ErrorCurve, Plan};
 pub use transpose::{Transposed, MAX_NORM, MIN_NONZERO_RMS};
 
 use crate::container::{Entropy, LtmWriter, Mode, OptionalChunks};
@@ -394,10 +394,11 @@ fn code_at_bits(
 /// `err` outside the target range, or `None` to keep the coding. The
 /// second coding moves τ to where the first coding's [`ErrorCurve`] puts
 /// the error at `aim`; beyond the curve's range (or without one) the plan's
-/// estimate is calibrated by `err`. A later coding (after a second miss of
-/// the budget) shrinks the estimate's budget by the miss and lowers τ. An
-/// error below the range is kept after the second coding, and whenever
-/// the plan's estimate is 0.
+/// estimate is calibrated by `err` ([`calibration`]). The third coding
+/// follows the second coding's own curve; later ones (after a miss of the
+/// budget) follow the curve when it lowers τ, else shrink the estimate's
+/// budget by the miss and lower τ. An error below the range is kept after
+/// the third coding, and whenever the plan's estimate is 0.
 fn replan(
     a: &Analysis,
     plan: &Plan,
@@ -414,7 +415,7 @@ fn replan(
             return Plan::at_threshold(a, bits, tau_sq, &coded.depths).map(Some);
         }
         if estimate > 0.0 && err > 0.0 {
-            return Plan::calibrated(a, bits, aim, err / estimate).map(Some);
+            return Plan::calibrated(a, bits, aim, calibration(plan, err)).map(Some);
         }
         return Ok(None);
     }
@@ -423,19 +424,22 @@ fn replan(
         // floor): back to the analysis's conservative plans, free depths.
         return Plan::new(a, bits, 0.5 * aim).map(Some);
     }
-    if plan.fixed_depths() && plan.tau_sq() > 0.0 && err > 0.0 && (coding == 2 || missed) {
+    if plan.tau_sq() > 0.0 && err > 0.0 && (coding == 2 || missed) {
         // The curve of the re-coding itself, measured near the target,
-        // at the same depths: a third coding, and later ones only while
-        // the error exceeds the target.
+        // at its depths: a third coding, and later ones only while the
+        // error exceeds the target.
         let next = coded
             .curve
             .as_ref()
             .and_then(|c| c.threshold_for(err, aim - err));
         let tau_sq = match next {
-            Some(t) if !missed || t < plan.tau_sq() => t,
-            _ => plan.tau_sq() * 0.9 * aim / err,
+            Some(t) if !missed || t < plan.tau_sq() => Some(t),
+            _ if plan.fixed_depths() => Some(plan.tau_sq() * 0.9 * aim / err),
+            _ => None,
         };
-        return Plan::at_threshold(a, bits, tau_sq, &coded.depths).map(Some);
+        if let Some(tau_sq) = tau_sq {
+            return Plan::at_threshold(a, bits, tau_sq, &coded.depths).map(Some);
+        }
     }
     if !missed || plan.tau_sq() <= 0.0 || err <= 0.0 {
         return Ok(None);
@@ -445,6 +449,30 @@ fn replan(
     }
     let shrink = 0.9 * aim / err;
     Plan::below(a, bits, estimate * shrink, plan.tau_sq() * shrink).map(Some)
+}
+
+/// How a coding with `plan` that measured the squared error `err` (> 0)
+/// calibrates the plan's estimate (> 0). The dropped energy is counted
+/// from the analysis, while the quantization error is a model (which can
+/// be off by a factor of a few where few bits meet a wide range of values):
+/// when the plan's estimate is mostly quantization error, the measured
+/// error less the dropped energy calibrates the model alone; otherwise
+/// (or when that leaves too little) both parts scale by `err / estimate`.
+fn calibration(plan: &Plan, err: f64) -> Calibration {
+    let (estimate, quant) = (plan.estimated_error(), plan.estimated_quantization());
+    let dropped = estimate - quant;
+    let whole = err / estimate;
+    if quant > 0.5 * estimate && err > 2.0 * dropped {
+        Calibration {
+            dropped: 1.0,
+            quantization: ((err - dropped) / quant).clamp(0.1 * whole, 10.0 * whole),
+        }
+    } else {
+        Calibration {
+            dropped: whole,
+            quantization: whole,
+        }
+    }
 }
 
 /// What a coding measured: the total squared error, each column's depth

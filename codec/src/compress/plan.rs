@@ -39,6 +39,9 @@ pub struct Plan {
     /// The estimated total squared error at τ (threshold plans; 0 for a
     /// term count).
     estimate: f64,
+    /// The part of `estimate` that is quantization error of kept values
+    /// (modelled; the rest is the energy of dropped values, counted).
+    quantization: f64,
     /// Each column is coded at its best depth only (a re-coding that keeps
     /// the first coding's depths).
     fixed: bool,
@@ -75,7 +78,7 @@ impl Plan {
                 continue;
             }
             let (err, choice) = choose(analysis, b, q);
-            if err <= budget {
+            if err[0] <= budget {
                 return Ok(Plan::threshold(analysis, bits, tau_sq, choice, err));
             }
             fallback = Some((choice, err));
@@ -87,37 +90,43 @@ impl Plan {
         Ok(Plan::threshold(analysis, bits, 0.0, choice, err))
     }
 
-    /// The plan whose estimated error, multiplied by `ratio` (a coding's
-    /// measured error over its plan's estimate), is `budget`: the threshold
-    /// τ² is interpolated (linearly in `log τ²`) between the two bin edges
-    /// whose calibrated estimates bracket the budget, so that a second
-    /// coding lands on the target instead of on the safe bin edge below it.
-    pub fn calibrated(analysis: &Analysis, bits: u32, budget: f64, ratio: f64) -> Result<Plan> {
+    /// The plan whose estimated error, calibrated by a coding's measured
+    /// error (`ratio`: the dropped energy and the quantization error are
+    /// multiplied by their own factors), is `budget`: the threshold τ² is
+    /// interpolated (linearly in `log τ²`) between the two bin edges whose
+    /// calibrated estimates bracket the budget, so that a second coding
+    /// lands on the target instead of on the safe bin edge below it.
+    pub fn calibrated(
+        analysis: &Analysis,
+        bits: u32,
+        budget: f64,
+        ratio: Calibration,
+    ) -> Result<Plan> {
         check_plan_args(bits, budget)?;
-        if !(ratio > 0.0 && ratio.is_finite()) {
-            return Err(Error::range(
-                "error calibration ratio",
-                ratio,
-                "finite and > 0",
-            ));
+        for r in [ratio.dropped, ratio.quantization] {
+            if !(r > 0.0 && r.is_finite()) {
+                return Err(Error::range("error calibration ratio", r, "finite and > 0"));
+            }
         }
         let q = levels(bits) as f64;
         let tau0_sq = analysis.settings().tau0_sq;
-        let mut above: Option<f64> = None;
+        let mut above: Option<([f64; 2], f64)> = None;
         for b in (0..BINS).rev() {
             let (err, choice) = choose(analysis, b, q);
-            if err * ratio <= budget {
+            let cal = ratio.apply(err);
+            if cal <= budget {
                 let edge = bin_threshold(b, tau0_sq);
                 let (tau_sq, estimate) = match above {
-                    Some(hi) if hi > err => {
-                        let t = ((budget / ratio - err) / (hi - err)).clamp(0.0, 1.0);
-                        (edge * 2f64.powf(t / BINS_PER_OCTAVE), err + t * (hi - err))
+                    Some((hi, cal_hi)) if cal_hi > cal => {
+                        let t = ((budget - cal) / (cal_hi - cal)).clamp(0.0, 1.0);
+                        let mix = |k: usize| err[k] + t * (hi[k] - err[k]);
+                        (edge * 2f64.powf(t / BINS_PER_OCTAVE), [mix(0), mix(1)])
                     }
                     _ => (edge, err),
                 };
                 return Ok(Plan::threshold(analysis, bits, tau_sq, choice, estimate));
             }
-            above = Some(err);
+            above = Some((err, cal));
         }
         let (err, choice) = choose(analysis, 0, q);
         Ok(Plan::threshold(analysis, bits, 0.0, choice, err))
@@ -128,7 +137,7 @@ impl Plan {
         bits: u32,
         tau_sq: f64,
         choice: Vec<[u32; 2]>,
-        estimate: f64,
+        [estimate, quantization]: [f64; 2],
     ) -> Plan {
         Plan {
             rule: Rule::Above(tau_sq),
@@ -136,6 +145,7 @@ impl Plan {
             columns: analysis.columns(),
             choice,
             estimate,
+            quantization,
             fixed: false,
         }
     }
@@ -169,7 +179,7 @@ impl Plan {
             bits,
             tau_sq,
             depths.iter().map(|&d| [d, d]).collect(),
-            0.0,
+            [0.0, 0.0],
         );
         plan.fixed = true;
         Ok(plan)
@@ -186,6 +196,12 @@ impl Plan {
         self.estimate
     }
 
+    /// The part of [`Plan::estimated_error`] that is modelled quantization
+    /// error of the kept values (the rest is dropped energy).
+    pub fn estimated_quantization(&self) -> f64 {
+        self.quantization
+    }
+
     /// The plan of a term-count target: every column keeps its `n` largest
     /// coefficients and tries every candidate depth (the paper's rule: less
     /// error wins; on ties, fewer nonzeros).
@@ -196,6 +212,7 @@ impl Plan {
             columns: 0..usize::MAX,
             choice: Vec::new(),
             estimate: 0.0,
+            quantization: 0.0,
             fixed: false,
         }
     }
@@ -363,23 +380,24 @@ fn check_plan_args(bits: u32, budget: f64) -> Result<()> {
 
 /// At the threshold of bin `b`: the estimated total error and each column's
 /// (best, runner-up) depth by estimated cost `kept + error/τ²`.
-fn choose(analysis: &Analysis, b: usize, q: f64) -> (f64, Vec<[u32; 2]>) {
+fn choose(analysis: &Analysis, b: usize, q: f64) -> ([f64; 2], Vec<[u32; 2]>) {
     let settings = analysis.settings();
     let (depths, channels) = (settings.depths(), settings.channels as usize);
     let tau_sq = bin_threshold(b, settings.tau0_sq);
-    let mut total = 0.0;
+    let mut total = [0.0, 0.0];
     let choice = analysis
         .columns()
         .map(|j| {
-            let mut costs: Vec<(f64, f64, usize)> = (0..depths.len())
+            let mut costs: Vec<(f64, [f64; 2], usize)> = (0..depths.len())
                 .map(|di| {
                     let (counts, energies, quant) = analysis.stats(j, di);
-                    let (k, e) = estimate(counts, energies, quant, channels, q, b);
-                    (k + e / tau_sq, e, di)
+                    let (k, e, eq) = estimate_parts(counts, energies, quant, channels, q, b);
+                    (k + e / tau_sq, [e, eq], di)
                 })
                 .collect();
             costs.sort_by(|a, b| a.0.total_cmp(&b.0));
-            total += costs[0].1;
+            total[0] += costs[0].1[0];
+            total[1] += costs[0].1[1];
             let second = costs.get(1).map_or(costs[0].2, |c| c.2);
             [depths[costs[0].2], depths[second]]
         })
@@ -387,11 +405,29 @@ fn choose(analysis: &Analysis, b: usize, q: f64) -> (f64, Vec<[u32; 2]>) {
     (total, choice)
 }
 
+/// How a coding's measured error calibrates a plan's estimate: factors for
+/// the dropped energy and for the modelled quantization error.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Calibration {
+    /// Factor on the energy of the dropped values.
+    pub dropped: f64,
+    /// Factor on the modelled quantization error of the kept values.
+    pub quantization: f64,
+}
+
+impl Calibration {
+    /// The calibrated total of an estimate `[total, quantization part]`.
+    fn apply(&self, [total, quant]: [f64; 2]) -> f64 {
+        (total - quant) * self.dropped + quant * self.quantization
+    }
+}
+
 /// Estimated (kept values, squared error) of one column at one depth when
 /// the bins below `b` are dropped: `counts` and `energies` its histogram,
 /// `quant` its (Σ squared group peaks, nonzeros), `q` the quantizer's levels.
 /// `Δ` is the RMS step of the column's scale groups, `x` a bin's RMS
 /// magnitude per channel.
+#[cfg(test)]
 pub(super) fn estimate(
     counts: &[u32],
     energies: &[f64],
@@ -400,21 +436,37 @@ pub(super) fn estimate(
     q: f64,
     b: usize,
 ) -> (f64, f64) {
+    let (kept, err, _) = estimate_parts(counts, energies, quant, channels, q, b);
+    (kept, err)
+}
+
+/// [`estimate`] with the part of the error that is quantization error of
+/// kept values: (kept values, squared error, its quantization part).
+fn estimate_parts(
+    counts: &[u32],
+    energies: &[f64],
+    quant: (f64, u32),
+    channels: usize,
+    q: f64,
+    b: usize,
+) -> (f64, f64, f64) {
     let mut dropped: f64 = energies[..b].iter().sum();
     let (qsum, nonzero) = quant;
     let step = (qsum / nonzero.max(1) as f64).sqrt() / q;
-    let mut kept = 0.0;
+    let (mut kept, mut quantization) = (0.0, 0.0);
     for (&count, &energy) in counts[b..].iter().zip(&energies[b..]).filter(|x| *x.0 > 0) {
         let x = (energy / count as f64 / channels as f64).sqrt();
         match quantization_error(x, step) {
             None => dropped += energy,
             Some(per_value) => {
                 kept += count as f64;
-                dropped += count as f64 * channels as f64 * per_value;
+                let q = count as f64 * channels as f64 * per_value;
+                dropped += q;
+                quantization += q;
             }
         }
     }
-    (kept, dropped)
+    (kept, dropped, quantization)
 }
 
 /// The expected squared error of dither-quantizing a value of magnitude `x`

@@ -26,7 +26,7 @@
 //!
 //! [`Transposed::code`] drives stages 3–5: when the measured error lands
 //! outside `[0.97·E, E]`, the columns are planned and coded again at the
-//! threshold the measured error calls for (at most [`MAX_CODINGS`] codings);
+//! threshold the measured error calls for (at most 8 codings);
 //! when the bits are too few for the
 //! target and [`CodeOptions::raise_bits`] is set, it codes again with 2 more
 //! bits. [`compress`] runs the whole pipeline.

@@ -414,16 +414,25 @@ impl Relighter {
                     kernel::prefetch(arena.entries(next as usize, range.start, range.end));
                 }
                 let j = j as usize;
+                // The column's entries in this task's blocks, cut at the
+                // block boundaries (most columns of a deep group have none
+                // in most tasks).
+                let all = arena.entries(j, range.start, range.end);
+                if all.is_empty() {
+                    continue;
+                }
                 let table = &tables[table_starts[k]..][..arena.factors(j).len()];
-                for b in range.clone() {
-                    let entries = arena.entries(j, b, b + 1);
-                    if entries.is_empty() {
+                let bounds = &arena.offsets(j)[range.start..=range.end];
+                let e = channels + 1;
+                for (b, w) in bounds.windows(2).enumerate() {
+                    let (lo, hi) = ((w[0] - bounds[0]) as usize, (w[1] - bounds[0]) as usize);
+                    if lo == hi {
                         continue;
                     }
-                    let from = (b - range.start) * layout.block_pixels;
+                    let from = b * layout.block_pixels;
                     let to = (from + layout.block_pixels).min(part.len());
                     let block = &mut part[from..to];
-                    kernel.run(channels, entries, table, layout.shift, block);
+                    kernel.run(channels, &all[e * lo..e * hi], table, layout.shift, block);
                 }
             }
         });

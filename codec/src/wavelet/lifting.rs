@@ -457,10 +457,13 @@ fn two_step_window(
     let ns = h.div_ceil(2);
     let (last_even, last_odd) = (2 * (ns - 1), 2 * (h / 2) - 1);
     let (w0, w1) = (rows.start.saturating_sub(2), (rows.end + 2).min(h));
-    buf.resize((w1 - w0) * w, 0.0);
+    // The window's rows, then one row of zeros (read for rows not live).
+    buf.resize((w1 - w0 + 1) * w, 0.0);
+    let (buf, zeros) = buf.split_at_mut((w1 - w0) * w);
+    zeros.fill(0.0);
+    let zeros = &*zeros;
     flags.clear();
     flags.resize(w1 - w0, false);
-    let zeros = vec![0.0f32; w];
     let band = |k: usize| {
         if k.is_multiple_of(2) {
             k / 2
@@ -480,16 +483,16 @@ fn two_step_window(
         let own = input(k);
         flags[k - w0] = match (input(x), input(y)) {
             (None, None) => {
-                copy_scaled(dst, own.unwrap_or(&zeros), 1.0);
+                copy_scaled(dst, own.unwrap_or(zeros), 1.0);
                 own.is_some()
             }
             (a, b) => {
                 lift_into(
                     dst,
-                    own.unwrap_or(&zeros),
+                    own.unwrap_or(zeros),
                     -cu,
-                    a.unwrap_or(&zeros),
-                    b.unwrap_or(&zeros),
+                    a.unwrap_or(zeros),
+                    b.unwrap_or(zeros),
                 );
                 true
             }
@@ -501,10 +504,10 @@ fn two_step_window(
         let own = input(k);
         let (row, a, b) = row_and_sources(buf, w, k - w0, x - w0, y - w0);
         flags[k - w0] = if flags[x - w0] || flags[y - w0] {
-            lift_into(row, own.unwrap_or(&zeros), -cp, a, b);
+            lift_into(row, own.unwrap_or(zeros), -cp, a, b);
             true
         } else {
-            copy_scaled(row, own.unwrap_or(&zeros), 1.0);
+            copy_scaled(row, own.unwrap_or(zeros), 1.0);
             own.is_some()
         };
     }

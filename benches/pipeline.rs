@@ -16,6 +16,9 @@
 //!   (`EncodedColumn::new`, default level; throughput: kept coefficients);
 //! - `parse_payload`: `SparseColumn::from_payload` on the plain payload
 //!   (kept coefficients);
+//! - `range_encode/encodingE`, `range_decode/encodingE`: the range-coded
+//!   column payloads of encodings 3 and 4 (`entropy::encode`/`decode`;
+//!   kept coefficients);
 //! - `dequantize_unweight`: `ColumnDecoder::accumulate` into a cleared plane
 //!   then `unweight`, i.e. decoding without the inverse transform (image
 //!   coefficients);
@@ -27,6 +30,7 @@ mod common;
 use criterion::{criterion_group, criterion_main, BenchmarkId, Criterion, Throughput};
 use ltm::codec::compress::{compress, CodeOptions, Target};
 use ltm::codec::container::{EncodedColumn, Mode};
+use ltm::codec::entropy::{self, ColumnShape, ValueCoding};
 use ltm::codec::quant::{self, scale_groups, BandWeights};
 use ltm::codec::wavelet::{self, row_forward};
 use ltm::codec::{ColumnDecoder, Dims, Filter, Meta, RawStore, SparseColumn};
@@ -221,6 +225,22 @@ fn quantize(c: &mut Criterion) {
     g.bench_function(format!("parse_payload/nnz{nnz}"), |b| {
         b.iter(|| SparseColumn::from_payload(&payload, nnz, 1, P, BITS, DEPTH).unwrap())
     });
+    let shape = ColumnShape {
+        width: W,
+        height: H,
+        channels: 1,
+        bits: BITS,
+    };
+    for (encoding, coding) in [(3, ValueCoding::ExpGolomb), (4, ValueCoding::Classes)] {
+        let bytes = entropy::encode(&col, &shape, coding).unwrap();
+        g.bench_function(format!("range_encode/encoding{encoding}/nnz{nnz}"), |b| {
+            b.iter(|| entropy::encode(&col, &shape, coding).unwrap())
+        });
+        let id = format!("range_decode/encoding{encoding}/nnz{nnz}_{}B", bytes.len());
+        g.bench_function(id, |b| {
+            b.iter(|| entropy::decode(&bytes, nnz, &shape, DEPTH, coding).unwrap())
+        });
+    }
     g.throughput(Throughput::Elements(P as u64));
     g.bench_function(format!("dequantize_unweight/nnz{nnz}"), |b| {
         b.iter(|| {

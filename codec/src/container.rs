@@ -20,7 +20,7 @@ use crate::bytes::{Reader, Writer};
 use crate::dims::Dims;
 use crate::eigen::{PcaModel, QuantizedMatrix};
 use crate::empty::EmptyRows;
-use crate::entropy::{self, ColumnShape};
+use crate::entropy::{self, ColumnShape, ValueCoding};
 use crate::error::{Error, Result};
 use crate::limits::Limits;
 use crate::mmap;
@@ -35,11 +35,12 @@ use std::sync::Arc;
 
 /// File magic: `\x89LTM\r\n\x1a\n`.
 pub const MAGIC: [u8; 8] = *b"\x89LTM\r\n\x1a\n";
-/// Format version this build writes. It reads versions 1 to 3; version 2
+/// Format version this build writes. It reads versions 1 to 4; version 2
 /// adds the empty-row mask ([`FEATURE_EMPTY_ROWS`]) and the row layout with
 /// per-row surface data ([`FEATURE_SURFACE`]). A version-1 file has neither.
-/// Version 3 adds column encoding 3 ([`Encoding::Ranged`]).
-pub const VERSION: u32 = 3;
+/// Version 3 adds column encoding 3 ([`Encoding::Ranged`]), version 4 column
+/// encoding 4 ([`Encoding::Classed`]).
+pub const VERSION: u32 = 4;
 /// The oldest format version this build reads.
 pub const MIN_VERSION: u32 = 1;
 /// Feature flag: an RGB albedo image is stored (chunk ALBD).
@@ -51,8 +52,9 @@ pub const FEATURE_EMPTY_ROWS: u32 = 2;
 /// stored (chunk SURF).
 pub const FEATURE_SURFACE: u32 = 4;
 /// The feature flags a reader of each version knows, by version − 1.
-const KNOWN_FEATURES: [u32; 3] = [
+const KNOWN_FEATURES: [u32; VERSION as usize] = [
     FEATURE_ALBEDO,
+    FEATURE_ALBEDO | FEATURE_EMPTY_ROWS | FEATURE_SURFACE,
     FEATURE_ALBEDO | FEATURE_EMPTY_ROWS | FEATURE_SURFACE,
     FEATURE_ALBEDO | FEATURE_EMPTY_ROWS | FEATURE_SURFACE,
 ];
@@ -129,7 +131,7 @@ impl std::str::FromStr for Mode {
 #[non_exhaustive]
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub enum Entropy {
-    /// Range-coded with context modelling (encoding 3) where that is no
+    /// Range-coded with context modelling (encoding 4) where that is no
     /// larger than the plain payload: the smallest files.
     #[default]
     Range,
@@ -268,6 +270,25 @@ pub enum Encoding {
     /// Scale codes, then the coefficients range-coded with context
     /// modelling (version 3; `crate::entropy`).
     Ranged = 3,
+    /// Scale codes, then the coefficients range-coded with magnitude
+    /// classes and raw low bits (version 4; `crate::entropy`).
+    Classed = 4,
+}
+
+impl Encoding {
+    /// How a range-coded payload codes its values; `None` for the others.
+    pub fn value_coding(self) -> Option<ValueCoding> {
+        match self {
+            Encoding::Ranged => Some(ValueCoding::ExpGolomb),
+            Encoding::Classed => Some(ValueCoding::Classes),
+            _ => None,
+        }
+    }
+
+    /// Whether the payload is range-coded (encodings 3 and 4).
+    pub fn is_range_coded(self) -> bool {
+        self.value_coding().is_some()
+    }
 }
 
 /// One column's entry in the column table.
@@ -431,7 +452,7 @@ pub struct EncodedColumn {
 
 impl EncodedColumn {
     /// Encodes a column of a `width` × `height` column image quantized to
-    /// `bits` bits: with [`Entropy::Range`], range-coded (encoding 3) when
+    /// `bits` bits: with [`Entropy::Range`], range-coded (encoding 4) when
     /// that is no larger than the plain payload (zstd is then not tried: on
     /// these payloads it gains less than range coding), else (and always
     /// with [`Entropy::Zstd`]) as [`EncodedColumn::new`].
@@ -443,7 +464,7 @@ impl EncodedColumn {
     ) -> EncodedColumn {
         let nnz = col.indices.len();
         if nnz > 0 && entropy == Entropy::Range {
-            if let Some(bytes) = entropy::encode(col, shape) {
+            if let Some(bytes) = entropy::encode(col, shape, ValueCoding::Classes) {
                 if bytes.len() <= col.to_payload(shape.channels).len() {
                     let entry = ColumnEntry {
                         offset: 0,
@@ -452,7 +473,7 @@ impl EncodedColumn {
                         nnz: nnz as u32,
                         crc: crc32fast::hash(&bytes),
                         depth: col.depth as u8,
-                        encoding: Encoding::Ranged,
+                        encoding: Encoding::Classed,
                     };
                     return EncodedColumn { bytes, entry };
                 }
@@ -1158,10 +1179,12 @@ fn check_column_entry(
         1 => Encoding::Plain,
         2 => Encoding::Zstd,
         3 if version >= 3 => Encoding::Ranged,
+        4 if version >= 4 => Encoding::Classed,
         _ if version >= 3 => {
+            let top = if version >= 4 { ", 4 classed" } else { "" };
             return bad(format!(
-                "encoding {enc} (valid: 0 empty, 1 plain, 2 zstd, 3 range-coded)"
-            ))
+                "encoding {enc} in a file of version {version} (valid: 0 empty, 1 plain, 2 zstd, 3 range-coded{top})"
+            ));
         }
         _ => {
             return bad(format!(
@@ -1186,10 +1209,12 @@ fn check_column_entry(
     // per value; a range-coded one 2 bytes per scale, then its stream.
     let channels = meta.dims.channels as u64;
     let scale_bytes = 2 * (depth as u64 + 1) * channels;
-    if e.encoding == Encoding::Ranged {
-        if nnz == 0 || raw_len != stored_len || (stored_len as u64) < scale_bytes {
+    if e.encoding.is_range_coded() {
+        // Encoding 4 adds the range-coded stream's length.
+        let least = scale_bytes + 4 * u64::from(e.encoding == Encoding::Classed);
+        if nnz == 0 || raw_len != stored_len || (stored_len as u64) < least {
             return bad(format!(
-                "{nnz} nonzeros with encoding 3, stored length {stored_len} and payload length {raw_len} (valid: k ≥ 1, equal lengths ≥ {scale_bytes})"
+                "{nnz} nonzeros with encoding {enc}, stored length {stored_len} and payload length {raw_len} (valid: k ≥ 1, equal lengths ≥ {least})"
             ));
         }
         return check_payload_range(j, e, data_len);
@@ -1333,12 +1358,13 @@ pub(crate) fn read_column(
                     computed: crc,
                 });
             }
-            if e.encoding == Encoding::Ranged {
+            if let Some(coding) = e.encoding.value_coding() {
                 return entropy::decode(
                     stored,
                     e.nnz as usize,
                     &ColumnShape::of(meta),
                     e.depth as u32,
+                    coding,
                 )
                 .map_err(|err| match err {
                     Error::Corrupt { what, detail } => Error::Corrupt {

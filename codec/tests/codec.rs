@@ -181,7 +181,7 @@ fn empty_rows_decode_to_exactly_zero_in_every_mode() {
 }
 
 /// A matrix without empty rows stores no mask, and the written file is
-/// version 3 either way.
+/// version 4 either way.
 #[test]
 fn files_without_empty_rows_have_no_mask() {
     let dir = tempfile::tempdir().unwrap();
@@ -192,7 +192,7 @@ fn files_without_empty_rows_have_no_mask() {
     let raw = write_raw(dir.path(), "f.raw", dims, &t);
     let (out, _) = run(dir.path(), &raw, &CompressOptions::default(), "f.ltm");
     let bytes = std::fs::read(&out).unwrap();
-    assert_eq!(u32::from_le_bytes(bytes[8..12].try_into().unwrap()), 3);
+    assert_eq!(u32::from_le_bytes(bytes[8..12].try_into().unwrap()), 4);
     assert!(LtmFile::open(&out).unwrap().empty_rows().is_none());
 }
 
@@ -225,10 +225,29 @@ fn version_2_files_still_decode() {
     let bytes = std::fs::read(&path).unwrap();
     assert_eq!(u32::from_le_bytes(bytes[8..12].try_into().unwrap()), 2);
     let file = LtmFile::open(&path).unwrap();
-    assert!(file
-        .columns()
-        .iter()
-        .all(|c| c.encoding != ltm_codec::container::Encoding::Ranged));
+    assert!(file.columns().iter().all(|c| !c.encoding.is_range_coded()));
+    let dense = decode_matrix(&file, &Limits::default()).unwrap();
+    let err = rel_error(&dense, &golden_matrix(file.meta().dims));
+    assert!(
+        (err - file.meta().achieved_error as f64).abs() <= 1e-4 + 1e-3 * err,
+        "decoded error {err} vs recorded {}",
+        file.meta().achieved_error
+    );
+}
+
+/// A version-3 file (column encoding 3, committed as a fixture: the golden
+/// matrix at the default options) still opens and decodes to the error it
+/// recorded.
+#[test]
+fn version_3_files_still_decode() {
+    let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/fixtures/golden-v3.ltm");
+    let bytes = std::fs::read(&path).unwrap();
+    assert_eq!(u32::from_le_bytes(bytes[8..12].try_into().unwrap()), 3);
+    assert_eq!(crc32fast::hash(&bytes), GOLDEN_LTM_V3);
+    let file = LtmFile::open(&path).unwrap();
+    let encodings: Vec<_> = file.columns().iter().map(|c| c.encoding).collect();
+    assert!(encodings.contains(&ltm_codec::container::Encoding::Ranged));
+    assert!(!encodings.contains(&ltm_codec::container::Encoding::Classed));
     let dense = decode_matrix(&file, &Limits::default()).unwrap();
     let err = rel_error(&dense, &golden_matrix(file.meta().dims));
     assert!(
@@ -260,7 +279,7 @@ fn zstd_entropy_writes_no_range_coded_columns() {
         let ranged = file
             .columns()
             .iter()
-            .filter(|c| c.encoding == ltm_codec::container::Encoding::Ranged)
+            .filter(|c| c.encoding.is_range_coded())
             .count();
         assert_eq!(
             ranged == 0,
@@ -971,4 +990,7 @@ const GOLDEN_LTM_V1: u32 = 0x5832_3993;
 
 const GOLDEN_RAW: u32 = 0xf20f_83f3;
 /// The default options: adaptive, 10 bits, 1 % target.
-const GOLDEN_LTM: u32 = 0x0c2f_934d;
+const GOLDEN_LTM: u32 = 0xb548_40d3;
+/// The committed version-3 fixture `tests/fixtures/golden-v3.ltm`: the
+/// same options, written before version 4 (column encoding 3).
+const GOLDEN_LTM_V3: u32 = 0x0c2f_934d;

@@ -375,16 +375,16 @@ fn version_1_wavelet_files_still_open_and_pca_needs_version_2() {
     let w = dir.path().join("w.ltm");
     compress(&raw, &w, &CompressOptions::default(), &|_, _, _| {}).unwrap();
     let mut b = std::fs::read(&w).unwrap();
-    assert_eq!(u32::from_le_bytes(b[8..12].try_into().unwrap()), 3);
-    // A version-1 file is a version-3 wavelet file with version 1 when it
+    assert_eq!(u32::from_le_bytes(b[8..12].try_into().unwrap()), 4);
+    // A version-1 file is a version-4 wavelet file with version 1 when it
     // has no version-2 feature (an empty-row mask, surface data) and no
-    // range-coded column (version 3).
+    // range-coded column (versions 3 and 4).
     let features = u32::from_le_bytes(b[12..16].try_into().unwrap());
     let ranged = LtmFile::open(&w)
         .unwrap()
         .columns()
         .iter()
-        .any(|c| c.encoding == ltm_codec::container::Encoding::Ranged);
+        .any(|c| c.encoding.is_range_coded());
     b[8..12].copy_from_slice(&1u32.to_le_bytes());
     fix_crcs(&mut b);
     let v1 = LtmFile::from_bytes(b.clone(), &Limits::default());
@@ -398,7 +398,21 @@ fn version_1_wavelet_files_still_open_and_pca_needs_version_2() {
         let e = v1.err().unwrap().to_string();
         assert!(e.contains("version 1"), "{e}");
     }
-    b[8..12].copy_from_slice(&4u32.to_le_bytes());
+    // Encoding 4 is refused in a file that claims version 3.
+    let classed = LtmFile::open(&w)
+        .unwrap()
+        .columns()
+        .iter()
+        .any(|c| c.encoding == ltm_codec::container::Encoding::Classed);
+    assert!(classed);
+    b[8..12].copy_from_slice(&3u32.to_le_bytes());
+    fix_crcs(&mut b);
+    let e = LtmFile::from_bytes(b.clone(), &Limits::default())
+        .err()
+        .unwrap()
+        .to_string();
+    assert!(e.contains("encoding 4") && e.contains("version 3"), "{e}");
+    b[8..12].copy_from_slice(&5u32.to_le_bytes());
     fix_crcs(&mut b);
     assert!(LtmFile::from_bytes(b, &Limits::default())
         .err()

@@ -1,11 +1,11 @@
-//! Any byte string given to the range-coded column decoder (encoding 3)
-//! must give a valid column or an error, never a panic. The first 8 bytes
-//! pick the shape (width, height 1..=64, channels 1 or 3, bits 2..=16,
-//! depth, nonzero count); the rest is the payload.
+//! Any byte string given to the range-coded column decoder (encodings 3
+//! and 4) must give a valid column or an error, never a panic. The first 8
+//! bytes pick the shape (width, height 1..=64, channels 1 or 3, bits
+//! 2..=16, depth, nonzero count) and the encoding; the rest is the payload.
 #![no_main]
 
 use libfuzzer_sys::fuzz_target;
-use ltm_codec::entropy::{decode, ColumnShape};
+use ltm_codec::entropy::{decode, ColumnShape, ValueCoding};
 use ltm_codec::wavelet::max_levels;
 
 fuzz_target!(|data: &[u8]| {
@@ -21,7 +21,12 @@ fuzz_target!(|data: &[u8]| {
     };
     let depth = head[4] as u32 % (max_levels(shape.width, shape.height) + 2);
     let nnz = u16::from_le_bytes([head[5], head[6]]) as usize;
-    if let Ok(col) = decode(payload, nnz, &shape, depth) {
+    let coding = if head[7] & 1 == 0 {
+        ValueCoding::ExpGolomb
+    } else {
+        ValueCoding::Classes
+    };
+    if let Ok(col) = decode(payload, nnz, &shape, depth, coding) {
         let pixels = shape.width * shape.height;
         let max = (1i32 << (shape.bits - 1)) - 1;
         assert_eq!(col.indices.len(), nnz);

@@ -5,12 +5,14 @@ This file was written only from the specification in docs/FORMAT.md (no Rust sou
 was consulted). It checks that the specification is complete: it decodes a `.ltm`
 file of mode 2d, 4d or adaptive to the dense transport matrix exactly as
 `ltm export` writes it (float32, shape (P, M, C), or (P, M) when C = 1).
-`pca` files (mode 3) are refused.
+`pca` files (mode 3) are refused. Format versions 1 to 4 are read, with column
+encodings 0 to 4.
 
 Usage:
     python3 tools/validate/ltm_reader.py FILE.ltm [--compare EXPORT.npy] [--out OUT.npy] [--f64]
 
-Prints the shape; with --compare, the max abs difference and the relative L2
+Prints the shape, the format version and the number of columns of each
+encoding; with --compare, the max abs difference and the relative L2
 difference against an `ltm export` of the same file, and exits with status 1 if
 the relative L2 difference exceeds 1e-5 (status 2 for a file it refuses).
 
@@ -24,10 +26,15 @@ Stages (one function each):
   parse_meta          META chunk
   parse_empty_rows    EMPT chunk
   parse_column_table  COLS chunk
-  decode_payload_plain / decode_payload_range   column payload -> sparse column
-  RangeDecoder, decode_range_stream             "Encoding 3" binary coder and context walk
+  decode_payload_plain / decode_payload_range / decode_payload_range4
+                      column payload (encodings 1-2 / 3 / 4) -> sparse column
+  RangeDecoder        "The binary coder" and encoding 4's 17-symbol contexts
+  RawBitReader        encoding 4's raw bit stream
+  walk_column         bands, blocks and significance bits (encodings 3 and 4)
+  Values3 / Values4   values of a kept pixel, encoding 3 / encoding 4
+  decode_range_stream / decode_range_stream4    the walk with those values
   dequantize_column   scale codes, u = q*s/Q, division by the band weights
-  band_weights        per-band synthesis norms for the lifting filters
+  band_weights        per-band synthesis norms
   inverse_2d / inverse_1d_*                     inverse column and row transforms
   decode_matrix       the whole pipeline
 Only numpy, the standard library and (for encoding 2) `zstandard` are used.
@@ -84,7 +91,7 @@ def read_container(buf):
     if len(buf) < 28 or buf[:8] != MAGIC:
         raise FormatError("not an .ltm file (bad magic)")
     version, features, k, reserved = struct.unpack_from("<4I", buf, 8)
-    if version not in (1, 2, 3):
+    if version not in (1, 2, 3, 4):
         raise FormatError(f"unsupported format version {version}")
     if reserved != 0:
         raise FormatError("reserved header field is not 0")
@@ -178,7 +185,8 @@ def parse_column_table(cols, M, P, W, H, version):
     table = []
     for j in range(M):
         off, slen, ulen, k, ccrc, d, enc, z = struct.unpack_from("<QIIIIBBH", cols, 28 * j)
-        if z != 0 or k > P or d > full_depth(W, H) or enc > 3 or (enc == 3 and version < 3):
+        if (z != 0 or k > P or d > full_depth(W, H) or enc > 4
+                or (enc == 3 and version < 3) or (enc == 4 and version < 4)):
             raise FormatError(f"bad column table entry {j}")
         table.append(dict(off=off, slen=slen, ulen=ulen, k=k, crc=ccrc, d=d, enc=enc))
     return table
@@ -264,11 +272,14 @@ def decode_payload_plain(payload, d, C, k, Q):
 
 
 # ----------------------------------------------------------------------------
-# Encoding 3: the binary range decoder and the context walk
+# Encodings 3 and 4: the range decoder (binary and 17-symbol contexts)
 
 
 class RangeDecoder:
-    """FORMAT.md "The binary coder". Contexts are two parallel lists p, n."""
+    """FORMAT.md "The binary coder" (encoding 3) and the symbol contexts of
+    "Encoding 4". Binary contexts are two parallel lists p, n; a symbol context
+    is a list of the 18 cumulative frequencies b[0..=17] plus a count in a
+    parallel list."""
 
     def __init__(self, stream):
         self.s = stream
@@ -289,6 +300,11 @@ class RangeDecoder:
             raise FormatError("range decoder read past the end of the stream")
         return 0
 
+    def _renormalize(self):
+        while self.range < (1 << 24):
+            self.range = (self.range << 8) & 0xFFFFFFFF
+            self.code = ((self.code << 8) | self._byte()) & 0xFFFFFFFF
+
     def bit(self, P, N, c):
         p = P[c]
         bound = (self.range >> 15) * p
@@ -306,20 +322,73 @@ class RangeDecoder:
         P[c] = 31 if p < 31 else (32737 if p > 32737 else p)
         if n < 32:
             N[c] = n + 1
-        while self.range < (1 << 24):
-            self.range = (self.range << 8) & 0xFFFFFFFF
-            self.code = ((self.code << 8) | self._byte()) & 0xFFFFFFFF
+        self._renormalize()
         return bit
 
+    def symbol(self, CUM, N, c):
+        """One of 17 symbols with context c (FORMAT.md "Encoding 4", steps 1-4)."""
+        b = CUM[c]
+        r = self.range >> 15
+        s = 0
+        while s < 16 and r * b[s + 1] <= self.code:  # b is increasing
+            s += 1
+        lo = r * b[s]
+        hi = r * b[s + 1] if s < 16 else self.range
+        self.code -= lo
+        self.range = hi - lo
+        n = N[c]
+        shift = min((n + 1).bit_length(), 5)
+        for i in range(1, 17):
+            t = i if i <= s else 32751 + i
+            b[i] += (t - b[i]) >> shift  # arithmetic shift = floor division
+        if n < 32:
+            N[c] = n + 1
+        self._renormalize()
+        return s
 
-# Context table offsets within one flat list.
+
+def new_symbol_context():
+    return [1927 * s for s in range(17)] + [32768]
+
+
+class RawBitReader:
+    """FORMAT.md "Encoding 4": the raw bit stream, most significant bit first."""
+
+    def __init__(self, data):
+        self.data = data
+        self.nbits = 0
+
+    def bit(self):
+        byte = self.nbits >> 3
+        if byte >= len(self.data):
+            raise FormatError("raw bit stream exhausted")
+        b = (self.data[byte] >> (7 - (self.nbits & 7))) & 1
+        self.nbits += 1
+        return b
+
+    def finish(self):
+        if (self.nbits + 7) >> 3 != len(self.data):
+            raise FormatError(f"raw bit stream: {len(self.data) - ((self.nbits + 7) >> 3)} "
+                              "bytes unread")
+        if self.nbits & 7 and self.data[-1] & ((1 << (8 - (self.nbits & 7))) - 1):
+            raise FormatError("raw bit stream: a padding bit is set")
+
+
+# Binary context tables shared by encodings 3 and 4 (the walk), one flat list.
 CTX_BLOCK = 0                   # 48
 CTX_SIG = CTX_BLOCK + 48        # 144
-CTX_ZERO = CTX_SIG + 144        # 7
+CTX_WALK = CTX_SIG + 144
+# Encoding 3 value contexts follow the walk's.
+CTX_ZERO = CTX_WALK             # 7
 CTX_SIGN = CTX_ZERO + 7         # 7
 CTX_PREFIX = CTX_SIGN + 7       # 64 x 16
 CTX_SUFFIX = CTX_PREFIX + 64 * 16  # 16 x 16
 CTX_TOTAL = CTX_SUFFIX + 16 * 16
+# Encoding 4 binary value contexts follow the walk's; `class` (80) is a symbol table.
+CTX4_SIGN = CTX_WALK            # 7
+CTX4_TOP = CTX4_SIGN + 7        # 17 (top[2..=16] used)
+CTX4_TOTAL = CTX4_TOP + 17
+CLASS4_COUNT = 80
 
 
 def decode_value(dec, P, N, zc, sc, pc, nmax):
@@ -342,17 +411,126 @@ def bitlen(v):
     return abs(v).bit_length()
 
 
-def decode_range_stream(stream, W, H, d, C, B, k):
-    """Context walk of FORMAT.md "Encoding 3". Returns (positions, values (k, C))."""
-    Q = (1 << (B - 1)) - 1
-    dec = RangeDecoder(stream)
-    P = [16384] * CTX_TOTAL
-    N = [0] * CTX_TOTAL
+class Values3:
+    """Values of a kept pixel, FORMAT.md "Encoding 3" (prediction divides each time)."""
+
+    def __init__(self, dec, P, N, C, B, d):
+        self.dec, self.P, self.N, self.C, self.B = dec, P, N, C, B
+        self.Q = (1 << (B - 1)) - 1
+        self.Sxx = [0] * (d + 1)
+        self.Sxy = [[0] * C for _ in range(d + 1)]
+
+    def pixel(self, grp, cls, t):
+        dec, P, N, C, B, Q = self.dec, self.P, self.N, self.C, self.B, self.Q
+        Sxx, Sxy = self.Sxx, self.Sxy
+        q0 = decode_value(dec, P, N, 0, 0, cls * 4 + t, B - 2)
+        q = [q0]
+        r1 = 0
+        for c in range(1, C):
+            if Sxx[grp] == 0:
+                pi = 0
+            else:
+                pi = (2 * Sxy[grp][c] * q0 + Sxx[grp]) // (2 * Sxx[grp])
+                pi = max(-Q, min(Q, pi))
+            sigma = 0 if pi == 0 else (1 if pi > 0 else 2)
+            if c == 1:
+                z = 1 + (pi == 0)
+            else:
+                z = 3 + 2 * (pi == 0) + (r1 == 0)
+            r = decode_value(dec, P, N, z, 1 + 3 * (c - 1) + sigma,
+                             32 + 16 * (c - 1) + min(bitlen(pi), 15), B - 1)
+            if c == 1:
+                r1 = r
+            qc = pi + r
+            if abs(qc) > Q:
+                raise FormatError("decoded value out of range")
+            q.append(qc)
+        if abs(q0) > Q:
+            raise FormatError("decoded value out of range")
+        for c in range(1, C):
+            Sxy[grp][c] += q[c] * q0
+        Sxx[grp] += q0 * q0
+        return q
+
+    def finish(self):
+        pass
+
+
+class Values4:
+    """Values of a kept pixel, FORMAT.md "Encoding 4": 17-symbol magnitude classes,
+    a context-coded second bit, raw low bits, and the group's fixed-point slope."""
+
+    def __init__(self, dec, raw, P, N, C, B, d):
+        self.dec, self.raw, self.P, self.N, self.C, self.B = dec, raw, P, N, C, B
+        self.Q = (1 << (B - 1)) - 1
+        self.CUM = [new_symbol_context() for _ in range(CLASS4_COUNT)]
+        self.NS = [0] * CLASS4_COUNT
+        self.Sxx = [0] * (d + 1)
+        self.Sxy = [[0] * C for _ in range(d + 1)]
+        self.rho = [[0] * C for _ in range(d + 1)]
+
+    def value4(self, h, sc, L):
+        k = self.dec.symbol(self.CUM, self.NS, h)
+        if k == 0:
+            return 0
+        if k > L:
+            raise FormatError(f"magnitude class {k} above {L}")
+        neg = self.dec.bit(self.P, self.N, CTX4_SIGN + sc)
+        if k == 1:
+            m = 1
+        else:
+            m = 2 + self.dec.bit(self.P, self.N, CTX4_TOP + k)
+            for _ in range(k - 2):
+                m = 2 * m + self.raw.bit()
+        return -m if neg else m
+
+    def pixel(self, grp, cls, t):
+        C, B, Q = self.C, self.B, self.Q
+        q0 = self.value4(cls * 4 + t, 0, B - 1)
+        if abs(q0) > Q:
+            raise FormatError("decoded value out of range")
+        q = [q0]
+        r1 = 0
+        for c in range(1, C):
+            pi = (q0 * self.rho[grp][c] + (1 << 15)) >> 16  # floor division by 2^16
+            pi = max(-Q, min(Q, pi))
+            sigma = 0 if pi == 0 else (1 if pi > 0 else 2)
+            ell = min(bitlen(pi), 15)
+            if c == 1:
+                h = 32 + ell
+            else:
+                h = 64 + ell if r1 == 0 else 48 + ell
+            r = self.value4(h, 1 + 3 * (c - 1) + sigma, B)
+            if c == 1:
+                r1 = r
+            qc = pi + r
+            if abs(qc) > Q:
+                raise FormatError("decoded value out of range")
+            q.append(qc)
+        Sxx, Sxy = self.Sxx, self.Sxy
+        for c in range(1, C):
+            Sxy[grp][c] += q[c] * q0
+        Sxx[grp] += q0 * q0
+        for c in range(1, C):
+            if Sxx[grp] == 0:
+                rho = 0
+            else:
+                rho = ((1 << 17) * Sxy[grp][c] + Sxx[grp]) // (2 * Sxx[grp])
+                rho = max(-(1 << 20), min(1 << 20, rho))
+            self.rho[grp][c] = rho
+        return q
+
+    def finish(self):
+        self.raw.finish()
+
+
+def walk_column(dec, P, N, W, H, d, C, k, values):
+    """Bands, scan order, parents, block flags and significance bits (FORMAT.md
+    "Encoding 3", shared by encoding 4); `values.pixel(group, class, t)` decodes
+    the values of each kept pixel. Returns (positions, values (k, C))."""
     mag = [0] * (W * H)
-    positions, values = [], []
+    positions, out = [], []
     left = k
-    Sxx = [0] * (d + 1)
-    Sxy = [[0] * C for _ in range(d + 1)]
     blist = bands(W, H, d)
     # parent of each band: index into blist and shift
     parent = [None]
@@ -418,51 +596,43 @@ def decode_range_stream(stream, W, H, d, C, B, k):
                         if not kept:
                             continue
                         any_kept = True
-                        # values of a kept pixel
+                        # values of a kept pixel; t buckets the left + upper mag classes
                         s = nb(u - 1, v) + nb(u, v - 1)
                         t = 0 if s == 0 else (1 if s <= 3 else (2 if s <= 7 else 3))
-                        q0 = decode_value(dec, P, N, 0, 0, cls * 4 + t, B - 2)
-                        q = [q0]
-                        r1 = 0
-                        for c in range(1, C):
-                            if Sxx[grp] == 0:
-                                pi = 0
-                            else:
-                                pi = (2 * Sxy[grp][c] * q0 + Sxx[grp]) // (2 * Sxx[grp])
-                                pi = max(-Q, min(Q, pi))
-                            sigma = 0 if pi == 0 else (1 if pi > 0 else 2)
-                            if c == 1:
-                                z = 1 + (pi == 0)
-                            else:
-                                z = 3 + 2 * (pi == 0) + (r1 == 0)
-                            r = decode_value(dec, P, N, z, 1 + 3 * (c - 1) + sigma,
-                                             32 + 16 * (c - 1) + min(bitlen(pi), 15), B - 1)
-                            if c == 1:
-                                r1 = r
-                            qc = pi + r
-                            if abs(qc) > Q:
-                                raise FormatError("decoded value out of range")
-                            q.append(qc)
-                        if abs(q0) > Q:
-                            raise FormatError("decoded value out of range")
-                        for c in range(1, C):
-                            Sxy[grp][c] += q[c] * q0
-                        Sxx[grp] += q0 * q0
+                        q = values.pixel(grp, cls, t)
                         i = (y0 + v) * W + x0 + u
                         L = max(bitlen(x) for x in q)
                         mag[i] = min(max(1, L), 15)
                         positions.append(i)
-                        values.append(q)
+                        out.append(q)
                         left -= 1
                         if left == 0:
                             break
     if left != 0:
         raise FormatError("range-coded column ended before all positions were found")
-    if dec.pos != len(stream):
-        raise FormatError(f"range-coded column: {len(stream) - dec.pos} stream bytes unread")
+    if dec.pos != len(dec.s):
+        raise FormatError(f"range-coded column: {len(dec.s) - dec.pos} stream bytes unread")
+    values.finish()
     order = np.argsort(positions, kind="stable")
     return (np.asarray(positions, np.int64)[order],
-            np.asarray(values, np.int64).reshape(k, C)[order])
+            np.asarray(out, np.int64).reshape(k, C)[order])
+
+
+def decode_range_stream(stream, W, H, d, C, B, k):
+    """FORMAT.md "Encoding 3": the walk with encoding 3's values."""
+    dec = RangeDecoder(stream)
+    P = [16384] * CTX_TOTAL
+    N = [0] * CTX_TOTAL
+    return walk_column(dec, P, N, W, H, d, C, k, Values3(dec, P, N, C, B, d))
+
+
+def decode_range_stream4(stream, raw, W, H, d, C, B, k):
+    """FORMAT.md "Encoding 4": the same walk, values as classes + raw low bits."""
+    dec = RangeDecoder(stream)
+    P = [16384] * CTX4_TOTAL
+    N = [0] * CTX4_TOTAL
+    values = Values4(dec, RawBitReader(raw), P, N, C, B, d)
+    return walk_column(dec, P, N, W, H, d, C, k, values)
 
 
 def decode_payload_range(payload, W, H, d, C, B, k):
@@ -474,12 +644,31 @@ def decode_payload_range(payload, W, H, d, C, B, k):
     return codes, positions, values
 
 
+def decode_payload_range4(payload, W, H, d, C, B, k):
+    """Encoding 4: scale codes, u32 R, R bytes of range-coded stream, raw bits."""
+    ns = (d + 1) * C
+    if len(payload) < 2 * ns + 4:
+        raise FormatError("encoding-4 payload shorter than its scale codes and length")
+    codes = np.frombuffer(payload, "<u2", ns, 0).reshape(d + 1, C)
+    R, = struct.unpack_from("<I", payload, 2 * ns)
+    start = 2 * ns + 4
+    if R > len(payload) - start:
+        raise FormatError("encoding-4 range-coded stream longer than the payload")
+    stream, raw = payload[start:start + R], payload[start + R:]
+    positions, values = decode_range_stream4(stream, raw, W, H, d, C, B, k)
+    return codes, positions, values
+
+
 # ----------------------------------------------------------------------------
 # Inverse transforms
 
 
-def inverse_1d_periodic(x, n, lo):
-    """Inverse 1D step along axis 0 of x[:n], in place, in x's precision."""
+def inverse_1d_periodic(x, n, lo, along_x):
+    """Inverse 1D step along axis 0 of x[:n], in place, in x's precision.
+
+    FORMAT.md "Inverse transforms": along y each x[k] adds its terms in tap order
+    j = 0..F-1; along x the terms are added for o = 0..m/2-1, within each o for
+    j = 0..F-1 (the two orders differ in f32 where the period wraps around)."""
     F = len(lo)
     hi = [(-1) ** (j + 1) * lo[F - 1 - j] for j in range(F)]
     lo = [x.dtype.type(t) for t in lo]
@@ -490,22 +679,31 @@ def inverse_1d_periodic(x, n, lo):
     m = n - (n & 1)
     h = m // 2
     out = np.zeros_like(x[:n])
-    o = np.arange(h)
-    for j in range(F):
-        idx = (2 * o + F // 2 - j) % m
-        out[idx] += lo[j] * low[:h] + hi[j] * high[:h]
+    if along_x:
+        for o in range(h):
+            for j in range(F):
+                out[(2 * o + F // 2 - j) % m] += lo[j] * low[o] + hi[j] * high[o]
+    else:
+        o = np.arange(h)
+        for j in range(F):
+            idx = (2 * o + F // 2 - j) % m  # distinct for distinct o
+            out[idx] += lo[j] * low[:h] + hi[j] * high[:h]
     if n & 1:
         out[n - 1] = low[(n - 1) // 2]
     x[:n] = out
 
 
-def inverse_1d_lifting(x, n, filt):
+def inverse_1d_lifting(x, n, filt, along_x):
     steps, low_scale, high_scale = LIFTING[filt]
     t = x.dtype.type  # constants rounded to the working precision (f32 in ltm)
     nl = (n + 1) // 2
     y = np.empty_like(x[:n])
-    y[0::2] = x[:nl] / t(low_scale)
-    y[1::2] = x[nl:n] / t(high_scale)
+    if along_x:  # the row pass divides by the scales
+        y[0::2] = x[:nl] / t(low_scale)
+        y[1::2] = x[nl:n] / t(high_scale)
+    else:  # the column pass multiplies by their reciprocals rounded to f32
+        y[0::2] = x[:nl] * t(1.0 / t(low_scale))
+        y[1::2] = x[nl:n] * t(1.0 / t(high_scale))
     e = (n - 1) if (n - 1) % 2 == 0 else n - 2  # last even index
     o = (n - 1) if (n - 1) % 2 == 1 else n - 2  # last odd index
     for kind, c in reversed(steps):
@@ -520,11 +718,11 @@ def inverse_1d_lifting(x, n, filt):
     x[:n] = y
 
 
-def inverse_1d(x, n, filt):
+def inverse_1d(x, n, filt, along_x):
     if filt in LIFTING:
-        inverse_1d_lifting(x, n, filt)
+        inverse_1d_lifting(x, n, filt, along_x)
     else:
-        inverse_1d_periodic(x, n, DEC_LO[filt])
+        inverse_1d_periodic(x, n, DEC_LO[filt], along_x)
 
 
 def inverse_2d(img, levels, filt):
@@ -533,10 +731,10 @@ def inverse_2d(img, levels, filt):
     for k in range(levels - 1, -1, -1):
         w, h = band_size(W, H, k)
         if h >= 2:  # every column of the region
-            inverse_1d(img[:h, :w], h, filt)
+            inverse_1d(img[:h, :w], h, filt, False)
         if w >= 2:  # every row of the region
             region = np.swapaxes(img[:h, :w], 0, 1)  # a view: (w, h, ...)
-            inverse_1d(region, w, filt)
+            inverse_1d(region, w, filt, True)
     return img
 
 
@@ -547,7 +745,7 @@ _weight_cache = {}
 
 
 def band_weights(W, H, d, filt, dt):
-    """w_d per position (H*W,), FORMAT.md "Band weights".
+    """w_d per position (H*W,), FORMAT.md "Band weights", for every filter.
 
     In f32 the sum of squares is accumulated sequentially in raster order, which
     reproduces ltm's weights bit for bit on the test files."""
@@ -555,7 +753,7 @@ def band_weights(W, H, d, filt, dt):
     if key in _weight_cache:
         return _weight_cache[key]
     w = np.ones((H, W), dt)
-    if d > 0 and filt in LIFTING:
+    if d > 0:  # every filter: ~1 for the orthonormal ones, and ltm uses that value
         for x0, x1, y0, y1, _g, _orient in bands(W, H, d):
             if x0 >= x1 or y0 >= y1:
                 continue
@@ -594,7 +792,9 @@ def dequantize_column(codes, positions, values, W, H, d, C, B, filt, dt):
 # The pipeline
 
 
-def decode_matrix(path, verbose=False, dt=np.float32):
+def decode_matrix(path, verbose=False, dt=np.float32, info=None):
+    """Decode the file to T; `info` (a dict), if given, receives the format version,
+    the META fields and the number of columns of each encoding."""
     buf = open(path, "rb").read()
     chunks, version, features = read_container(buf)
     meta = parse_meta(chunks[b"META"])
@@ -604,6 +804,10 @@ def decode_matrix(path, verbose=False, dt=np.float32):
     empty = parse_empty_rows(chunks[b"EMPT"], P) if b"EMPT" in chunks else None
     table = parse_column_table(chunks[b"COLS"], M, P, W, H, version)
     data = chunks[b"DATA"]
+    if info is not None:
+        info.update(meta, version=version, features=features,
+                    encodings={e: sum(1 for t in table if t["enc"] == e)
+                               for e in sorted({t["enc"] for t in table})})
     if verbose:
         print(f"version {version}, features {features}, W={W} H={H} n={n} C={C} B={B} "
               f"mode={meta['mode']} rows={FILTER_NAMES[meta['row_filter']]} "
@@ -631,6 +835,10 @@ def decode_matrix(path, verbose=False, dt=np.float32):
             if k < 1 or ent["slen"] != ent["ulen"]:
                 raise FormatError(f"column {j}: bad encoding-3 entry")
             codes, positions, values = decode_payload_range(payload, W, H, d, C, B, k)
+        elif enc == 4:
+            if k < 1 or ent["slen"] != ent["ulen"]:
+                raise FormatError(f"column {j}: bad encoding-4 entry")
+            codes, positions, values = decode_payload_range4(payload, W, H, d, C, B, k)
         else:
             codes, positions, values = decode_payload_plain(payload, d, C, k, Q)
         if len(positions) and (positions[-1] >= P or positions[0] < 0):
@@ -668,12 +876,15 @@ def main(argv=None):
                     help="compute in float64 (default: float32, as ltm does)")
     ap.add_argument("-v", "--verbose", action="store_true")
     args = ap.parse_args(argv)
+    info = {}
     try:
-        T = decode_matrix(args.file, args.verbose, np.float64 if args.f64 else np.float32)
+        T = decode_matrix(args.file, args.verbose, np.float64 if args.f64 else np.float32, info)
     except FormatError as e:
         print(f"{args.file}: {e}", file=sys.stderr)
         return 2
     print("shape", T.shape)
+    print(f"format version {info['version']}, columns by encoding "
+          + ", ".join(f"{e}: {c}" for e, c in info["encodings"].items()))
     if args.out:
         np.save(args.out, T)
     if args.compare:

@@ -1,13 +1,18 @@
-//! Column encoding 3: a column's sparse coefficients range-coded with
-//! context modelling. The bands of the column image are visited coarse to
-//! fine, each in 4 × 4 blocks: a block flag says whether the block holds a
-//! kept coefficient, then each of its pixels a significance bit, then each
-//! kept pixel its channels' values (zero flag, sign, exp-Golomb magnitude).
-//! Contexts come from the band's level, the already coded neighbours and
-//! the parent in the next coarser band. docs/FORMAT.md ("Encoding 3") is
-//! the specification.
+//! Column encodings 3 and 4: a column's sparse coefficients range-coded
+//! with context modelling. The bands of the column image are visited coarse
+//! to fine, each in 4 × 4 blocks: a block flag says whether the block holds
+//! a kept coefficient, then each of its pixels a significance bit, then
+//! each kept pixel its channels' values. Encoding 3 codes a value as a zero
+//! flag, a sign and an exp-Golomb magnitude, every bit modelled; encoding 4
+//! as one 17-symbol magnitude class, a sign, the bit below the leading one
+//! modelled and the rest raw, in a bit stream of their own: a third of the
+//! arithmetic per value, for a payload about as small. Contexts come from
+//! the band's level, the already coded neighbours and the parent in the
+//! next coarser band. docs/FORMAT.md ("Encoding 3", "Encoding 4") is the
+//! specification.
 
-use super::range::{Context, Decoder, Encoder};
+use super::bits::{BitReader, BitWriter};
+use super::range::{Cdf, Context, Decoder, Encoder};
 use crate::container::SparseColumn;
 use crate::error::{Error, Result};
 use crate::wavelet::{band_size, max_levels};
@@ -116,35 +121,82 @@ fn bit_length(m: u32) -> u32 {
     32 - m.leading_zeros()
 }
 
-/// Reads or writes one bit: the encoder codes the bit given, the decoder
-/// returns the bit decoded.
+/// How a column's values are coded: the column encodings 3 and 4.
+#[non_exhaustive]
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum ValueCoding {
+    /// Encoding 3: zero flag, sign, exp-Golomb magnitude, every bit
+    /// modelled.
+    ExpGolomb,
+    /// Encoding 4: a 17-symbol magnitude class, a sign, one modelled bit
+    /// below the leading one and the rest raw.
+    Classes,
+}
+
+/// Reads or writes symbols: the encoder codes the symbol given, the
+/// decoder returns the symbol decoded.
 trait BitIo {
     /// True for the encoder (which knows the bits).
     const ENCODES: bool;
     fn bit(&mut self, ctx: &mut Context, bit: bool) -> bool;
-    /// Whether the decoder read past the stream's end (it then stops).
+    /// A symbol of 0..=16.
+    fn symbol(&mut self, cdf: &mut Cdf, s: usize) -> usize;
+    /// `n` raw bits (the low `n` bits of `value` when encoding).
+    fn raw(&mut self, n: u32, value: u32) -> u32;
+    /// Whether the decoder read past a stream's end (it then stops).
     fn overrun(&self) -> bool {
         false
     }
 }
 
-impl BitIo for Encoder {
+/// The encoder's two streams.
+#[derive(Default)]
+struct Writer {
+    range: Encoder,
+    raw: BitWriter,
+}
+
+impl BitIo for Writer {
     const ENCODES: bool = true;
     #[inline(always)]
     fn bit(&mut self, ctx: &mut Context, bit: bool) -> bool {
-        Encoder::bit(self, ctx, bit);
+        self.range.bit(ctx, bit);
         bit
+    }
+    #[inline(always)]
+    fn symbol(&mut self, cdf: &mut Cdf, s: usize) -> usize {
+        self.range.symbol(cdf, s);
+        s
+    }
+    #[inline(always)]
+    fn raw(&mut self, n: u32, value: u32) -> u32 {
+        self.raw.put(n, value);
+        value
     }
 }
 
-impl BitIo for Decoder<'_> {
+/// The decoder's two streams.
+struct Reader<'a> {
+    range: Decoder<'a>,
+    raw: BitReader<'a>,
+}
+
+impl BitIo for Reader<'_> {
     const ENCODES: bool = false;
     #[inline(always)]
     fn bit(&mut self, ctx: &mut Context, _bit: bool) -> bool {
-        Decoder::bit(self, ctx)
+        self.range.bit(ctx)
+    }
+    #[inline(always)]
+    fn symbol(&mut self, cdf: &mut Cdf, _s: usize) -> usize {
+        self.range.symbol(cdf)
+    }
+    #[inline(always)]
+    fn raw(&mut self, n: u32, _value: u32) -> u32 {
+        self.raw.get(n)
     }
     fn overrun(&self) -> bool {
-        Decoder::overrun(self)
+        self.range.overrun() || self.raw.overrun()
     }
 }
 
@@ -164,7 +216,15 @@ struct Model {
     prefix: [[Context; 16]; MAG_CONTEXTS],
     /// Exp-Golomb suffix: prefix length × bit position.
     suffix: [[Context; 16]; 16],
+    /// Encoding 4's magnitude classes: the prefix contexts' 64, then 16
+    /// more for channel 2 after a zero residual of channel 1.
+    class: [Cdf; CLASS_CONTEXTS],
+    /// Encoding 4's bit below the leading one, by bit length (2..=16).
+    top: [Context; 17],
 }
+
+/// Encoding 4's magnitude-class contexts.
+const CLASS_CONTEXTS: usize = MAG_CONTEXTS + 16;
 
 /// Scale groups a column has at most (depth ≤ 15).
 const MAX_GROUPS: usize = 16;
@@ -183,6 +243,8 @@ impl Model {
             sign: [c; 7],
             prefix: [[c; 16]; MAG_CONTEXTS],
             suffix: [[c; 16]; 16],
+            class: [Cdf::default(); CLASS_CONTEXTS],
+            top: [c; 17],
         })
     }
 }
@@ -199,6 +261,7 @@ where
     io: &'a mut IO,
     truth: T,
     shape: ColumnShape,
+    coding: ValueCoding,
     model: Box<Model>,
     /// Per pixel: 0 if not kept, else the largest channel bit length
     /// (capped at 15).
@@ -211,6 +274,9 @@ where
     /// positions coded so far.
     sxx: [i64; MAX_GROUPS],
     sxy: [[i64; 2]; MAX_GROUPS],
+    /// Encoding 4: per scale group, the ratios `Sxy/Sxx` in units of
+    /// 2^−16 as of the last position (see [`ratio`]).
+    ratio: [[i64; 2]; MAX_GROUPS],
     found: F,
 }
 
@@ -319,16 +385,17 @@ where
 
     fn sig_context(&self, band: &Band, u: usize, v: usize) -> usize {
         let r = &band.rect;
-        let on = |du: isize, dv: isize| -> usize {
-            let (x, y) = (u as isize + du, v as isize + dv);
-            if x < 0 || y < 0 || x as usize >= r.w {
-                0
-            } else {
-                usize::from(self.mag_at(r, x as usize, y as usize) > 0)
-            }
-        };
-        let near = on(-1, 0) + on(0, -1);
-        let diag = on(-1, -1) + on(1, -1);
+        let w = self.shape.width;
+        let at = (r.y0 + v) * w + r.x0 + u;
+        let on = |i: usize| usize::from(self.mag[i] > 0);
+        let (left, right) = (u > 0, u + 1 < r.w);
+        let mut near = if left { on(at - 1) } else { 0 };
+        let mut diag = 0;
+        if v > 0 {
+            let above = at - w;
+            near += on(above);
+            diag = if left { on(above - 1) } else { 0 } + if right { on(above + 1) } else { 0 };
+        }
         let parent = usize::from(self.parent_mag(band, u, v) > 0);
         ((band.class * 3 + near) * 3 + diag) * 2 + parent
     }
@@ -354,12 +421,20 @@ where
         };
         let max = (1i32 << (self.shape.bits - 1)) - 1;
         let mut out = [0i32; MAX_CHANNELS];
-        let q0 = self.value(0, 0, band.class * 4 + bucket, self.shape.bits - 2, truth[0])?;
+        let ctx0 = band.class * 4 + bucket;
+        let q0 = match self.coding {
+            ValueCoding::ExpGolomb => self.value(0, 0, ctx0, self.shape.bits - 2, truth[0])?,
+            _ => self.classed(ctx0, 0, self.shape.bits - 1, truth[0])?,
+        };
         out[0] = q0;
         let mut widest = bit_length(q0.unsigned_abs());
         let mut prev_zero = false;
         for c in 1..self.shape.channels {
-            let pred = self.predict(band.group, c, q0, max);
+            let pred = match self.coding {
+                ValueCoding::ExpGolomb => self.predict(band.group, c, q0, max),
+                _ => ((q0 as i64 * self.ratio[band.group][c - 1] + (1 << 15)) >> 16)
+                    .clamp(-max as i64, max as i64) as i32,
+            };
             let zero_ctx = if c == 1 {
                 1 + usize::from(pred == 0)
             } else {
@@ -368,13 +443,19 @@ where
             let sign_ctx = 1 + (c - 1) * 3 + pred.signum().rem_euclid(3) as usize;
             let len = bit_length(pred.unsigned_abs()).min(15) as usize;
             let mag_ctx = CLASSES * 4 + (c - 1) * 16 + len;
-            let res = self.value(
-                zero_ctx,
-                sign_ctx,
-                mag_ctx,
-                self.shape.bits - 1,
-                truth[c] - pred,
-            )?;
+            let res = match self.coding {
+                ValueCoding::ExpGolomb => self.value(
+                    zero_ctx,
+                    sign_ctx,
+                    mag_ctx,
+                    self.shape.bits - 1,
+                    truth[c] - pred,
+                )?,
+                _ => {
+                    let class_ctx = mag_ctx + if c == 2 && prev_zero { 16 } else { 0 };
+                    self.classed(class_ctx, sign_ctx, self.shape.bits, truth[c] - pred)?
+                }
+            };
             let q = pred + res;
             if q.abs() > max {
                 return Err(Error::corrupt(
@@ -388,7 +469,13 @@ where
             let g = band.group;
             self.sxy[g][c - 1] += q as i64 * q0 as i64;
         }
-        self.sxx[band.group] += q0 as i64 * q0 as i64;
+        let g = band.group;
+        self.sxx[g] += q0 as i64 * q0 as i64;
+        if self.coding != ValueCoding::ExpGolomb {
+            for c in 1..self.shape.channels {
+                self.ratio[g][c - 1] = ratio(self.sxy[g][c - 1], self.sxx[g]);
+            }
+        }
         let pixel = (r.y0 + v) * self.shape.width + r.x0 + u;
         self.mag[pixel] = (widest as u8).clamp(1, MAX_MAG);
         Ok(out)
@@ -431,6 +518,43 @@ where
         Ok(if negative { -m } else { m })
     }
 
+    /// Codes a value as encoding 4 does: its magnitude class (bit length,
+    /// at most `max_len`), the sign of a nonzero one, the bit below the
+    /// leading one modelled, then the lower bits raw.
+    fn classed(
+        &mut self,
+        class_ctx: usize,
+        sign_ctx: usize,
+        max_len: u32,
+        want: i32,
+    ) -> Result<i32> {
+        let want_m = want.unsigned_abs();
+        let len = self.io.symbol(
+            &mut self.model.class[class_ctx],
+            bit_length(want_m) as usize,
+        ) as u32;
+        if len == 0 {
+            return Ok(0);
+        }
+        if len > max_len {
+            return Err(Error::corrupt(
+                "column payload",
+                format!("magnitude class {len} (valid: 0..={max_len})"),
+            ));
+        }
+        let negative = self.io.bit(&mut self.model.sign[sign_ctx], want < 0);
+        let mut m = 1u32;
+        if len >= 2 {
+            let top = self.io.bit(
+                &mut self.model.top[len as usize],
+                want_m >> (len - 2) & 1 == 1,
+            );
+            let low = len - 2;
+            m = (2 | u32::from(top)) << low | self.io.raw(low, want_m & ((1 << low) - 1));
+        }
+        Ok(if negative { -(m as i32) } else { m as i32 })
+    }
+
     /// Codes a magnitude `m ≥ 1` below `2^(max_n + 1)`: its bit length
     /// minus one `n` in unary (no terminator at `n = max_n`), then its `n`
     /// bits below the leading one, most significant first.
@@ -458,6 +582,25 @@ where
     }
 }
 
+/// Encoding 4's prediction ratio `⌊(2^17·sxy + sxx) / (2·sxx)⌋` (`sxy/sxx`
+/// rounded, in units of 2^−16; 0 for `sxx = 0`) within `±2^20`. It is
+/// computed once a position is done, so that the next position's
+/// prediction is a product: the division is off the decoder's path.
+fn ratio(sxy: i64, sxx: i64) -> i64 {
+    if sxx == 0 {
+        return 0;
+    }
+    // i64 when it cannot overflow (the usual case), else i128: the same
+    // exact value.
+    const LIMIT: i64 = 1 << 20;
+    if sxy.unsigned_abs() < 1 << 45 && sxx < 1 << 60 {
+        ((sxy << 17) + sxx).div_euclid(2 * sxx).clamp(-LIMIT, LIMIT)
+    } else {
+        let r = (((sxy as i128) << 17) + sxx as i128).div_euclid(2 * sxx as i128);
+        r.clamp(-LIMIT as i128, LIMIT as i128) as i64
+    }
+}
+
 /// Checks that the coder can represent `col`: at most 3 channels, every
 /// magnitude below `2^(bits − 1)`, positions inside the image, a depth
 /// the image has.
@@ -477,9 +620,11 @@ fn representable(col: &SparseColumn, shape: &ColumnShape) -> bool {
 }
 
 /// Encodes a column: its scale codes (2 bytes each, little-endian), then
-/// the range-coded stream. `None` when the column cannot be represented
-/// (see [`representable`]); the caller then stores it otherwise.
-pub fn encode(col: &SparseColumn, shape: &ColumnShape) -> Option<Vec<u8>> {
+/// the range-coded stream (encoding 3), or the range-coded stream's length
+/// (`u32`, little-endian), the stream and the raw bit stream (encoding 4).
+/// `None` when the column cannot be represented (see [`representable`]);
+/// the caller then stores it otherwise.
+pub fn encode(col: &SparseColumn, shape: &ColumnShape, coding: ValueCoding) -> Option<Vec<u8>> {
     if !representable(col, shape) {
         return None;
     }
@@ -496,17 +641,19 @@ pub fn encode(col: &SparseColumn, shape: &ColumnShape) -> Option<Vec<u8>> {
             v
         })
     };
-    let mut enc = Encoder::new();
+    let mut enc = Writer::default();
     let mut walk = Walk {
         io: &mut enc,
         truth,
         shape: *shape,
+        coding,
         model: Model::new(),
         mag: vec![0; shape.width * shape.height],
         blocks: Vec::new(),
         left: col.indices.len(),
         sxx: [0; MAX_GROUPS],
         sxy: [[0; 2]; MAX_GROUPS],
+        ratio: [[0; 2]; MAX_GROUPS],
         found: |_, _| {},
     };
     walk.run(col.depth).ok()?;
@@ -517,13 +664,25 @@ pub fn encode(col: &SparseColumn, shape: &ColumnShape) -> Option<Vec<u8>> {
     for e in &col.scale_codes {
         out.extend_from_slice(&e.to_le_bytes());
     }
-    out.extend_from_slice(&enc.finish());
+    let range = enc.range.finish();
+    if coding == ValueCoding::ExpGolomb {
+        out.extend_from_slice(&range);
+    } else {
+        out.extend_from_slice(&u32::try_from(range.len()).ok()?.to_le_bytes());
+        out.extend_from_slice(&range);
+        out.extend_from_slice(&enc.raw.finish());
+    }
     Some(out)
 }
 
-/// Decodes a column of `nnz` kept positions at `depth` from `bytes`. The
-/// caller has checked `nnz` against the image's pixel count.
-pub fn decode(bytes: &[u8], nnz: usize, shape: &ColumnShape, depth: u32) -> Result<SparseColumn> {
+/// Decodes a column of `nnz` kept positions at `depth` from `bytes`.
+pub fn decode(
+    bytes: &[u8],
+    nnz: usize,
+    shape: &ColumnShape,
+    depth: u32,
+    coding: ValueCoding,
+) -> Result<SparseColumn> {
     let c = shape.channels;
     if !(1..=MAX_CHANNELS).contains(&c) || !(2..=16).contains(&shape.bits) {
         return Err(Error::range("channels", c, "1..=3"));
@@ -554,7 +713,14 @@ pub fn decode(bytes: &[u8], nnz: usize, shape: &ColumnShape, depth: u32) -> Resu
         .chunks_exact(2)
         .map(|b| u16::from_le_bytes([b[0], b[1]]))
         .collect();
-    let mut dec = Decoder::new(stream)?;
+    let (range, raw) = match coding {
+        ValueCoding::ExpGolomb => (stream, &[][..]),
+        _ => split_streams(stream)?,
+    };
+    let mut dec = Reader {
+        range: Decoder::new(range)?,
+        raw: BitReader::new(raw),
+    };
     // Values in coding order, and each kept pixel's place among them.
     let mut order: Vec<[i32; MAX_CHANNELS]> = Vec::with_capacity(nnz);
     let mut slot = vec![0u32; pixels];
@@ -562,12 +728,14 @@ pub fn decode(bytes: &[u8], nnz: usize, shape: &ColumnShape, depth: u32) -> Resu
         io: &mut dec,
         truth: |_| None,
         shape: *shape,
+        coding,
         model: Model::new(),
         mag: vec![0; pixels],
         blocks: Vec::new(),
         left: nnz,
         sxx: [0; MAX_GROUPS],
         sxy: [[0; 2]; MAX_GROUPS],
+        ratio: [[0; 2]; MAX_GROUPS],
         found: |pixel: usize, v| {
             slot[pixel] = order.len() as u32;
             order.push(v);
@@ -581,7 +749,8 @@ pub fn decode(bytes: &[u8], nnz: usize, shape: &ColumnShape, depth: u32) -> Resu
             format!("{} of {nnz} nonzeros found", nnz - left),
         ));
     }
-    dec.finish()?;
+    dec.range.finish()?;
+    dec.raw.finish()?;
     let mut col = SparseColumn {
         depth,
         scale_codes,
@@ -604,6 +773,27 @@ pub fn decode(bytes: &[u8], nnz: usize, shape: &ColumnShape, depth: u32) -> Resu
         }
     }
     Ok(col)
+}
+
+/// Encoding 4's range-coded and raw streams, after the scale codes.
+fn split_streams(stream: &[u8]) -> Result<(&[u8], &[u8])> {
+    let Some((len, rest)) = stream.split_first_chunk::<4>() else {
+        return Err(Error::corrupt(
+            "column payload",
+            format!("{} bytes after the scale codes (valid: ≥ 4)", stream.len()),
+        ));
+    };
+    let len = u32::from_le_bytes(*len) as usize;
+    if len > rest.len() {
+        return Err(Error::corrupt(
+            "column payload",
+            format!(
+                "range-coded stream of {len} bytes (valid: 0..={})",
+                rest.len()
+            ),
+        ));
+    }
+    Ok(rest.split_at(len))
 }
 
 #[cfg(test)]
@@ -660,6 +850,10 @@ mod tests {
         (col, shape)
     }
 
+    fn codings() -> impl Strategy<Value = ValueCoding> {
+        prop::sample::select(vec![ValueCoding::ExpGolomb, ValueCoding::Classes])
+    }
+
     fn shapes() -> impl Strategy<Value = (usize, usize, usize, u32)> {
         (
             1usize..40,
@@ -671,25 +865,25 @@ mod tests {
 
     proptest! {
         #[test]
-        fn columns_round_trip(shape in shapes(), d in 0u32..8, density in 0.0f64..1.0, seed in any::<u64>()) {
+        fn columns_round_trip(shape in shapes(), d in 0u32..8, density in 0.0f64..1.0, seed in any::<u64>(), coding in codings()) {
             let (col, shape) = column(shape, d, density, seed);
-            let bytes = encode(&col, &shape).unwrap();
-            let back = decode(&bytes, col.indices.len(), &shape, col.depth).unwrap();
+            let bytes = encode(&col, &shape, coding).unwrap();
+            let back = decode(&bytes, col.indices.len(), &shape, col.depth, coding).unwrap();
             prop_assert_eq!(back, col);
         }
 
         #[test]
-        fn truncated_or_altered_payloads_fail_cleanly(shape in shapes(), d in 0u32..8, density in 0.01f64..0.5, seed in any::<u64>(), cut in any::<prop::sample::Index>(), flip in any::<prop::sample::Index>()) {
+        fn truncated_or_altered_payloads_fail_cleanly(shape in shapes(), d in 0u32..8, density in 0.01f64..0.5, seed in any::<u64>(), cut in any::<prop::sample::Index>(), flip in any::<prop::sample::Index>(), coding in codings()) {
             let (col, shape) = column(shape, d, density, seed);
-            let bytes = encode(&col, &shape).unwrap();
+            let bytes = encode(&col, &shape, coding).unwrap();
             let n = col.indices.len();
-            let _ = decode(&bytes[..cut.index(bytes.len() + 1)], n, &shape, col.depth);
+            let _ = decode(&bytes[..cut.index(bytes.len() + 1)], n, &shape, col.depth, coding);
             let mut altered = bytes.clone();
             if !altered.is_empty() {
                 let k = flip.index(altered.len());
                 altered[k] ^= 0x5A;
             }
-            if let Ok(back) = decode(&altered, n, &shape, col.depth) {
+            if let Ok(back) = decode(&altered, n, &shape, col.depth, coding) {
                 // Whatever decodes is a valid column of the shape.
                 prop_assert_eq!(back.indices.len(), n);
                 prop_assert!(back.indices.windows(2).all(|p| p[0] < p[1]));
@@ -700,23 +894,52 @@ mod tests {
         }
 
         #[test]
-        fn random_bytes_never_panic(bytes in prop::collection::vec(any::<u8>(), 0..200), shape in shapes(), d in 0u32..8, nnz in 0usize..2000) {
+        fn random_bytes_never_panic(bytes in prop::collection::vec(any::<u8>(), 0..200), shape in shapes(), d in 0u32..8, nnz in 0usize..2000, coding in codings()) {
             let depth = d % (max_levels(shape.0, shape.1) + 1);
             let shape = ColumnShape { width: shape.0, height: shape.1, channels: shape.2, bits: shape.3 };
-            let _ = decode(&bytes, nnz, &shape, depth);
+            let _ = decode(&bytes, nnz, &shape, depth, coding);
         }
     }
 
     #[test]
     fn a_wrong_count_is_an_error() {
         let (col, shape) = column((32, 24, 3, 12), 3, 0.1, 7);
-        let bytes = encode(&col, &shape).unwrap();
+        for coding in [ValueCoding::ExpGolomb, ValueCoding::Classes] {
+            let bytes = encode(&col, &shape, coding).unwrap();
+            let n = col.indices.len();
+            assert!(decode(&bytes, n + 1, &shape, 3, coding).is_err());
+            assert!(decode(&bytes, shape.width * shape.height + 1, &shape, 3, coding).is_err());
+            // Shorter than its scale codes; far too short for its nonzeros.
+            assert!(decode(&bytes[..4 * 3 * 2 - 1], n, &shape, 3, coding).is_err());
+            assert!(decode(&bytes[..4 * 3 * 2 + 2], n, &shape, 3, coding).is_err());
+        }
+    }
+
+    /// Encoding 4 codes the same column in fewer range-coded symbols than
+    /// encoding 3, at about its size, and refuses a stream length that
+    /// does not fit the payload.
+    #[test]
+    fn classes_code_the_same_column_about_as_small() {
+        let (col, shape) = column((64, 48, 3, 12), 4, 0.2, 11);
+        let v3 = encode(&col, &shape, ValueCoding::ExpGolomb).unwrap();
+        let v4 = encode(&col, &shape, ValueCoding::Classes).unwrap();
+        let ratio = v4.len() as f64 / v3.len() as f64;
+        assert!(
+            (0.9..1.05).contains(&ratio),
+            "{} vs {} bytes",
+            v4.len(),
+            v3.len()
+        );
+        let scales = 5 * 3 * 2;
+        let mut bad = v4.clone();
+        let len = u32::from_le_bytes(bad[scales..scales + 4].try_into().unwrap());
+        bad[scales..scales + 4].copy_from_slice(&(len + (v4.len() - scales) as u32).to_le_bytes());
         let n = col.indices.len();
-        assert!(decode(&bytes, n + 1, &shape, 3).is_err());
-        assert!(decode(&bytes, shape.width * shape.height + 1, &shape, 3).is_err());
-        // Shorter than its scale codes; far too short for its nonzeros.
-        assert!(decode(&bytes[..4 * 3 * 2 - 1], n, &shape, 3).is_err());
-        assert!(decode(&bytes[..4 * 3 * 2 + 2], n, &shape, 3).is_err());
+        assert!(decode(&bad, n, &shape, 4, ValueCoding::Classes).is_err());
+        // A payload of one encoding read as the other fails or decodes
+        // something else; it never panics.
+        let _ = decode(&v3, n, &shape, 4, ValueCoding::Classes);
+        let _ = decode(&v4, n, &shape, 4, ValueCoding::ExpGolomb);
     }
 
     #[test]
@@ -733,8 +956,42 @@ mod tests {
             indices: vec![3],
             values: vec![0],
         };
-        let bytes = encode(&col, &shape).unwrap();
-        assert_eq!(decode(&bytes, 1, &shape, 0).unwrap(), col);
+        for coding in [ValueCoding::ExpGolomb, ValueCoding::Classes] {
+            let bytes = encode(&col, &shape, coding).unwrap();
+            assert_eq!(decode(&bytes, 1, &shape, 0, coding).unwrap(), col);
+        }
+    }
+
+    /// The ratio's 64-bit path gives the exact value at the edges where it
+    /// hands over to the 128-bit one.
+    #[test]
+    fn ratio_is_exact_at_the_edges_of_its_fast_path() {
+        let exact = |sxy: i64, sxx: i64| -> i64 {
+            if sxx == 0 {
+                return 0;
+            }
+            let num = sxy as i128 * (1 << 17) + sxx as i128;
+            num.div_euclid(2 * sxx as i128).clamp(-(1 << 20), 1 << 20) as i64
+        };
+        let edges = [
+            0,
+            1,
+            7,
+            12_345,
+            (1 << 45) - 1,
+            1 << 45,
+            1 << 50,
+            i64::MAX >> 2,
+        ];
+        for &a in &edges {
+            for sxy in [a, -a] {
+                for sxx in [1, 2, 3, 1000, 1 << 31, (1 << 60) - 1, 1 << 60, 1 << 61] {
+                    assert_eq!(ratio(sxy, sxx), exact(sxy, sxx), "{sxy} / {sxx}");
+                }
+            }
+        }
+        assert_eq!(ratio(3, 4), 49_152);
+        assert_eq!(ratio(-1, 3), -21_845);
     }
 
     #[test]

@@ -1,11 +1,13 @@
-//! Context-modelled entropy coding of column payloads (column encoding 3,
-//! `.ltm` version 3): an adaptive binary range coder ([`range`]) and the
-//! column model that drives it ([`column`]).
+//! Context-modelled entropy coding of column payloads (column encodings 3
+//! and 4, `.ltm` versions 3 and 4): an adaptive range coder ([`range`]),
+//! encoding 4's raw bit stream ([`bits`]) and the column model that drives
+//! them ([`column`]).
 
+mod bits;
 mod column;
 pub mod range;
 
-pub use column::{decode, encode, ColumnShape};
+pub use column::{decode, encode, ColumnShape, ValueCoding};
 
 use crate::container::Meta;
 

@@ -1,7 +1,9 @@
-//! An adaptive binary range coder: 32-bit range, byte-wise output with
-//! carry propagation, 15-bit probabilities whose adaptation rate slows from
-//! 1/2 to 1/32 as a context sees more bits. docs/FORMAT.md ("Encoding 3")
-//! gives the exact arithmetic; this is the reference.
+//! An adaptive range coder: 32-bit range, byte-wise output with carry
+//! propagation. Binary contexts hold 15-bit probabilities whose adaptation
+//! rate slows from 1/2 to 1/32 as a context sees more bits; 17-symbol
+//! contexts ([`Cdf`], encoding 4) hold 15-bit cumulative frequencies that
+//! adapt the same way. docs/FORMAT.md ("Encoding 3", "Encoding 4") gives
+//! the exact arithmetic; this is the reference.
 
 use crate::error::{Error, Result};
 
@@ -87,6 +89,99 @@ impl Context {
     }
 }
 
+/// Symbols of a [`Cdf`]: 0..=16.
+pub const SYMBOLS: usize = 17;
+/// The part of the total a [`Cdf`] adapts: every symbol keeps at least
+/// 1/2^15 of it on top.
+const CDF_FREE: i32 = PROB_ONE as i32 - SYMBOLS as i32;
+/// One adaptive 17-symbol context: cumulative frequencies `b[s]` (the
+/// total below symbol `s`, in units of 2^−15) with `b[0] = 0`,
+/// `b[17] = 2^15` and `b[s + 1] − b[s] ≥ 1`, and a count of the symbols
+/// seen (capped). It stores `b[1..=16]`, which all fit an `i16`.
+#[derive(Clone, Copy, Debug)]
+#[repr(C, align(32))]
+pub struct Cdf {
+    inner: [i16; SYMBOLS - 1],
+    n: u16,
+}
+
+/// `1, 2, …, 16`: the symbol index of each stored frequency.
+const INDEX: [i16; SYMBOLS - 1] = {
+    let mut t = [0i16; SYMBOLS - 1];
+    let mut k = 0;
+    while k < SYMBOLS - 1 {
+        t[k] = k as i16 + 1;
+        k += 1;
+    }
+    t
+};
+
+impl Default for Cdf {
+    /// Every symbol about equally likely: `b[s] = s·⌊2^15/17⌋`.
+    fn default() -> Cdf {
+        Cdf {
+            inner: INDEX.map(|i| i * (PROB_ONE / SYMBOLS as u32) as i16),
+            n: 0,
+        }
+    }
+}
+
+impl Cdf {
+    /// `b[s]`, `s = 0..=17`.
+    #[cfg(test)]
+    fn b(&self, s: usize) -> u32 {
+        match s {
+            0 => 0,
+            SYMBOLS => PROB_ONE,
+            _ => self.inner[s - 1] as u32,
+        }
+    }
+
+    /// The symbol whose scaled interval holds `t` (`≤ 2^15 − 1`): how many
+    /// of `b[1..=16]` are at most `t`.
+    #[inline(always)]
+    fn find(&self, t: i16) -> usize {
+        // Lane-wise, so that it compiles to vector compares.
+        let mut count = [0i16; SYMBOLS - 1];
+        for (c, &b) in count.iter_mut().zip(&self.inner) {
+            *c = i16::from(b <= t);
+        }
+        count.iter().sum::<i16>() as usize
+    }
+
+    /// Moves the frequencies towards symbol `s`: every `b[i]` (i = 1..=16)
+    /// by `⌊(target − b[i]) / 2^shift⌋` (floor division) towards `i` if
+    /// `i ≤ s`, else towards `2^15 − 17 + i`, with `shift` as a binary
+    /// [`Context`]'s: `min(1 + ⌊log2(n + 1)⌋, 5)`.
+    #[inline(always)]
+    fn update(&mut self, s: usize) {
+        let shift = SHIFTS[self.n as usize];
+        let s = s as i16;
+        for (b, &i) in self.inner.iter_mut().zip(&INDEX) {
+            let target = if i <= s { i } else { CDF_FREE as i16 + i };
+            *b += (target - *b) >> shift;
+        }
+        self.n += u16::from(self.n < (1 << MAX_SHIFT));
+    }
+
+    /// The bounds `[lo, hi)` of symbol `s` in a `range`.
+    #[inline(always)]
+    fn interval(&self, range: u32, s: usize) -> (u32, u32) {
+        let r = range >> PROB_BITS;
+        let lo = if s == 0 {
+            0
+        } else {
+            r * self.inner[s - 1] as u32
+        };
+        let hi = if s + 1 == SYMBOLS {
+            range
+        } else {
+            r * self.inner[s] as u32
+        };
+        (lo, hi)
+    }
+}
+
 /// Writes bits under adaptive contexts.
 pub struct Encoder {
     low: u64,
@@ -128,6 +223,19 @@ impl Encoder {
             self.range = bound;
         }
         ctx.update(bit);
+        while self.range < TOP {
+            self.range <<= 8;
+            self.shift_low();
+        }
+    }
+
+    /// Codes symbol `s` (0..=16) with `cdf`, then adapts `cdf`.
+    #[inline]
+    pub fn symbol(&mut self, cdf: &mut Cdf, s: usize) {
+        let (lo, hi) = cdf.interval(self.range, s);
+        self.low += lo as u64;
+        self.range = hi - lo;
+        cdf.update(s);
         while self.range < TOP {
             self.range <<= 8;
             self.shift_low();
@@ -254,6 +362,23 @@ impl<'a> Decoder<'a> {
         bit
     }
 
+    /// Decodes a symbol coded with `cdf`, then adapts `cdf`.
+    #[inline(always)]
+    pub fn symbol(&mut self, cdf: &mut Cdf) -> usize {
+        // `code < range`, so the quotient is below 2^15 + 2^15/r.
+        let t = (self.code / (self.range >> PROB_BITS)).min(PROB_ONE - 1);
+        let s = cdf.find(t as i16);
+        let (lo, hi) = cdf.interval(self.range, s);
+        self.code -= lo;
+        self.range = hi - lo;
+        cdf.update(s);
+        while self.range < TOP {
+            self.range <<= 8;
+            self.code = (self.code << 8) | self.next_byte() as u32;
+        }
+        s
+    }
+
     /// Checks that the stream was read to its end: no byte left unread,
     /// no more than [`MAX_OVERRUN`] read past it.
     pub fn finish(&self) -> Result<()> {
@@ -341,6 +466,94 @@ mod tests {
         fn arbitrary_input_never_panics(bytes in prop::collection::vec(any::<u8>(), 0..64), n in 0usize..2000) {
             let _ = decode(&bytes, &vec![0; n], 1);
         }
+    }
+
+    /// Symbols and bits mixed in one stream, the symbols' contexts driven
+    /// to skewed distributions.
+    fn mixed(items: &[(bool, usize)]) -> (Vec<u8>, Vec<usize>) {
+        let (mut cdfs, mut bits) = ([Cdf::default(); 3], [Context::default(); 2]);
+        let mut e = Encoder::new();
+        for (k, &(is_symbol, v)) in items.iter().enumerate() {
+            if is_symbol {
+                e.symbol(&mut cdfs[k % 3], v);
+            } else {
+                e.bit(&mut bits[k % 2], v == 1);
+            }
+        }
+        let bytes = e.finish();
+        let (mut cdfs, mut bits) = ([Cdf::default(); 3], [Context::default(); 2]);
+        let mut d = Decoder::new(&bytes).unwrap();
+        let back = items
+            .iter()
+            .enumerate()
+            .map(|(k, &(is_symbol, _))| {
+                if is_symbol {
+                    d.symbol(&mut cdfs[k % 3])
+                } else {
+                    usize::from(d.bit(&mut bits[k % 2]))
+                }
+            })
+            .collect();
+        d.finish().unwrap();
+        (bytes, back)
+    }
+
+    proptest! {
+        #[test]
+        fn symbols_round_trip(items in prop::collection::vec((any::<bool>(), 0usize..SYMBOLS), 0..3000)) {
+            let items: Vec<(bool, usize)> = items.into_iter().map(|(s, v)| (s, if s { v } else { v % 2 })).collect();
+            let (_, back) = mixed(&items);
+            prop_assert_eq!(back, items.iter().map(|i| i.1).collect::<Vec<_>>());
+        }
+
+        #[test]
+        fn skewed_symbols_round_trip(n in 0usize..20000, top in 1usize..SYMBOLS, seed in any::<u64>()) {
+            // One symbol most of the time, the rarest ones now and then:
+            // frequencies pinned at their floor of 1.
+            let mut s = seed | 1;
+            let items: Vec<(bool, usize)> = (0..n).map(|_| {
+                s ^= s << 13; s ^= s >> 7; s ^= s << 17;
+                (true, if s % 997 == 0 { (s >> 20) as usize % SYMBOLS } else { top })
+            }).collect();
+            let (_, back) = mixed(&items);
+            prop_assert_eq!(back, items.iter().map(|i| i.1).collect::<Vec<_>>());
+        }
+    }
+
+    /// Every state a [`Cdf`] reaches keeps its invariant: `b[0] = 0`,
+    /// `b[17] = 2^15`, every symbol at least 1 wide.
+    #[test]
+    fn cdf_updates_keep_every_symbol_codable() {
+        let mut s = 12345u64;
+        for rare in 0..SYMBOLS {
+            let mut cdf = Cdf::default();
+            for k in 0..5000 {
+                s ^= s << 13;
+                s ^= s >> 7;
+                s ^= s << 17;
+                let sym = if k % 500 == 499 {
+                    (s % 17) as usize
+                } else {
+                    rare
+                };
+                cdf.update(sym);
+                assert!((0..SYMBOLS).all(|s| cdf.b(s + 1) > cdf.b(s)), "{cdf:?}");
+            }
+            // A long run drives the symbol towards its largest share (one
+            // other symbol at the end takes 1/32 of it back).
+            let width = cdf.b(rare + 1) - cdf.b(rare);
+            assert!(width > PROB_ONE * 95 / 100, "{rare}: {width}");
+        }
+    }
+
+    #[test]
+    fn skewed_symbols_cost_little() {
+        // Symbol 5 with p = 0.99, else 6: entropy 0.081 bit per symbol.
+        let items: Vec<(bool, usize)> = (0..10000)
+            .map(|i| (true, if i % 100 == 0 { 6 } else { 5 }))
+            .collect();
+        let (bytes, _) = mixed(&items);
+        assert!(bytes.len() < 180, "{} bytes", bytes.len());
     }
 
     #[test]

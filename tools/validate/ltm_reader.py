@@ -16,10 +16,10 @@ encoding; with --compare, the max abs difference and the relative L2
 difference against an `ltm export` of the same file, and exits with status 1 if
 the relative L2 difference exceeds 1e-5 (status 2 for a file it refuses).
 
-By default the dequantization and inverse transforms run in float32, which
-reproduces `ltm export` bit for bit on most test files; --f64 computes in
-float64 (differences of float32 rounding only). Encodings 1 and 2 and
-one-channel files follow the spec but were not covered by the test files.
+By default the dequantization and inverse transforms run in float32, in the
+operation order FORMAT.md gives, which reproduces `ltm export` bit for bit on
+every test file (tools/validate/README.md); --f64 computes in float64
+(differences of float32 rounding only).
 
 Stages (one function each):
   read_container      header, chunk directory, CRCs
@@ -778,8 +778,8 @@ def scales_from_codes(codes, dt):
 def dequantize_column(codes, positions, values, W, H, d, C, B, filt, dt):
     """Column image coefficients v (H*W, C), before the inverse column transform.
 
-    FORMAT.md writes v = u / w; ltm evidently multiplies by the reciprocal 1/w
-    (identical in f64 up to rounding; in f32 only this matches bit for bit)."""
+    v = u * (1/w), the reciprocal rounded to the working precision, as FORMAT.md
+    "Decoding a column" step 2 says (in f32 only this matches bit for bit)."""
     Q = (1 << (B - 1)) - 1
     s = scales_from_codes(codes, dt)                  # (d+1, C)
     g = group_map(W, H, d)[positions]                 # (k,)

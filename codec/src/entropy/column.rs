@@ -5,8 +5,8 @@
 //! each kept pixel its channels' values. Encoding 3 codes a value as a zero
 //! flag, a sign and an exp-Golomb magnitude, every bit modelled; encoding 4
 //! as one 17-symbol magnitude class, a sign, the bit below the leading one
-//! modelled and the rest raw, in a bit stream of their own: a third of the
-//! arithmetic per value, for a payload about as small. Contexts come from
+//! modelled and the rest raw, in a bit stream of their own: about a third
+//! of the range coder's steps per value, for a payload about as small. Contexts come from
 //! the band's level, the already coded neighbours and the parent in the
 //! next coarser band. docs/FORMAT.md ("Encoding 3", "Encoding 4") is the
 //! specification.

@@ -990,7 +990,7 @@ const GOLDEN_LTM_V1: u32 = 0x5832_3993;
 
 const GOLDEN_RAW: u32 = 0xf20f_83f3;
 /// The default options: adaptive, 10 bits, 1 % target.
-const GOLDEN_LTM: u32 = 0xb548_40d3;
+const GOLDEN_LTM: u32 = 0xd11d_24af;
 /// The committed version-3 fixture `tests/fixtures/golden-v3.ltm`: the
 /// same options, written before version 4 (column encoding 3).
 const GOLDEN_LTM_V3: u32 = 0x0c2f_934d;

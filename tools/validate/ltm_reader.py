@@ -387,7 +387,8 @@ CTX_TOTAL = CTX_SUFFIX + 16 * 16
 # Encoding 4 binary value contexts follow the walk's; `class` (80) is a symbol table.
 CTX4_SIGN = CTX_WALK            # 7
 CTX4_TOP = CTX4_SIGN + 7        # 17 (top[2..=16] used)
-CTX4_TOTAL = CTX4_TOP + 17
+CTX4_SECOND = CTX4_TOP + 17     # 17 x 2 (second[3..=16][0..=1] used)
+CTX4_TOTAL = CTX4_SECOND + 17 * 2
 CLASS4_COUNT = 80
 
 
@@ -458,7 +459,7 @@ class Values3:
 
 class Values4:
     """Values of a kept pixel, FORMAT.md "Encoding 4": 17-symbol magnitude classes,
-    a context-coded second bit, raw low bits, and the group's fixed-point slope."""
+    two context-coded bits below the leading one, raw low bits, and the group's fixed-point slope."""
 
     def __init__(self, dec, raw, P, N, C, B, d):
         self.dec, self.raw, self.P, self.N, self.C, self.B = dec, raw, P, N, C, B
@@ -479,9 +480,12 @@ class Values4:
         if k == 1:
             m = 1
         else:
-            m = 2 + self.dec.bit(self.P, self.N, CTX4_TOP + k)
-            for _ in range(k - 2):
-                m = 2 * m + self.raw.bit()
+            u = self.dec.bit(self.P, self.N, CTX4_TOP + k)
+            m = 2 + u
+            if k >= 3:
+                m = 2 * m + self.dec.bit(self.P, self.N, CTX4_SECOND + 2 * k + u)
+                for _ in range(k - 3):
+                    m = 2 * m + self.raw.bit()
         return -m if neg else m
 
     def pixel(self, grp, cls, t):

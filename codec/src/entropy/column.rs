@@ -221,6 +221,9 @@ struct Model {
     class: [Cdf; CLASS_CONTEXTS],
     /// Encoding 4's bit below the leading one, by bit length (2..=16).
     top: [Context; 17],
+    /// Encoding 4's second bit below the leading one, by bit length and
+    /// the first.
+    second: [[Context; 2]; 17],
 }
 
 /// Encoding 4's magnitude-class contexts.
@@ -245,6 +248,7 @@ impl Model {
             suffix: [[c; 16]; 16],
             class: [Cdf::default(); CLASS_CONTEXTS],
             top: [c; 17],
+            second: [[c; 2]; 17],
         })
     }
 }
@@ -549,8 +553,16 @@ where
                 &mut self.model.top[len as usize],
                 want_m >> (len - 2) & 1 == 1,
             );
-            let low = len - 2;
-            m = (2 | u32::from(top)) << low | self.io.raw(low, want_m & ((1 << low) - 1));
+            m = 2 | u32::from(top);
+            if len >= 3 {
+                let second = self.io.bit(
+                    &mut self.model.second[len as usize][top as usize],
+                    want_m >> (len - 3) & 1 == 1,
+                );
+                m = m << 1 | u32::from(second);
+                let low = len - 3;
+                m = m << low | self.io.raw(low, want_m & ((1 << low) - 1));
+            }
         }
         Ok(if negative { -(m as i32) } else { m as i32 })
     }

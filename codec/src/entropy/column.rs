@@ -4,9 +4,10 @@
 //! a kept coefficient, then each of its pixels a significance bit, then
 //! each kept pixel its channels' values. Encoding 3 codes a value as a zero
 //! flag, a sign and an exp-Golomb magnitude, every bit modelled; encoding 4
-//! as one 17-symbol magnitude class, a sign, the bit below the leading one
-//! modelled and the rest raw, in a bit stream of their own: about a third
-//! of the range coder's steps per value, for a payload about as small. Contexts come from
+//! as one 17-symbol magnitude class, a sign, the two bits below the leading
+//! one modelled and the rest raw, in a bit stream of their own: about a
+//! third of the range coder's steps per value, for a payload about as
+//! small. Contexts come from
 //! the band's level, the already coded neighbours and the parent in the
 //! next coarser band. docs/FORMAT.md ("Encoding 3", "Encoding 4") is the
 //! specification.
@@ -128,7 +129,7 @@ pub enum ValueCoding {
     /// Encoding 3: zero flag, sign, exp-Golomb magnitude, every bit
     /// modelled.
     ExpGolomb,
-    /// Encoding 4: a 17-symbol magnitude class, a sign, one modelled bit
+    /// Encoding 4: a 17-symbol magnitude class, a sign, two modelled bits
     /// below the leading one and the rest raw.
     Classes,
 }
@@ -523,8 +524,8 @@ where
     }
 
     /// Codes a value as encoding 4 does: its magnitude class (bit length,
-    /// at most `max_len`), the sign of a nonzero one, the bit below the
-    /// leading one modelled, then the lower bits raw.
+    /// at most `max_len`), the sign of a nonzero one, the two bits below
+    /// the leading one modelled, then the lower bits raw.
     fn classed(
         &mut self,
         class_ctx: usize,

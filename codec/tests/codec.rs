@@ -196,65 +196,56 @@ fn files_without_empty_rows_have_no_mask() {
     assert!(LtmFile::open(&out).unwrap().empty_rows().is_none());
 }
 
-/// A version-1 file (written by ltm before the empty-row mask, committed as
-/// a fixture: the golden matrix below at the default options) still opens
-/// and decodes, with no row known to be empty.
+/// Opens the committed fixture `tests/fixtures/NAME` (the golden matrix
+/// below at the default options, written by an older ltm), checks its
+/// version, and checks that it decodes to the error it recorded. Returns
+/// the file and the CRC-32 of its bytes.
+fn old_fixture_decodes(name: &str, version: u32) -> (LtmFile, u32) {
+    let path = Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("tests/fixtures")
+        .join(name);
+    let bytes = std::fs::read(&path).unwrap();
+    assert_eq!(
+        u32::from_le_bytes(bytes[8..12].try_into().unwrap()),
+        version
+    );
+    let file = LtmFile::open(&path).unwrap();
+    let dense = decode_matrix(&file, &Limits::default()).unwrap();
+    let err = rel_error(&dense, &golden_matrix(file.meta().dims));
+    assert!(
+        (err - file.meta().achieved_error as f64).abs() <= 1e-4 + 1e-3 * err,
+        "{name}: decoded error {err} vs recorded {}",
+        file.meta().achieved_error
+    );
+    (file, crc32fast::hash(&bytes))
+}
+
+/// A version-1 file (before the empty-row mask) still opens and decodes,
+/// with no row known to be empty.
 #[test]
 fn version_1_files_still_decode() {
-    let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/fixtures/golden-v1.ltm");
-    let bytes = std::fs::read(&path).unwrap();
-    assert_eq!(u32::from_le_bytes(bytes[8..12].try_into().unwrap()), 1);
-    assert_eq!(crc32fast::hash(&bytes), GOLDEN_LTM_V1);
-    let file = LtmFile::open(&path).unwrap();
+    let (file, crc) = old_fixture_decodes("golden-v1.ltm", 1);
+    assert_eq!(crc, GOLDEN_LTM_V1);
     assert!(file.empty_rows().is_none());
-    let dense = decode_matrix(&file, &Limits::default()).unwrap();
-    let err = rel_error(&dense, &golden_matrix(file.meta().dims));
-    assert!(
-        (err - file.meta().achieved_error as f64).abs() <= 1e-4 + 1e-3 * err,
-        "decoded error {err} vs recorded {}",
-        file.meta().achieved_error
-    );
 }
 
-/// A version-2 file (written by ltm before column encoding 3, committed as a
-/// fixture: the golden matrix below at the default options) still opens
-/// and decodes to the error it recorded.
+/// A version-2 file (before column encoding 3) still opens and decodes to
+/// the error it recorded.
 #[test]
 fn version_2_files_still_decode() {
-    let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/fixtures/golden-v2.ltm");
-    let bytes = std::fs::read(&path).unwrap();
-    assert_eq!(u32::from_le_bytes(bytes[8..12].try_into().unwrap()), 2);
-    let file = LtmFile::open(&path).unwrap();
+    let (file, _) = old_fixture_decodes("golden-v2.ltm", 2);
     assert!(file.columns().iter().all(|c| !c.encoding.is_range_coded()));
-    let dense = decode_matrix(&file, &Limits::default()).unwrap();
-    let err = rel_error(&dense, &golden_matrix(file.meta().dims));
-    assert!(
-        (err - file.meta().achieved_error as f64).abs() <= 1e-4 + 1e-3 * err,
-        "decoded error {err} vs recorded {}",
-        file.meta().achieved_error
-    );
 }
 
-/// A version-3 file (column encoding 3, committed as a fixture: the golden
-/// matrix at the default options) still opens and decodes to the error it
-/// recorded.
+/// A version-3 file (column encoding 3, before encoding 4) still opens and
+/// decodes to the error it recorded.
 #[test]
 fn version_3_files_still_decode() {
-    let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/fixtures/golden-v3.ltm");
-    let bytes = std::fs::read(&path).unwrap();
-    assert_eq!(u32::from_le_bytes(bytes[8..12].try_into().unwrap()), 3);
-    assert_eq!(crc32fast::hash(&bytes), GOLDEN_LTM_V3);
-    let file = LtmFile::open(&path).unwrap();
+    let (file, crc) = old_fixture_decodes("golden-v3.ltm", 3);
+    assert_eq!(crc, GOLDEN_LTM_V3);
     let encodings: Vec<_> = file.columns().iter().map(|c| c.encoding).collect();
     assert!(encodings.contains(&ltm_codec::container::Encoding::Ranged));
     assert!(!encodings.contains(&ltm_codec::container::Encoding::Classed));
-    let dense = decode_matrix(&file, &Limits::default()).unwrap();
-    let err = rel_error(&dense, &golden_matrix(file.meta().dims));
-    assert!(
-        (err - file.meta().achieved_error as f64).abs() <= 1e-4 + 1e-3 * err,
-        "decoded error {err} vs recorded {}",
-        file.meta().achieved_error
-    );
 }
 
 /// `Entropy::Zstd` stores no range-coded column (the faster-opening

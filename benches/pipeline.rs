@@ -54,7 +54,9 @@ fn bench(c: &mut Criterion) {
                 ..Default::default()
             };
             compress(&raw, &path, &opts.into(), &|_, _, _| {}).unwrap();
-            (mode, Relighter::open(&path).unwrap())
+            let relighter = Relighter::open(&path).unwrap();
+            relighter.decode_all().unwrap();
+            (mode, relighter)
         })
         .collect();
 
@@ -290,6 +292,7 @@ fn multiply_add(c: &mut Criterion) {
     let mut group = c.benchmark_group("multiply_add");
     for (name, path) in &files {
         let mut relighter = Relighter::open(path).unwrap();
+        relighter.decode_all().unwrap();
         let light = env.to_cubemap(
             relighter.meta().dims.face_res() as usize,
             &Rotation::IDENTITY,

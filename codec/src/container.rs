@@ -3,12 +3,14 @@
 //!
 //! ```text
 //! header (24 bytes) | chunk directory (32 bytes × count) | directory CRC
-//! META | ALBD (optional) | SURF (optional) | COLS (column table) | DATA (column payloads)
+//! META | ALBD | EMPT | SURF | NORM (each optional) | COLS (column table) | DATA (column payloads)
 //! ```
 //!
 //! Version 2 adds feature 4 and chunk `SURF`: the row layout (image pixels
 //! or texture texels) and per-row surface data ([`Surface`]). Version-1
-//! files (features 1 at most) are still read.
+//! files (features 1 at most) are still read. Version 5 adds feature 8 and
+//! chunk `NORM`: each column's priority norm, so that a relighter can rank
+//! lights by transport without decoding every column first.
 //!
 //! Every chunk has a CRC-32 in the directory, except DATA whose columns
 //! each have their own CRC in the column table. The directory is validated
@@ -35,12 +37,13 @@ use std::sync::Arc;
 
 /// File magic: `\x89LTM\r\n\x1a\n`.
 pub const MAGIC: [u8; 8] = *b"\x89LTM\r\n\x1a\n";
-/// Format version this build writes. It reads versions 1 to 4; version 2
+/// Format version this build writes. It reads versions 1 to 5; version 2
 /// adds the empty-row mask ([`FEATURE_EMPTY_ROWS`]) and the row layout with
 /// per-row surface data ([`FEATURE_SURFACE`]). A version-1 file has neither.
 /// Version 3 adds column encoding 3 ([`Encoding::Ranged`]), version 4 column
-/// encoding 4 ([`Encoding::Classed`]).
-pub const VERSION: u32 = 4;
+/// encoding 4 ([`Encoding::Classed`]), version 5 the column norms
+/// ([`FEATURE_COLUMN_NORMS`]).
+pub const VERSION: u32 = 5;
 /// The oldest format version this build reads.
 pub const MIN_VERSION: u32 = 1;
 /// Feature flag: an RGB albedo image is stored (chunk ALBD).
@@ -51,12 +54,19 @@ pub const FEATURE_EMPTY_ROWS: u32 = 2;
 /// Feature flag (version 2): the row layout and per-row surface data are
 /// stored (chunk SURF).
 pub const FEATURE_SURFACE: u32 = 4;
+/// Feature flag (version 5): every column's priority norm is stored (chunk
+/// NORM; wavelet modes only), [`ColumnDecoder::weighted_norm`] of the
+/// decoded column.
+///
+/// [`ColumnDecoder::weighted_norm`]: crate::ColumnDecoder::weighted_norm
+pub const FEATURE_COLUMN_NORMS: u32 = 8;
 /// The feature flags a reader of each version knows, by version − 1.
 const KNOWN_FEATURES: [u32; VERSION as usize] = [
     FEATURE_ALBEDO,
     FEATURE_ALBEDO | FEATURE_EMPTY_ROWS | FEATURE_SURFACE,
     FEATURE_ALBEDO | FEATURE_EMPTY_ROWS | FEATURE_SURFACE,
     FEATURE_ALBEDO | FEATURE_EMPTY_ROWS | FEATURE_SURFACE,
+    FEATURE_ALBEDO | FEATURE_EMPTY_ROWS | FEATURE_SURFACE | FEATURE_COLUMN_NORMS,
 ];
 const HEADER_LEN: usize = 24;
 const DIR_ENTRY_LEN: usize = 32;
@@ -448,6 +458,13 @@ pub struct EncodedColumn {
     pub bytes: Vec<u8>,
     /// Its column-table entry.
     pub entry: ColumnEntry,
+    /// The column's priority norm ([`ColumnDecoder::weighted_norm`] of the
+    /// column as decoded), for a writer that stores them
+    /// ([`OptionalChunks::column_norms`]); `None` until
+    /// [`EncodedColumn::with_norm`] sets it.
+    ///
+    /// [`ColumnDecoder::weighted_norm`]: crate::ColumnDecoder::weighted_norm
+    pub norm: Option<f32>,
 }
 
 impl EncodedColumn {
@@ -475,7 +492,11 @@ impl EncodedColumn {
                         depth: col.depth as u8,
                         encoding: Encoding::Classed,
                     };
-                    return EncodedColumn { bytes, entry };
+                    return EncodedColumn {
+                        bytes,
+                        entry,
+                        norm: None,
+                    };
                 }
             }
         }
@@ -499,6 +520,7 @@ impl EncodedColumn {
             return EncodedColumn {
                 bytes: Vec::new(),
                 entry,
+                norm: None,
             };
         }
         let payload = col.to_payload(channels);
@@ -515,7 +537,19 @@ impl EncodedColumn {
         entry.raw_len = payload.len() as u32;
         entry.stored_len = bytes.len() as u32;
         entry.crc = crc32fast::hash(&bytes);
-        EncodedColumn { bytes, entry }
+        EncodedColumn {
+            bytes,
+            entry,
+            norm: None,
+        }
+    }
+
+    /// The column with its priority norm set (see [`EncodedColumn::norm`]).
+    pub fn with_norm(self, norm: f32) -> EncodedColumn {
+        EncodedColumn {
+            norm: Some(norm),
+            ..self
+        }
     }
 }
 
@@ -526,6 +560,9 @@ pub struct OptionalChunks<'a> {
     pub surface: Option<&'a Surface>,
     /// The mask of all-zero rows (chunk EMPT); stored when it has any.
     pub empty_rows: Option<&'a EmptyRows>,
+    /// Store every column's priority norm (chunk NORM): each pushed
+    /// column must then carry one ([`EncodedColumn::with_norm`]).
+    pub column_norms: bool,
 }
 
 /// Streams a `.ltm` file to a unique temporary file beside `PATH`, then
@@ -538,6 +575,8 @@ pub struct LtmWriter {
     surface: Option<Vec<u8>>,
     empty_rows: Option<Vec<u8>>,
     entries: Vec<ColumnEntry>,
+    /// The columns' norms, when the file stores them.
+    norms: Option<Vec<f32>>,
     data_start: u64,
     data_len: u64,
 }
@@ -600,16 +639,21 @@ impl LtmWriter {
         };
         let file = AtomicFile::create(path)?;
         let tmp = file.tmp_path().to_path_buf();
-        let chunks =
-            3 + albedo.is_some() as u64 + empty_rows.is_some() as u64 + surface.is_some() as u64;
+        let chunks = 3
+            + albedo.is_some() as u64
+            + empty_rows.is_some() as u64
+            + surface.is_some() as u64
+            + extra.column_norms as u64;
         let head_len = HEADER_LEN as u64 + DIR_ENTRY_LEN as u64 * chunks + 4;
         let cols_len = (COLUMN_ENTRY_LEN * meta.dims.lights()) as u64;
+        let norms_len = 4 * meta.dims.lights() as u64 * extra.column_norms as u64;
         let optional = |c: &Option<Vec<u8>>| c.as_ref().map_or(0, |a| a.len() as u64);
         let data_start = head_len
             + META_LEN as u64
             + optional(&albedo)
             + optional(&empty_rows)
             + optional(&surface)
+            + norms_len
             + cols_len;
         let mut w = LtmWriter {
             file: BufWriter::with_capacity(1 << 20, file),
@@ -619,6 +663,7 @@ impl LtmWriter {
             surface,
             empty_rows,
             entries: Vec::new(),
+            norms: extra.column_norms.then(Vec::new),
             data_start,
             data_len: 0,
         };
@@ -632,6 +677,16 @@ impl LtmWriter {
     pub fn push_column(&mut self, col: EncodedColumn) -> Result<()> {
         let next = self.entries.len();
         self.check_range(next, next + 1)?;
+        if let Some(norms) = &mut self.norms {
+            match col.norm {
+                Some(n) if n.is_finite() && n >= 0.0 => norms.push(n),
+                other => {
+                    return Err(Error::Invalid(format!(
+                        "column {next}: priority norm {other:?}, the writer stores a finite norm ≥ 0 per column"
+                    )))
+                }
+            }
+        }
         let mut entry = col.entry;
         entry.offset = self.data_len;
         self.file
@@ -706,6 +761,10 @@ impl LtmWriter {
             chunks.push((b"SURF", s));
             features |= FEATURE_SURFACE;
         }
+        if let Some(n) = self.norms.take() {
+            chunks.push((b"NORM", bytemuck::cast_slice::<f32, u8>(&n).to_vec()));
+            features |= FEATURE_COLUMN_NORMS;
+        }
         chunks.push((b"COLS", cols.bytes));
         let head_len = HEADER_LEN + DIR_ENTRY_LEN * (chunks.len() + 1) + 4;
         let mut dir = Vec::new();
@@ -773,6 +832,8 @@ pub struct LtmIndex {
     pub surface: Option<Surface>,
     /// The mask of all-zero rows (chunk EMPT), if stored.
     pub empty_rows: Option<EmptyRows>,
+    /// Every column's priority norm (chunk NORM), if stored.
+    pub column_norms: Option<Vec<f32>>,
     /// Where the column payloads (chunk DATA) lie in the file (empty in
     /// PCA files).
     pub data: std::ops::Range<usize>,
@@ -859,6 +920,12 @@ impl LtmFile {
             &meta.dims,
         )?;
         check_mode_chunks(version, &meta, &dir)?;
+        let column_norms = read_column_norms(
+            chunk(bytes, &dir, b"NORM")?,
+            features & FEATURE_COLUMN_NORMS != 0,
+            &meta.dims,
+            limits,
+        )?;
         if meta.mode == Mode::Pca {
             let pca =
                 read_pca_chunks(bytes, &dir, &meta, limits)?.with_empty_rows(empty_rows.clone())?;
@@ -868,6 +935,7 @@ impl LtmFile {
                 albedo,
                 surface,
                 empty_rows,
+                column_norms,
                 data: 0..0,
                 pca: Some(pca),
             });
@@ -885,6 +953,7 @@ impl LtmFile {
             albedo,
             surface,
             empty_rows,
+            column_norms,
             data,
             pca: None,
         })
@@ -921,6 +990,29 @@ impl LtmFile {
     /// The mask of all-zero rows, if stored (a version-1 file has none).
     pub fn empty_rows(&self) -> Option<&EmptyRows> {
         self.index.empty_rows.as_ref()
+    }
+
+    /// Every column's priority norm ([`ColumnDecoder::weighted_norm`]), if
+    /// stored (version 5 and later).
+    ///
+    /// [`ColumnDecoder::weighted_norm`]: crate::ColumnDecoder::weighted_norm
+    pub fn column_norms(&self) -> Option<&[f32]> {
+        self.index.column_norms.as_deref()
+    }
+
+    /// Checks the CRC of every column payload without decoding any (about
+    /// a millisecond per 10 MB), so that a damaged file is refused before
+    /// its columns are decoded on demand.
+    pub fn check_column_crcs(&self) -> Result<()> {
+        let data = &self.bytes[self.index.data.clone()];
+        for (j, e) in self.index.columns.iter().enumerate() {
+            if e.encoding == Encoding::Empty {
+                continue;
+            }
+            let stored = &data[e.offset as usize..(e.offset + e.stored_len as u64) as usize];
+            check_column_crc(j, e, stored)?;
+        }
+        Ok(())
     }
 
     /// File size in bytes.
@@ -1010,7 +1102,16 @@ fn check_directory(dir: &[DirEntry], start: u64, file_len: usize) -> Result<()> 
         let tag = String::from_utf8_lossy(&d.tag);
         if !matches!(
             &d.tag,
-            b"META" | b"ALBD" | b"EMPT" | b"SURF" | b"COLS" | b"DATA" | b"PCAM" | b"PCAB" | b"PCAC"
+            b"META"
+                | b"ALBD"
+                | b"EMPT"
+                | b"SURF"
+                | b"NORM"
+                | b"COLS"
+                | b"DATA"
+                | b"PCAM"
+                | b"PCAB"
+                | b"PCAC"
         ) {
             return Err(Error::corrupt(
                 "chunk directory",
@@ -1107,6 +1208,50 @@ fn read_empty_rows(chunk: Option<&[u8]>, flagged: bool, dims: &Dims) -> Result<O
             "EMPT chunk and empty-row feature flag disagree",
         )),
     }
+}
+
+/// The NORM chunk's column norms: present exactly when the feature flag
+/// says so, one finite `f32` ≥ 0 per column.
+fn read_column_norms(
+    chunk: Option<&[u8]>,
+    flagged: bool,
+    dims: &Dims,
+    limits: &Limits,
+) -> Result<Option<Vec<f32>>> {
+    let bytes = match (chunk, flagged) {
+        (Some(b), true) => b,
+        (None, false) => return Ok(None),
+        _ => {
+            return Err(Error::corrupt(
+                "chunk directory",
+                "NORM chunk and column-norm feature flag disagree",
+            ))
+        }
+    };
+    let lights = dims.lights();
+    if bytes.len() != 4 * lights {
+        return Err(Error::corrupt(
+            "NORM chunk",
+            format!("{} bytes, expected {lights} columns × 4", bytes.len()),
+        ));
+    }
+    limits.check_alloc("column norms", lights as u64, 4)?;
+    let norms: Vec<f32> = bytes
+        .chunks_exact(4)
+        .map(|b| f32::from_le_bytes([b[0], b[1], b[2], b[3]]))
+        .collect();
+    if let Some((j, n)) = norms
+        .iter()
+        .enumerate()
+        .find(|(_, n)| !(n.is_finite() && **n >= 0.0))
+    {
+        return Err(Error::range(
+            "column norm",
+            format!("{n} (column {j})"),
+            "finite and ≥ 0",
+        ));
+    }
+    Ok(Some(norms))
 }
 
 /// Reads the COLS chunk: one checked entry per column, payloads within a
@@ -1350,14 +1495,7 @@ pub(crate) fn read_column(
         },
         _ => {
             let stored = &data[e.offset as usize..(e.offset + e.stored_len as u64) as usize];
-            let crc = crc32fast::hash(stored);
-            if crc != e.crc {
-                return Err(Error::Crc {
-                    chunk: format!("column {j}"),
-                    stored: e.crc,
-                    computed: crc,
-                });
-            }
+            check_column_crc(j, e, stored)?;
             if let Some(coding) = e.encoding.value_coding() {
                 return entropy::decode(
                     stored,
@@ -1406,6 +1544,19 @@ pub(crate) fn read_column(
     Ok(col)
 }
 
+/// Column `j`'s stored payload against the CRC of its table entry.
+fn check_column_crc(j: usize, e: &ColumnEntry, stored: &[u8]) -> Result<()> {
+    let crc = crc32fast::hash(stored);
+    if crc != e.crc {
+        return Err(Error::Crc {
+            chunk: format!("column {j}"),
+            stored: e.crc,
+            computed: crc,
+        });
+    }
+    Ok(())
+}
+
 /// The chunks a mode needs: wavelet files hold `COLS` and `DATA` and no PCA
 /// chunk; `pca` files (version 2 and later) hold `PCAM`, `PCAB`, `PCAC` and
 /// neither `COLS` nor `DATA`.
@@ -1419,7 +1570,7 @@ fn check_mode_chunks(version: u32, meta: &Meta, dir: &[DirEntry]) -> Result<()> 
         ));
     }
     let (need, refuse): (&[&[u8; 4]], &[&[u8; 4]]) = if pca {
-        (&[b"PCAM", b"PCAB", b"PCAC"], &[b"COLS", b"DATA"])
+        (&[b"PCAM", b"PCAB", b"PCAC"], &[b"COLS", b"DATA", b"NORM"])
     } else {
         (&[b"COLS", b"DATA"], &[b"PCAM", b"PCAB", b"PCAC"])
     };

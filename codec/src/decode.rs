@@ -27,6 +27,8 @@ fn scaled(q: i32, s: f32, q_levels: f32) -> f32 {
 /// Decoding state for one file's column filter and image size.
 pub struct ColumnDecoder {
     meta: Meta,
+    /// The band weights of every depth.
+    weights: BandWeights,
     /// `1 / weight` per position, per depth.
     inv_weights: Vec<Vec<f32>>,
     /// Scale group per position, per depth.
@@ -57,10 +59,17 @@ impl ColumnDecoder {
             .collect();
         ColumnDecoder {
             meta: meta.clone(),
+            weights,
             inv_weights,
             groups,
             empty_rows: None,
         }
+    }
+
+    /// The band weights of every depth (computed once, by
+    /// [`ColumnDecoder::new`]).
+    pub fn band_weights(&self) -> &BandWeights {
+        &self.weights
     }
 
     /// The decoder of an opened file: [`ColumnDecoder::new`] with the

@@ -192,7 +192,7 @@ fn files_without_empty_rows_have_no_mask() {
     let raw = write_raw(dir.path(), "f.raw", dims, &t);
     let (out, _) = run(dir.path(), &raw, &CompressOptions::default(), "f.ltm");
     let bytes = std::fs::read(&out).unwrap();
-    assert_eq!(u32::from_le_bytes(bytes[8..12].try_into().unwrap()), 4);
+    assert_eq!(u32::from_le_bytes(bytes[8..12].try_into().unwrap()), 5);
     assert!(LtmFile::open(&out).unwrap().empty_rows().is_none());
 }
 
@@ -246,6 +246,62 @@ fn version_3_files_still_decode() {
     let encodings: Vec<_> = file.columns().iter().map(|c| c.encoding).collect();
     assert!(encodings.contains(&ltm_codec::container::Encoding::Ranged));
     assert!(!encodings.contains(&ltm_codec::container::Encoding::Classed));
+}
+
+/// A version-4 file (column encoding 4, before the stored column norms)
+/// still opens and decodes to the error it recorded, with no norms.
+#[test]
+fn version_4_files_still_decode() {
+    let (file, crc) = old_fixture_decodes("golden-v4.ltm", 4);
+    assert_eq!(crc, GOLDEN_LTM_V4);
+    assert!(file.column_norms().is_none());
+    let encodings: Vec<_> = file.columns().iter().map(|c| c.encoding).collect();
+    assert!(encodings.contains(&ltm_codec::container::Encoding::Classed));
+}
+
+/// Every wavelet file stores each column's priority norm (chunk NORM), and
+/// it is the norm of the column as the decoder reads it, bit for bit: in
+/// every wavelet mode, with either entropy coder, grey and RGB, with zero
+/// columns.
+#[test]
+fn stored_column_norms_are_those_of_the_decoded_columns() {
+    let dir = tempfile::tempdir().unwrap();
+    for (dims, entropy, mode) in [
+        (Dims::image(40, 28, 4, 3), Entropy::Range, Mode::Adaptive),
+        (Dims::image(40, 28, 4, 3), Entropy::Zstd, Mode::TwoD),
+        (Dims::image(9, 31, 2, 1), Entropy::Range, Mode::FourD),
+    ] {
+        let mut t = scene(dims);
+        // Face 0 dark: its n² wavelet lights (the row transform works per
+        // face) have all-zero columns.
+        let (m, c) = (dims.lights(), dims.channels as usize);
+        let face = m / 6;
+        for (i, v) in t.iter_mut().enumerate() {
+            if i / c % m < face {
+                *v = 0.0;
+            }
+        }
+        let raw = write_raw(dir.path(), "n.raw", dims, &t);
+        let opts: CompressOptions = CodeOptions {
+            entropy,
+            mode,
+            target: Target::MaxError(0.01),
+            ..Default::default()
+        }
+        .into();
+        let (out, _) = run(dir.path(), &raw, &opts, "n.ltm");
+        let file = LtmFile::open(&out).unwrap();
+        let norms = file.column_norms().expect("a NORM chunk");
+        assert_eq!(norms.len(), m);
+        let decoder = ltm_codec::ColumnDecoder::for_file(&file);
+        for (j, &n) in norms.iter().enumerate() {
+            let col = file.column(j).unwrap();
+            assert_eq!(n, decoder.weighted_norm(&col) as f32, "{mode:?} column {j}");
+        }
+        let zero = file.columns().iter().filter(|c| c.nnz == 0).count();
+        assert!(zero >= face, "{zero} empty columns");
+        assert_eq!(norms.iter().filter(|&&n| n == 0.0).count(), zero);
+    }
 }
 
 /// `Entropy::Zstd` stores no range-coded column (the faster-opening
@@ -714,6 +770,7 @@ fn stages_run_per_column_range_give_the_same_file() {
             ltm_codec::container::OptionalChunks {
                 surface: None,
                 empty_rows: Some(t.empty_rows()),
+                column_norms: true,
             },
         )
         .unwrap();
@@ -898,6 +955,65 @@ fn hostile_files_error_and_never_panic() {
     assert!(err.contains("version 9"), "{err}");
 }
 
+/// The directory entry of chunk `tag`: (entry offset, chunk offset, length).
+fn chunk_entry(bytes: &[u8], tag: &[u8; 4]) -> (usize, usize, usize) {
+    let count = u32::from_le_bytes(bytes[16..20].try_into().unwrap()) as usize;
+    let at = |k: usize, o: usize| u64::from_le_bytes(bytes[k + o..k + o + 8].try_into().unwrap());
+    (0..count)
+        .map(|k| 24 + 32 * k)
+        .find(|&e| &bytes[e..e + 4] == tag)
+        .map(|e| (e, at(e, 8) as usize, at(e, 16) as usize))
+        .expect("the chunk")
+}
+
+/// A NORM chunk that is not one finite norm ≥ 0 per column, or that
+/// disagrees with its feature flag or the file's version, is refused with a
+/// message naming it, even with every checksum repaired; the relighter
+/// refuses a column whose stored norm differs from its decoded one (see
+/// relight/tests/frames.rs).
+#[test]
+fn bad_column_norms_are_refused() {
+    let dir = tempfile::tempdir().unwrap();
+    let dims = Dims::image(8, 6, 2, 3);
+    let raw = write_raw(dir.path(), "x.raw", dims, &scene(dims));
+    let (out, _) = run(dir.path(), &raw, &CompressOptions::default(), "x.ltm");
+    let good = std::fs::read(&out).unwrap();
+    let (_, norm_at, norm_len) = chunk_entry(&good, b"NORM");
+    assert_eq!(norm_len, 4 * dims.lights());
+    let parse = |mutate: &dyn Fn(&mut Vec<u8>)| {
+        let mut b = good.clone();
+        mutate(&mut b);
+        ltm_codec::container::repair_checksums(&mut b);
+        LtmFile::parse(&b, &Limits::default())
+            .err()
+            .map(|e| e.to_string())
+            .unwrap_or_default()
+    };
+    for bad in [f32::NAN, f32::INFINITY, -1.0, -f32::MIN_POSITIVE] {
+        let err = parse(&|b| b[norm_at + 12..norm_at + 16].copy_from_slice(&bad.to_le_bytes()));
+        assert!(
+            err.contains("column norm") && err.contains("column 3"),
+            "{bad}: {err}"
+        );
+    }
+    // The flag cleared with the chunk still there.
+    let err = parse(&|b| b[12] &= !8);
+    assert!(err.contains("NORM"), "{err}");
+    // A version-4 header knows no feature 8.
+    let err = parse(&|b| b[8] = 4);
+    assert!(
+        err.contains("feature flags") && err.contains("version 4"),
+        "{err}"
+    );
+    // One column short.
+    let err = parse(&|b| {
+        let (entry, _, _) = chunk_entry(b, b"NORM");
+        b[entry + 16..entry + 24].copy_from_slice(&(norm_len as u64 - 4).to_le_bytes());
+    });
+    assert!(err.contains("NORM chunk"), "{err}");
+    assert_eq!(parse(&|_| {}), "");
+}
+
 #[test]
 fn hostile_raw_stores_error() {
     let dir = tempfile::tempdir().unwrap();
@@ -981,7 +1097,10 @@ const GOLDEN_LTM_V1: u32 = 0x5832_3993;
 
 const GOLDEN_RAW: u32 = 0xf20f_83f3;
 /// The default options: adaptive, 10 bits, 1 % target.
-const GOLDEN_LTM: u32 = 0xd11d_24af;
+const GOLDEN_LTM: u32 = 0xe48a_2fdb;
+/// The committed version-4 fixture `tests/fixtures/golden-v4.ltm`: the
+/// same options, written before version 5 (the column norms).
+const GOLDEN_LTM_V4: u32 = 0xd11d_24af;
 /// The committed version-3 fixture `tests/fixtures/golden-v3.ltm`: the
 /// same options, written before version 4 (column encoding 3).
 const GOLDEN_LTM_V3: u32 = 0x0c2f_934d;

@@ -375,10 +375,10 @@ fn version_1_wavelet_files_still_open_and_pca_needs_version_2() {
     let w = dir.path().join("w.ltm");
     compress(&raw, &w, &CompressOptions::default(), &|_, _, _| {}).unwrap();
     let mut b = std::fs::read(&w).unwrap();
-    assert_eq!(u32::from_le_bytes(b[8..12].try_into().unwrap()), 4);
-    // A version-1 file is a version-4 wavelet file with version 1 when it
-    // has no version-2 feature (an empty-row mask, surface data) and no
-    // range-coded column (versions 3 and 4).
+    assert_eq!(u32::from_le_bytes(b[8..12].try_into().unwrap()), 5);
+    // A version-1 file is a version-5 wavelet file with version 1 when it
+    // has no feature of a later version (an empty-row mask, surface data,
+    // column norms) and no range-coded column (versions 3 and 4).
     let features = u32::from_le_bytes(b[12..16].try_into().unwrap());
     let ranged = LtmFile::open(&w)
         .unwrap()
@@ -398,21 +398,36 @@ fn version_1_wavelet_files_still_open_and_pca_needs_version_2() {
         let e = v1.err().unwrap().to_string();
         assert!(e.contains("version 1"), "{e}");
     }
-    // Encoding 4 is refused in a file that claims version 3.
-    let classed = LtmFile::open(&w)
-        .unwrap()
-        .columns()
-        .iter()
-        .any(|c| c.encoding == ltm_codec::container::Encoding::Classed);
-    assert!(classed);
-    b[8..12].copy_from_slice(&3u32.to_le_bytes());
+    // Column norms (feature 8) are refused in a file that claims version
+    // 4, and encoding 4 in a version-4 file without them that claims
+    // version 3.
+    b[8..12].copy_from_slice(&4u32.to_le_bytes());
     fix_crcs(&mut b);
     let e = LtmFile::from_bytes(b.clone(), &Limits::default())
         .err()
         .unwrap()
         .to_string();
+    assert!(
+        e.contains("feature flags") && e.contains("version 4"),
+        "{e}"
+    );
+    let fixture =
+        std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/fixtures/golden-v4.ltm");
+    let mut v4 = std::fs::read(fixture).unwrap();
+    let classed = LtmFile::from_bytes(v4.clone(), &Limits::default())
+        .unwrap()
+        .columns()
+        .iter()
+        .any(|c| c.encoding == ltm_codec::container::Encoding::Classed);
+    assert!(classed);
+    v4[8..12].copy_from_slice(&3u32.to_le_bytes());
+    fix_crcs(&mut v4);
+    let e = LtmFile::from_bytes(v4, &Limits::default())
+        .err()
+        .unwrap()
+        .to_string();
     assert!(e.contains("encoding 4") && e.contains("version 3"), "{e}");
-    b[8..12].copy_from_slice(&5u32.to_le_bytes());
+    b[8..12].copy_from_slice(&6u32.to_le_bytes());
     fix_crcs(&mut b);
     assert!(LtmFile::from_bytes(b, &Limits::default())
         .err()

@@ -74,7 +74,7 @@ fn texture_rows_and_surface_carry_through_compress() {
         assert_eq!(f.meta().dims, dims);
         assert_eq!(f.surface(), Some(&s));
         let bytes = std::fs::read(&out).unwrap();
-        assert_eq!(u32::from_le_bytes(bytes[8..12].try_into().unwrap()), 4);
+        assert_eq!(u32::from_le_bytes(bytes[8..12].try_into().unwrap()), 5);
         let features = u32::from_le_bytes(bytes[12..16].try_into().unwrap());
         assert_eq!(features & 4, 4, "feature flags {features:#x}");
     }
@@ -119,7 +119,7 @@ fn version_1_files_are_still_read() {
         .unwrap_err()
         .to_string();
     assert!(e.contains("feature flags"), "{e}");
-    set_version(&mut b, 5);
+    set_version(&mut b, 6);
     assert!(validate_bytes(&b, &Limits::default()).is_err());
 }
 

@@ -1,7 +1,10 @@
-//! The compact arena: every column of a file decoded once at open into the
-//! form the multiply-add streams, 8 bytes per RGB coefficient and 4 per grey
-//! one (Cheslack-Postava et al. 2007 §4.5 keeps the matrix in memory in its
-//! compressed form; this is the decoded form closest to it).
+//! The compact arena: every column of a file decoded once, the first time a
+//! frame needs it, into the form the multiply-add streams, 8 bytes per RGB
+//! coefficient and 4 per grey one (Cheslack-Postava et al. 2007 §4.5 keeps
+//! the matrix in memory in its compressed form; this is the decoded form
+//! closest to it). Columns are independent in the file, so a frame with N
+//! lights needs only its N columns: opening decodes none, and a relight
+//! with N = 200 of a 1536-light file decodes about a tenth of it.
 //!
 //! A coefficient is stored as its quantized value `q` (an `i16`: the coder
 //! writes `|q| ≤ 2^(bits−1) − 1 ≤ 32767`) per channel, then one `u16`
@@ -22,11 +25,13 @@
 //! multiply-add into pixel ranges of equal work without searching.
 
 use crate::error::{RelightError, Result};
+use crate::slots::Slots;
 use ltm_codec::container::{LtmFile, Meta, SparseColumn};
 use ltm_codec::wavelet::band_size;
 use ltm_codec::BandWeights;
 use ltm_codec::ColumnDecoder;
 use rayon::prelude::*;
+use std::sync::OnceLock;
 
 /// The fewest pixel blocks a column is cut into.
 pub(crate) const MIN_BLOCKS: usize = 64;
@@ -107,9 +112,8 @@ struct Bands {
 }
 
 impl Bands {
-    fn new(meta: &Meta) -> Bands {
+    fn new(meta: &Meta, bw: &BandWeights) -> Bands {
         let (w, h) = (meta.dims.width() as usize, meta.dims.height() as usize);
-        let bw = BandWeights::new(meta.col_filter, w, h, meta.max_depth());
         let maps: Vec<Vec<u8>> = (0..=meta.max_depth()).map(|d| band_map(w, h, d)).collect();
         let weights = maps
             .iter()
@@ -129,38 +133,72 @@ impl Bands {
     }
 }
 
-/// One column in arena form, before it is appended.
-struct ArenaColumn {
-    /// `channels + 1` values per coefficient: `q` per channel, then the code.
-    entries: Vec<i16>,
-    /// Offsets of the block boundaries within the column's coefficients.
-    block_index: Vec<u32>,
+/// What a decoded column keeps beside its entries and block offsets.
+struct ColumnInfo {
     /// Per band: the channel factors (grey: the one factor three times),
     /// lane 3 zero.
     factors: Vec<[f32; 4]>,
-    depth: u8,
     /// L2 norm of the column's weighted values (the transport priority).
     norm: f32,
 }
 
-/// Every column of a file in compact form.
+/// A decoded column, as a frame reads it.
+#[derive(Clone, Copy)]
+pub(crate) struct ArenaColumn<'a> {
+    /// `channels + 1` values per coefficient: `q` per channel, then the code.
+    entries: &'a [i16],
+    /// Offsets of the block boundaries within the column's coefficients.
+    offsets: &'a [u32],
+    factors: &'a [[f32; 4]],
+    norm: f32,
+}
+
+impl<'a> ArenaColumn<'a> {
+    /// The block boundaries.
+    pub fn offsets(&self) -> &'a [u32] {
+        self.offsets
+    }
+
+    /// The entries from block `b0` up to block `b1` (`channels + 1` per
+    /// coefficient).
+    pub fn entries(&self, channels: usize, b0: usize, b1: usize) -> &'a [i16] {
+        let (o, e) = (self.offsets, channels + 1);
+        &self.entries[e * o[b0] as usize..e * o[b1] as usize]
+    }
+
+    /// The band factors.
+    pub fn factors(&self) -> &'a [[f32; 4]] {
+        self.factors
+    }
+
+    /// Bytes held.
+    fn bytes(&self) -> usize {
+        2 * self.entries.len() + 4 * self.offsets.len() + 16 * self.factors.len()
+    }
+}
+
+/// Every column of a file in compact form, each decoded the first time a
+/// frame needs it (or all at once by [`Arena::decode_all`]): a frame with N
+/// lights decodes at most N columns, so a file opens without decoding any.
+/// Columns lie end to end in column order in one buffer sized from the
+/// column table ([`crate::slots`]), as a frame streams them fastest.
 pub(crate) struct Arena {
     /// 1 (grey) or 3 (RGB).
     pub channels: usize,
     pub layout: CodeLayout,
-    /// `channels + 1` `i16` per coefficient.
-    pub entries: Vec<i16>,
-    /// Column `j`'s coefficients are `starts[j]..starts[j + 1]`.
-    pub starts: Vec<usize>,
-    /// Column `j`'s entries in block `b` are `starts[j] + block_index[j·(blocks
-    /// + 1) + b] ..` up to the next boundary's offset.
-    pub block_index: Vec<u32>,
-    /// Column `j`'s band factors are `factors[factor_starts[j]..]`, one per
-    /// band of its depth.
-    pub factors: Vec<[f32; 4]>,
-    pub factor_starts: Vec<usize>,
+    /// Per column: its transform depth (from the column table).
     pub depths: Vec<u8>,
-    pub norms: Vec<f32>,
+    /// Coefficients of all columns (from the column table).
+    nonzeros: usize,
+    bands: Bands,
+    /// Per column: its entries and block offsets.
+    slots: Slots<i16, u32>,
+    /// Per column: its factors and norm, set before its slots are
+    /// published.
+    info: Vec<OnceLock<ColumnInfo>>,
+    /// The decoded columns' norms, once every column is decoded (for a file
+    /// that does not store them).
+    decoded_norms: OnceLock<Vec<f32>>,
 }
 
 impl Arena {
@@ -169,86 +207,152 @@ impl Arena {
         2 * (channels + 1)
     }
 
-    /// Decodes every column of `file` (in parallel).
-    pub fn build(file: &LtmFile, decoder: &ColumnDecoder) -> Result<Arena> {
+    /// The arena of `file` (whose decoder is `decoder`), with no column
+    /// decoded yet. The caller has checked the entries' size against its
+    /// limits.
+    pub fn new(file: &LtmFile, decoder: &ColumnDecoder) -> Arena {
         let meta = file.meta();
         let dims = meta.dims;
         let channels = dims.channels as usize;
         let layout = CodeLayout::new(dims.pixels(), meta.max_depth());
-        let bands = Bands::new(meta);
-        let columns: Vec<ArenaColumn> = (0..dims.lights())
-            .into_par_iter()
-            .map(|j| {
-                let col = file.column(j)?;
-                arena_column(&col, j, meta, &layout, &bands, decoder)
-            })
-            .collect::<Result<_>>()?;
-        let total: usize = columns.iter().map(|c| c.entries.len()).sum();
-        let total_factors: usize = columns.iter().map(|c| c.factors.len()).sum();
-        let mut arena = Arena {
+        let columns = file.columns();
+        Arena {
             channels,
             layout,
-            entries: Vec::with_capacity(total),
-            starts: Vec::with_capacity(columns.len() + 1),
-            block_index: Vec::with_capacity(columns.len() * (layout.blocks + 1)),
-            factors: Vec::with_capacity(total_factors),
-            factor_starts: Vec::with_capacity(columns.len() + 1),
-            depths: Vec::with_capacity(columns.len()),
-            norms: Vec::with_capacity(columns.len()),
-        };
-        arena.starts.push(0);
-        arena.factor_starts.push(0);
-        for c in columns {
-            arena.entries.extend_from_slice(&c.entries);
-            arena.starts.push(arena.entries.len() / (channels + 1));
-            arena.block_index.extend_from_slice(&c.block_index);
-            arena.factors.extend_from_slice(&c.factors);
-            arena.factor_starts.push(arena.factors.len());
-            arena.depths.push(c.depth);
-            arena.norms.push(c.norm);
+            depths: columns.iter().map(|c| c.depth).collect(),
+            nonzeros: columns.iter().map(|c| c.nnz as usize).sum(),
+            bands: Bands::new(meta, decoder.band_weights()),
+            slots: Slots::new(
+                columns.iter().map(|c| c.nnz as usize * (channels + 1)),
+                layout.blocks + 1,
+            ),
+            info: (0..dims.lights()).map(|_| OnceLock::new()).collect(),
+            decoded_norms: OnceLock::new(),
         }
-        Ok(arena)
     }
 
-    /// Coefficients held.
+    /// Column `j`, if decoded.
+    pub fn column(&self, j: usize) -> Option<ArenaColumn<'_>> {
+        let (entries, offsets) = self.slots.get(j)?;
+        let info = self.info.get(j)?.get()?;
+        Some(ArenaColumn {
+            entries,
+            offsets,
+            factors: &info.factors,
+            norm: info.norm,
+        })
+    }
+
+    /// Decodes the columns of `group` that are not decoded yet (in
+    /// parallel) and puts every column of `group`, in order, in `out`.
+    /// Returns how many it decoded.
+    pub fn columns<'a>(
+        &'a self,
+        group: &[u32],
+        file: &LtmFile,
+        decoder: &ColumnDecoder,
+        out: &mut Vec<ArenaColumn<'a>>,
+    ) -> Result<usize> {
+        let missing: Vec<usize> = group
+            .iter()
+            .map(|&j| j as usize)
+            .filter(|&j| !self.slots.is_ready(j))
+            .collect();
+        self.decode(&missing, file, decoder)?;
+        out.clear();
+        for &j in group {
+            out.push(
+                self.column(j as usize).ok_or_else(|| {
+                    RelightError::Invalid(format!("column {j} is not in the arena"))
+                })?,
+            );
+        }
+        Ok(missing.len())
+    }
+
+    /// Decodes every column not decoded yet.
+    pub fn decode_all(&self, file: &LtmFile, decoder: &ColumnDecoder) -> Result<()> {
+        let missing: Vec<usize> = (0..self.depths.len())
+            .filter(|&j| !self.slots.is_ready(j))
+            .collect();
+        self.decode(&missing, file, decoder)
+    }
+
+    /// Decodes columns `js` in parallel; a column another thread is
+    /// decoding is waited for. A column whose norm differs from the one the
+    /// file stores is refused (the file is damaged).
+    fn decode(&self, js: &[usize], file: &LtmFile, decoder: &ColumnDecoder) -> Result<()> {
+        let meta = file.meta();
+        js.par_iter().try_for_each(|&j| {
+            let Some(mut claim) = self.slots.claim(j) else {
+                return Ok(()); // decoded meanwhile
+            };
+            let (entries, offsets) = claim.parts();
+            let col = file.column(j)?;
+            let info = arena_column(&col, j, meta, self, decoder, entries, offsets)?;
+            if let Some(&stored) = file.column_norms().and_then(|n| n.get(j)) {
+                if stored != info.norm {
+                    return Err(RelightError::Invalid(format!(
+                        "column {j}: decodes to priority norm {:e}, the file stores {stored:e}",
+                        info.norm
+                    )));
+                }
+            }
+            // Only this claim's holder sets it; a holder that failed set
+            // nothing.
+            let _ = self.info[j].set(info);
+            claim.publish();
+            Ok(())
+        })
+    }
+
+    /// Every column's priority norm: the file's (chunk NORM), else those of
+    /// the decoded columns, which decodes every column the first time.
+    pub fn norms<'a>(&'a self, file: &'a LtmFile, decoder: &ColumnDecoder) -> Result<&'a [f32]> {
+        if let Some(n) = file.column_norms() {
+            return Ok(n);
+        }
+        if let Some(n) = self.decoded_norms.get() {
+            return Ok(n);
+        }
+        self.decode_all(file, decoder)?;
+        let norms = (0..self.depths.len())
+            .map(|j| self.column(j).map_or(0.0, |c| c.norm))
+            .collect();
+        Ok(self.decoded_norms.get_or_init(|| norms))
+    }
+
+    /// Coefficients of all columns, decoded or not.
     pub fn nonzeros(&self) -> usize {
-        self.entries.len() / (self.channels + 1)
+        self.nonzeros
     }
 
-    /// Column `j`'s block boundaries.
-    pub fn offsets(&self, j: usize) -> &[u32] {
-        &self.block_index[j * (self.layout.blocks + 1)..][..self.layout.blocks + 1]
-    }
-
-    /// Column `j`'s entries from block `b0` up to block `b1`.
-    pub fn entries(&self, j: usize, b0: usize, b1: usize) -> &[i16] {
-        let (s, o) = (self.starts[j], self.offsets(j));
-        let e = self.channels + 1;
-        &self.entries[e * (s + o[b0] as usize)..e * (s + o[b1] as usize)]
-    }
-
-    /// Column `j`'s band factors.
-    pub fn factors(&self, j: usize) -> &[[f32; 4]] {
-        &self.factors[self.factor_starts[j]..self.factor_starts[j + 1]]
+    /// Bytes of the columns decoded so far.
+    pub fn held_bytes(&self) -> usize {
+        let columns: usize = (0..self.depths.len())
+            .filter_map(|j| self.column(j))
+            .map(|c| c.bytes())
+            .sum();
+        columns + 4 * self.decoded_norms.get().map_or(0, Vec::len)
     }
 
     /// The light tables of `group`'s columns, appended to `out`: per column,
     /// per band, the light's channels times the band factors (lane 3 zero).
     /// `starts[k]` is column `group[k]`'s first table.
     pub fn light_tables(
-        &self,
         group: &[u32],
+        columns: &[ArenaColumn<'_>],
         light: &[[f32; 3]],
         out: &mut Vec<[f32; 4]>,
         starts: &mut Vec<usize>,
     ) {
         out.clear();
         starts.clear();
-        for &j in group {
+        for (&j, col) in group.iter().zip(columns) {
             starts.push(out.len());
             let l = light[j as usize];
             out.extend(
-                self.factors(j as usize)
+                col.factors()
                     .iter()
                     .map(|f| [l[0] * f[0], l[1] * f[1], l[2] * f[2], 0.0]),
             );
@@ -260,25 +364,29 @@ impl Arena {
     #[cfg(test)]
     pub fn value(&self, j: usize, k: usize, c: usize) -> f32 {
         let e = self.channels + 1;
-        let entry = &self.entries[e * (self.starts[j] + k)..][..e];
+        let col = self.column(j).expect("decoded");
+        let entry = &col.entries[e * k..][..e];
         let band = (entry[self.channels] as u16 >> self.layout.shift) as usize;
         let q = entry[if self.channels == 1 { 0 } else { c }] as f32;
-        self.factors(j)[band][c] * q
+        col.factors[band][c] * q
     }
 }
 
-/// Column `j` in arena form, with its priority norm.
+/// Column `j` in arena form: its entries and block offsets written into
+/// `entries` and `offsets` (sized from the column table), its factors and
+/// priority norm returned.
 fn arena_column(
     col: &SparseColumn,
     j: usize,
     meta: &Meta,
-    layout: &CodeLayout,
-    bands: &Bands,
+    arena: &Arena,
     decoder: &ColumnDecoder,
-) -> Result<ArenaColumn> {
-    let channels = meta.dims.channels as usize;
+    entries: &mut [i16],
+    offsets: &mut [u32],
+) -> Result<ColumnInfo> {
+    let (layout, channels) = (&arena.layout, arena.channels);
     let depth = col.depth as usize;
-    let (map, weights) = (&bands.maps[depth], &bands.weights[depth]);
+    let (map, weights) = (&arena.bands.maps[depth], &arena.bands.weights[depth]);
     let q = (1u64 << (meta.bits - 1)) as f64 - 1.0;
     let mut factors = Vec::with_capacity(weights.len());
     for (b, w) in weights.iter().enumerate() {
@@ -295,35 +403,40 @@ fn arena_column(
         }
         factors.push(f);
     }
-    let mut entries = Vec::with_capacity(col.indices.len() * (channels + 1));
-    for (k, &i) in col.indices.iter().enumerate() {
-        for c in 0..channels {
-            let v = col.values[k * channels + c];
-            let q = i16::try_from(v).map_err(|_| {
+    if entries.len() != col.indices.len() * (channels + 1) || offsets.len() != layout.blocks + 1 {
+        return Err(RelightError::Invalid(format!(
+            "column {j}: decodes to {} coefficients, its table entry says {}",
+            col.indices.len(),
+            entries.len() / (channels + 1)
+        )));
+    }
+    for ((&i, entry), values) in col
+        .indices
+        .iter()
+        .zip(entries.chunks_exact_mut(channels + 1))
+        .zip(col.values.chunks_exact(channels))
+    {
+        for (e, &v) in entry.iter_mut().zip(values) {
+            *e = i16::try_from(v).map_err(|_| {
                 RelightError::Invalid(format!(
                     "column {j}: quantized value {v} outside the i16 range of a {}-bit file",
                     meta.bits
                 ))
             })?;
-            entries.push(q);
         }
         let i = i as usize;
         let offset = i % layout.block_pixels;
         let band = map[i] as usize;
-        entries.push(((band << layout.shift) | offset) as u16 as i16);
+        entry[channels] = ((band << layout.shift) | offset) as u16 as i16;
     }
     // Positions are sorted (the container stores them as gaps).
-    let block_index = (0..=layout.blocks)
-        .map(|b| {
-            col.indices
-                .partition_point(|&i| (i as usize) < b * layout.block_pixels) as u32
-        })
-        .collect();
-    Ok(ArenaColumn {
-        entries,
-        block_index,
+    for (b, o) in offsets.iter_mut().enumerate() {
+        *o = col
+            .indices
+            .partition_point(|&i| (i as usize) < b * layout.block_pixels) as u32;
+    }
+    Ok(ColumnInfo {
         factors,
-        depth: col.depth as u8,
         norm: decoder.weighted_norm(col) as f32,
     })
 }
@@ -431,29 +544,39 @@ mod file_tests {
                 let file = LtmFile::open(&out).unwrap();
                 let meta = file.meta().clone();
                 let decoder = ColumnDecoder::new(&meta);
-                let arena = Arena::build(&file, &decoder).unwrap();
+                let arena = Arena::new(&file, &decoder);
+                assert_eq!(arena.held_bytes(), 0);
+                arena.decode_all(&file, &decoder).unwrap();
+                let norms = arena.norms(&file, &decoder).unwrap();
                 let weights =
                     BandWeights::new(meta.col_filter, w as usize, h as usize, meta.max_depth());
                 let l = arena.layout;
-                for j in 0..meta.dims.lights() {
+                for (j, &norm) in norms.iter().enumerate() {
                     let col = file.column(j).unwrap();
                     let map = band_map(w as usize, h as usize, col.depth);
-                    assert_eq!(arena.starts[j + 1] - arena.starts[j], col.indices.len());
+                    let ac = arena.column(j).unwrap();
+                    assert_eq!(
+                        ac.entries.len(),
+                        col.indices.len() * (channels as usize + 1)
+                    );
+                    assert_eq!(ac.offsets.len(), l.blocks + 1);
                     // The norm, from scales decoded once per group, is the
-                    // per-value dequantization's, exactly.
+                    // per-value dequantization's, exactly, and the file
+                    // stores it.
                     let per_value: f64 = (0..col.indices.len())
                         .flat_map(|k| (0..channels as usize).map(move |c| (k, c)))
                         .map(|(k, c)| (decoder.dequantize(&col, k, c) as f64).powi(2))
                         .sum();
-                    assert_eq!(arena.norms[j], per_value.sqrt() as f32);
+                    assert_eq!(ac.norm, per_value.sqrt() as f32);
+                    assert_eq!(norm, ac.norm);
                     for (k, &i) in col.indices.iter().enumerate() {
                         let i = i as usize;
-                        let e = &arena.entries[(channels as usize + 1) * (arena.starts[j] + k)..];
+                        let e = &ac.entries[(channels as usize + 1) * k..];
                         let code = e[channels as usize] as u16;
                         assert_eq!((code >> l.shift) as u8, map[i]);
                         assert_eq!((code & l.mask()) as usize, i % l.block_pixels);
                         let block = i / l.block_pixels;
-                        let o = arena.offsets(j);
+                        let o = ac.offsets();
                         assert!(o[block] as usize <= k && k < o[block + 1] as usize);
                         for c in 0..3 {
                             let fc = if channels == 1 { 0 } else { c };

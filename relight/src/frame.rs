@@ -37,6 +37,14 @@ pub trait Relight {
     /// Bytes of decoded data this relighter holds in memory (its arena,
     /// basis or coefficients), for reports.
     fn held_bytes(&self) -> usize;
+    /// Decodes now whatever later frames would decode on first use (the
+    /// wavelet relighter decodes each column the first time a frame needs
+    /// it), so that frames after it only relight: for timing frames alone,
+    /// or for a viewer warming up in the background. The linear bases hold
+    /// everything from the start.
+    fn preload(&self) -> Result<()> {
+        Ok(())
+    }
     /// A frame holding every buffer this relighter needs, so that
     /// [`Relight::relight`] allocates nothing. Any frame works (buffers of
     /// the wrong size are replaced on first use).
@@ -110,6 +118,11 @@ pub struct FrameStats {
     pub multiply: Duration,
     /// Inverse column steps and the albedo (zero for linear bases).
     pub inverse: Duration,
+    /// Decoding the columns this frame was the first to need (wavelet
+    /// relighter; zero once every column it uses is decoded).
+    pub decode: Duration,
+    /// Columns this frame decoded.
+    pub columns_decoded: usize,
     /// Lighting terms used: wavelet lights (≤ N), principal components (N)
     /// or spherical-harmonics coefficients (N²).
     pub lights: usize,
@@ -120,7 +133,7 @@ pub struct FrameStats {
 impl FrameStats {
     /// The whole frame's time.
     pub fn total(&self) -> Duration {
-        self.light_transform + self.selection + self.multiply + self.inverse
+        self.light_transform + self.selection + self.decode + self.multiply + self.inverse
     }
 }
 

@@ -66,6 +66,7 @@ mod reference;
 mod relighter;
 mod render;
 mod select;
+mod slots;
 
 pub use basis::BasisRelighter;
 pub use envmap::{EnvMap, Rotation, MAX_ENV_HEIGHT};

@@ -1,22 +1,25 @@
 //! The relighter: environment lighting → image from a compressed matrix
 //! (Cheslack-Postava et al. 2007 §4.5, eq. 6–8, Fig. 6).
 //!
-//! At open, every column is decoded once to the compact arena
-//! ([`crate::arena`]: quantized `i16` values and a band-and-offset code, 8
-//! bytes per RGB coefficient, 4 per grey one, with one factor per column,
-//! band and channel that carries the quantizer step and the inverse band
-//! weight). Per frame:
+//! Each column is decoded once, the first time a frame needs it, to the
+//! compact arena ([`crate::arena`]: quantized `i16` values and a
+//! band-and-offset code, 8 bytes per RGB coefficient, 4 per grey one, with
+//! one factor per column, band and channel that carries the quantizer step
+//! and the inverse band weight); opening checks the file and decodes
+//! nothing. Per frame:
 //! 1. the cubemap lighting gets the file's row transform (kept in the frame:
 //!    a frame under the same lighting, e.g. when only N changes, reuses it);
-//! 2. the N lights of highest priority are chosen ([`select`]);
-//! 3. they are grouped by their column's depth, deepest first; each group's
+//! 2. the N lights of highest priority are chosen ([`select`]; the transport
+//!    priority uses the column norms the file stores);
+//! 3. their columns not yet in the arena are decoded (in parallel);
+//! 4. they are grouped by their column's depth, deepest first; each group's
 //!    band factors are multiplied by its lights, its coefficients
 //!    multiply-added into one image of interleaved `[r, g, b, 0]` pixels
 //!    ([`crate::kernel`]), then one inverse column step of all three
 //!    channels at once brings the image one level up, until depth 0 (eq. 8);
-//! 4. a factored monochrome file multiplies in its albedo image.
+//! 5. a factored monochrome file multiplies in its albedo image.
 
-use crate::arena::Arena;
+use crate::arena::{Arena, ArenaColumn};
 use crate::error::{RelightError, Result};
 use crate::frame::{check_light, Frame, FrameStats, Relight, Request};
 use crate::image_io::Image;
@@ -44,7 +47,7 @@ const LANES: usize = 4;
 pub struct Relighter {
     file: LtmFile,
     decoder: ColumnDecoder,
-    /// Every column, decoded once ([`crate::arena`]).
+    /// Every column, decoded once on first use ([`crate::arena`]).
     arena: Arena,
     /// The multiply-add kernel this CPU runs best.
     kernel: Kernel,
@@ -85,8 +88,9 @@ impl WaveletScratch {
 }
 
 impl Relighter {
-    /// Opens an `.ltm` file (memory-mapped) and decodes its columns, with
-    /// the default [`Limits`].
+    /// Opens an `.ltm` file (memory-mapped) with the default [`Limits`].
+    /// Columns are decoded when a frame first needs them
+    /// ([`Relighter::decode_all`] decodes the rest at once).
     pub fn open(path: &Path) -> Result<Relighter> {
         Relighter::open_with_limits(path, &Limits::default())
     }
@@ -96,9 +100,10 @@ impl Relighter {
         Relighter::new(LtmFile::open_with_limits(path, limits)?, limits)
     }
 
-    /// Prepares a relighter for an opened file. The arena of decoded
-    /// coefficients, sized by the file's column table, is checked against
-    /// `limits` before anything is decoded.
+    /// Prepares a relighter for an opened file: checks every column's CRC
+    /// (a damaged file is refused here, not in a later frame) and the arena
+    /// of decoded coefficients, sized by the file's column table, against
+    /// `limits`. Decodes no column.
     pub fn new(file: LtmFile, limits: &Limits) -> Result<Relighter> {
         if file.pca().is_some() {
             return Err(RelightError::Invalid(
@@ -118,8 +123,9 @@ impl Relighter {
             4 * LANES as u64 * 2,
         )?;
         let n = dims.face_res() as usize;
+        file.check_column_crcs()?;
         let decoder = ColumnDecoder::for_file(&file);
-        let arena = Arena::build(&file, &decoder)?;
+        let arena = Arena::new(&file, &decoder);
         Ok(Relighter {
             decoder,
             arena,
@@ -165,19 +171,22 @@ impl Relighter {
         &self.file
     }
 
-    /// Coefficients held in memory.
+    /// Coefficients of the file's columns (held in memory once all are
+    /// decoded).
     pub fn nonzeros(&self) -> usize {
         self.arena.nonzeros()
     }
 
-    /// Bytes of the in-memory arena (coefficients, block index, band
+    /// Bytes of the columns decoded so far (coefficients, block index, band
     /// factors).
     pub fn arena_bytes(&self) -> usize {
-        let a = &self.arena;
-        2 * a.entries.len()
-            + 4 * a.block_index.len()
-            + 16 * a.factors.len()
-            + 8 * (a.starts.len() + a.factor_starts.len())
+        self.arena.held_bytes()
+    }
+
+    /// Decodes every column not decoded yet (in parallel), so that no later
+    /// frame decodes: for timings of frames alone, or a viewer warming up.
+    pub fn decode_all(&self) -> Result<()> {
+        self.arena.decode_all(&self.file, &self.decoder)
     }
 
     /// Buffers for one frame of this file.
@@ -228,12 +237,15 @@ impl Relighter {
         Ok(())
     }
 
-    fn priority_scale(&self, weighting: Weighting) -> &[f32] {
-        match weighting {
+    /// The priority scales of `weighting`: the transport norms of a file
+    /// that does not store them are those of its decoded columns (every
+    /// column is decoded the first time).
+    fn priority_scale(&self, weighting: Weighting) -> Result<&[f32]> {
+        Ok(match weighting {
             Weighting::Unweighted => &self.ones,
-            Weighting::Transport => &self.arena.norms,
+            Weighting::Transport => self.arena.norms(&self.file, &self.decoder)?,
             Weighting::Area => &self.areas,
-        }
+        })
     }
 
     /// Checks the lighting and row-transforms it into `s.light`, unless
@@ -257,20 +269,27 @@ impl Relighter {
     }
 
     /// Selects the requested lights from `s.light` into `s.selected`.
-    fn select_lights(&self, request: &Request, s: &mut WaveletScratch) {
+    fn select_lights(&self, request: &Request, s: &mut WaveletScratch) -> Result<()> {
         select(
             &s.light,
-            self.priority_scale(request.weighting),
+            self.priority_scale(request.weighting)?,
             request.terms,
             &mut s.order,
             &mut s.selected,
         );
+        Ok(())
     }
 
-    /// Eq. 8 on the selected lights (sorted deepest first): each depth
-    /// group is multiply-added into the pixels, then one inverse column step
-    /// of all three interleaved channels brings them a level up, to depth 0.
-    fn multiply_levels(&self, s: &mut WaveletScratch, stats: &mut FrameStats) -> Result<()> {
+    /// Eq. 8 on the selected lights (sorted deepest first; `columns[k]` is
+    /// light `s.selected[k]`'s column): each depth group is multiply-added
+    /// into the pixels, then one inverse column step of all three
+    /// interleaved channels brings them a level up, to depth 0.
+    fn multiply_levels(
+        &self,
+        s: &mut WaveletScratch,
+        columns: &[ArenaColumn<'_>],
+        stats: &mut FrameStats,
+    ) -> Result<()> {
         self.clear_pixels(s);
         let depths = &self.arena.depths;
         let top = s.selected.first().map_or(0, |&j| depths[j as usize]);
@@ -283,15 +302,10 @@ impl Relighter {
             }
             let group = &s.selected[start..next];
             if !group.is_empty() {
-                self.arena
-                    .light_tables(group, &s.light, &mut s.tables, &mut s.table_starts);
-                stats.nonzeros += self.multiply_add(
-                    group,
-                    &s.tables,
-                    &s.table_starts,
-                    &mut s.pixels,
-                    &mut s.rows,
-                );
+                let cols = &columns[start..next];
+                Arena::light_tables(group, cols, &s.light, &mut s.tables, &mut s.table_starts);
+                stats.nonzeros +=
+                    self.multiply_add(cols, &s.tables, &s.table_starts, &mut s.pixels, &mut s.rows);
             }
             let ti = Instant::now();
             stats.multiply += ti - tm;
@@ -357,14 +371,14 @@ impl Relighter {
         }
     }
 
-    /// Multiply-adds the columns of `group` (with their light tables) into
+    /// Multiply-adds the columns of a group (with their light tables) into
     /// the pixels, in parallel over pixel ranges of about equal work (from
     /// the block index; each pixel is summed by one task in group order, so
     /// the image does not depend on the split), and marks the image rows it
     /// touches in `rows`. Returns the coefficients used.
     fn multiply_add(
         &self,
-        group: &[u32],
+        group: &[ArenaColumn<'_>],
         tables: &[[f32; 4]],
         table_starts: &[usize],
         pixels: &mut [[f32; LANES]],
@@ -374,8 +388,8 @@ impl Relighter {
         let layout = arena.layout;
         let blocks = layout.blocks;
         let mut work = vec![0u64; blocks];
-        for &j in group {
-            for (w, o) in work.iter_mut().zip(arena.offsets(j as usize).windows(2)) {
+        for col in group {
+            for (w, o) in work.iter_mut().zip(col.offsets().windows(2)) {
                 *w += u64::from(o[1] - o[0]);
             }
         }
@@ -409,20 +423,19 @@ impl Relighter {
         }
         let (channels, kernel) = (arena.channels, self.kernel);
         parts.into_par_iter().for_each(|(range, part)| {
-            for (k, &j) in group.iter().enumerate() {
-                if let Some(&next) = group.get(k + PREFETCH_COLUMNS) {
-                    kernel::prefetch(arena.entries(next as usize, range.start, range.end));
+            for (k, col) in group.iter().enumerate() {
+                if let Some(next) = group.get(k + PREFETCH_COLUMNS) {
+                    kernel::prefetch(next.entries(channels, range.start, range.end));
                 }
-                let j = j as usize;
                 // The column's entries in this task's blocks, cut at the
                 // block boundaries (most columns of a deep group have none
                 // in most tasks).
-                let all = arena.entries(j, range.start, range.end);
+                let all = col.entries(channels, range.start, range.end);
                 if all.is_empty() {
                     continue;
                 }
-                let table = &tables[table_starts[k]..][..arena.factors(j).len()];
-                let bounds = &arena.offsets(j)[range.start..=range.end];
+                let table = &tables[table_starts[k]..][..col.factors().len()];
+                let bounds = &col.offsets()[range.start..=range.end];
                 let e = channels + 1;
                 for (b, w) in bounds.windows(2).enumerate() {
                     let (lo, hi) = ((w[0] - bounds[0]) as usize, (w[1] - bounds[0]) as usize);
@@ -474,7 +487,7 @@ impl Relighter {
     pub fn relight_naive(&self, light: &[[f32; 3]], request: &Request) -> Result<Image> {
         let mut s = self.scratch();
         self.prepare_light(light, &mut s)?;
-        self.select_lights(request, &mut s);
+        self.select_lights(request, &mut s)?;
         let channels = self.meta().dims.channels as usize;
         let p = self.meta().dims.pixels();
         let mut plane = vec![0.0f32; p];
@@ -523,6 +536,10 @@ impl Relight for Relighter {
         self.arena_bytes()
     }
 
+    fn preload(&self) -> Result<()> {
+        self.decode_all()
+    }
+
     fn frame(&self) -> Frame {
         let (w, h) = self.size();
         Frame {
@@ -551,16 +568,22 @@ impl Relight for Relighter {
         let t0 = Instant::now();
         self.prepare_light(light, s)?;
         let t1 = Instant::now();
-        self.select_lights(request, s);
+        self.select_lights(request, s)?;
         // Deepest columns first (eq. 8).
         let depths = &self.arena.depths;
         s.selected
             .sort_unstable_by_key(|&j| (std::cmp::Reverse(depths[j as usize]), j));
         stats.lights = s.selected.len();
         let t2 = Instant::now();
+        let mut columns = Vec::with_capacity(s.selected.len());
+        stats.columns_decoded =
+            self.arena
+                .columns(&s.selected, &self.file, &self.decoder, &mut columns)?;
+        let t3 = Instant::now();
         stats.light_transform = t1 - t0;
         stats.selection = t2 - t1;
-        self.multiply_levels(s, &mut stats)?;
+        stats.decode = t3 - t2;
+        self.multiply_levels(s, &columns, &mut stats)?;
         let ti = Instant::now();
         self.finish_image(&s.pixels, &mut frame.image);
         stats.inverse += ti.elapsed();

@@ -115,8 +115,9 @@ pub struct CompressArgs {
     pub seed: u64,
     /// Column payloads: `range` (context-modelled range coding, column
     /// encoding 4: the smallest files) or `zstd` (about 1.5× larger files
-    /// that open about 2.5× faster; what format versions 1 and 2 wrote).
-    /// Wavelet modes only [default: range].
+    /// whose columns decode about 3× faster; what format versions 1 and 2
+    /// wrote). The relighter decodes a column when a frame first needs it,
+    /// so either opens without decoding. Wavelet modes only [default: range].
     #[arg(long)]
     pub entropy: Option<Entropy>,
 }

@@ -86,9 +86,15 @@ pub struct RelightArgs {
     /// its lighting anew; `--json` also gives the median of as many frames
     /// that reuse the transform, as when only the number of terms changes;
     /// each part of a frame, e.g. the multiply-add, is its median over the
-    /// timed frames).
+    /// timed frames). The first frame also decodes the columns it uses
+    /// (`--json`: `first_frame_ms`, `decode_ms`), unless `--preload`.
     #[arg(long, default_value_t = 1, value_parser = crate::ranges::frames)]
     pub frames: usize,
+    /// Decode every column of a wavelet file at open (counted in the open
+    /// time) instead of each when a frame first needs it: frames then
+    /// never decode.
+    #[arg(long)]
+    pub preload: bool,
     /// An exact image from `ltm reference` (same map and rotation): print the
     /// relit image's relative L2 error against it.
     #[arg(long)]
@@ -162,6 +168,11 @@ pub fn run(a: RelightArgs) -> Result<()> {
         (None, Some(o)) => o.as_ref(),
         (None, None) => unreachable!("one of the two is opened"),
     };
+    if a.preload {
+        relighter
+            .preload()
+            .with_context(|| format!("decoding {}", a.file.display()))?;
+    }
     let open_time = opened.elapsed();
     let light = match &a.env {
         Some(path) => {
@@ -222,6 +233,8 @@ pub fn run(a: RelightArgs) -> Result<()> {
         v.sort();
         v.get(v.len() / 2).copied().unwrap_or_default()
     };
+    let first = all_stats.first().copied().unwrap_or_default();
+    let first_time = times.first().copied().unwrap_or_default();
     let stats = ltm_relight::FrameStats {
         light_transform: part(|s| s.light_transform),
         selection: part(|s| s.selection),
@@ -269,6 +282,9 @@ pub fn run(a: RelightArgs) -> Result<()> {
             "frame_ms": ms(median),
             "same_light_frame_ms": ms(median_reuse),
             "open_ms": ms(open_time),
+            "first_frame_ms": ms(first_time),
+            "decode_ms": ms(first.decode),
+            "columns_decoded": first.columns_decoded,
             "arena_bytes": relighter.held_bytes(),
             "light_transform_ms": ms(stats.light_transform),
             "selection_ms": ms(stats.selection),

@@ -509,3 +509,61 @@ fn pca_mode_compress_inspect_export_relight() {
     ]);
     assert!(!ok && stderr.contains("--mode pca"), "{stderr}");
 }
+
+/// `ltm relight --json` of a wavelet file: the first frame decodes the
+/// columns it uses and later frames none; with `--preload` the open
+/// decodes them all and no frame does; the images are the same.
+#[test]
+fn relight_decodes_columns_on_first_use_or_with_preload() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = |n: &str| dir.path().join(n).to_str().unwrap().to_string();
+    let (p, m) = (6 * 5, 6 * 4 * 4);
+    let values: Vec<f32> = (0..p * m)
+        .map(|i| 0.01 + ((i * 7) % 13) as f32 * 0.01 * (1.0 + (i % m) as f32 * 0.05))
+        .collect();
+    write_npy(dir.path().join("t.npy").as_path(), p, m, &values);
+    let (ok, _, stderr) = ltm(&[
+        "import",
+        &path("t.npy"),
+        "--width",
+        "6",
+        "--height",
+        "5",
+        "-o",
+        &path("t.raw"),
+    ]);
+    assert!(ok, "{stderr}");
+    let (ok, _, stderr) = ltm(&["compress", &path("t.raw"), "-o", &path("t.ltm")]);
+    assert!(ok, "{stderr}");
+    let env = Path::new(env!("CARGO_MANIFEST_DIR")).join("../assets/envmaps/studio.exr");
+    let relight = |out: &str, extra: &[&str]| {
+        let mut args = vec![
+            "relight".to_string(),
+            path("t.ltm"),
+            "--env".into(),
+            env.to_str().unwrap().into(),
+            "--terms".into(),
+            "7".into(),
+            "--weighting".into(),
+            "transport".into(),
+            "--frames".into(),
+            "3".into(),
+            "--json".into(),
+            "-o".into(),
+            path(out),
+        ];
+        args.extend(extra.iter().map(|s| s.to_string()));
+        let args: Vec<&str> = args.iter().map(String::as_str).collect();
+        let (ok, stdout, stderr) = ltm(&args);
+        assert!(ok, "{stderr}");
+        let j: serde_json::Value = serde_json::from_str(stdout.trim()).unwrap();
+        (j, std::fs::read(path(out)).unwrap())
+    };
+    let (lazy, a) = relight("a.exr", &[]);
+    assert_eq!(lazy["columns_decoded"], 7, "{lazy}");
+    assert!(lazy["first_frame_ms"].is_f64() && lazy["decode_ms"].is_f64());
+    let (eager, b) = relight("b.exr", &["--preload"]);
+    assert_eq!(eager["columns_decoded"], 0, "{eager}");
+    assert!(eager["arena_bytes"].as_u64() > lazy["arena_bytes"].as_u64());
+    assert_eq!(a, b);
+}

@@ -5,8 +5,9 @@ This file was written only from the specification in docs/FORMAT.md (no Rust sou
 was consulted). It checks that the specification is complete: it decodes a `.ltm`
 file of mode 2d, 4d or adaptive to the dense transport matrix exactly as
 `ltm export` writes it (float32, shape (P, M, C), or (P, M) when C = 1).
-`pca` files (mode 3) are refused. Format versions 1 to 4 are read, with column
-encodings 0 to 4.
+`pca` files (mode 3) are refused. Format versions 1 to 5 are read, with column
+encodings 0 to 4; a version-5 file's column norms (chunk NORM) are checked against
+the decoded columns.
 
 Usage:
     python3 tools/validate/ltm_reader.py FILE.ltm [--compare EXPORT.npy] [--out OUT.npy] [--f64]
@@ -25,6 +26,7 @@ Stages (one function each):
   read_container      header, chunk directory, CRCs
   parse_meta          META chunk
   parse_empty_rows    EMPT chunk
+  parse_norms         NORM chunk (checked against the decoded columns: column_norm)
   parse_column_table  COLS chunk
   decode_payload_plain / decode_payload_range / decode_payload_range4
                       column payload (encodings 1-2 / 3 / 4) -> sparse column
@@ -91,15 +93,17 @@ def read_container(buf):
     if len(buf) < 28 or buf[:8] != MAGIC:
         raise FormatError("not an .ltm file (bad magic)")
     version, features, k, reserved = struct.unpack_from("<4I", buf, 8)
-    if version not in (1, 2, 3, 4):
+    if version not in (1, 2, 3, 4, 5):
         raise FormatError(f"unsupported format version {version}")
     if reserved != 0:
         raise FormatError("reserved header field is not 0")
-    if features & ~7:
+    if features & ~15:
         raise FormatError(f"unknown feature bits {features:#x}")
     if version == 1 and features & ~1:
         raise FormatError("feature bits 1/2 in a version-1 file")
-    if not 3 <= k <= 7:
+    if version < 5 and features & 8:
+        raise FormatError(f"feature bit 3 in a version-{version} file")
+    if not 3 <= k <= (8 if version >= 5 else 7):
         raise FormatError(f"bad chunk count {k}")
     end = 24 + 32 * k
     if len(buf) < end + 4:
@@ -128,6 +132,8 @@ def read_container(buf):
         want.add(b"EMPT")
     if features & 4:
         want.add(b"SURF")
+    if features & 8:
+        want.add(b"NORM")
     if b"PCAM" in chunks or b"PCAB" in chunks or b"PCAC" in chunks:
         raise FormatError("this is a pca file (mode 3): not supported by this reader")
     want |= {b"COLS", b"DATA"}
@@ -172,6 +178,26 @@ def parse_empty_rows(empt, P):
     if bits[P:].any():
         raise FormatError("EMPT bits past the last row are set")
     return bits[:P].astype(bool)
+
+
+def parse_norms(norm, M):
+    if len(norm) != 4 * M:
+        raise FormatError("NORM has the wrong length")
+    norms = np.frombuffer(norm, "<f4")
+    if not (np.isfinite(norms) & (norms >= 0)).all():
+        raise FormatError("NORM holds a value that is not finite and >= 0")
+    return norms
+
+
+def column_norm(codes, positions, values, W, H, d, C, B, dt):
+    """FORMAT.md "NORM": sqrt of the running f64 sum of the squared u = q*s/Q,
+    position by position, channel by channel, rounded to f32."""
+    Q = (1 << (B - 1)) - 1
+    s = scales_from_codes(codes, dt)
+    g = group_map(W, H, d)[positions]
+    u = (values.astype(dt) * s[g] / dt(Q)).astype(np.float64).ravel()
+    total = np.cumsum(u * u)[-1] if len(u) else 0.0  # sequential, as one running sum
+    return np.float32(np.sqrt(total))
 
 
 def full_depth(W, H):
@@ -806,6 +832,7 @@ def decode_matrix(path, verbose=False, dt=np.float32, info=None):
     P, M = W * H, 6 * n * n
     Q = (1 << (B - 1)) - 1
     empty = parse_empty_rows(chunks[b"EMPT"], P) if b"EMPT" in chunks else None
+    norms = parse_norms(chunks[b"NORM"], M) if b"NORM" in chunks else None
     table = parse_column_table(chunks[b"COLS"], M, P, W, H, version)
     data = chunks[b"DATA"]
     if info is not None:
@@ -824,6 +851,8 @@ def decode_matrix(path, verbose=False, dt=np.float32, info=None):
         if enc == 0:
             if k != 0 or ent["slen"] != 0:
                 raise FormatError(f"column {j}: empty column with a payload")
+            if norms is not None and norms[j] != 0:
+                raise FormatError(f"column {j}: empty column with norm {norms[j]}")
             continue
         stored = data[ent["off"]:ent["off"] + ent["slen"]]
         if len(stored) != ent["slen"] or crc32(stored) != ent["crc"]:
@@ -847,6 +876,12 @@ def decode_matrix(path, verbose=False, dt=np.float32, info=None):
             codes, positions, values = decode_payload_plain(payload, d, C, k, Q)
         if len(positions) and (positions[-1] >= P or positions[0] < 0):
             raise FormatError(f"column {j}: position out of range")
+        if norms is not None:
+            got = column_norm(codes, positions, values, W, H, d, C, B, dt)
+            # Bit for bit in f32; f64 differs by rounding only.
+            ok = got == norms[j] if dt == np.float32 else abs(got - norms[j]) <= 1e-6 * norms[j]
+            if not ok:
+                raise FormatError(f"column {j}: norm {got} decoded, {norms[j]} stored")
         v = dequantize_column(codes, positions, values, W, H, d, C, B, meta["col_filter"], dt)
         by_depth.setdefault(d, []).append((j, v))
 

@@ -315,7 +315,9 @@ impl<'t> Coder<'t> {
                 self.opts.zstd_level,
             )
         });
-        Ok((encoded, best.err, curve))
+        // The norm of the column as the decoder will read it (chunk NORM).
+        let norm = self.decoder.weighted_norm(&best.col) as f32;
+        Ok((encoded.with_norm(norm), best.err, curve))
     }
 
     /// The [`ErrorCurve`] of a coded column around `tau_sq`: `coefs` are its

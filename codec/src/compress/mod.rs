@@ -500,6 +500,7 @@ fn write_columns(
         OptionalChunks {
             surface: t.raw().surface(),
             empty_rows: Some(t.empty_rows()),
+            column_norms: true,
         },
     )?;
     let mut stats = CompressStats {

@@ -650,6 +650,8 @@ fn code_and_relight(
     let code_s = t.elapsed().as_secs_f64();
     let quality_pair = bits == s.quality_bits && err == s.quality && mode != Mode::FourD;
     let relighter = Relighter::open_with_limits(&path, crate::limits())?;
+    // Frame times below are of frames alone, with every column decoded.
+    relighter.decode_all()?;
     let mut terms: Vec<usize> = s.terms.iter().map(|&n| n.min(relighter.lights())).collect();
     terms.sort_unstable();
     terms.dedup();

@@ -51,6 +51,8 @@ pub fn measure(
 ) -> Result<TexturePoint> {
     let relighter = Relighter::open_with_limits(file, crate::limits())
         .with_context(|| format!("opening {}", file.display()))?;
+    // Frame times below are of frames alone, with every column decoded.
+    relighter.decode_all()?;
     let mesh = TexturedMesh::from_file(relighter.file())?;
     let camera = framing_camera(&mesh)?;
     let request = Request {

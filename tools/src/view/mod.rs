@@ -150,6 +150,13 @@ pub fn run(a: ViewArgs) -> Result<()> {
                 .context("starting a worker thread")?,
         );
     }
+    // Wavelet files decode each column when a frame first needs it; the
+    // rest are decoded here meanwhile, so that later frames only relight.
+    let v = viewer.clone();
+    std::thread::Builder::new()
+        .name("view-preload".into())
+        .spawn(move || v.preload())
+        .context("starting the preload thread")?;
     println!("http://{addr}/");
     use std::io::Write;
     let _ = std::io::stdout().flush();

@@ -183,6 +183,17 @@ impl ViewFile {
 }
 
 impl Viewer {
+    /// Decodes every file's columns not decoded yet (frames decode the
+    /// ones they need first themselves); a file that fails here says so and
+    /// fails again in the frame that needs the column.
+    pub fn preload(&self) {
+        for f in &self.files {
+            if let Err(e) = f.relighter.preload() {
+                eprintln!("warning: {}: {e}", f.path.display());
+            }
+        }
+    }
+
     /// Opens the files, maps and raw store; `slots` frames may run at once.
     pub fn open(
         files: &[PathBuf],

@@ -114,9 +114,12 @@ impl Relighter {
         let meta = file.meta().clone();
         let dims = meta.dims;
         let nonzeros: u64 = file.columns().iter().map(|c| c.nnz as u64).sum();
-        // Entries, held twice while the columns are gathered.
-        let entry_bytes = 2 * Arena::entry_bytes(dims.channels as usize) as u64;
+        // The arena is allocated whole at open (its pages are touched as
+        // columns are decoded), beside one block index per column.
+        let entry_bytes = Arena::entry_bytes(dims.channels as usize) as u64;
         limits.check_alloc("relighting arena", nonzeros, entry_bytes)?;
+        let blocks = crate::arena::CodeLayout::new(dims.pixels(), meta.max_depth()).blocks as u64;
+        limits.check_alloc("arena block index", dims.lights() as u64, 4 * (blocks + 1))?;
         limits.check_alloc(
             "frame image planes",
             dims.pixels() as u64,

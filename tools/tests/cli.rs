@@ -325,6 +325,26 @@ fn write_npy(path: &Path, rows: usize, cols: usize, values: &[f32]) {
     std::fs::write(path, bytes).unwrap();
 }
 
+/// Writes `values` (`width·height` rows of `lights` columns) as `t.npy` in
+/// `dir` and imports it with `ltm import` as `t.raw`.
+fn import_matrix(dir: &Path, width: usize, height: usize, values: &[f32]) {
+    let rows = width * height;
+    write_npy(&dir.join("t.npy"), rows, values.len() / rows, values);
+    let path = |n: &str| dir.join(n).to_str().unwrap().to_string();
+    let (w, h) = (width.to_string(), height.to_string());
+    let (ok, _, stderr) = ltm(&[
+        "import",
+        &path("t.npy"),
+        "--width",
+        &w,
+        "--height",
+        &h,
+        "-o",
+        &path("t.raw"),
+    ]);
+    assert!(ok, "{stderr}");
+}
+
 /// `ltm compress --keep N` keeps N coefficients per column; the old
 /// spelling `--terms` (which `ltm relight` uses for lights per frame) is
 /// refused with a message that names `--keep`, with or without a value;
@@ -395,18 +415,7 @@ fn pca_mode_compress_inspect_export_relight() {
     let values: Vec<f32> = (0..p * m)
         .map(|i| 0.05 + ((i * 7) % 13) as f32 * 0.01 * (1.0 + (i / m) as f32 * 0.1))
         .collect();
-    write_npy(dir.path().join("t.npy").as_path(), p, m, &values);
-    let (ok, _, stderr) = ltm(&[
-        "import",
-        &path("t.npy"),
-        "--width",
-        "4",
-        "--height",
-        "3",
-        "-o",
-        &path("t.raw"),
-    ]);
-    assert!(ok, "{stderr}");
+    import_matrix(dir.path(), 4, 3, &values);
     let (ok, _, stderr) = ltm(&[
         "compress",
         &path("t.raw"),
@@ -521,18 +530,7 @@ fn relight_decodes_columns_on_first_use_or_with_preload() {
     let values: Vec<f32> = (0..p * m)
         .map(|i| 0.01 + ((i * 7) % 13) as f32 * 0.01 * (1.0 + (i % m) as f32 * 0.05))
         .collect();
-    write_npy(dir.path().join("t.npy").as_path(), p, m, &values);
-    let (ok, _, stderr) = ltm(&[
-        "import",
-        &path("t.npy"),
-        "--width",
-        "6",
-        "--height",
-        "5",
-        "-o",
-        &path("t.raw"),
-    ]);
-    assert!(ok, "{stderr}");
+    import_matrix(dir.path(), 6, 5, &values);
     let (ok, _, stderr) = ltm(&["compress", &path("t.raw"), "-o", &path("t.ltm")]);
     assert!(ok, "{stderr}");
     let env = Path::new(env!("CARGO_MANIFEST_DIR")).join("../assets/envmaps/studio.exr");

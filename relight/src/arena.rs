@@ -255,12 +255,18 @@ impl Arena {
         decoder: &ColumnDecoder,
         out: &mut Vec<ArenaColumn<'a>>,
     ) -> Result<usize> {
-        let missing: Vec<usize> = group
-            .iter()
-            .map(|&j| j as usize)
-            .filter(|&j| !self.slots.is_ready(j))
-            .collect();
-        self.decode(&missing, file, decoder)?;
+        // Once the columns are decoded (every frame but the first few),
+        // nothing is gathered.
+        let mut missing = Vec::new();
+        if !group.iter().all(|&j| self.slots.is_ready(j as usize)) {
+            missing.extend(
+                group
+                    .iter()
+                    .map(|&j| j as usize)
+                    .filter(|&j| !self.slots.is_ready(j)),
+            );
+            self.decode(&missing, file, decoder)?;
+        }
         out.clear();
         for &j in group {
             out.push(

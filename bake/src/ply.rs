@@ -103,157 +103,21 @@ pub(crate) fn parse(bytes: &[u8]) -> Result<RawMesh, String> {
     let mut mesh = RawMesh::default();
     let mut vertex_seen = false;
     let mut face_seen = false;
-    let mut polygon: Vec<f64> = Vec::new();
     for el in &elements {
-        // Refuse counts the remaining bytes cannot hold (truncation, or a
-        // header lying about its size) before allocating for them.
         if el.props.is_empty() && el.name != "vertex" && el.name != "face" {
             continue;
         }
-        let min = if binary {
-            el.min_binary_size().max(1)
-        } else {
-            (2 * el.props.len()).max(1)
-        };
-        if el.count > (reader.remaining() + 1) / min {
-            return Err(format!(
-                "truncated: the header declares {} {} elements, but only {} bytes follow",
-                el.count,
-                el.name,
-                reader.remaining()
-            ));
-        }
+        check_count(el, binary, reader.as_ref())?;
         match el.name.as_str() {
             "vertex" => {
                 vertex_seen = true;
-                let idx = |n: &str| {
-                    el.props
-                        .iter()
-                        .position(|p| matches!(p, Prop::Scalar { name, .. } if name == n))
-                };
-                let (Some(ix), Some(iy), Some(iz)) = (idx("x"), idx("y"), idx("z")) else {
-                    return Err("element vertex lacks a scalar x, y or z property".into());
-                };
-                let normals = match (idx("nx"), idx("ny"), idx("nz")) {
-                    (Some(a), Some(b), Some(c)) => Some([a, b, c]),
-                    _ => None,
-                };
-                let uv = [
-                    ("s", "t"),
-                    ("u", "v"),
-                    ("texture_u", "texture_v"),
-                    ("texture_s", "texture_t"),
-                ]
-                .iter()
-                .find_map(|(a, b)| Some([idx(a)?, idx(b)?]));
-                let mut uvs = Vec::with_capacity(if uv.is_some() { el.count } else { 0 });
-                mesh.positions.reserve(el.count);
-                let mut vals = vec![0.0f64; el.props.len()];
-                let mut ns = Vec::with_capacity(if normals.is_some() { el.count } else { 0 });
-                for i in 0..el.count {
-                    for (k, p) in el.props.iter().enumerate() {
-                        let at = || format!("vertex {i} of {}", el.count);
-                        match p {
-                            Prop::Scalar { ty, .. } => vals[k] = reader.scalar(*ty, &at)?,
-                            Prop::List { count, item, .. } => {
-                                let n = list_len(reader.scalar(*count, &at)?, &at)?;
-                                for _ in 0..n {
-                                    reader.scalar(*item, &at)?;
-                                }
-                            }
-                        }
-                    }
-                    mesh.positions
-                        .push([vals[ix] as f32, vals[iy] as f32, vals[iz] as f32]);
-                    if let Some([a, b, c]) = normals {
-                        ns.push([vals[a] as f32, vals[b] as f32, vals[c] as f32]);
-                    }
-                    if let Some([a, b]) = uv {
-                        uvs.push([vals[a] as f32, vals[b] as f32]);
-                    }
-                }
-                if normals.is_some() {
-                    mesh.normals = Some(ns);
-                }
-                if uv.is_some() {
-                    mesh.uvs = Some(uvs);
-                }
+                read_vertices(el, reader.as_mut(), &mut mesh)?;
             }
             "face" => {
                 face_seen = true;
-                let Some(li) = el.props.iter().position(|p| {
-                    matches!(p, Prop::List { name, .. } if name == "vertex_indices" || name == "vertex_index")
-                }) else {
-                    return Err(
-                        "element face lacks a list property vertex_indices (or vertex_index)"
-                            .into(),
-                    );
-                };
-                mesh.triangles.reserve(el.count);
-                for i in 0..el.count {
-                    let at = || format!("face {i} of {}", el.count);
-                    for (k, p) in el.props.iter().enumerate() {
-                        match p {
-                            Prop::Scalar { ty, .. } => {
-                                reader.scalar(*ty, &at)?;
-                            }
-                            Prop::List { count, item, .. } => {
-                                let n = list_len(reader.scalar(*count, &at)?, &at)?;
-                                if k != li {
-                                    for _ in 0..n {
-                                        reader.scalar(*item, &at)?;
-                                    }
-                                    continue;
-                                }
-                                if !item.is_int() {
-                                    return Err(format!(
-                                        "{}: vertex indices are stored as floating point",
-                                        at()
-                                    ));
-                                }
-                                if n < 3 {
-                                    return Err(format!(
-                                        "{}: a face has {n} vertices, at least 3 are needed",
-                                        at()
-                                    ));
-                                }
-                                polygon.clear();
-                                for _ in 0..n {
-                                    polygon.push(reader.scalar(*item, &at)?);
-                                }
-                                let mut ids = [0u32; 3];
-                                for (slot, &v) in ids.iter_mut().zip(&polygon[..3]) {
-                                    *slot = index(v, &at)?;
-                                }
-                                mesh.triangles.push(ids);
-                                for &v in &polygon[3..] {
-                                    ids[1] = ids[2];
-                                    ids[2] = index(v, &at)?;
-                                    mesh.triangles.push(ids);
-                                }
-                            }
-                        }
-                    }
-                }
+                read_faces(el, reader.as_mut(), &mut mesh)?;
             }
-            _ => {
-                for i in 0..el.count {
-                    let at = || format!("element {} {i} of {}", el.name, el.count);
-                    for p in &el.props {
-                        match p {
-                            Prop::Scalar { ty, .. } => {
-                                reader.scalar(*ty, &at)?;
-                            }
-                            Prop::List { count, item, .. } => {
-                                let n = list_len(reader.scalar(*count, &at)?, &at)?;
-                                for _ in 0..n {
-                                    reader.scalar(*item, &at)?;
-                                }
-                            }
-                        }
-                    }
-                }
-            }
+            _ => skip_element(el, reader.as_mut())?,
         }
     }
     if !vertex_seen {
@@ -263,6 +127,183 @@ pub(crate) fn parse(bytes: &[u8]) -> Result<RawMesh, String> {
         return Err("the header declares no face element (point clouds cannot be baked)".into());
     }
     Ok(mesh)
+}
+
+/// Refuses counts the remaining bytes cannot hold (truncation, or a header
+/// lying about its size) before anything is allocated for them.
+fn check_count(el: &Element, binary: bool, reader: &dyn Scalars) -> Result<(), String> {
+    let min = if binary {
+        el.min_binary_size().max(1)
+    } else {
+        (2 * el.props.len()).max(1)
+    };
+    if el.count > (reader.remaining() + 1) / min {
+        return Err(format!(
+            "truncated: the header declares {} {} elements, but only {} bytes follow",
+            el.count,
+            el.name,
+            reader.remaining()
+        ));
+    }
+    Ok(())
+}
+
+/// Reads a list's length and skips its items.
+fn skip_list(
+    reader: &mut dyn Scalars,
+    count: Ty,
+    item: Ty,
+    at: &dyn Fn() -> String,
+) -> Result<(), String> {
+    let n = list_len(reader.scalar(count, at)?, at)?;
+    for _ in 0..n {
+        reader.scalar(item, at)?;
+    }
+    Ok(())
+}
+
+/// The `vertex` element: positions, and normals and texture coordinates
+/// when the element has them.
+fn read_vertices(el: &Element, reader: &mut dyn Scalars, mesh: &mut RawMesh) -> Result<(), String> {
+    let idx = |n: &str| {
+        el.props
+            .iter()
+            .position(|p| matches!(p, Prop::Scalar { name, .. } if name == n))
+    };
+    let (Some(ix), Some(iy), Some(iz)) = (idx("x"), idx("y"), idx("z")) else {
+        return Err("element vertex lacks a scalar x, y or z property".into());
+    };
+    let normals = match (idx("nx"), idx("ny"), idx("nz")) {
+        (Some(a), Some(b), Some(c)) => Some([a, b, c]),
+        _ => None,
+    };
+    let uv = [
+        ("s", "t"),
+        ("u", "v"),
+        ("texture_u", "texture_v"),
+        ("texture_s", "texture_t"),
+    ]
+    .iter()
+    .find_map(|(a, b)| Some([idx(a)?, idx(b)?]));
+    let mut uvs = Vec::with_capacity(if uv.is_some() { el.count } else { 0 });
+    mesh.positions.reserve(el.count);
+    let mut vals = vec![0.0f64; el.props.len()];
+    let mut ns = Vec::with_capacity(if normals.is_some() { el.count } else { 0 });
+    for i in 0..el.count {
+        for (k, p) in el.props.iter().enumerate() {
+            let at = || format!("vertex {i} of {}", el.count);
+            match p {
+                Prop::Scalar { ty, .. } => vals[k] = reader.scalar(*ty, &at)?,
+                Prop::List { count, item, .. } => skip_list(reader, *count, *item, &at)?,
+            }
+        }
+        mesh.positions
+            .push([vals[ix] as f32, vals[iy] as f32, vals[iz] as f32]);
+        if let Some([a, b, c]) = normals {
+            ns.push([vals[a] as f32, vals[b] as f32, vals[c] as f32]);
+        }
+        if let Some([a, b]) = uv {
+            uvs.push([vals[a] as f32, vals[b] as f32]);
+        }
+    }
+    if normals.is_some() {
+        mesh.normals = Some(ns);
+    }
+    if uv.is_some() {
+        mesh.uvs = Some(uvs);
+    }
+    Ok(())
+}
+
+/// The `face` element: each polygon of `vertex_indices` fanned into
+/// triangles.
+fn read_faces(el: &Element, reader: &mut dyn Scalars, mesh: &mut RawMesh) -> Result<(), String> {
+    let Some(li) = el.props.iter().position(|p| {
+        matches!(p, Prop::List { name, .. } if name == "vertex_indices" || name == "vertex_index")
+    }) else {
+        return Err("element face lacks a list property vertex_indices (or vertex_index)".into());
+    };
+    mesh.triangles.reserve(el.count);
+    let mut polygon: Vec<f64> = Vec::new();
+    for i in 0..el.count {
+        let at = || format!("face {i} of {}", el.count);
+        for (k, p) in el.props.iter().enumerate() {
+            match p {
+                Prop::Scalar { ty, .. } => {
+                    reader.scalar(*ty, &at)?;
+                }
+                Prop::List { count, item, .. } if k != li => skip_list(reader, *count, *item, &at)?,
+                Prop::List { count, item, .. } => {
+                    read_polygon(reader, (*count, *item), &at, &mut polygon)?;
+                    fan(&polygon, &at, &mut mesh.triangles)?;
+                }
+            }
+        }
+    }
+    Ok(())
+}
+
+/// Reads one polygon's vertex indices (at least 3, stored as integers).
+fn read_polygon(
+    reader: &mut dyn Scalars,
+    (count, item): (Ty, Ty),
+    at: &dyn Fn() -> String,
+    polygon: &mut Vec<f64>,
+) -> Result<(), String> {
+    let n = list_len(reader.scalar(count, at)?, at)?;
+    if !item.is_int() {
+        return Err(format!(
+            "{}: vertex indices are stored as floating point",
+            at()
+        ));
+    }
+    if n < 3 {
+        return Err(format!(
+            "{}: a face has {n} vertices, at least 3 are needed",
+            at()
+        ));
+    }
+    polygon.clear();
+    for _ in 0..n {
+        polygon.push(reader.scalar(item, at)?);
+    }
+    Ok(())
+}
+
+/// Fans a polygon into triangles `(0, 1, 2), (0, 2, 3), …`.
+fn fan(
+    polygon: &[f64],
+    at: &dyn Fn() -> String,
+    triangles: &mut Vec<[u32; 3]>,
+) -> Result<(), String> {
+    let mut ids = [0u32; 3];
+    for (slot, &v) in ids.iter_mut().zip(&polygon[..3]) {
+        *slot = index(v, at)?;
+    }
+    triangles.push(ids);
+    for &v in &polygon[3..] {
+        ids[1] = ids[2];
+        ids[2] = index(v, at)?;
+        triangles.push(ids);
+    }
+    Ok(())
+}
+
+/// Reads and drops every instance of an element other than `vertex` and
+/// `face`.
+fn skip_element(el: &Element, reader: &mut dyn Scalars) -> Result<(), String> {
+    for i in 0..el.count {
+        let at = || format!("element {} {i} of {}", el.name, el.count);
+        for p in &el.props {
+            match p {
+                Prop::Scalar { ty, .. } => {
+                    reader.scalar(*ty, &at)?;
+                }
+                Prop::List { count, item, .. } => skip_list(reader, *count, *item, &at)?,
+            }
+        }
+    }
+    Ok(())
 }
 
 fn list_len(v: f64, at: &dyn Fn() -> String) -> Result<usize, String> {
@@ -286,6 +327,39 @@ fn index(v: f64, at: &dyn Fn() -> String) -> Result<u32, String> {
 }
 
 fn parse_header(bytes: &[u8]) -> Result<(Vec<Element>, bool, &[u8]), String> {
+    let (lines, pos) = header_lines(bytes)?;
+    let mut binary = None;
+    let mut elements: Vec<Element> = Vec::new();
+    for (i, line) in lines.iter().enumerate().skip(1) {
+        let ln = i + 1;
+        let w: Vec<&str> = line.split_whitespace().collect();
+        match w.first().copied() {
+            None | Some("comment") | Some("obj_info") => {}
+            Some("format") => binary = Some(format_line(&w, ln, line)?),
+            Some("element") => elements.push(element_line(&w, ln, line)?),
+            Some("property") => {
+                let Some(el) = elements.last_mut() else {
+                    return Err(format!(
+                        "header line {ln}: property before any element"
+                    ));
+                };
+                el.props.push(property_line(&w, ln, line)?);
+            }
+            Some(other) => {
+                return Err(format!(
+                    "header line {ln}: unknown keyword \"{other}\" (valid: format, element, property, comment, obj_info, end_header)"
+                ))
+            }
+        }
+    }
+    let Some(binary) = binary else {
+        return Err("the header has no format line".into());
+    };
+    Ok((elements, binary, &bytes[pos..]))
+}
+
+/// The header's lines up to `end_header`, and the offset of the body.
+fn header_lines(bytes: &[u8]) -> Result<(Vec<String>, usize), String> {
     if !bytes.starts_with(b"ply\n") && !bytes.starts_with(b"ply\r\n") {
         return Err("does not start with the line \"ply\"".into());
     }
@@ -306,95 +380,71 @@ fn parse_header(bytes: &[u8]) -> Result<(Vec<Element>, bool, &[u8]), String> {
             .map_err(|_| format!("header line {} is not text", lines.len() + 1))?
             .trim_end_matches('\r');
         if line.trim() == "end_header" {
-            break;
+            return Ok((lines, pos));
         }
         lines.push(line.to_string());
     }
-    let mut binary = None;
-    let mut elements: Vec<Element> = Vec::new();
-    for (i, line) in lines.iter().enumerate().skip(1) {
-        let ln = i + 1;
-        let w: Vec<&str> = line.split_whitespace().collect();
-        match w.first().copied() {
-            None | Some("comment") | Some("obj_info") => {}
-            Some("format") => {
-                binary = Some(match (w.get(1).copied(), w.get(2).copied()) {
-                    (Some("ascii"), Some("1.0")) => false,
-                    (Some("binary_little_endian"), Some("1.0")) => true,
-                    (Some("binary_big_endian"), _) => {
-                        return Err(
-                            "binary_big_endian PLY is not supported (valid: ascii 1.0, binary_little_endian 1.0)"
-                                .into(),
-                        )
-                    }
-                    _ => {
-                        return Err(format!(
-                            "header line {ln}: unknown format \"{line}\" (valid: ascii 1.0, binary_little_endian 1.0)"
-                        ))
-                    }
-                });
-            }
-            Some("element") => {
-                let (Some(name), Some(count), None) = (w.get(1), w.get(2), w.get(3)) else {
-                    return Err(format!(
-                        "header line {ln}: expected \"element NAME COUNT\", found \"{line}\""
-                    ));
-                };
-                let count = count.parse::<usize>().map_err(|_| {
-                    format!("header line {ln}: element count \"{count}\" is not a non-negative integer")
-                })?;
-                elements.push(Element {
-                    name: name.to_string(),
-                    count,
-                    props: Vec::new(),
-                });
-            }
-            Some("property") => {
-                let Some(el) = elements.last_mut() else {
-                    return Err(format!(
-                        "header line {ln}: property before any element"
-                    ));
-                };
-                let bad = || {
-                    format!("header line {ln}: expected \"property TYPE NAME\" or \"property list COUNT_TYPE ITEM_TYPE NAME\" with types char, uchar, short, ushort, int, uint, float, double; found \"{line}\"")
-                };
-                let prop = if w.get(1) == Some(&"list") {
-                    match (w.get(2), w.get(3), w.get(4), w.get(5)) {
-                        (Some(c), Some(t), Some(n), None) => {
-                            let count = Ty::parse(c).ok_or_else(bad)?;
-                            if !count.is_int() {
-                                return Err(bad());
-                            }
-                            Prop::List {
-                                name: n.to_string(),
-                                count,
-                                item: Ty::parse(t).ok_or_else(bad)?,
-                            }
-                        }
-                        _ => return Err(bad()),
-                    }
-                } else {
-                    match (w.get(1), w.get(2), w.get(3)) {
-                        (Some(t), Some(n), None) => Prop::Scalar {
-                            name: n.to_string(),
-                            ty: Ty::parse(t).ok_or_else(bad)?,
-                        },
-                        _ => return Err(bad()),
-                    }
-                };
-                el.props.push(prop);
-            }
-            Some(other) => {
-                return Err(format!(
-                    "header line {ln}: unknown keyword \"{other}\" (valid: format, element, property, comment, obj_info, end_header)"
-                ))
-            }
-        }
+}
+
+/// `format ascii 1.0` (false) or `format binary_little_endian 1.0` (true).
+fn format_line(w: &[&str], ln: usize, line: &str) -> Result<bool, String> {
+    match (w.get(1).copied(), w.get(2).copied()) {
+        (Some("ascii"), Some("1.0")) => Ok(false),
+        (Some("binary_little_endian"), Some("1.0")) => Ok(true),
+        (Some("binary_big_endian"), _) => Err(
+            "binary_big_endian PLY is not supported (valid: ascii 1.0, binary_little_endian 1.0)"
+                .into(),
+        ),
+        _ => Err(format!(
+            "header line {ln}: unknown format \"{line}\" (valid: ascii 1.0, binary_little_endian 1.0)"
+        )),
     }
-    let Some(binary) = binary else {
-        return Err("the header has no format line".into());
+}
+
+/// `element NAME COUNT`.
+fn element_line(w: &[&str], ln: usize, line: &str) -> Result<Element, String> {
+    let (Some(name), Some(count), None) = (w.get(1), w.get(2), w.get(3)) else {
+        return Err(format!(
+            "header line {ln}: expected \"element NAME COUNT\", found \"{line}\""
+        ));
     };
-    Ok((elements, binary, &bytes[pos..]))
+    let count = count.parse::<usize>().map_err(|_| {
+        format!("header line {ln}: element count \"{count}\" is not a non-negative integer")
+    })?;
+    Ok(Element {
+        name: name.to_string(),
+        count,
+        props: Vec::new(),
+    })
+}
+
+/// `property TYPE NAME` or `property list COUNT_TYPE ITEM_TYPE NAME`.
+fn property_line(w: &[&str], ln: usize, line: &str) -> Result<Prop, String> {
+    let bad = || {
+        format!("header line {ln}: expected \"property TYPE NAME\" or \"property list COUNT_TYPE ITEM_TYPE NAME\" with types char, uchar, short, ushort, int, uint, float, double; found \"{line}\"")
+    };
+    if w.get(1) == Some(&"list") {
+        let (Some(c), Some(t), Some(n), None) = (w.get(2), w.get(3), w.get(4), w.get(5)) else {
+            return Err(bad());
+        };
+        let count = Ty::parse(c).ok_or_else(bad)?;
+        if !count.is_int() {
+            return Err(bad());
+        }
+        Ok(Prop::List {
+            name: n.to_string(),
+            count,
+            item: Ty::parse(t).ok_or_else(bad)?,
+        })
+    } else {
+        let (Some(t), Some(n), None) = (w.get(1), w.get(2), w.get(3)) else {
+            return Err(bad());
+        };
+        Ok(Prop::Scalar {
+            name: n.to_string(),
+            ty: Ty::parse(t).ok_or_else(bad)?,
+        })
+    }
 }
 
 /// A source of scalar values (ASCII tokens or little-endian binary).

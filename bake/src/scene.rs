@@ -453,6 +453,14 @@ impl SceneDesc {
                 format!("1..={MAX_SPP}"),
             ));
         }
+        self.validate_lighting()?;
+        self.validate_materials()?;
+        self.validate_geometry()?;
+        self.validate_texture()
+    }
+
+    fn validate_lighting(&self) -> Result<()> {
+        let o = &self.origin;
         let l = &self.lighting;
         if !l.face_res.is_power_of_two() || l.face_res > MAX_FACE_RES {
             return Err(BakeError::range(
@@ -470,6 +478,11 @@ impl SceneDesc {
                 format!("1..={MAX_TEXEL_SAMPLES}"),
             ));
         }
+        Ok(())
+    }
+
+    fn validate_materials(&self) -> Result<()> {
+        let o = &self.origin;
         for (name, m) in &self.materials {
             let f = |k: &str| format!("materials.{name}.{k}");
             let (albedo, spec, rough) = match m {
@@ -495,6 +508,11 @@ impl SceneDesc {
                 }
             }
         }
+        Ok(())
+    }
+
+    fn validate_geometry(&self) -> Result<()> {
+        let o = &self.origin;
         if self.meshes.is_empty() && self.quads.is_empty() {
             return Err(BakeError::invalid(
                 o,
@@ -534,7 +552,7 @@ impl SceneDesc {
                 }
             }
         }
-        self.validate_texture()
+        Ok(())
     }
 
     fn validate_texture(&self) -> Result<()> {

@@ -578,6 +578,47 @@ struct Arc {
     side_a: bool,
 }
 
+/// The great circle of an arc: its unit normal `m`, and `u = m × p`, so
+/// that the arc's points are `p·cos t + u·sin t`, `t ∈ [0, α]`, ordered by
+/// `key = tan(t/2)` from 0 to `key_end`.
+struct ArcFrame {
+    p: DVec3,
+    m: DVec3,
+    u: DVec3,
+    key_end: f64,
+}
+
+impl ArcFrame {
+    /// `None` for a degenerate arc (zero length, or antipodal ends).
+    fn new(arc: &Arc) -> Option<ArcFrame> {
+        let (p, q) = (arc.p, arc.q);
+        let cross = p.cross(q);
+        let sin_a = cross.length();
+        if sin_a.is_nan() || sin_a <= 0.0 || p.dot(q) <= -1.0 + 1e-12 {
+            return None;
+        }
+        let m = cross / sin_a;
+        let mut g = ArcFrame {
+            p,
+            m,
+            u: m.cross(p),
+            key_end: 0.0,
+        };
+        g.key_end = g.key(q);
+        Some(g)
+    }
+
+    /// The position of `d` along the arc's great circle.
+    fn key(&self, d: DVec3) -> f64 {
+        d.dot(self.u) / (1.0 + d.dot(self.p))
+    }
+
+    /// Whether a key lies on the arc.
+    fn inside(&self, k: f64) -> bool {
+        (0.0..=self.key_end).contains(&k)
+    }
+}
+
 /// One resampling: the map, the cubemap resolution and the rotation.
 struct Remap<'a> {
     env: &'a EnvMap,
@@ -812,121 +853,124 @@ impl<'a> Remap<'a> {
     /// Adds one texel edge's line integrals, records where it crosses the
     /// parallels, and where it meets a pole.
     fn arc(&self, arc: &Arc, acc: &mut Acc) {
-        let (w, h) = (self.env.width, self.env.height);
-        let Arc { p, q, ta, tb, .. } = *arc;
-        let cross = p.cross(q);
-        let sin_a = cross.length();
-        if sin_a.is_nan() || sin_a <= 0.0 || p.dot(q) <= -1.0 + 1e-12 {
+        let Some(g) = ArcFrame::new(arc) else {
             return;
-        }
-        let m = cross / sin_a;
-        let u = m.cross(p);
-        // Points of the arc are p·cos t + u·sin t, t ∈ [0, α]; they are
-        // ordered by key = tan(t/2), from 0 to `key_end`.
-        let key = |d: DVec3| d.dot(u) / (1.0 + d.dot(p));
-        let key_end = key(q);
-        // In the (φ, z) plane, whose orientation is the reverse of the
-        // sphere's seen from outside, the texel on the −m side lies on the
-        // left of the arc's direction.
-        let (left, right) = if arc.side_a { (tb, ta) } else { (ta, tb) };
-
-        // An edge through a pole: no line integral (in the plane it runs
-        // along meridians); the pole's parallel is split where it leaves.
-        let mut touches = false;
-        for (pole, ps) in self.poles.iter().enumerate() {
-            let Some(ps) = *ps else { continue };
-            if m.dot(ps).abs() > THROUGH_TOL || 1.0 + ps.dot(p) < 1e-12 {
-                continue;
-            }
-            let k = key(ps);
-            if (-THROUGH_TOL..=key_end + THROUGH_TOL).contains(&k) {
-                touches = true;
-                // The rays take the φ of the arc's ends, the same values
-                // as the edges meeting there, so that the (φ, z) plane
-                // closes up exactly around the pole.
-                let mut push = |phi: f64| {
-                    let after = DVec3::new(phi.cos(), 0.0, phi.sin());
-                    let texel_after = if (m.dot(after) > 0.0) == arc.side_a {
-                        ta
-                    } else {
-                        tb
-                    };
-                    acc.rays.push(Ray {
-                        pole: pole as u8,
-                        phi,
-                        texel_after,
-                    });
-                };
-                if k < key_end - THROUGH_TOL {
-                    push(arc.phi_q);
-                }
-                if k > THROUGH_TOL {
-                    push(arc.phi_p);
-                }
-            }
-        }
-
+        };
+        let touches = self.pole_rays(arc, &g, acc);
         acc.cuts.clear();
         acc.cuts.push(Cut {
             key: 0.0,
-            d: p,
+            d: arc.p,
             phi: arc.phi_p,
         });
         acc.cuts.push(Cut {
-            key: key_end,
-            d: q,
+            key: g.key_end,
+            d: arc.q,
             phi: arc.phi_q,
         });
-        let in_range = |k: f64| (-CROSS_KEY_TOL..=key_end + CROSS_KEY_TOL).contains(&k);
-        let inside = |k: f64| (0.0..=key_end).contains(&k);
-
-        // Crossings with the parallels 1..H−1: the great circle meets the
-        // plane y = z at d0 ± s·l.
-        let rr2 = m.x * m.x + m.z * m.z;
-        if rr2 > 0.0 {
-            let rr = rr2.sqrt();
-            let top = (DVec3::Y - m * m.y) / rr;
-            let on_arc = |d: DVec3| 1.0 + d.dot(p) > 1e-12 && inside(key(d));
-            let zmax = if on_arc(top) { rr } else { p.y.max(q.y) };
-            let zmin = if on_arc(-top) { -rr } else { p.y.min(q.y) };
-            let hf = h as f64;
-            let k_lo = ((zmax.clamp(-1.0, 1.0).acos() / PI * hf).floor() as usize)
-                .saturating_sub(1)
-                .max(1);
-            let k_hi = ((zmin.clamp(-1.0, 1.0).acos() / PI * hf).ceil() as usize + 1).min(h - 1);
-            let l = m.cross(DVec3::Y) / rr;
-            for k in k_lo..=k_hi {
-                let z = self.z[k];
-                let s2 = 1.0 - z * z / rr2;
-                if s2 < 0.0 {
-                    continue;
-                }
-                let d0 = top * (z / rr);
-                let s = s2.sqrt();
-                for d in [d0 + l * s, d0 - l * s] {
-                    if 1.0 + d.dot(p) <= 1e-12 {
-                        continue;
-                    }
-                    let kd = key(d);
-                    if in_range(kd) {
-                        let phi = phi_of(d);
-                        acc.crossings.push((k as u32, phi));
-                        if !touches && inside(kd) {
-                            acc.cuts.push(Cut { key: kd, d, phi });
-                        }
-                    }
-                    if s == 0.0 {
-                        break;
-                    }
-                }
-            }
-        }
+        self.parallel_crossings(arc, &g, touches, acc);
         if touches {
             return;
         }
+        self.meridian_cuts(arc, &g, acc);
+        self.integrate_cuts(arc, &g, acc);
+    }
 
-        // Crossings with the meridians: φ is monotonic along the arc,
-        // decreasing when m.y > 0.
+    /// An edge through a pole has no line integral (in the (φ, z) plane it
+    /// runs along meridians); the pole's parallel is split where it leaves,
+    /// with a ray recorded for each side. Returns whether the edge touches
+    /// a pole.
+    fn pole_rays(&self, arc: &Arc, g: &ArcFrame, acc: &mut Acc) -> bool {
+        let mut touches = false;
+        for (pole, ps) in self.poles.iter().enumerate() {
+            let Some(ps) = *ps else { continue };
+            if g.m.dot(ps).abs() > THROUGH_TOL || 1.0 + ps.dot(arc.p) < 1e-12 {
+                continue;
+            }
+            let k = g.key(ps);
+            if !(-THROUGH_TOL..=g.key_end + THROUGH_TOL).contains(&k) {
+                continue;
+            }
+            touches = true;
+            // The rays take the φ of the arc's ends, the same values as the
+            // edges meeting there, so that the (φ, z) plane closes up
+            // exactly around the pole.
+            let mut push = |phi: f64| {
+                let after = DVec3::new(phi.cos(), 0.0, phi.sin());
+                let texel_after = if (g.m.dot(after) > 0.0) == arc.side_a {
+                    arc.ta
+                } else {
+                    arc.tb
+                };
+                acc.rays.push(Ray {
+                    pole: pole as u8,
+                    phi,
+                    texel_after,
+                });
+            };
+            if k < g.key_end - THROUGH_TOL {
+                push(arc.phi_q);
+            }
+            if k > THROUGH_TOL {
+                push(arc.phi_p);
+            }
+        }
+        touches
+    }
+
+    /// Crossings with the parallels 1..H−1: the great circle meets the
+    /// plane y = z at d0 ± s·l. Every crossing is recorded for the
+    /// parallel; those inside the arc also cut it, unless it touches a pole.
+    fn parallel_crossings(&self, arc: &Arc, g: &ArcFrame, touches: bool, acc: &mut Acc) {
+        let (m, p, q) = (g.m, arc.p, arc.q);
+        let rr2 = m.x * m.x + m.z * m.z;
+        if rr2 <= 0.0 {
+            return;
+        }
+        let h = self.env.height;
+        let rr = rr2.sqrt();
+        let top = (DVec3::Y - m * m.y) / rr;
+        let on_arc = |d: DVec3| 1.0 + d.dot(p) > 1e-12 && g.inside(g.key(d));
+        let zmax = if on_arc(top) { rr } else { p.y.max(q.y) };
+        let zmin = if on_arc(-top) { -rr } else { p.y.min(q.y) };
+        let hf = h as f64;
+        let k_lo = ((zmax.clamp(-1.0, 1.0).acos() / PI * hf).floor() as usize)
+            .saturating_sub(1)
+            .max(1);
+        let k_hi = ((zmin.clamp(-1.0, 1.0).acos() / PI * hf).ceil() as usize + 1).min(h - 1);
+        let l = m.cross(DVec3::Y) / rr;
+        for k in k_lo..=k_hi {
+            let z = self.z[k];
+            let s2 = 1.0 - z * z / rr2;
+            if s2 < 0.0 {
+                continue;
+            }
+            let d0 = top * (z / rr);
+            let s = s2.sqrt();
+            for d in [d0 + l * s, d0 - l * s] {
+                if 1.0 + d.dot(p) <= 1e-12 {
+                    continue;
+                }
+                let kd = g.key(d);
+                if (-CROSS_KEY_TOL..=g.key_end + CROSS_KEY_TOL).contains(&kd) {
+                    let phi = phi_of(d);
+                    acc.crossings.push((k as u32, phi));
+                    if !touches && g.inside(kd) {
+                        acc.cuts.push(Cut { key: kd, d, phi });
+                    }
+                }
+                if s == 0.0 {
+                    break;
+                }
+            }
+        }
+    }
+
+    /// Crossings with the meridians: φ is monotonic along the arc,
+    /// decreasing when m.y > 0.
+    fn meridian_cuts(&self, arc: &Arc, g: &ArcFrame, acc: &mut Acc) {
+        let w = self.env.width;
+        let m = g.m;
         let decreasing = m.y > 0.0;
         let (phi_p, phi_q) = (arc.phi_p, arc.phi_q);
         let mut sweep = if decreasing {
@@ -959,11 +1003,11 @@ impl<'a> Remap<'a> {
             if d.x * s - d.z * c < 0.0 {
                 d = -d;
             }
-            if 1.0 + d.dot(p) <= 1e-12 {
+            if 1.0 + d.dot(arc.p) <= 1e-12 {
                 continue;
             }
-            let kd = key(d);
-            if inside(kd) {
+            let kd = g.key(d);
+            if g.inside(kd) {
                 acc.cuts.push(Cut {
                     key: kd,
                     d,
@@ -971,9 +1015,23 @@ impl<'a> Remap<'a> {
                 });
             }
         }
+    }
 
-        // Each piece between cuts lies in one pixel: add its line integral
-        // ∫ z dφ = atan(q1/m_y) − atan(q0/m_y), q = (m × d)_y.
+    /// Each piece between cuts lies in one pixel: adds its line integral
+    /// ∫ z dφ = atan(q1/m_y) − atan(q0/m_y), q = (m × d)_y, to the texels
+    /// on either side.
+    fn integrate_cuts(&self, arc: &Arc, g: &ArcFrame, acc: &mut Acc) {
+        let w = self.env.width;
+        let m = g.m;
+        let scale = w as f64 / TAU;
+        // In the (φ, z) plane, whose orientation is the reverse of the
+        // sphere's seen from outside, the texel on the −m side lies on the
+        // left of the arc's direction.
+        let (left, right) = if arc.side_a {
+            (arc.tb, arc.ta)
+        } else {
+            (arc.ta, arc.tb)
+        };
         acc.cuts.sort_unstable_by(|a, b| a.key.total_cmp(&b.key));
         let q_of = |d: DVec3| m.z * d.x - m.x * d.z;
         for i in 1..acc.cuts.len() {

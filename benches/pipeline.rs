@@ -28,8 +28,9 @@
 mod common;
 
 use criterion::{criterion_group, criterion_main, BenchmarkId, Criterion, Throughput};
+use ltm::codec::column::EncodedColumn;
+use ltm::codec::compress::Mode;
 use ltm::codec::compress::{compress, CodeOptions, Target};
-use ltm::codec::container::{EncodedColumn, Mode};
 use ltm::codec::entropy::{self, ColumnShape, ValueCoding};
 use ltm::codec::quant::{self, scale_groups, BandWeights};
 use ltm::codec::wavelet::{self, row_forward};

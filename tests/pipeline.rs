@@ -3,8 +3,8 @@
 //! checked against the exact dense product T·L and against eq. 3.
 
 use ltm::bake::{bake, BakeOptions, Overrides, Scene, SceneDesc};
+use ltm::codec::compress::Mode;
 use ltm::codec::compress::{compress, CodeOptions, CompressOptions, Target, TransposeOptions};
-use ltm::codec::container::Mode;
 use ltm::codec::{Filter, RawStore};
 use ltm::relight::{
     reference, relative_l2, EnvMap, Relight, Relighter, Request, Rotation, Weighting,

@@ -3,7 +3,8 @@
 //! column's depth, undo the band weights, then inverse steps, then the
 //! file's empty rows set to 0.
 
-use crate::container::{LtmFile, Meta, SparseColumn};
+use crate::column::SparseColumn;
+use crate::container::{LtmFile, Meta};
 use crate::empty::EmptyRows;
 use crate::error::{Error, Result};
 use crate::quant::{decode_scale, levels, scale_groups, BandWeights};

@@ -11,13 +11,15 @@
 #![deny(unsafe_code)]
 #![warn(missing_docs)]
 
+pub mod bands;
+pub mod baseline;
 mod bytes;
+pub mod column;
 pub mod compress;
 pub mod container;
 pub mod cubemap;
 mod decode;
 mod dims;
-pub mod eigen;
 mod empty;
 pub mod entropy;
 mod error;
@@ -33,29 +35,28 @@ pub mod quant;
 #[cfg(not(feature = "benchmarks"))]
 mod quant;
 pub mod raw;
-mod rows;
-pub mod sh;
+mod rsvd;
 mod surface;
 pub mod wavelet;
 
+pub use baseline::{PcaBasis, ShProjection, MAX_SH_ORDER};
+pub use column::SparseColumn;
 pub use compress::{
-    compress, Analysis, CodeOptions, Coder, CompressOptions, CompressStats, Plan, Stage, Target,
-    TransposeOptions, Transposed,
+    compress, compress_pca, Analysis, CodeOptions, Coder, CompressOptions, CompressStats, Entropy,
+    Mode, PcaOptions, PcaStats, Plan, Stage, Target, TransposeOptions, Transposed,
 };
-pub use container::{Entropy, LtmFile, LtmWriter, Meta, Mode, OptionalChunks, SparseColumn};
+pub use container::{LtmFile, LtmWriter, Meta, OptionalChunks};
 pub use decode::ColumnDecoder;
 pub use dims::{
     Dims, LightBasis, Parameterization, RowLayout, MAX_FACE_RES, MAX_PIXELS, MAX_SIDE,
     MAX_TEXTURE_SIZE,
 };
-pub use eigen::{compress_pca, PcaModel, PcaOptions, PcaStats};
 pub use empty::EmptyRows;
 pub use error::{Error, Result};
 pub use limits::Limits;
 pub use output::AtomicFile;
-pub use pca::PcaBasis;
+pub use pca::PcaModel;
 pub use quant::BandWeights;
 pub use raw::{RawHeader, RawStore, RawWriter};
-pub use sh::{ShProjection, MAX_SH_ORDER};
 pub use surface::{Surface, SurfacePoint, SURFACE_RECORD_LEN};
 pub use wavelet::Filter;

@@ -15,8 +15,9 @@
 //! (`E[q] = u/s·Q`), so small kept coefficients survive on average instead of
 //! all rounding the same way; zero stays zero. Decoding is `u = q·s/Q`.
 
-use crate::container::SparseColumn;
-use crate::wavelet::{self, band_size, Filter};
+use crate::bands::{band_count, band_level, band_map, band_rect};
+use crate::column::SparseColumn;
+use crate::wavelet::{self, Filter};
 
 /// Quantization levels on each side of zero for `bits` (2..=16).
 pub fn levels(bits: u32) -> f32 {
@@ -40,18 +41,9 @@ pub fn dither(seed: u64, column: u32, index: u32, channel: u32) -> f32 {
 /// bands of level `k` (1 = finest). Each group has its own quantizer scale, so
 /// large coarse coefficients do not coarsen the steps of small fine ones.
 pub fn scale_groups(width: usize, height: usize, depth: u32) -> Vec<u8> {
-    let mut map = vec![0u8; width * height];
-    for k in 1..=depth {
-        let (pw, ph) = band_size(width, height, k - 1);
-        let (lw, lh) = band_size(width, height, k);
-        for y in 0..ph {
-            for x in 0..pw {
-                if x >= lw || y >= lh {
-                    map[y * width + x] = k as u8;
-                }
-            }
-        }
-    }
+    let mut map = band_map(width, height, depth);
+    map.iter_mut()
+        .for_each(|b| *b = band_level(*b as usize) as u8);
     map
 }
 
@@ -165,24 +157,15 @@ impl BandWeights {
         for depth in 0..=max_depth {
             let mut map = vec![1.0f32; n];
             if depth > 0 {
-                // Detail bands of each level k, then the low band of `depth`.
-                for k in 1..=depth {
-                    let (pw, ph) = band_size(width, height, k - 1);
-                    let (lw, lh) = band_size(width, height, k);
-                    for (x0, x1, y0, y1) in [(lw, pw, 0, lh), (0, lw, lh, ph), (lw, pw, lh, ph)] {
-                        if x0 >= x1 || y0 >= y1 {
-                            continue;
-                        }
-                        let w = norm((x0 + x1) / 2, (y0 + y1) / 2, depth);
-                        for y in y0..y1 {
-                            map[y * width + x0..y * width + x1].fill(w);
-                        }
+                for band in 0..band_count(depth) {
+                    let (xs, ys) = band_rect(width, height, depth, band);
+                    if xs.is_empty() || ys.is_empty() {
+                        continue;
                     }
-                }
-                let (lw, lh) = band_size(width, height, depth);
-                let w = norm(lw / 2, lh / 2, depth);
-                for y in 0..lh {
-                    map[y * width..y * width + lw].fill(w);
+                    let w = norm((xs.start + xs.end) / 2, (ys.start + ys.end) / 2, depth);
+                    for y in ys {
+                        map[y * width + xs.start..y * width + xs.end].fill(w);
+                    }
                 }
             }
             maps.push(map);

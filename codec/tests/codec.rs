@@ -5,7 +5,8 @@
 use ltm_codec::compress::{
     compress, CodeOptions, Coder, CompressOptions, ErrorCurve, Plan, Target, TransposeOptions,
 };
-use ltm_codec::container::{Entropy, LtmFile, Mode};
+use ltm_codec::compress::{Entropy, Mode};
+use ltm_codec::container::LtmFile;
 use ltm_codec::cubemap::{texel_direction, texel_solid_angle};
 use ltm_codec::npy::decode_matrix;
 use ltm_codec::{
@@ -244,8 +245,8 @@ fn version_3_files_still_decode() {
     let (file, crc) = old_fixture_decodes("golden-v3.ltm", 3);
     assert_eq!(crc, GOLDEN_LTM_V3);
     let encodings: Vec<_> = file.columns().iter().map(|c| c.encoding).collect();
-    assert!(encodings.contains(&ltm_codec::container::Encoding::Ranged));
-    assert!(!encodings.contains(&ltm_codec::container::Encoding::Classed));
+    assert!(encodings.contains(&ltm_codec::column::Encoding::Ranged));
+    assert!(!encodings.contains(&ltm_codec::column::Encoding::Classed));
 }
 
 /// A version-4 file (column encoding 4, before the stored column norms)
@@ -256,7 +257,7 @@ fn version_4_files_still_decode() {
     assert_eq!(crc, GOLDEN_LTM_V4);
     assert!(file.column_norms().is_none());
     let encodings: Vec<_> = file.columns().iter().map(|c| c.encoding).collect();
-    assert!(encodings.contains(&ltm_codec::container::Encoding::Classed));
+    assert!(encodings.contains(&ltm_codec::column::Encoding::Classed));
 }
 
 /// Every wavelet file stores each column's priority norm (chunk NORM), and

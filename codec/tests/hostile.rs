@@ -4,10 +4,11 @@
 //! fail with an error that names the problem, never panic, signal or write
 //! an output.
 
+use ltm_codec::compress::Mode;
 use ltm_codec::compress::{
     compress, CodeOptions, CompressOptions, Stage, Target, MAX_NORM, MIN_NONZERO_RMS,
 };
-use ltm_codec::container::{LtmFile, Mode};
+use ltm_codec::container::LtmFile;
 use ltm_codec::npy::decode_matrix;
 use ltm_codec::{
     ColumnDecoder, Dims, Error, Filter, Limits, Meta, RawHeader, RawStore, RawWriter, SparseColumn,

@@ -4,7 +4,7 @@
 //! corrupted payloads; version-1 files still open.
 
 use ltm_codec::compress::{compress, CompressOptions};
-use ltm_codec::eigen::{compress_pca, PcaOptions};
+use ltm_codec::compress::{compress_pca, PcaOptions};
 use ltm_codec::npy::decode_matrix;
 use ltm_codec::{Dims, Limits, LtmFile, Mode, RawHeader, RawStore, RawWriter};
 use std::path::{Path, PathBuf};
@@ -418,7 +418,7 @@ fn version_1_wavelet_files_still_open_and_pca_needs_version_2() {
         .unwrap()
         .columns()
         .iter()
-        .any(|c| c.encoding == ltm_codec::container::Encoding::Classed);
+        .any(|c| c.encoding == ltm_codec::column::Encoding::Classed);
     assert!(classed);
     v4[8..12].copy_from_slice(&3u32.to_le_bytes());
     fix_crcs(&mut v4);

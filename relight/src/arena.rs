@@ -28,8 +28,9 @@
 
 use crate::error::{RelightError, Result};
 use crate::slots::Slots;
-use ltm_codec::container::{LtmFile, Meta, SparseColumn};
-use ltm_codec::wavelet::band_size;
+use ltm_codec::bands::{band_count, band_level, band_map};
+use ltm_codec::column::SparseColumn;
+use ltm_codec::container::{LtmFile, Meta};
 use ltm_codec::BandWeights;
 use ltm_codec::ColumnDecoder;
 use rayon::prelude::*;
@@ -37,43 +38,6 @@ use std::sync::OnceLock;
 
 /// The fewest pixel blocks a column is cut into.
 pub(crate) const MIN_BLOCKS: usize = 64;
-
-/// Bands of a column transformed to `depth`: the low band and three
-/// orientations per level.
-pub(crate) fn bands(depth: u32) -> usize {
-    3 * depth as usize + 1
-}
-
-/// Band of every position of a `width` × `height` column image at `depth`
-/// (numbered as in the module docs).
-pub(crate) fn band_map(width: usize, height: usize, depth: u32) -> Vec<u8> {
-    let mut map = vec![0u8; width * height];
-    for k in 1..=depth {
-        let (pw, ph) = band_size(width, height, k - 1);
-        let (lw, lh) = band_size(width, height, k);
-        for y in 0..ph {
-            for x in 0..pw {
-                let o = match (x >= lw, y >= lh) {
-                    (false, false) => continue,
-                    (true, false) => 0,
-                    (false, true) => 1,
-                    (true, true) => 2,
-                };
-                map[y * width + x] = (1 + 3 * (k - 1) + o) as u8;
-            }
-        }
-    }
-    map
-}
-
-/// The scale group of band `b` ([`ltm_codec::quant::scale_groups`]).
-fn band_group(b: usize) -> usize {
-    if b == 0 {
-        0
-    } else {
-        (b - 1) / 3 + 1
-    }
-}
 
 /// How codes split into band and in-block position.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -89,7 +53,7 @@ pub(crate) struct CodeLayout {
 impl CodeLayout {
     /// The layout for `pixels` pixels and columns of depth up to `max_depth`.
     pub fn new(pixels: usize, max_depth: u32) -> CodeLayout {
-        let band_bits = usize::BITS - (bands(max_depth) - 1).leading_zeros();
+        let band_bits = usize::BITS - (band_count(max_depth) - 1).leading_zeros();
         let shift = 16 - band_bits.max(1);
         let blocks = MIN_BLOCKS.max(pixels.div_ceil(1 << shift));
         CodeLayout {
@@ -121,7 +85,7 @@ impl Bands {
             .iter()
             .enumerate()
             .map(|(d, map)| {
-                let mut out = vec![1.0f64; bands(d as u32)];
+                let mut out = vec![1.0f64; band_count(d as u32)];
                 let mut seen = vec![false; out.len()];
                 for (&b, &wt) in map.iter().zip(bw.map(d as u32)) {
                     if !seen[b as usize] {
@@ -400,7 +364,7 @@ fn arena_column(
     for (b, w) in weights.iter().enumerate() {
         let mut f = [0.0f32; 4];
         for (c, fc) in f.iter_mut().take(3).enumerate() {
-            let v = decoder.step(col, band_group(b), if channels == 1 { 0 } else { c }) / w;
+            let v = decoder.step(col, band_level(b), if channels == 1 { 0 } else { c }) / w;
             *fc = v as f32;
             if !fc.is_finite() || (*fc as f64 * q).abs() > ColumnDecoder::MAX_DECODED as f64 {
                 return Err(RelightError::Invalid(format!(
@@ -476,19 +440,19 @@ mod tests {
             for d in 0..=max {
                 let map = band_map(w, h, d);
                 for (i, b) in map.iter().enumerate() {
-                    assert!((*b as usize) < bands(d));
+                    assert!((*b as usize) < band_count(d));
                     let g = decoder.scale_group(d, i);
-                    assert_eq!(band_group(*b as usize), g as usize, "{w}x{h} depth {d}");
+                    assert_eq!(band_level(*b as usize), g as usize, "{w}x{h} depth {d}");
                 }
             }
             let l = CodeLayout::new(w * h, max);
             assert!(l.block_pixels <= 1 << l.shift && l.blocks * l.block_pixels >= w * h);
-            assert!(bands(max) <= 1 << (16 - l.shift));
+            assert!(band_count(max) <= 1 << (16 - l.shift));
         }
         for (p, d) in [(1 << 20, 10), (1 << 24, 12), (7, 15)] {
             let l = CodeLayout::new(p, d);
             assert!(l.block_pixels <= 1 << l.shift && l.blocks * l.block_pixels >= p);
-            assert!(bands(d) <= 1 << (16 - l.shift), "{p} {d}");
+            assert!(band_count(d) <= 1 << (16 - l.shift), "{p} {d}");
         }
     }
 }

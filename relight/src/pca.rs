@@ -398,7 +398,7 @@ impl Relight for PcaRelighter {
 /// The model's quantized coefficients in component blocks.
 fn blocks(model: &ltm_codec::PcaModel) -> Blocks {
     let coefficients = model.coefficients();
-    let q_max = ltm_codec::eigen::q_max(coefficients.bits);
+    let q_max = ltm_codec::pca::q_max(coefficients.bits);
     Blocks::new(
         model.dims().pixels(),
         &coefficients.q,

@@ -315,7 +315,7 @@ mod tests {
         for p in 0..pixels {
             blocks.row(p, rank, &mut row);
             let want: Vec<f32> = (0..rank)
-                .map(|a| ltm_codec::eigen::dequantize(q[a * pixels + p], scales[a], 10))
+                .map(|a| ltm_codec::pca::dequantize(q[a * pixels + p], scales[a], 10))
                 .collect();
             assert_eq!(row, want, "pixel {p}");
         }

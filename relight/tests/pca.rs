@@ -2,7 +2,7 @@
 //! relit images against the exact `T·L` and against the dense product of
 //! the decoded matrix, `--terms` below the rank, and `open_relighter`.
 
-use ltm_codec::eigen::{compress_pca, PcaOptions};
+use ltm_codec::compress::{compress_pca, PcaOptions};
 use ltm_codec::npy::decode_matrix;
 use ltm_codec::{Dims, Limits, LtmFile, RawHeader, RawStore, RawWriter};
 use ltm_relight::{

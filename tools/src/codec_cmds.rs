@@ -8,7 +8,8 @@ use ltm_codec::compress::{
     compress, CodeOptions, CompressOptions, Stage, Target, TransposeOptions, DEFAULT_BITS,
     DEFAULT_MAX_ERROR,
 };
-use ltm_codec::container::{Entropy, LtmFile, Mode};
+use ltm_codec::compress::{Entropy, Mode};
+use ltm_codec::container::LtmFile;
 use ltm_codec::npy::{export_npy, import_npy};
 use ltm_codec::wavelet::row_level;
 use ltm_codec::{compress_pca, Filter, PcaOptions, RawStore};
@@ -77,7 +78,7 @@ pub struct CompressArgs {
     #[arg(long, value_name = "K", conflicts_with_all = ["max_error", "keep"])]
     pub rank: Option<usize>,
     /// pca: the largest rank --max-error may choose (the fit's sketch size).
-    #[arg(long, value_name = "K", default_value_t = ltm_codec::eigen::DEFAULT_MAX_RANK)]
+    #[arg(long, value_name = "K", default_value_t = ltm_codec::compress::DEFAULT_MAX_RANK)]
     pub max_rank: usize,
     /// Row filter over each cube face: haar, d4, d6 or d8.
     #[arg(long, default_value = "haar")]
@@ -272,7 +273,7 @@ fn compress_pca_cmd(a: &CompressArgs, raw: &RawStore) -> Result<()> {
         rank: a.rank,
         max_error: a.max_error.unwrap_or(DEFAULT_MAX_ERROR),
         max_rank: a.max_rank,
-        bits: a.bits.unwrap_or(ltm_codec::eigen::DEFAULT_PCA_BITS),
+        bits: a.bits.unwrap_or(ltm_codec::compress::DEFAULT_PCA_BITS),
         raise_bits: a.bits.is_none(),
         seed: a.seed,
         mem_budget,

@@ -8,8 +8,8 @@ use crate::progress;
 use anyhow::{bail, Context, Result};
 use clap::Args;
 use ltm_bake::{bake, BakeOptions, Overrides, Scene, SceneDesc};
+use ltm_codec::compress::Mode;
 use ltm_codec::compress::{compress, CodeOptions, Target};
-use ltm_codec::container::Mode;
 use ltm_codec::RawStore;
 use ltm_relight::{
     reference, relative_l2, EnvMap, Image, Relight, Relighter, Request, Rotation, Weighting,

@@ -359,7 +359,9 @@ fn a_folder_given_as_a_file_is_named_as_such() {
 /// A tiny, valid `.ltm` that claims 8192×8192 pixels and 6·2² lights, with
 /// every column empty: a few hundred bytes that would decode to 6.4 GB.
 fn huge_claim(dir: &Path) -> PathBuf {
-    use ltm_codec::container::{EncodedColumn, LtmWriter, Meta, Mode, SparseColumn};
+    use ltm_codec::column::{EncodedColumn, SparseColumn};
+    use ltm_codec::compress::Mode;
+    use ltm_codec::container::{LtmWriter, Meta};
     use ltm_codec::{Dims, Filter};
     let meta = Meta {
         dims: Dims::image(8192, 8192, 2, 1),

@@ -11,8 +11,8 @@
 //! and code each shard.
 
 use super::code::Coder;
+use super::Mode;
 use super::Stage;
-use crate::container::Mode;
 use crate::error::{Error, Result};
 use crate::wavelet::{max_levels, Filter};
 use rayon::prelude::*;

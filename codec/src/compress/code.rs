@@ -11,7 +11,8 @@
 use super::analysis::{candidate_depths, AnalysisSettings};
 use super::plan::{quantization_error, ErrorCurve, Plan, Rule};
 use super::{CodeOptions, Target, Transposed};
-use crate::container::{EncodedColumn, Meta, SparseColumn};
+use crate::column::{EncodedColumn, SparseColumn};
+use crate::container::Meta;
 use crate::decode::ColumnDecoder;
 use crate::dims::Dims;
 use crate::entropy::ColumnShape;

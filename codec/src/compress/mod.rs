@@ -33,15 +33,19 @@
 
 mod analysis;
 mod code;
+mod options;
+mod pca;
 mod plan;
 mod transpose;
 
 pub use analysis::{Analysis, AnalysisSettings};
 pub use code::{CodedColumns, Coder};
+pub use options::{Entropy, Mode};
+pub use pca::{compress_pca, PcaOptions, PcaStats, DEFAULT_MAX_RANK, DEFAULT_PCA_BITS};
 pub use plan::{Calibration, ErrorCurve, Plan};
 pub use transpose::{Transposed, MAX_NORM, MIN_NONZERO_RMS};
 
-use crate::container::{Entropy, LtmWriter, Mode, OptionalChunks};
+use crate::container::{LtmWriter, OptionalChunks};
 use crate::error::{Error, Result};
 use crate::raw::RawStore;
 use crate::wavelet::Filter;

@@ -12,7 +12,7 @@ use super::{Stage, TransposeOptions};
 use crate::dims::Dims;
 use crate::empty::EmptyRows;
 use crate::error::{Error, Result};
-use crate::raw::{BlockVerifier, RawStore};
+use crate::raw::{RawStore, RowBlocks};
 use crate::wavelet::{row_forward, Filter};
 use rayon::prelude::*;
 use std::fs::File;
@@ -124,9 +124,8 @@ impl<'a> Transposed<'a> {
         let p = self.dims.pixels();
         let mut tbuf = vec![0.0f32; block * self.dims.row_len()];
         let mut reader = RowReader {
-            verifier: self.raw.verifier(),
+            blocks: self.raw.row_blocks(true),
             range: RangeCheck::default(),
-            src: Vec::new(),
             empty: EmptyRows::none(p),
         };
         let mut p0 = 0;
@@ -138,10 +137,9 @@ impl<'a> Transposed<'a> {
             p0 = rows.end;
             progress(Stage::Rows, p0 as u64, p as u64);
         }
-        reader.verifier.finish()?;
         reader.range.check()?;
         self.empty_rows = reader.empty;
-        self.raw.check_unchanged()
+        reader.blocks.finish()
     }
 
     /// Rows `rows`, row-transformed and channel-planar:
@@ -155,17 +153,19 @@ impl<'a> Transposed<'a> {
         let mut rbuf = vec![0.0f32; rows.len() * out_len];
         for start in rows.clone().step_by(step) {
             let piece = start..(start + step).min(rows.end);
-            self.raw.read_rows(piece.clone(), &mut reader.src)?;
-            reader.verifier.feed(piece.start, &reader.src)?;
-            reader.range.add(&reader.src, src_len);
+            let Some((read, src)) = reader.blocks.next_rows(piece.len())? else {
+                break;
+            };
+            debug_assert_eq!(read, piece);
+            reader.range.add(src, src_len);
             reader.range.check_norm(piece.end, p)?;
-            for (r, row) in reader.src.chunks_exact(src_len).enumerate() {
+            for (r, row) in src.chunks_exact(src_len).enumerate() {
                 if row.iter().all(|&v| v == 0.0) {
                     reader.empty.set(piece.start + r);
                 }
             }
             let at = (piece.start - rows.start) * out_len;
-            self.transform_rows(&reader.src, &mut rbuf[at..at + piece.len() * out_len])?;
+            self.transform_rows(src, &mut rbuf[at..at + piece.len() * out_len])?;
         }
         Ok(rbuf)
     }
@@ -358,9 +358,8 @@ fn row_stats(row: &[f32], hist: &mut [(u64, f64)]) -> RowStats {
 /// The state of the row pass's reads: the block verifier, the range check
 /// and the read buffer.
 struct RowReader<'a> {
-    verifier: BlockVerifier<'a>,
+    blocks: RowBlocks<'a>,
     range: RangeCheck,
-    src: Vec<f32>,
     /// The all-zero rows read so far.
     empty: EmptyRows,
 }

@@ -14,7 +14,7 @@
 
 use super::bits::{BitReader, BitWriter};
 use super::range::{Cdf, Context, Decoder, Encoder};
-use crate::container::SparseColumn;
+use crate::column::SparseColumn;
 use crate::error::{Error, Result};
 use crate::wavelet::{band_size, max_levels};
 

@@ -8,17 +8,3 @@ mod column;
 pub mod range;
 
 pub use column::{decode, encode, ColumnShape, ValueCoding};
-
-use crate::container::Meta;
-
-impl ColumnShape {
-    /// The column shape of a file's metadata.
-    pub fn of(meta: &Meta) -> ColumnShape {
-        ColumnShape {
-            width: meta.dims.width() as usize,
-            height: meta.dims.height() as usize,
-            channels: meta.dims.channels as usize,
-            bits: meta.bits,
-        }
-    }
-}

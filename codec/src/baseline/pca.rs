@@ -15,18 +15,17 @@
 //! Rayleigh–Ritz step, each a pass over the raw store in blocks of rows
 //! (never whole in memory); the last pass is in f64.
 
+use super::rows::{relative, CHUNK_VALUES};
 use crate::dims::Dims;
 use crate::error::{Error, Result};
 use crate::raw::RawStore;
-use crate::rows::{block_norm2, for_each_block, mix64, relative, SplitMix64, CHUNK_VALUES};
+use crate::rsvd::{block_norm2, for_each_block};
+use crate::rsvd::{power_iterations, rayleigh_ritz, sketch, Rows, OVERSAMPLING};
 use faer::linalg::matmul::matmul;
-use faer::{Accum, Mat, MatRef, Par, Side};
-use rayon::prelude::*;
+use faer::{Accum, Mat, MatRef, Par};
 
-/// Extra columns of the randomized sketch beyond the rank.
-const OVERSAMPLING: usize = 10;
-/// Power iterations of the randomized SVD.
-const POWER_ITERATIONS: usize = 2;
+/// The salt of this fit's Gaussian sketch rows ([`crate::rsvd::gaussian_row`]).
+const SKETCH_SALT: u64 = 0x6A09_E667_F3BC_C909;
 
 /// The first `K` principal light vectors of a transport matrix (rows =
 /// (pixel, channel) pairs, uncentered) and the error of every rank up to
@@ -108,14 +107,20 @@ impl PcaBasis {
     }
 }
 
-/// [`PcaBasis::fit`] with blocks of about `chunk_values` values.
+/// [`PcaBasis::fit`] with blocks of about `chunk_values` values: the
+/// randomized SVD ([`crate::rsvd`]) of the uncentred rows.
 fn fit_with(raw: &RawStore, rank: usize, seed: u64, chunk_values: usize) -> Result<PcaBasis> {
     let dims = raw.dims();
     let m = dims.lights();
     let full = (dims.pixels() * dims.channels as usize).min(m);
     let rank = rank.min(full);
     let l = (rank + OVERSAMPLING).min(full);
-    let (z, norm2) = sketch(raw, l, seed, chunk_values)?;
+    let a = Rows::uncentred(raw, chunk_values);
+    // The first pass verifies the store's checksums and sums `‖A‖²`.
+    let mut norm2 = 0.0f64;
+    let z = sketch(&a, l, (seed, SKETCH_SALT), true, |data| {
+        norm2 += block_norm2(data)
+    })?;
     if norm2 == 0.0 || l == 0 {
         return Ok(PcaBasis {
             dims,
@@ -124,24 +129,19 @@ fn fit_with(raw: &RawStore, rank: usize, seed: u64, chunk_values: usize) -> Resu
             rank_errors: vec![0.0; rank + 1],
         });
     }
-    let mut q = orthonormal_columns(&z);
-    // Power iterations Z = Aᵀ·A·Q in f32, with A scaled by a power of two
-    // near 1/‖A‖ so that the squared magnitudes stay in range.
-    let scale = 2f32.powi(-(0.5 * norm2.log2()).round().clamp(-120.0, 120.0) as i32);
-    for _ in 0..POWER_ITERATIONS {
-        q = orthonormal_columns(&power_step(raw, &q, scale, chunk_values)?);
-    }
-    let (basis, captured, norm2) = rayleigh_ritz(raw, &q, rank, chunk_values)?;
+    let q = power_iterations(&a, &z, norm2, |_| {})?;
+    let ritz = rayleigh_ritz(&a, &q, rank, None)?;
+    let norm2 = ritz.norm2;
     let mut kept = 0.0f64;
     let mut rank_errors = vec![relative(norm2, norm2)];
-    for c in &captured {
+    for c in &ritz.captured {
         kept += c;
         rank_errors.push(relative(norm2 - kept, norm2));
     }
     // Column-major M × K is vector after vector.
     let vectors = (0..rank)
         .flat_map(|i| (0..m).map(move |j| (j, i)))
-        .map(|ij| basis[ij])
+        .map(|ij| ritz.basis[ij])
         .collect();
     Ok(PcaBasis {
         dims,
@@ -151,129 +151,12 @@ fn fit_with(raw: &RawStore, rank: usize, seed: u64, chunk_values: usize) -> Resu
     })
 }
 
-/// The sketch of the row space `Z = Aᵀ·G` (`M × l`, `G` Gaussian, rows ×
-/// `l`) in one pass that verifies the store's checksums, and `‖A‖²`.
-fn sketch(raw: &RawStore, l: usize, seed: u64, chunk_values: usize) -> Result<(Mat<f32>, f64)> {
-    let mut z = Mat::<f32>::zeros(raw.dims().lights(), l);
-    let mut norm2 = 0.0f64;
-    let mut buf32: Vec<f32> = Vec::new();
-    let mut gauss: Vec<f32> = Vec::new();
-    for_each_block(raw, chunk_values, true, &mut buf32, |blk| {
-        norm2 += block_norm2(blk.data);
-        gauss.resize(blk.rows.len() * l, 0.0);
-        gauss
-            .par_chunks_mut(l.max(1))
-            .zip(blk.rows.par_iter())
-            .for_each(|(dst, &r)| gaussian_row(seed, r, dst));
-        let g = MatRef::from_row_major_slice(&gauss, blk.rows.len(), l);
-        matmul(z.as_mut(), Accum::Add, blk.at(), g, 1.0f32, Par::rayon(0));
-        Ok(())
-    })?;
-    Ok((z, norm2))
-}
-
-/// One power iteration `Z = (sA)ᵀ·(sA)·Q` in f32.
-fn power_step(raw: &RawStore, q: &Mat<f64>, scale: f32, chunk_values: usize) -> Result<Mat<f32>> {
-    let (m, l) = (q.nrows(), q.ncols());
-    let par = Par::rayon(0);
-    let q32 = Mat::<f32>::from_fn(m, l, |i, j| q[(i, j)] as f32);
-    let mut z = Mat::<f32>::zeros(m, l);
-    let mut buf32: Vec<f32> = Vec::new();
-    for_each_block(raw, chunk_values, false, &mut buf32, |blk| {
-        let mut x = Mat::<f32>::zeros(blk.rows.len(), l);
-        matmul(
-            x.as_mut(),
-            Accum::Replace,
-            blk.a(),
-            q32.as_ref(),
-            scale,
-            par,
-        );
-        matmul(z.as_mut(), Accum::Add, blk.at(), x.as_ref(), scale, par);
-        Ok(())
-    })?;
-    Ok(z)
-}
-
-/// Rayleigh–Ritz in f64: `C = A·Q` (coefficients on the orthonormal `Q`),
-/// `H = CᵀC`; its eigenvectors `W` give `V = Q·W`, and the energy row `r`
-/// keeps on `v_i` is `(c_r·w_i)²`, so `Σ_r ‖t_r − Σ_{i<k}(t_r·v_i)v_i‖²`
-/// equals `‖A‖² − Σ_{i<k} w_iᵀ·H·w_i`. Returns `V` (`M × k`), the energy
-/// captured by each vector and `‖A‖²`.
-fn rayleigh_ritz(
-    raw: &RawStore,
-    q: &Mat<f64>,
-    k: usize,
-    chunk_values: usize,
-) -> Result<(Mat<f64>, Vec<f64>, f64)> {
-    let l = q.ncols();
-    let par = Par::rayon(0);
-    let mut h = Mat::<f64>::zeros(l, l);
-    let mut norm2 = 0.0f64;
-    let mut buf64: Vec<f64> = Vec::new();
-    for_each_block(raw, chunk_values, false, &mut buf64, |blk| {
-        norm2 += block_norm2(blk.data);
-        let mut c = Mat::<f64>::zeros(blk.rows.len(), l);
-        matmul(c.as_mut(), Accum::Replace, blk.a(), q.as_ref(), 1.0, par);
-        matmul(h.as_mut(), Accum::Add, c.transpose(), c.as_ref(), 1.0, par);
-        Ok(())
-    })?;
-    let evd = h
-        .as_ref()
-        .self_adjoint_eigen(Side::Lower)
-        .map_err(|e| Error::Numerical {
-            what: "PCA",
-            detail: format!("eigendecomposition of the {l}×{l} Gram matrix failed: {e:?}"),
-        })?;
-    // Eigenvalues come in nondecreasing order: take them from the end.
-    let u = evd.U();
-    let w = Mat::<f64>::from_fn(l, k, |i, j| u[(i, l - 1 - j)]);
-    let mut hw = Mat::<f64>::zeros(l, k);
-    matmul(
-        hw.as_mut(),
-        Accum::Replace,
-        h.as_ref(),
-        w.as_ref(),
-        1.0,
-        par,
-    );
-    let captured = (0..k)
-        .map(|j| (0..l).map(|i| w[(i, j)] * hw[(i, j)]).sum())
-        .collect();
-    let mut basis = Mat::<f64>::zeros(q.nrows(), k);
-    matmul(
-        basis.as_mut(),
-        Accum::Replace,
-        q.as_ref(),
-        w.as_ref(),
-        1.0,
-        par,
-    );
-    Ok((basis, captured, norm2))
-}
-
-/// An orthonormal basis (f64) of the column space of `z` by Householder QR.
-fn orthonormal_columns(z: &Mat<f32>) -> Mat<f64> {
-    let z64 = Mat::<f64>::from_fn(z.nrows(), z.ncols(), |i, j| z[(i, j)] as f64);
-    z64.as_ref().qr().compute_thin_Q()
-}
-
-/// Row `row` of the Gaussian sketch matrix: a function of `(seed, row)`
-/// only, so the sketch does not depend on how rows are split into blocks.
-fn gaussian_row(seed: u64, row: usize, out: &mut [f32]) {
-    let mut rng = SplitMix64(mix64(seed ^ mix64(row as u64 ^ 0x6A09_E667_F3BC_C909)));
-    for pair in out.chunks_mut(2) {
-        let g = rng.gaussian_pair();
-        for (o, v) in pair.iter_mut().zip(g) {
-            *o = v as f32;
-        }
-    }
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::rows::testing::{dense, dims, frobenius2, write_raw};
+    use crate::baseline::rows::testing::{dense, dims, frobenius2, write_raw};
+    use crate::rsvd::SplitMix64;
+    use faer::Side;
     use std::path::Path;
 
     /// A rank-5 matrix with decaying singular values, plus Gaussian noise of

@@ -5,17 +5,18 @@
 //! Ramamoorthi and Hanrahan 2003 ("All-frequency shadows using non-linear
 //! wavelet lighting approximation").
 //!
-//! It lives in the codec next to [`crate::pca`] because both are fits of a
+//! It lives in the codec next to [`crate::PcaBasis`] because both are fits of a
 //! raw store: they stream the same dense blocks of rows and share the
 //! linear algebra (faer), and a fit produces what a file would store. The
 //! relighting crate only evaluates the fitted coefficients
 //! (`ltm_relight::BasisRelighter`).
 
+use super::rows::{relative, CHUNK_VALUES};
 use crate::cubemap;
 use crate::dims::Dims;
 use crate::error::{Error, Result};
 use crate::raw::RawStore;
-use crate::rows::{for_each_block, relative, Block, CHUNK_VALUES};
+use crate::rsvd::{for_each_block, Block};
 use faer::linalg::matmul::matmul;
 use faer::{Accum, Mat, Par};
 use glam::DVec3;
@@ -324,8 +325,8 @@ fn fit_with(raw: &RawStore, max_order: usize, chunk_values: usize) -> Result<ShP
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::rows::testing::{dense, dims, frobenius2, write_raw};
-    use crate::rows::SplitMix64;
+    use crate::baseline::rows::testing::{dense, dims, frobenius2, write_raw};
+    use crate::rsvd::SplitMix64;
 
     fn test_directions() -> Vec<DVec3> {
         vec![

@@ -1,0 +1,264 @@
+//! The header and the chunk directory: magic, version, feature flags and
+//! the directory's entries, written and checked (known unique tags, in
+//! range, sorted, non-overlapping) before any chunk is read.
+
+use crate::bytes::{Reader, Writer};
+use crate::error::{Error, Result};
+
+/// File magic: `\x89LTM\r\n\x1a\n`.
+pub const MAGIC: [u8; 8] = *b"\x89LTM\r\n\x1a\n";
+/// Format version this build writes. It reads versions 1 to 5; version 2
+/// adds the empty-row mask ([`FEATURE_EMPTY_ROWS`]) and the row layout with
+/// per-row surface data ([`FEATURE_SURFACE`]). A version-1 file has neither.
+/// Version 3 adds column encoding 3 ([`Encoding::Ranged`]), version 4 column
+/// encoding 4 ([`Encoding::Classed`]), version 5 the column norms
+/// ([`FEATURE_COLUMN_NORMS`]).
+pub const VERSION: u32 = 5;
+/// The oldest format version this build reads.
+pub const MIN_VERSION: u32 = 1;
+/// Feature flag: an RGB albedo image is stored (chunk ALBD).
+pub const FEATURE_ALBEDO: u32 = 1;
+/// Feature flag (version 2): the mask of all-zero rows is stored (chunk
+/// EMPT); decoders output exactly 0 in those rows.
+pub const FEATURE_EMPTY_ROWS: u32 = 2;
+/// Feature flag (version 2): the row layout and per-row surface data are
+/// stored (chunk SURF).
+pub const FEATURE_SURFACE: u32 = 4;
+/// Feature flag (version 5): every column's priority norm is stored (chunk
+/// NORM; wavelet modes only), [`ColumnDecoder::weighted_norm`] of the
+/// decoded column.
+///
+/// [`ColumnDecoder::weighted_norm`]: crate::ColumnDecoder::weighted_norm
+pub const FEATURE_COLUMN_NORMS: u32 = 8;
+/// The feature flags a reader of each version knows, by version − 1.
+const KNOWN_FEATURES: [u32; VERSION as usize] = [
+    FEATURE_ALBEDO,
+    FEATURE_ALBEDO | FEATURE_EMPTY_ROWS | FEATURE_SURFACE,
+    FEATURE_ALBEDO | FEATURE_EMPTY_ROWS | FEATURE_SURFACE,
+    FEATURE_ALBEDO | FEATURE_EMPTY_ROWS | FEATURE_SURFACE,
+    FEATURE_ALBEDO | FEATURE_EMPTY_ROWS | FEATURE_SURFACE | FEATURE_COLUMN_NORMS,
+];
+pub(super) const HEADER_LEN: usize = 24;
+pub(super) const DIR_ENTRY_LEN: usize = 32;
+
+#[derive(Clone, Copy, Debug)]
+pub(super) struct DirEntry {
+    pub tag: [u8; 4],
+    pub offset: u64,
+    pub len: u64,
+    pub crc: u32,
+}
+
+/// Reads and checks the header and the chunk directory: magic, version,
+/// known feature flags, the directory CRC, and chunks with known unique
+/// tags, in range, sorted and non-overlapping. Returns the feature flags
+/// and the directory.
+pub(super) fn read_directory(bytes: &[u8]) -> Result<(u32, u32, Vec<DirEntry>)> {
+    let mut r = Reader::new(bytes, ".ltm header");
+    if r.take(8)? != MAGIC {
+        return Err(Error::corrupt(".ltm header", "bad magic bytes"));
+    }
+    let version = r.u32()?;
+    if !(MIN_VERSION..=VERSION).contains(&version) {
+        return Err(Error::Version {
+            what: ".ltm",
+            found: version,
+            supported: VERSION,
+        });
+    }
+    let features = r.u32()?;
+    let known = KNOWN_FEATURES[version as usize - 1];
+    if features & !known != 0 {
+        return Err(Error::range(
+            "feature flags",
+            format!("{features:#x}"),
+            format!("a subset of {known:#x} in version {version}"),
+        ));
+    }
+    let count = r.u32()? as usize;
+    // Required chunks: 3 (META, COLS, DATA), 4 in a version-2 pca file
+    // (META, PCAM, PCAB, PCAC); plus one per feature bit.
+    let most = 3 + usize::from(version >= 2) + known.count_ones() as usize;
+    if !(3..=most).contains(&count) {
+        return Err(Error::range("chunk count", count, format!("3..={most}")));
+    }
+    r.u32()?;
+    let mut dir = Vec::with_capacity(count);
+    for _ in 0..count {
+        let tag: [u8; 4] = r.take(4)?.try_into().expect("4 bytes");
+        r.u32()?;
+        let (offset, len, crc) = (r.u64()?, r.u64()?, r.u32()?);
+        r.u32()?;
+        dir.push(DirEntry {
+            tag,
+            offset,
+            len,
+            crc,
+        });
+    }
+    let dir_end = r.pos();
+    let stored = r.u32()?;
+    let computed = crc32fast::hash(&bytes[..dir_end]);
+    if stored != computed {
+        return Err(Error::Crc {
+            chunk: "chunk directory".into(),
+            stored,
+            computed,
+        });
+    }
+    check_directory(&dir, r.pos() as u64, bytes.len())?;
+    Ok((version, features, dir))
+}
+
+/// Directory entries: known unique tags, in range, sorted, non-overlapping,
+/// starting at or after `start` in a file of `file_len` bytes.
+fn check_directory(dir: &[DirEntry], start: u64, file_len: usize) -> Result<()> {
+    let mut end = start;
+    for d in dir {
+        let tag = String::from_utf8_lossy(&d.tag);
+        if !matches!(
+            &d.tag,
+            b"META"
+                | b"ALBD"
+                | b"EMPT"
+                | b"SURF"
+                | b"NORM"
+                | b"COLS"
+                | b"DATA"
+                | b"PCAM"
+                | b"PCAB"
+                | b"PCAC"
+        ) {
+            return Err(Error::corrupt(
+                "chunk directory",
+                format!("unknown chunk tag {tag:?}"),
+            ));
+        }
+        if dir.iter().filter(|o| o.tag == d.tag).count() != 1 {
+            return Err(Error::corrupt(
+                "chunk directory",
+                format!("chunk {tag} appears more than once"),
+            ));
+        }
+        let stop = d
+            .offset
+            .checked_add(d.len)
+            .filter(|&s| s <= file_len as u64);
+        match stop {
+            Some(stop) if d.offset >= end => end = stop,
+            _ => {
+                return Err(Error::corrupt("chunk directory", format!(
+                    "chunk {tag} at {}+{} is out of order, overlapping or past the end of the {file_len}-byte file",
+                    d.offset, d.len)))
+            }
+        }
+    }
+    Ok(())
+}
+
+/// The bytes of chunk `tag`, CRC-checked (DATA has per-column CRCs
+/// instead), or `None` when the directory has no such chunk. The directory
+/// has been checked against the file's length.
+pub(super) fn chunk<'a>(
+    bytes: &'a [u8],
+    dir: &[DirEntry],
+    tag: &[u8; 4],
+) -> Result<Option<&'a [u8]>> {
+    let Some(d) = dir.iter().find(|d| &d.tag == tag) else {
+        return Ok(None);
+    };
+    let s = &bytes[d.offset as usize..(d.offset + d.len) as usize];
+    if tag != b"DATA" {
+        let computed = crc32fast::hash(s);
+        if computed != d.crc {
+            return Err(Error::Crc {
+                chunk: String::from_utf8_lossy(tag).into_owned(),
+                stored: d.crc,
+                computed,
+            });
+        }
+    }
+    Ok(Some(s))
+}
+
+/// The header and chunk directory with its CRC.
+pub(super) fn encode_head(features: u32, dir: &[DirEntry]) -> Vec<u8> {
+    let mut head = Writer::default();
+    head.bytes.extend_from_slice(&MAGIC);
+    head.u32(VERSION);
+    head.u32(features);
+    head.u32(dir.len() as u32);
+    head.u32(0);
+    for d in dir {
+        head.bytes.extend_from_slice(&d.tag);
+        head.u32(0);
+        head.u64(d.offset);
+        head.u64(d.len);
+        head.u32(d.crc);
+        head.u32(0);
+    }
+    let crc = crc32fast::hash(&head.bytes);
+    head.u32(crc);
+    head.bytes
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn entry(tag: &[u8; 4], offset: u64, len: u64) -> DirEntry {
+        DirEntry {
+            tag: *tag,
+            offset,
+            len,
+            crc: 0,
+        }
+    }
+
+    #[test]
+    fn a_written_directory_reads_back() {
+        let dir = [
+            entry(b"META", 124, 64),
+            entry(b"COLS", 188, 28),
+            entry(b"DATA", 216, 0),
+        ];
+        let mut file = encode_head(0, &dir);
+        assert_eq!(file.len(), HEADER_LEN + DIR_ENTRY_LEN * dir.len() + 4);
+        file.resize(216, 0);
+        let (version, features, back) = read_directory(&file).unwrap();
+        assert_eq!((version, features), (VERSION, 0));
+        assert_eq!(
+            back.iter()
+                .map(|d| (d.tag, d.offset, d.len))
+                .collect::<Vec<_>>(),
+            dir.iter()
+                .map(|d| (d.tag, d.offset, d.len))
+                .collect::<Vec<_>>()
+        );
+        file[HEADER_LEN + 9] ^= 1;
+        assert!(matches!(read_directory(&file), Err(Error::Crc { .. })));
+    }
+
+    #[test]
+    fn directory_entries_are_checked() {
+        let ok = [entry(b"META", 100, 64), entry(b"COLS", 164, 8)];
+        check_directory(&ok, 100, 172).unwrap();
+        let cases: [(&[DirEntry], &str); 4] = [
+            (&[entry(b"XXXX", 100, 1)], "unknown chunk tag"),
+            (
+                &[entry(b"META", 100, 1), entry(b"META", 101, 1)],
+                "more than once",
+            ),
+            (
+                &[entry(b"COLS", 120, 8), entry(b"META", 100, 64)],
+                "out of order",
+            ),
+            (&[entry(b"META", 100, 100)], "past the end"),
+        ];
+        for (dir, says) in cases {
+            let err = check_directory(dir, 100, 172).unwrap_err().to_string();
+            assert!(err.contains(says), "{err}");
+        }
+        assert!(check_directory(&ok, 101, 172).is_err());
+    }
+}

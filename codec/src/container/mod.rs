@@ -1,0 +1,37 @@
+//! The `.ltm` container: everything a relighter needs, with each column
+//! reachable without decoding the others. Layout in docs/FORMAT.md.
+//!
+//! ```text
+//! header (24 bytes) | chunk directory (32 bytes × count) | directory CRC
+//! META | ALBD | EMPT | SURF | NORM (each optional) | COLS (column table) | DATA (column payloads)
+//! ```
+//!
+//! Version 2 adds feature 4 and chunk `SURF`: the row layout (image pixels
+//! or texture texels) and per-row surface data ([`Surface`]). Version-1
+//! files (features 1 at most) are still read. Version 5 adds feature 8 and
+//! chunk `NORM`: each column's priority norm, so that a relighter can rank
+//! lights by transport without decoding every column first.
+//!
+//! Every chunk has a CRC-32 in the directory, except DATA whose columns
+//! each have their own CRC in the column table. The directory is validated
+//! (tags known and unique, offsets in range, sorted, non-overlapping) before
+//! any chunk is read, and no allocation is sized by a field that has not
+//! been checked against the dimensions.
+
+mod directory;
+mod meta;
+mod read;
+#[cfg(feature = "fuzzing")]
+mod repair;
+mod write;
+
+pub use directory::{
+    FEATURE_ALBEDO, FEATURE_COLUMN_NORMS, FEATURE_EMPTY_ROWS, FEATURE_SURFACE, MAGIC, MIN_VERSION,
+    VERSION,
+};
+pub use meta::Meta;
+pub use read::{validate_bytes, LtmFile, LtmIndex};
+#[cfg(feature = "fuzzing")]
+pub use repair::repair_checksums;
+pub(crate) use write::write_pca_file;
+pub use write::{LtmWriter, OptionalChunks};

@@ -1,0 +1,68 @@
+//! Checksum repair for fuzzing and tests (the `fuzzing` feature).
+
+use crate::column::COLUMN_ENTRY_LEN;
+
+/// Rewrites every checksum an `.ltm` image claims — each column's, each
+/// chunk's and the directory's — from the bytes it covers, as far as the
+/// (unchecked) directory and column table can be followed. For fuzzing and
+/// tests: it lets mutated files reach the structural checks behind the CRCs.
+/// Only with the `fuzzing` feature.
+pub fn repair_checksums(b: &mut [u8]) {
+    let u32_at = |b: &[u8], at: usize| {
+        b.get(at..at + 4)
+            .map(|s| u32::from_le_bytes(s.try_into().expect("4 bytes")))
+    };
+    let u64_at = |b: &[u8], at: usize| {
+        b.get(at..at + 8)
+            .map(|s| u64::from_le_bytes(s.try_into().expect("8 bytes")))
+    };
+    let span = |len: usize, offset: u64, size: u64| {
+        offset
+            .checked_add(size)
+            .filter(|&e| e <= len as u64)
+            .map(|e| offset as usize..e as usize)
+    };
+    let Some(count) = u32_at(b, 16).map(|c| (c as usize).min(8)) else {
+        return;
+    };
+    let mut chunks = Vec::new();
+    for k in 0..count {
+        let e = 24 + 32 * k;
+        if let (Some(tag), Some(offset), Some(len)) =
+            (b.get(e..e + 4), u64_at(b, e + 8), u64_at(b, e + 16))
+        {
+            chunks.push((tag.to_vec(), offset, len, e + 24));
+        }
+    }
+    let find = |tag: &[u8]| {
+        chunks
+            .iter()
+            .find(|c| c.0 == tag)
+            .and_then(|c| span(b.len(), c.1, c.2))
+    };
+    if let (Some(data), Some(cols)) = (find(b"DATA"), find(b"COLS")) {
+        let mut entry = cols.start;
+        while entry + COLUMN_ENTRY_LEN <= cols.end {
+            if let (Some(off), Some(len)) = (u64_at(b, entry), u32_at(b, entry + 8)) {
+                if let Some(r) = span(data.len(), off, len as u64) {
+                    let crc = crc32fast::hash(&b[data.start + r.start..data.start + r.end]);
+                    b[entry + 20..entry + 24].copy_from_slice(&crc.to_le_bytes());
+                }
+            }
+            entry += COLUMN_ENTRY_LEN;
+        }
+    }
+    for (tag, offset, len, crc_at) in &chunks {
+        if let (false, Some(r)) = (tag == b"DATA", span(b.len(), *offset, *len)) {
+            let crc = crc32fast::hash(&b[r]);
+            if let Some(dst) = b.get_mut(*crc_at..*crc_at + 4) {
+                dst.copy_from_slice(&crc.to_le_bytes());
+            }
+        }
+    }
+    let dir_end = 24 + 32 * count;
+    if b.len() >= dir_end + 4 {
+        let crc = crc32fast::hash(&b[..dir_end]);
+        b[dir_end..dir_end + 4].copy_from_slice(&crc.to_le_bytes());
+    }
+}

@@ -1,0 +1,331 @@
+//! The `.ltm` writers: [`LtmWriter`] streams a wavelet file's columns,
+//! [`write_pca_file`] writes a `pca` file at once.
+
+use super::directory::{
+    encode_head, DirEntry, DIR_ENTRY_LEN, FEATURE_ALBEDO, FEATURE_COLUMN_NORMS, FEATURE_EMPTY_ROWS,
+    FEATURE_SURFACE, HEADER_LEN,
+};
+use super::meta::{Meta, META_LEN};
+use crate::bytes::Writer;
+use crate::column::{ColumnEntry, EncodedColumn, COLUMN_ENTRY_LEN};
+use crate::empty::EmptyRows;
+use crate::error::{Error, Result};
+use crate::output::AtomicFile;
+use crate::pca::PcaModel;
+use crate::surface::Surface;
+use std::io::{BufWriter, Seek, SeekFrom, Write};
+use std::path::{Path, PathBuf};
+
+/// The optional chunks of a new `.ltm` file beside its albedo image.
+#[derive(Clone, Copy, Debug, Default)]
+pub struct OptionalChunks<'a> {
+    /// Per-row surface data (chunk SURF); required for a texture layout.
+    pub surface: Option<&'a Surface>,
+    /// The mask of all-zero rows (chunk EMPT); stored when it has any.
+    pub empty_rows: Option<&'a EmptyRows>,
+    /// Store every column's priority norm (chunk NORM): each pushed
+    /// column must then carry one ([`EncodedColumn::with_norm`]).
+    pub column_norms: bool,
+}
+
+/// Streams a `.ltm` file to a unique temporary file beside `PATH`, then
+/// renames it into place ([`AtomicFile`]).
+pub struct LtmWriter {
+    file: BufWriter<AtomicFile>,
+    tmp: PathBuf,
+    meta: Meta,
+    albedo: Option<Vec<u8>>,
+    surface: Option<Vec<u8>>,
+    empty_rows: Option<Vec<u8>>,
+    entries: Vec<ColumnEntry>,
+    /// The columns' norms, when the file stores them.
+    norms: Option<Vec<f32>>,
+    data_start: u64,
+    data_len: u64,
+}
+
+impl LtmWriter {
+    /// Starts a file for `meta`, with an optional albedo image (3 values per
+    /// pixel).
+    pub fn create(path: &Path, meta: Meta, albedo: Option<&[f32]>) -> Result<LtmWriter> {
+        LtmWriter::create_with(path, meta, albedo, OptionalChunks::default())
+    }
+
+    /// [`LtmWriter::create`] with the optional chunks: per-row surface data
+    /// (chunk SURF, which also records the row layout of `meta.dims`; a
+    /// texture layout needs it) and the mask of all-zero rows (chunk EMPT,
+    /// stored when it has any).
+    pub fn create_with(
+        path: &Path,
+        meta: Meta,
+        albedo: Option<&[f32]>,
+        extra: OptionalChunks<'_>,
+    ) -> Result<LtmWriter> {
+        meta.dims.validate()?;
+        if !meta.mode.is_wavelet() {
+            return Err(Error::Invalid(format!(
+                "the column writer writes wavelet modes, not {} (see ltm_codec::compress_pca)",
+                meta.mode.name()
+            )));
+        }
+        if let Some(s) = extra.surface {
+            s.check_rows(&meta.dims)?;
+        } else if meta.dims.rows.is_texture() {
+            return Err(Error::Invalid(
+                "a texture-space .ltm file needs its surface data".into(),
+            ));
+        }
+        let surface = extra.surface.map(|s| s.encode_chunk(&meta.dims.rows));
+        let empty_rows = match extra.empty_rows {
+            Some(e) if e.rows() != meta.dims.pixels() => {
+                return Err(Error::BufferTooSmall {
+                    what: "empty-row mask",
+                    len: e.rows(),
+                    need: meta.dims.pixels(),
+                })
+            }
+            Some(e) if e.count() > 0 => Some(e.as_bytes().to_vec()),
+            _ => None,
+        };
+        let albedo = match albedo {
+            Some(a) if a.len() == 3 * meta.dims.pixels() => {
+                Some(bytemuck::cast_slice::<f32, u8>(a).to_vec())
+            }
+            Some(a) => {
+                return Err(Error::BufferTooSmall {
+                    what: "albedo image",
+                    len: a.len(),
+                    need: 3 * meta.dims.pixels(),
+                })
+            }
+            None => None,
+        };
+        let file = AtomicFile::create(path)?;
+        let tmp = file.tmp_path().to_path_buf();
+        let chunks = 3
+            + albedo.is_some() as u64
+            + empty_rows.is_some() as u64
+            + surface.is_some() as u64
+            + extra.column_norms as u64;
+        let head_len = HEADER_LEN as u64 + DIR_ENTRY_LEN as u64 * chunks + 4;
+        let cols_len = (COLUMN_ENTRY_LEN * meta.dims.lights()) as u64;
+        let norms_len = 4 * meta.dims.lights() as u64 * extra.column_norms as u64;
+        let optional = |c: &Option<Vec<u8>>| c.as_ref().map_or(0, |a| a.len() as u64);
+        let data_start = head_len
+            + META_LEN as u64
+            + optional(&albedo)
+            + optional(&empty_rows)
+            + optional(&surface)
+            + norms_len
+            + cols_len;
+        let mut w = LtmWriter {
+            file: BufWriter::with_capacity(1 << 20, file),
+            tmp,
+            meta,
+            albedo,
+            surface,
+            empty_rows,
+            entries: Vec::new(),
+            norms: extra.column_norms.then(Vec::new),
+            data_start,
+            data_len: 0,
+        };
+        w.file
+            .seek(SeekFrom::Start(data_start))
+            .map_err(|e| Error::io(&w.tmp, e))?;
+        Ok(w)
+    }
+
+    /// Appends the next column (columns are written in order `0..M`).
+    pub fn push_column(&mut self, col: EncodedColumn) -> Result<()> {
+        let next = self.entries.len();
+        self.check_range(next, next + 1)?;
+        if let Some(norms) = &mut self.norms {
+            match col.norm {
+                Some(n) if n.is_finite() && n >= 0.0 => norms.push(n),
+                other => {
+                    return Err(Error::Invalid(format!(
+                        "column {next}: priority norm {other:?}, the writer stores a finite norm ≥ 0 per column"
+                    )))
+                }
+            }
+        }
+        let mut entry = col.entry;
+        entry.offset = self.data_len;
+        self.file
+            .write_all(&col.bytes)
+            .map_err(|e| Error::io(&self.tmp, e))?;
+        self.data_len += col.bytes.len() as u64;
+        self.entries.push(entry);
+        Ok(())
+    }
+
+    /// Appends columns `first..first + cols.len()`: `first` must be the
+    /// number of columns written so far, so that ranges coded apart (in
+    /// batches or shards) are written in order, each exactly once.
+    pub fn push_columns(&mut self, first: usize, cols: Vec<EncodedColumn>) -> Result<()> {
+        self.check_range(first, first.saturating_add(cols.len()))?;
+        cols.into_iter().try_for_each(|c| self.push_column(c))
+    }
+
+    /// Columns `start..end` continue the columns written so far and end
+    /// within the matrix.
+    fn check_range(&self, start: usize, end: usize) -> Result<()> {
+        let (expected, total) = (self.entries.len(), self.meta.dims.lights());
+        if start != expected || end > total {
+            return Err(Error::ColumnRange {
+                what: "ltm writer",
+                start,
+                end,
+                expected,
+                total,
+            });
+        }
+        Ok(())
+    }
+
+    /// Drops the partial file (as dropping the writer does).
+    pub fn abandon(self) {}
+
+    /// Writes the tables, syncs and renames the file into place. Returns the
+    /// file size.
+    pub fn finish(mut self, achieved_error: f32) -> Result<u64> {
+        let lights = self.meta.dims.lights();
+        if self.entries.len() != lights {
+            return Err(Error::Invalid(format!(
+                "{} columns written, the matrix has {lights}",
+                self.entries.len()
+            )));
+        }
+        self.meta.achieved_error = achieved_error;
+        let mut cols = Writer::default();
+        for e in &self.entries {
+            cols.u64(e.offset);
+            cols.u32(e.stored_len);
+            cols.u32(e.raw_len);
+            cols.u32(e.nnz);
+            cols.u32(e.crc);
+            cols.u8(e.depth);
+            cols.u8(e.encoding as u8);
+            cols.u16(0);
+        }
+        let meta = self.meta.encode();
+        let mut chunks: Vec<(&[u8; 4], Vec<u8>)> = vec![(b"META", meta)];
+        let mut features = 0;
+        if let Some(a) = self.albedo.take() {
+            chunks.push((b"ALBD", a));
+            features |= FEATURE_ALBEDO;
+        }
+        if let Some(e) = self.empty_rows.take() {
+            chunks.push((b"EMPT", e));
+            features |= FEATURE_EMPTY_ROWS;
+        }
+        if let Some(s) = self.surface.take() {
+            chunks.push((b"SURF", s));
+            features |= FEATURE_SURFACE;
+        }
+        if let Some(n) = self.norms.take() {
+            chunks.push((b"NORM", bytemuck::cast_slice::<f32, u8>(&n).to_vec()));
+            features |= FEATURE_COLUMN_NORMS;
+        }
+        chunks.push((b"COLS", cols.bytes));
+        let head_len = HEADER_LEN + DIR_ENTRY_LEN * (chunks.len() + 1) + 4;
+        let mut dir = Vec::new();
+        let mut offset = head_len as u64;
+        for (tag, bytes) in &chunks {
+            dir.push(DirEntry {
+                tag: **tag,
+                offset,
+                len: bytes.len() as u64,
+                crc: crc32fast::hash(bytes),
+            });
+            offset += bytes.len() as u64;
+        }
+        debug_assert_eq!(offset, self.data_start);
+        dir.push(DirEntry {
+            tag: *b"DATA",
+            offset,
+            len: self.data_len,
+            crc: 0,
+        });
+        let head = encode_head(features, &dir);
+        let io = |e| Error::io(&self.tmp, e);
+        self.file.seek(SeekFrom::Start(0)).map_err(io)?;
+        self.file.write_all(&head).map_err(io)?;
+        for (_, bytes) in &chunks {
+            self.file.write_all(bytes).map_err(io)?;
+        }
+        let file = self
+            .file
+            .into_inner()
+            .map_err(|e| Error::io(&self.tmp, e.into_error()))?;
+        file.commit()?;
+        Ok(self.data_start + self.data_len)
+    }
+}
+
+/// Writes a `pca` file (version 2): META, ALBD, EMPT (when it has a row),
+/// SURF (each when given), PCAM, PCAB, PCAC, atomically. Returns the file
+/// size.
+pub(crate) fn write_pca_file(
+    path: &Path,
+    meta: Meta,
+    albedo: Option<&[f32]>,
+    surface: Option<&Surface>,
+    empty_rows: Option<&EmptyRows>,
+    model: &PcaModel,
+    zstd_level: i32,
+) -> Result<u64> {
+    let mut chunks: Vec<([u8; 4], Vec<u8>)> = vec![(*b"META", meta.encode())];
+    let mut features = 0;
+    if let Some(a) = albedo {
+        chunks.push((*b"ALBD", bytemuck::cast_slice::<f32, u8>(a).to_vec()));
+        features |= FEATURE_ALBEDO;
+    }
+    if let Some(e) = empty_rows.filter(|e| e.count() > 0) {
+        if e.rows() != meta.dims.pixels() {
+            return Err(Error::BufferTooSmall {
+                what: "empty-row mask",
+                len: e.rows(),
+                need: meta.dims.pixels(),
+            });
+        }
+        chunks.push((*b"EMPT", e.as_bytes().to_vec()));
+        features |= FEATURE_EMPTY_ROWS;
+    }
+    if let Some(s) = surface {
+        s.check_rows(&meta.dims)?;
+        chunks.push((*b"SURF", s.encode_chunk(&meta.dims.rows)));
+        features |= FEATURE_SURFACE;
+    } else if meta.dims.rows.is_texture() {
+        return Err(Error::Invalid(
+            "a texture-space .ltm file needs its surface data".into(),
+        ));
+    }
+    chunks.extend(crate::pca::write_chunks(model, zstd_level)?);
+    let head_len = HEADER_LEN + DIR_ENTRY_LEN * chunks.len() + 4;
+    let mut dir = Vec::new();
+    let mut offset = head_len as u64;
+    for (tag, bytes) in &chunks {
+        dir.push(DirEntry {
+            tag: *tag,
+            offset,
+            len: bytes.len() as u64,
+            crc: crc32fast::hash(bytes),
+        });
+        offset += bytes.len() as u64;
+    }
+    let head = encode_head(features, &dir);
+    let file = AtomicFile::create(path)?;
+    let tmp = file.tmp_path().to_path_buf();
+    let mut w = BufWriter::with_capacity(1 << 20, file);
+    let io = |e| Error::io(&tmp, e);
+    w.write_all(&head).map_err(io)?;
+    for (_, bytes) in &chunks {
+        w.write_all(bytes).map_err(io)?;
+    }
+    w.into_inner()
+        .map_err(|e| Error::io(&tmp, e.into_error()))?
+        .commit()?;
+    Ok(offset)
+}

@@ -1,0 +1,362 @@
+//! The raw store's header: fields, block layout, encoding and checks.
+
+use crate::bytes::{Reader, Writer};
+use crate::dims::Dims;
+use crate::error::{Error, Result};
+use crate::surface::SURFACE_RECORD_LEN;
+use std::path::Path;
+
+pub(super) const MAGIC: [u8; 8] = *b"LTMRAW\0\x01";
+/// The newest version; version 1 (no input identity) is still read and
+/// written.
+pub(super) const VERSION: u32 = 3;
+/// Header bytes of versions 1, 2 and 3.
+pub(super) const HEADER_LEN_V1: u64 = 64;
+pub(super) const HEADER_LEN_V2: u64 = 96;
+pub(super) const HEADER_LEN_V3: u64 = 112;
+/// Bytes of an input identity.
+pub const INPUT_ID_LEN: usize = 32;
+pub(super) const FLAG_ALBEDO: u32 = 1;
+pub(super) const FLAG_SURFACE: u32 = 2;
+pub(super) const DATA_ALIGN: u64 = 4096;
+/// Bytes read at a time when a block's CRC is checked.
+pub(super) const CRC_CHUNK: u64 = 8 << 20;
+
+/// Header of a raw store.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct RawHeader {
+    /// Matrix dimensions: rows (pixels), lights (cubemap texels), channels.
+    pub dims: Dims,
+    /// Rows per block (the unit of writing, resuming and checksumming).
+    pub block_rows: u32,
+    /// An RGB albedo image is stored (monochrome transport factored as
+    /// albedo × grey transport).
+    pub has_albedo: bool,
+    /// A digest of everything that determines the rows, defined by the
+    /// writer (`ltm bake`: a SHA-256 of the resolved scene description,
+    /// every mesh file's bytes and the settings), or `None` when the writer
+    /// cannot tell (`ltm import`). A `.partial` file is resumed only when
+    /// its identity equals the writer's. Stored in version-2 files; a
+    /// header without one is written as version 1.
+    pub input_id: Option<[u8; INPUT_ID_LEN]>,
+    /// Per-row surface data ([`Surface`]) is stored (version 3). Texture
+    /// rows ([`crate::RowLayout::Texture`]) always have it.
+    pub has_surface: bool,
+}
+
+#[derive(Clone, Copy)]
+pub(super) struct Layout {
+    /// Start of the block table: the header length.
+    pub(super) table_offset: u64,
+    pub(super) block_count: u64,
+    pub(super) flags_offset: u64,
+    pub(super) albedo_offset: u64,
+    /// Start of the surface records (0 when absent).
+    pub(super) surface_offset: u64,
+    pub(super) data_offset: u64,
+    pub(super) file_len: u64,
+}
+
+impl RawHeader {
+    /// A header with a block size of about `block_bytes` of row data.
+    pub fn new(dims: Dims, has_albedo: bool, block_bytes: u64) -> RawHeader {
+        let row_bytes = (dims.row_len() as u64 * 4).max(1);
+        let block_rows = (block_bytes / row_bytes).clamp(1, dims.pixels().max(1) as u64) as u32;
+        RawHeader {
+            dims,
+            block_rows,
+            has_albedo,
+            input_id: None,
+            has_surface: dims.rows.is_texture(),
+        }
+    }
+
+    /// The same header with per-row surface data (written as version 3).
+    pub fn with_surface(self) -> RawHeader {
+        RawHeader {
+            has_surface: true,
+            ..self
+        }
+    }
+
+    /// The same header with an input identity (written as version 2).
+    pub fn with_input_id(self, id: [u8; INPUT_ID_LEN]) -> RawHeader {
+        RawHeader {
+            input_id: Some(id),
+            ..self
+        }
+    }
+
+    /// The format version this header is written as: 3 with surface data,
+    /// else 2 with an input identity, else 1.
+    pub fn version(&self) -> u32 {
+        if self.has_surface {
+            3
+        } else if self.input_id.is_some() {
+            2
+        } else {
+            1
+        }
+    }
+
+    pub(super) fn header_len(&self) -> u64 {
+        match self.version() {
+            3 => HEADER_LEN_V3,
+            2 => HEADER_LEN_V2,
+            _ => HEADER_LEN_V1,
+        }
+    }
+
+    pub(super) fn layout(&self) -> Result<Layout> {
+        self.dims.validate()?;
+        if self.has_albedo && self.dims.channels != 1 {
+            return Err(Error::range(
+                "channels with an albedo image",
+                self.dims.channels,
+                "1",
+            ));
+        }
+        if self.dims.rows.is_texture() && !self.has_surface {
+            return Err(Error::Invalid(
+                "a texture-space raw store must carry surface data".into(),
+            ));
+        }
+        let p = self.dims.pixels() as u64;
+        if self.block_rows == 0 || self.block_rows as u64 > p {
+            return Err(Error::range(
+                "block_rows",
+                self.block_rows,
+                format!("1..={p}"),
+            ));
+        }
+        let block_count = p.div_ceil(self.block_rows as u64);
+        let table_offset = self.header_len();
+        let flags_offset = table_offset + 8 * block_count;
+        let albedo_offset = (flags_offset + p).next_multiple_of(64);
+        let albedo_end = albedo_offset + if self.has_albedo { 12 * p } else { 0 };
+        let surface_offset = albedo_end.next_multiple_of(64);
+        let surface_end = surface_offset
+            + if self.has_surface {
+                SURFACE_RECORD_LEN as u64 * p + 4
+            } else {
+                0
+            };
+        let data_offset = surface_end.next_multiple_of(DATA_ALIGN);
+        let file_len = data_offset
+            .checked_add(self.dims.raw_bytes())
+            .ok_or_else(|| {
+                Error::range("raw store size", self.dims.raw_bytes(), "below 2^64 bytes")
+            })?;
+        Ok(Layout {
+            table_offset,
+            block_count,
+            flags_offset,
+            albedo_offset: if self.has_albedo { albedo_offset } else { 0 },
+            surface_offset: if self.has_surface { surface_offset } else { 0 },
+            data_offset,
+            file_len,
+        })
+    }
+
+    /// Number of blocks.
+    pub fn block_count(&self) -> usize {
+        (self.dims.pixels()).div_ceil(self.block_rows as usize)
+    }
+
+    /// Rows of block `b`.
+    pub fn block_range(&self, b: usize) -> std::ops::Range<usize> {
+        let start = b * self.block_rows as usize;
+        start..(start + self.block_rows as usize).min(self.dims.pixels())
+    }
+
+    pub(super) fn encode(&self, layout: &Layout) -> Vec<u8> {
+        let mut w = Writer::default();
+        w.bytes.extend_from_slice(&MAGIC);
+        w.u32(self.version());
+        w.u32(
+            if self.has_albedo { FLAG_ALBEDO } else { 0 }
+                | if self.has_surface { FLAG_SURFACE } else { 0 },
+        );
+        for v in self.dims.to_fields() {
+            w.u32(v);
+        }
+        w.u32(self.block_rows);
+        w.u32(layout.block_count as u32);
+        w.u64(layout.data_offset);
+        w.u64(layout.albedo_offset);
+        w.u32(0);
+        if let Some(id) = &self.input_id {
+            w.bytes.extend_from_slice(id);
+        } else if self.has_surface {
+            w.bytes.extend_from_slice(&[0; INPUT_ID_LEN]);
+        }
+        if self.has_surface {
+            w.u64(layout.surface_offset);
+            w.u32(self.dims.rows.code());
+            w.u32(match self.dims.rows {
+                crate::RowLayout::Texture {
+                    parameterization, ..
+                } => parameterization.code(),
+                _ => 0,
+            });
+        }
+        let crc = crc32fast::hash(&w.bytes);
+        w.u32(crc);
+        w.bytes
+    }
+
+    /// Decodes and checks a header from the first bytes of a file of
+    /// `file_len` bytes (`bytes` holds `min(file_len, HEADER_LEN_V3)` of
+    /// them).
+    pub(super) fn decode(bytes: &[u8], file_len: u64, path: &Path) -> Result<(RawHeader, Layout)> {
+        check_magic(bytes, file_len, path)?;
+        let version = u32::from_le_bytes(bytes[8..12].try_into().expect("4 bytes"));
+        let len = match version {
+            1 => HEADER_LEN_V1,
+            2 => HEADER_LEN_V2,
+            3 => HEADER_LEN_V3,
+            _ => {
+                return Err(Error::Version {
+                    what: "raw store",
+                    found: version,
+                    supported: VERSION,
+                })
+            }
+        } as usize;
+        if bytes.len() < len {
+            return Err(Error::corrupt(
+                "raw store",
+                format!(
+                    "{}: truncated: the file is {file_len} bytes, shorter than its {len}-byte version-{version} header",
+                    path.display()
+                ),
+            ));
+        }
+        let mut r = Reader::new(&bytes[..len], "raw store header");
+        r.take(12)?;
+        let flags = r.u32()?;
+        check_fixed_fields(bytes, len, version, flags)?;
+        let mut dims = Dims::read_fields(&mut r)?;
+        let word = |at: usize| u32::from_le_bytes(bytes[at..at + 4].try_into().expect("4 bytes"));
+        if version == 3 {
+            dims.rows =
+                crate::RowLayout::from_codes(word(100), word(104), dims.width(), dims.height())?;
+        }
+        let id: [u8; INPUT_ID_LEN] = bytes[60..60 + INPUT_ID_LEN.min(len - 60)]
+            .iter()
+            .copied()
+            .chain(std::iter::repeat(0))
+            .take(INPUT_ID_LEN)
+            .collect::<Vec<u8>>()
+            .try_into()
+            .expect("32 bytes");
+        let header = RawHeader {
+            dims,
+            block_rows: r.u32()?,
+            has_albedo: flags & FLAG_ALBEDO != 0,
+            input_id: (version == 2 || (version == 3 && id != [0; INPUT_ID_LEN])).then_some(id),
+            has_surface: version == 3,
+        };
+        let layout = header.layout()?;
+        let offsets = (r.u32()?, r.u64()?, r.u64()?);
+        let surface_offset = if version == 3 {
+            u64::from_le_bytes(bytes[92..100].try_into().expect("8 bytes"))
+        } else {
+            0
+        };
+        check_offsets(&layout, offsets, surface_offset)?;
+        Ok((header, layout))
+    }
+}
+
+/// The header's CRC (over its first `len − 4` bytes), its flags (bit 0,
+/// and bit 1 exactly in `version` 3) and its reserved field (0).
+pub(super) fn check_fixed_fields(bytes: &[u8], len: usize, version: u32, flags: u32) -> Result<()> {
+    let stored_crc = u32::from_le_bytes(bytes[len - 4..len].try_into().expect("4 bytes"));
+    let crc = crc32fast::hash(&bytes[..len - 4]);
+    if crc != stored_crc {
+        return Err(Error::Crc {
+            chunk: "raw store header".into(),
+            stored: stored_crc,
+            computed: crc,
+        });
+    }
+    let allowed = if version == 3 {
+        FLAG_ALBEDO | FLAG_SURFACE
+    } else {
+        FLAG_ALBEDO
+    };
+    if flags & !allowed != 0 || (version == 3) != (flags & FLAG_SURFACE != 0) {
+        return Err(Error::range(
+            "raw store flags",
+            format!("{flags:#x} (version {version})"),
+            "bit 0, and bit 1 exactly in version 3",
+        ));
+    }
+    let reserved = u32::from_le_bytes(bytes[56..60].try_into().expect("4 bytes"));
+    if reserved != 0 {
+        return Err(Error::range(
+            "raw store reserved field (header offset 56)",
+            format!("{reserved:#x}"),
+            "0",
+        ));
+    }
+    Ok(())
+}
+
+/// The offsets a header stores (block count, data, albedo; surface) against
+/// the layout its dimensions imply.
+pub(super) fn check_offsets(
+    layout: &Layout,
+    (block_count, data_offset, albedo_offset): (u32, u64, u64),
+    surface_offset: u64,
+) -> Result<()> {
+    if surface_offset != layout.surface_offset {
+        return Err(Error::corrupt(
+            "raw store header",
+            format!(
+                "surface_offset {surface_offset} disagrees with the dimensions (expected {})",
+                layout.surface_offset
+            ),
+        ));
+    }
+    if block_count as u64 != layout.block_count
+        || data_offset != layout.data_offset
+        || albedo_offset != layout.albedo_offset
+    {
+        return Err(Error::corrupt("raw store header", format!(
+                "block_count {block_count}, data_offset {data_offset}, albedo_offset {albedo_offset} disagree with the dimensions (expected {}, {}, {})",
+                layout.block_count, layout.data_offset, layout.albedo_offset)));
+    }
+    Ok(())
+}
+
+/// The file starts with the magic and holds a whole header: a file whose
+/// bytes are the magic (or a prefix of it) but shorter than the header is
+/// reported as truncated, not as another kind of file.
+pub(super) fn check_magic(bytes: &[u8], file_len: u64, path: &Path) -> Result<()> {
+    let n = bytes.len().min(8);
+    if file_len == 0 {
+        return Err(Error::corrupt(
+            "raw store",
+            format!("{}: the file is empty (0 bytes)", path.display()),
+        ));
+    }
+    if bytes[..n] != MAGIC[..n] {
+        return Err(Error::BadMagic {
+            path: path.into(),
+            expected: "an ltm raw transport store",
+            found: bytes[..n].to_vec(),
+        });
+    }
+    if file_len < HEADER_LEN_V1 {
+        return Err(Error::corrupt(
+            "raw store",
+            format!(
+                "{}: truncated: the file is {file_len} bytes, shorter than the {HEADER_LEN_V1}-byte header",
+                path.display()
+            ),
+        ));
+    }
+    Ok(())
+}

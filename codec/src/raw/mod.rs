@@ -1,0 +1,66 @@
+//! The raw transport store: the uncompressed matrix T, row-major, as `ltm
+//! bake` and `ltm import` write it and `ltm compress` reads it.
+//!
+//! One little-endian file (layout in docs/FORMAT.md). Version 2 adds the
+//! input identity, version 3 the row layout and per-row surface data
+//! ([`Surface`]); a header is `hlen` = 64 bytes in version 1, 96 in version
+//! 2 and 112 in version 3:
+//!
+//! | offset | size | field |
+//! |---|---|---|
+//! | 0 | 8 | magic `LTMRAW\0\x01` |
+//! | 8 | 4 | version (1, 2 or 3) |
+//! | 12 | 4 | flags: bit 0 = an albedo image is stored, bit 1 = surface data (exactly in version 3) |
+//! | 16 | 4·5 | width, height, face_res, channels, block_rows |
+//! | 36 | 4 | block_count = ceil(width·height / block_rows) |
+//! | 40 | 8 | data_offset (multiple of 4096) |
+//! | 48 | 8 | albedo_offset (0 when absent) |
+//! | 56 | 4 | reserved, 0 (a reader refuses any other value) |
+//! | 60 | 32 | version 2 and 3: input identity ([`RawHeader::input_id`]; all zero in version 3 = none) |
+//! | 92 | 8 | version 3: surface_offset |
+//! | 100 | 4·2 | version 3: row layout (0 image, 1 texture), parameterization (0 none, 1 uv, 2 sphere) |
+//! | hlen − 4 | 4 | CRC-32 of bytes 0..hlen−4 |
+//! | hlen | 8·block_count | block table: state (0 = pending, 1 = complete), CRC-32 of the block |
+//! | flags_offset | P | one byte per row: 1 = the row is all zero, else 0 |
+//! | albedo_offset | 12·P | RGB albedo per pixel, f32 (optional) |
+//! | surface_offset | 28·P + 4 | version 3: surface record per row, then the CRC-32 of the records |
+//! | data_offset | 4·P·M·C | T\[p\]\[j\]\[c\], f32 |
+//!
+//! A block is `block_rows` consecutive rows (the last may be shorter); its
+//! CRC covers its row flags, then its albedo values, then its data.
+//!
+//! Writing goes to `PATH.partial`, one block at a time with plain positioned
+//! writes (so that a full disk is an error, not a signal), and the file is
+//! renamed to `PATH` when every block is complete. A header with an input
+//! identity is written as version 2, one without as version 1.
+//! Re-opening an interrupted `.partial` resumes it only when it proves to
+//! come from the same inputs: both it and the new header carry an input
+//! identity, the identities are equal, and the layout and length match. Its
+//! blocks marked complete whose CRC verifies are then kept, the others are
+//! pending. Otherwise the file is started over, and
+//! [`RawWriter::resume_state`] says why.
+//!
+//! Reading ([`RawStore`]) trusts nothing: a file with the magic but shorter
+//! than its header implies is reported as truncated with both sizes; the
+//! reserved field must be 0, every block state 1 (0 = never completed, any
+//! other value is refused), every row flag 0 or 1 and every albedo value
+//! finite. Row data is read with positioned reads ([`RawStore::read_rows`])
+//! and trusted only once its block is verified: its CRC, finite values, and
+//! every row flagged zero really zero ([`BlockVerifier`]).
+
+#[cfg(target_endian = "big")]
+compile_error!("ltm's file formats are little-endian and are mapped directly; big-endian targets are not supported");
+
+mod blocks;
+mod header;
+mod store;
+#[cfg(test)]
+mod tests;
+mod verify;
+mod writer;
+
+pub use blocks::RowBlocks;
+pub use header::{RawHeader, INPUT_ID_LEN};
+pub use store::RawStore;
+pub use verify::BlockVerifier;
+pub use writer::{RawWriter, RestartReason, ResumeState};

@@ -1,0 +1,416 @@
+//! The raw store opened for reading.
+
+use super::header::{Layout, RawHeader, CRC_CHUNK, HEADER_LEN_V3};
+use super::verify::BlockVerifier;
+use super::writer::non_finite_albedo;
+use crate::dims::Dims;
+use crate::error::{Error, Result};
+use crate::fileio::PositionedIo as _;
+use crate::limits::Limits;
+use crate::mmap;
+use crate::surface::{Surface, SURFACE_RECORD_LEN};
+use memmap2::Mmap;
+use std::fs::File;
+use std::io;
+use std::ops::Range;
+use std::path::{Path, PathBuf};
+use std::time::SystemTime;
+
+/// A file's length and modification time, taken at open and compared after
+/// a run to detect a change of the input while it was read.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub(super) struct Stamp {
+    pub(super) len: u64,
+    pub(super) modified: Option<SystemTime>,
+}
+
+impl Stamp {
+    pub(super) fn of(file: &File, path: &Path) -> Result<Stamp> {
+        let m = file.metadata().map_err(|e| Error::io(path, e))?;
+        Ok(Stamp {
+            len: m.len(),
+            modified: m.modified().ok(),
+        })
+    }
+}
+
+/// Reads `buf.len()` bytes at `offset` of `file`; a file that ends too early
+/// (truncated since it was opened) is an error that says so.
+pub(super) fn read_at(file: &File, path: &Path, buf: &mut [u8], offset: u64) -> Result<()> {
+    file.read_exact_at(buf, offset).map_err(|e| {
+        if e.kind() != io::ErrorKind::UnexpectedEof {
+            return Error::io(path, e);
+        }
+        let now = file
+            .metadata()
+            .map_or_else(|_| "unknown".into(), |m| m.len().to_string());
+        let end = offset + buf.len() as u64;
+        Error::io(
+            path,
+            io::Error::new(
+                e.kind(),
+                format!("bytes {offset}..{end} lie past the end of the file (now {now} bytes): it was truncated while being read"),
+            ),
+        )
+    })
+}
+
+/// A raw store opened for reading.
+///
+/// Opening validates the header and reads the block table, the row flags
+/// and the albedo image into memory with positioned reads, checking every
+/// field: block states 0 or 1 (and every block complete), row flags 0 or 1,
+/// finite albedo values. Row data is read on demand, either with
+/// [`RawStore::read_rows`] (positioned reads: a file truncated meanwhile is
+/// an error; what the compressor uses) or with [`RawStore::rows`] (a memory
+/// map: no copy, but a file truncated while mapped raises SIGBUS). Data is
+/// trusted only once its block is verified ([`RawStore::verify_block`],
+/// [`BlockVerifier`]) against the block table read at open.
+pub struct RawStore {
+    pub(super) file: File,
+    pub(super) map: Mmap,
+    pub(super) header: RawHeader,
+    pub(super) layout: Layout,
+    pub(super) path: PathBuf,
+    /// CRC of every block, from the block table.
+    pub(super) block_crcs: Vec<u32>,
+    /// One byte per row: 1 = flagged all zero.
+    pub(super) flags: Vec<u8>,
+    pub(super) albedo: Option<Vec<f32>>,
+    pub(super) surface: Option<Surface>,
+    pub(super) stamp: Stamp,
+}
+
+impl RawStore {
+    /// Opens and validates a raw store: header CRC, reserved fields,
+    /// dimensions, file length, block table (every block complete), row
+    /// flags and albedo values. Block CRCs, finite values and rows flagged
+    /// zero are checked by [`RawStore::verify_block`] or a
+    /// [`BlockVerifier`]. Uses the default [`Limits`].
+    pub fn open(path: &Path) -> Result<RawStore> {
+        Self::open_with_limits(path, &Limits::default())
+    }
+
+    /// [`RawStore::open`] with the given limits.
+    pub fn open_with_limits(path: &Path, limits: &Limits) -> Result<RawStore> {
+        let file = File::open(path).map_err(|e| Error::io(path, e))?;
+        mmap::check_regular(&file).map_err(|e| Error::io(path, e))?;
+        let stamp = Stamp::of(&file, path)?;
+        let mut head = vec![0u8; stamp.len.min(HEADER_LEN_V3) as usize];
+        read_at(&file, path, &mut head, 0)?;
+        let (header, layout) = RawHeader::decode(&head, stamp.len, path)?;
+        check_length(stamp.len, layout.file_len, path)?;
+        let block_crcs = read_block_table(&file, path, &layout, limits)?;
+        let flags = read_flags(&file, path, &header, &layout, limits)?;
+        let albedo = read_albedo(&file, path, &header, &layout, limits)?;
+        let surface = read_surface(&file, path, &header, &layout, limits)?;
+        let map = mmap::map_read(&file).map_err(|e| Error::io(path, e))?;
+        check_length(map.len() as u64, layout.file_len, path)?;
+        Ok(RawStore {
+            file,
+            map,
+            header,
+            layout,
+            path: path.into(),
+            block_crcs,
+            flags,
+            albedo,
+            surface,
+            stamp,
+        })
+    }
+
+    /// The header.
+    pub fn header(&self) -> &RawHeader {
+        &self.header
+    }
+
+    /// The matrix dimensions.
+    pub fn dims(&self) -> Dims {
+        self.header.dims
+    }
+
+    /// The file's path.
+    pub fn path(&self) -> &Path {
+        &self.path
+    }
+
+    /// Reads rows `range` into `out` (resized to `range.len() · M · C`
+    /// values) with positioned reads: a file truncated since it was opened
+    /// gives an [`Error::Io`] that says so, never a signal. The values are
+    /// as stored; a [`BlockVerifier`] checks them.
+    pub fn read_rows(&self, range: Range<usize>, out: &mut Vec<f32>) -> Result<()> {
+        let p = self.header.dims.pixels();
+        if range.start > range.end || range.end > p {
+            return Err(Error::range(
+                "raw store rows",
+                format!("{}..{}", range.start, range.end),
+                format!("a range within 0..{p}"),
+            ));
+        }
+        let row_len = self.header.dims.row_len();
+        self.read_values(range.start * row_len..range.end * row_len, out)
+    }
+
+    /// Reads the values `range` of the data (`p·M·C + j·C + c`), which must
+    /// lie within it, into `out` (resized), with positioned reads.
+    pub(crate) fn read_values(&self, range: Range<usize>, out: &mut Vec<f32>) -> Result<()> {
+        out.truncate(range.len());
+        out.resize(range.len(), 0.0);
+        let offset = self.layout.data_offset + range.start as u64 * 4;
+        read_at(
+            &self.file,
+            &self.path,
+            bytemuck::cast_slice_mut(out),
+            offset,
+        )
+    }
+
+    /// Rows `range` as one slice of `range.len() · M · C` values, from the
+    /// memory map. Truncating the file while it is mapped raises SIGBUS on
+    /// access: [`RawStore::read_rows`] is the safe way to read.
+    pub fn rows(&self, range: Range<usize>) -> &[f32] {
+        let row_bytes = self.header.dims.row_len() * 4;
+        let start = self.layout.data_offset as usize + range.start * row_bytes;
+        bytemuck::cast_slice(&self.map[start..start + range.len() * row_bytes])
+    }
+
+    /// Row `p`: M·C values, channel-interleaved (memory-mapped, as
+    /// [`RawStore::rows`]).
+    pub fn row(&self, p: usize) -> &[f32] {
+        self.rows(p..p + 1)
+    }
+
+    /// True when row `p` is flagged all zero (e.g. a background pixel). The
+    /// flag is checked against the row's values when its block is verified
+    /// ([`RawStore::verify_block`]): trust it only after that.
+    pub fn is_zero_row(&self, p: usize) -> bool {
+        self.flags.get(p) == Some(&1)
+    }
+
+    /// The RGB albedo image (3 finite values per pixel), if stored.
+    pub fn albedo(&self) -> Option<&[f32]> {
+        self.albedo.as_deref()
+    }
+
+    /// The per-row surface data (version 3), if stored: CRC-checked, one
+    /// valid point (finite, unit normal) or all-zero record per row.
+    pub fn surface(&self) -> Option<&Surface> {
+        self.surface.as_ref()
+    }
+
+    /// Checks block `b`: its CRC against the block table, that its values
+    /// are finite and that every row flagged zero is zero. Reads it with
+    /// positioned reads, 8 MiB at a time.
+    pub fn verify_block(&self, b: usize) -> Result<()> {
+        if b >= self.block_crcs.len() {
+            return Err(Error::range(
+                "block index",
+                b,
+                format!("0..{}", self.block_crcs.len()),
+            ));
+        }
+        let range = self.header.block_range(b);
+        let step = (CRC_CHUNK as usize / (self.header.dims.row_len() * 4)).max(1);
+        let mut verifier = BlockVerifier::new(self, range.start);
+        let mut buf = Vec::new();
+        for start in range.clone().step_by(step) {
+            let rows = start..(start + step).min(range.end);
+            self.read_rows(rows.clone(), &mut buf)?;
+            verifier.feed(rows.start, &buf)?;
+        }
+        Ok(())
+    }
+
+    /// A [`BlockVerifier`] for reading every row in order from row 0.
+    pub fn verifier(&self) -> BlockVerifier<'_> {
+        BlockVerifier::new(self, 0)
+    }
+
+    /// Checks that the file still has the length and modification time it
+    /// had when it was opened: a run that read it fails rather than write
+    /// an output from an input that changed meanwhile.
+    pub fn check_unchanged(&self) -> Result<()> {
+        let now = Stamp::of(&self.file, &self.path)?;
+        if now == self.stamp {
+            return Ok(());
+        }
+        let detail = if now.len != self.stamp.len {
+            format!(
+                "its length went from {} to {} bytes",
+                self.stamp.len, now.len
+            )
+        } else {
+            "its modification time changed".into()
+        };
+        Err(Error::io(
+            &self.path,
+            io::Error::other(format!(
+                "the file changed while it was read ({detail}); no output is written from a changed input"
+            )),
+        ))
+    }
+
+    /// Lets the kernel drop the mapped pages of rows `range` from this
+    /// process (they stay readable), bounding resident memory on long scans
+    /// through [`RawStore::rows`].
+    pub fn release_rows(&self, range: Range<usize>) {
+        let row_bytes = self.header.dims.row_len() * 4;
+        let start = self.layout.data_offset as usize + range.start * row_bytes;
+        mmap::release(&self.map, start, range.len() * row_bytes);
+    }
+
+    /// The first problem of row `p`'s values: a non-finite value, or a value
+    /// other than 0 in a row flagged zero.
+    pub(super) fn check_row(&self, p: usize, row: &[f32]) -> Result<()> {
+        let c = self.header.dims.channels as usize;
+        if let Some(i) = row.iter().position(|v| !v.is_finite()) {
+            return Err(Error::range(
+                "raw store value",
+                format!("{} (row {p}, column {}, channel {})", row[i], i / c, i % c),
+                "finite",
+            ));
+        }
+        if self.is_zero_row(p) {
+            if let Some(i) = row.iter().position(|&v| v != 0.0) {
+                return Err(Error::corrupt(
+                    "raw store",
+                    format!(
+                        "{}: row {p} is flagged all zero but holds {} at column {}, channel {}",
+                        self.path.display(),
+                        row[i],
+                        i / c,
+                        i % c
+                    ),
+                ));
+            }
+        }
+        Ok(())
+    }
+}
+
+/// The file is exactly as long as the header implies.
+pub(super) fn check_length(len: u64, expected: u64, path: &Path) -> Result<()> {
+    if len == expected {
+        return Ok(());
+    }
+    let what = if len < expected { "truncated: " } else { "" };
+    Err(Error::corrupt(
+        "raw store",
+        format!(
+            "{}: {what}the file is {len} bytes, the header implies {expected}",
+            path.display()
+        ),
+    ))
+}
+
+/// The block table: every state must be 1 (complete); returns the CRCs.
+pub(super) fn read_block_table(
+    file: &File,
+    path: &Path,
+    layout: &Layout,
+    limits: &Limits,
+) -> Result<Vec<u32>> {
+    let len = limits.check_alloc("raw store block table", layout.block_count, 8)?;
+    let mut table = vec![0u8; len];
+    read_at(file, path, &mut table, layout.table_offset)?;
+    let entry =
+        |e: &[u8], k: usize| u32::from_le_bytes(e[4 * k..4 * k + 4].try_into().expect("4 bytes"));
+    table
+        .chunks_exact(8)
+        .enumerate()
+        .map(|(b, e)| match entry(e, 0) {
+            1 => Ok(entry(e, 1)),
+            0 => Err(Error::corrupt(
+                "raw store",
+                format!(
+                    "{}: block {b} was never completed (state 0)",
+                    path.display()
+                ),
+            )),
+            s => Err(Error::range(
+                "raw store block state",
+                format!("{s} (block {b})"),
+                "0 (pending) or 1 (complete)",
+            )),
+        })
+        .collect()
+}
+
+/// The row flags: every byte 0 or 1.
+pub(super) fn read_flags(
+    file: &File,
+    path: &Path,
+    header: &RawHeader,
+    layout: &Layout,
+    limits: &Limits,
+) -> Result<Vec<u8>> {
+    let len = limits.check_alloc("raw store row flags", header.dims.pixels() as u64, 1)?;
+    let mut flags = vec![0u8; len];
+    read_at(file, path, &mut flags, layout.flags_offset)?;
+    if let Some(p) = flags.iter().position(|&f| f > 1) {
+        return Err(Error::range(
+            "raw store row flag",
+            format!("{} (row {p})", flags[p]),
+            "0 (not known to be zero) or 1 (all zero)",
+        ));
+    }
+    Ok(flags)
+}
+
+/// The surface data, if stored: size checked against the limits, CRC and
+/// every record checked.
+pub(super) fn read_surface(
+    file: &File,
+    path: &Path,
+    header: &RawHeader,
+    layout: &Layout,
+    limits: &Limits,
+) -> Result<Option<Surface>> {
+    if !header.has_surface {
+        return Ok(None);
+    }
+    let rows = header.dims.pixels();
+    let len = limits.check_alloc(
+        "raw store surface data",
+        rows as u64,
+        SURFACE_RECORD_LEN as u64,
+    )?;
+    let mut bytes = vec![0u8; len + 4];
+    read_at(file, path, &mut bytes, layout.surface_offset)?;
+    let stored = u32::from_le_bytes(bytes[len..].try_into().expect("4 bytes"));
+    let computed = crc32fast::hash(&bytes[..len]);
+    if stored != computed {
+        return Err(Error::Crc {
+            chunk: "raw store surface data".into(),
+            stored,
+            computed,
+        });
+    }
+    Surface::decode_records(&bytes[..len], rows).map(Some)
+}
+
+/// The albedo image, if stored: every value finite.
+pub(super) fn read_albedo(
+    file: &File,
+    path: &Path,
+    header: &RawHeader,
+    layout: &Layout,
+    limits: &Limits,
+) -> Result<Option<Vec<f32>>> {
+    if !header.has_albedo {
+        return Ok(None);
+    }
+    let len = limits.check_alloc("raw store albedo image", header.dims.pixels() as u64, 12)?;
+    let mut albedo = vec![0.0f32; len / 4];
+    read_at(
+        file,
+        path,
+        bytemuck::cast_slice_mut(&mut albedo),
+        layout.albedo_offset,
+    )?;
+    if let Some(i) = albedo.iter().position(|v| !v.is_finite()) {
+        return Err(non_finite_albedo(i / 3, i % 3, albedo[i]));
+    }
+    Ok(Some(albedo))
+}

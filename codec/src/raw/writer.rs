@@ -1,0 +1,411 @@
+//! The raw store's writer: block by block, resumable from `PATH.partial`.
+
+use super::header::{Layout, RawHeader, CRC_CHUNK, HEADER_LEN_V3};
+use crate::error::{Error, Result};
+use crate::fileio::PositionedIo as _;
+use crate::surface::Surface;
+use std::fs::{File, OpenOptions};
+use std::path::{Path, PathBuf};
+
+/// What [`RawWriter::create`] did with an existing `PATH.partial`.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[non_exhaustive]
+pub enum ResumeState {
+    /// There was no partial file: a new one was started.
+    New,
+    /// The partial file comes from the same inputs: its `kept` complete
+    /// blocks (of `total`) whose CRC verifies were kept.
+    Resumed {
+        /// Blocks kept.
+        kept: usize,
+        /// Blocks in the store.
+        total: usize,
+    },
+    /// A partial file was there but could not be resumed; it was started
+    /// over.
+    Restarted(RestartReason),
+}
+
+/// Why a partial file was started over.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[non_exhaustive]
+pub enum RestartReason {
+    /// It cannot be read, or its header is not a valid raw store header.
+    Unreadable,
+    /// It or the new header has no input identity (a version-1 store, as
+    /// `ltm import` and older versions of ltm write), so the two cannot be
+    /// proven to come from the same inputs.
+    NoIdentity,
+    /// Its input identity differs: it was computed from other inputs.
+    DifferentInputs,
+    /// Same inputs, but another layout (dimensions, albedo image or block
+    /// size).
+    DifferentLayout,
+    /// Its length is not the one its header implies (truncated).
+    WrongLength,
+}
+
+impl std::fmt::Display for RestartReason {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(match self {
+            RestartReason::Unreadable => "it cannot be read as a raw store",
+            RestartReason::NoIdentity => {
+                "it records no input identity (a version-1 store, from ltm import or an older ltm), so it cannot be proven to come from the same inputs"
+            }
+            RestartReason::DifferentInputs => {
+                "it was computed from different inputs (its input identity differs: another scene description, mesh file, setting or program version)"
+            }
+            RestartReason::DifferentLayout => {
+                "it has another layout (dimensions, albedo image or block size)"
+            }
+            RestartReason::WrongLength => "its length does not match its header (truncated)",
+        })
+    }
+}
+
+impl std::fmt::Display for ResumeState {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            ResumeState::New => f.write_str("no partial file; started a new one"),
+            ResumeState::Resumed { kept, total } => {
+                write!(f, "resumed the partial file: kept {kept} of {total} blocks")
+            }
+            ResumeState::Restarted(why) => {
+                write!(f, "started the partial file over: {why}")
+            }
+        }
+    }
+}
+
+/// `Ok` when the partial file at `partial` can be resumed by a writer of
+/// `header`, else the state to report: no file, or why it is started over.
+pub(super) fn probe_partial(
+    partial: &Path,
+    header: &RawHeader,
+    layout: &Layout,
+) -> std::result::Result<(), ResumeState> {
+    let restart = |why| Err(ResumeState::Restarted(why));
+    let file = match File::open(partial) {
+        Ok(f) => f,
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound => return Err(ResumeState::New),
+        Err(_) => return restart(RestartReason::Unreadable),
+    };
+    let len = file.metadata().map(|m| m.len()).unwrap_or(0);
+    let mut bytes = vec![0u8; len.min(HEADER_LEN_V3) as usize];
+    if file.read_exact_at(&mut bytes, 0).is_err() {
+        return restart(RestartReason::Unreadable);
+    }
+    let Ok((old, old_layout)) = RawHeader::decode(&bytes, len, partial) else {
+        return restart(RestartReason::Unreadable);
+    };
+    match (old.input_id, header.input_id) {
+        (Some(a), Some(b)) if a != b => restart(RestartReason::DifferentInputs),
+        (Some(_), Some(_)) if old != *header => restart(RestartReason::DifferentLayout),
+        (Some(_), Some(_)) if len != layout.file_len || len != old_layout.file_len => {
+            restart(RestartReason::WrongLength)
+        }
+        (Some(_), Some(_)) => Ok(()),
+        _ => restart(RestartReason::NoIdentity),
+    }
+}
+
+pub(super) fn partial_path(path: &Path) -> PathBuf {
+    let mut s = path.as_os_str().to_owned();
+    s.push(".partial");
+    PathBuf::from(s)
+}
+
+/// Writes a raw store block by block; see the module docs for resuming.
+pub struct RawWriter {
+    file: File,
+    header: RawHeader,
+    layout: Layout,
+    path: PathBuf,
+    partial: PathBuf,
+    done: Vec<bool>,
+    resume: ResumeState,
+}
+
+impl RawWriter {
+    /// Opens `PATH.partial` for writing: resumes it when it comes from the
+    /// same inputs as `header` (see the module docs), else starts it over.
+    /// [`RawWriter::resume_state`] tells which, and why.
+    pub fn create(path: &Path, header: RawHeader) -> Result<RawWriter> {
+        Self::create_with_surface(path, header, None)
+    }
+
+    /// [`RawWriter::create`] for a header with surface data: `surface`
+    /// (one point per row) must be given exactly when
+    /// [`RawHeader::has_surface`]. It is written at once, on a resumed file
+    /// too (it is a function of the same inputs).
+    pub fn create_with_surface(
+        path: &Path,
+        header: RawHeader,
+        surface: Option<&Surface>,
+    ) -> Result<RawWriter> {
+        let layout = header.layout()?;
+        match surface {
+            Some(s) => s.check_rows(&header.dims)?,
+            None if header.has_surface => {
+                return Err(Error::Invalid(
+                    "the raw store header has surface data but none was given".into(),
+                ))
+            }
+            None => {}
+        }
+        if surface.is_some() && !header.has_surface {
+            return Err(Error::Invalid(
+                "surface data given for a raw store header without it".into(),
+            ));
+        }
+        let partial = partial_path(path);
+        let io = |e| Error::io(&partial, e);
+        let probe = probe_partial(&partial, &header, &layout);
+        let file = OpenOptions::new()
+            .read(true)
+            .write(true)
+            .create(true)
+            .truncate(probe.is_err())
+            .open(&partial)
+            .map_err(io)?;
+        let total = layout.block_count as usize;
+        let mut writer = RawWriter {
+            file,
+            header,
+            path: path.into(),
+            partial: partial.clone(),
+            layout,
+            done: vec![false; total],
+            resume: ResumeState::New,
+        };
+        match probe {
+            Ok(()) => {
+                writer.done = writer.verified_blocks()?;
+                let kept = writer.done.iter().filter(|&&d| d).count();
+                writer.resume = ResumeState::Resumed { kept, total };
+            }
+            Err(state) => {
+                writer.file.set_len(layout.file_len).map_err(io)?;
+                writer
+                    .file
+                    .write_all_at(&header.encode(&layout), 0)
+                    .map_err(io)?;
+                writer.resume = state;
+            }
+        }
+        if let Some(s) = surface {
+            let mut bytes = s.encode_records();
+            let crc = crc32fast::hash(&bytes);
+            bytes.extend_from_slice(&crc.to_le_bytes());
+            writer
+                .file
+                .write_all_at(&bytes, layout.surface_offset)
+                .map_err(io)?;
+        }
+        Ok(writer)
+    }
+
+    /// What was done with an existing `PATH.partial`: started anew, resumed
+    /// (with the blocks kept), or started over (and why).
+    pub fn resume_state(&self) -> ResumeState {
+        self.resume
+    }
+
+    /// The blocks of a resumed file marked complete whose CRC verifies.
+    pub(super) fn verified_blocks(&self) -> Result<Vec<bool>> {
+        let mut table = vec![0u8; 8 * self.layout.block_count as usize];
+        self.file
+            .read_exact_at(&mut table, self.layout.table_offset)
+            .map_err(|e| Error::io(&self.partial, e))?;
+        let mut done = Vec::with_capacity(table.len() / 8);
+        for (b, entry) in table.chunks_exact(8).enumerate() {
+            let stored = u32::from_le_bytes(entry[4..8].try_into().expect("4 bytes"));
+            done.push(entry[..4] == 1u32.to_le_bytes() && self.block_crc(b)? == stored);
+        }
+        Ok(done)
+    }
+
+    /// The header being written.
+    pub fn header(&self) -> &RawHeader {
+        &self.header
+    }
+
+    /// Blocks not yet complete, in order.
+    pub fn pending_blocks(&self) -> Vec<usize> {
+        (0..self.done.len()).filter(|&b| !self.done[b]).collect()
+    }
+
+    pub(super) fn block_crc(&self, b: usize) -> Result<u32> {
+        let rows = self.header.block_range(b);
+        let n = rows.len() as u64;
+        let mut h = crc32fast::Hasher::new();
+        let mut buf = vec![0u8; n as usize];
+        let io = |e| Error::io(&self.partial, e);
+        self.file
+            .read_exact_at(&mut buf, self.layout.flags_offset + rows.start as u64)
+            .map_err(io)?;
+        h.update(&buf);
+        if self.header.has_albedo {
+            buf.resize(12 * n as usize, 0);
+            self.file
+                .read_exact_at(&mut buf, self.layout.albedo_offset + 12 * rows.start as u64)
+                .map_err(io)?;
+            h.update(&buf);
+        }
+        let row_bytes = self.header.dims.row_len() as u64 * 4;
+        let (start, end) = (
+            self.layout.data_offset + rows.start as u64 * row_bytes,
+            self.layout.data_offset + rows.end as u64 * row_bytes,
+        );
+        buf.resize((end - start).min(CRC_CHUNK) as usize, 0);
+        let mut at = start;
+        while at < end {
+            let len = (end - at).min(CRC_CHUNK) as usize;
+            self.file.read_exact_at(&mut buf[..len], at).map_err(io)?;
+            h.update(&buf[..len]);
+            at += len as u64;
+        }
+        Ok(h.finalize())
+    }
+
+    /// Writes block `b`: `rows` holds its rows (M·C values each) and
+    /// `albedo` its RGB albedo values when the store has an albedo image.
+    pub fn write_block(&mut self, b: usize, rows: &[f32], albedo: Option<&[f32]>) -> Result<()> {
+        if b >= self.done.len() {
+            return Err(Error::range(
+                "block index",
+                b,
+                format!("0..{}", self.done.len()),
+            ));
+        }
+        let range = self.header.block_range(b);
+        let row_len = self.header.dims.row_len();
+        if rows.len() != range.len() * row_len {
+            return Err(Error::BufferTooSmall {
+                what: "raw block rows",
+                len: rows.len(),
+                need: range.len() * row_len,
+            });
+        }
+        if rows.iter().any(|v| !v.is_finite()) {
+            return Err(Error::Invalid(format!(
+                "block {b} holds NaN or infinite values"
+            )));
+        }
+        if let Some((i, v)) = albedo
+            .into_iter()
+            .flatten()
+            .enumerate()
+            .find(|(_, v)| !v.is_finite())
+        {
+            return Err(non_finite_albedo(range.start + i / 3, i % 3, *v));
+        }
+        let io = |e| Error::io(&self.partial, e);
+        let mut h = crc32fast::Hasher::new();
+        let flags: Vec<u8> = rows
+            .chunks(row_len.max(1))
+            .map(|r| u8::from(r.iter().all(|&v| v == 0.0)))
+            .collect();
+        self.file
+            .write_all_at(&flags, self.layout.flags_offset + range.start as u64)
+            .map_err(io)?;
+        h.update(&flags);
+        match (self.header.has_albedo, albedo) {
+            (true, Some(a)) if a.len() == 3 * range.len() => {
+                let bytes: &[u8] = bytemuck::cast_slice(a);
+                self.file.write_all_at(bytes, self.layout.albedo_offset + 12 * range.start as u64).map_err(io)?;
+                h.update(bytes);
+            }
+            (false, None) => {}
+            _ => return Err(Error::Invalid(format!("albedo for block {b} must be given exactly when the store has an albedo image, 3 values per row"))),
+        }
+        // Plain positioned writes, not a memory map of the sparse file: a full
+        // disk is then an ENOSPC error here rather than SIGBUS on a page.
+        let bytes: &[u8] = bytemuck::cast_slice(rows);
+        let row_bytes = row_len as u64 * 4;
+        self.file
+            .write_all_at(
+                bytes,
+                self.layout.data_offset + range.start as u64 * row_bytes,
+            )
+            .map_err(io)?;
+        h.update(bytes);
+        let mut entry = 1u32.to_le_bytes().to_vec();
+        entry.extend_from_slice(&h.finalize().to_le_bytes());
+        self.file
+            .write_all_at(&entry, self.layout.table_offset + 8 * b as u64)
+            .map_err(io)?;
+        self.done[b] = true;
+        Ok(())
+    }
+
+    /// Writes a whole matrix held in memory — `t` with P·M·C values, `albedo`
+    /// with 3·P when the header has an albedo image — block by block, and
+    /// finishes the store. Returns its path.
+    pub fn write_dense(
+        path: &Path,
+        header: RawHeader,
+        t: &[f32],
+        albedo: Option<&[f32]>,
+    ) -> Result<PathBuf> {
+        Self::write_dense_with_surface(path, header, t, albedo, None)
+    }
+
+    /// [`RawWriter::write_dense`] with per-row surface data (see
+    /// [`RawWriter::create_with_surface`]).
+    pub fn write_dense_with_surface(
+        path: &Path,
+        header: RawHeader,
+        t: &[f32],
+        albedo: Option<&[f32]>,
+        surface: Option<&Surface>,
+    ) -> Result<PathBuf> {
+        let (p, row) = (header.dims.pixels(), header.dims.row_len());
+        if t.len() != p * row {
+            return Err(Error::BufferTooSmall {
+                what: "dense matrix",
+                len: t.len(),
+                need: p * row,
+            });
+        }
+        if albedo.is_some_and(|a| a.len() != 3 * p) || albedo.is_some() != header.has_albedo {
+            return Err(Error::BufferTooSmall {
+                what: "albedo image",
+                len: albedo.map_or(0, <[f32]>::len),
+                need: if header.has_albedo { 3 * p } else { 0 },
+            });
+        }
+        let mut w = RawWriter::create_with_surface(path, header, surface)?;
+        for b in 0..header.block_count() {
+            let r = header.block_range(b);
+            let a = albedo.map(|a| &a[3 * r.start..3 * r.end]);
+            w.write_block(b, &t[r.start * row..r.end * row], a)?;
+        }
+        w.finish()
+    }
+
+    /// Checks that every block is complete, syncs, and renames the file into
+    /// place.
+    pub fn finish(self) -> Result<PathBuf> {
+        if let Some(b) = self.done.iter().position(|d| !d) {
+            return Err(Error::Invalid(format!(
+                "raw store incomplete: block {b} of {} not written",
+                self.done.len()
+            )));
+        }
+        self.file
+            .sync_all()
+            .map_err(|e| Error::io(&self.partial, e))?;
+        std::fs::rename(&self.partial, &self.path).map_err(|e| Error::io(&self.path, e))?;
+        Ok(self.path)
+    }
+}
+
+/// The error for a non-finite albedo value of pixel `p`, channel `c`.
+pub(super) fn non_finite_albedo(p: usize, c: usize, v: f32) -> Error {
+    Error::range(
+        "raw store albedo value",
+        format!("{v} (pixel {p}, channel {c})"),
+        "finite",
+    )
+}

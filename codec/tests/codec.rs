@@ -9,16 +9,9 @@ use ltm_codec::compress::{Entropy, Mode};
 use ltm_codec::container::LtmFile;
 use ltm_codec::cubemap::{texel_direction, texel_solid_angle};
 use ltm_codec::npy::decode_matrix;
-use ltm_codec::{
-    Dims, Error, Filter, Limits, LtmWriter, RawHeader, RawStore, RawWriter, Transposed,
-};
+use ltm_codec::{Dims, Error, Filter, Limits, LtmWriter, RawStore, Transposed};
+use ltm_testkit::write_raw;
 use std::path::{Path, PathBuf};
-
-/// Writes a raw store from a dense `P × M × C` matrix.
-fn write_raw(dir: &Path, name: &str, dims: Dims, t: &[f32]) -> PathBuf {
-    let header = RawHeader::new(dims, false, 64 << 10);
-    RawWriter::write_dense(&dir.join(name), header, t, None).unwrap()
-}
 
 /// A plausible transport matrix: a curved surface with a shadowing ridge,
 /// cosine-weighted, zero background pixels.
@@ -87,7 +80,7 @@ fn every_mode_meets_its_target_and_reports_the_measured_error() {
     let dir = tempfile::tempdir().unwrap();
     let dims = Dims::image(24, 20, 4, 1);
     let t = scene(dims);
-    let raw = write_raw(dir.path(), "m.raw", dims, &t);
+    let raw = write_raw(&dir.path().join("m.raw"), dims, &t, None, 64 << 10);
     for mode in [Mode::TwoD, Mode::FourD, Mode::Adaptive] {
         for (bits, target) in [(16, 0.001), (9, 0.02), (12, 0.05)] {
             let opts: CompressOptions = CodeOptions {
@@ -149,7 +142,7 @@ fn empty_rows_decode_to_exactly_zero_in_every_mode() {
             .filter(|&p| t[p * m..(p + 1) * m].iter().all(|&v| v == 0.0))
             .collect();
         assert!(background.len() > dims.pixels() / 10);
-        let raw = write_raw(dir.path(), "e.raw", dims, &t);
+        let raw = write_raw(&dir.path().join("e.raw"), dims, &t, None, 64 << 10);
         for mode in [Mode::TwoD, Mode::FourD, Mode::Adaptive] {
             for target in [Target::MaxError(0.03), Target::Keep(9)] {
                 let opts: CompressOptions = CodeOptions {
@@ -190,7 +183,7 @@ fn files_without_empty_rows_have_no_mask() {
     let t: Vec<f32> = (0..dims.pixels() * dims.lights())
         .map(|i| 1.0 + (i % 7) as f32)
         .collect();
-    let raw = write_raw(dir.path(), "f.raw", dims, &t);
+    let raw = write_raw(&dir.path().join("f.raw"), dims, &t, None, 64 << 10);
     let (out, _) = run(dir.path(), &raw, &CompressOptions::default(), "f.ltm");
     let bytes = std::fs::read(&out).unwrap();
     assert_eq!(u32::from_le_bytes(bytes[8..12].try_into().unwrap()), 5);
@@ -282,7 +275,7 @@ fn stored_column_norms_are_those_of_the_decoded_columns() {
                 *v = 0.0;
             }
         }
-        let raw = write_raw(dir.path(), "n.raw", dims, &t);
+        let raw = write_raw(&dir.path().join("n.raw"), dims, &t, None, 64 << 10);
         let opts: CompressOptions = CodeOptions {
             entropy,
             mode,
@@ -312,7 +305,13 @@ fn stored_column_norms_are_those_of_the_decoded_columns() {
 fn zstd_entropy_writes_no_range_coded_columns() {
     let dir = tempfile::tempdir().unwrap();
     let dims = Dims::image(40, 28, 4, 3);
-    let raw = write_raw(dir.path(), "z.raw", dims, &scene(dims));
+    let raw = write_raw(
+        &dir.path().join("z.raw"),
+        dims,
+        &scene(dims),
+        None,
+        64 << 10,
+    );
     let mut sizes = Vec::new();
     for entropy in [Entropy::Zstd, Entropy::Range] {
         let opts: CompressOptions = CodeOptions {
@@ -362,7 +361,13 @@ fn zstd_entropy_writes_no_range_coded_columns() {
 fn raised_bits_give_the_file_of_the_final_bits() {
     let dir = tempfile::tempdir().unwrap();
     let dims = Dims::image(31, 17, 4, 3);
-    let raw = write_raw(dir.path(), "r.raw", dims, &scene(dims));
+    let raw = write_raw(
+        &dir.path().join("r.raw"),
+        dims,
+        &scene(dims),
+        None,
+        64 << 10,
+    );
     let options = |bits, raise_bits| -> CompressOptions {
         CodeOptions {
             bits,
@@ -399,7 +404,7 @@ fn target_errors_land_within_three_percent_below_the_target() {
         Dims::image(45, 33, 2, 1),
     ] {
         let t = scene(dims);
-        let raw = write_raw(dir.path(), "x.raw", dims, &t);
+        let raw = write_raw(&dir.path().join("x.raw"), dims, &t, None, 64 << 10);
         for mode in [Mode::TwoD, Mode::FourD, Mode::Adaptive] {
             for target in [0.003, 0.01, 0.03] {
                 let opts: CompressOptions = CodeOptions {
@@ -444,7 +449,7 @@ fn targets_near_the_quantization_floor_land_close_below_them() {
     let mut failures = Vec::new();
     for dims in [Dims::image(31, 17, 4, 3), Dims::image(24, 20, 4, 1)] {
         let t = scene(dims);
-        let raw = write_raw(dir.path(), "f.raw", dims, &t);
+        let raw = write_raw(&dir.path().join("f.raw"), dims, &t, None, 64 << 10);
         for mode in [Mode::TwoD, Mode::FourD, Mode::Adaptive] {
             for bits in [6, 8] {
                 let options = |target| -> CompressOptions {
@@ -495,7 +500,7 @@ fn near_lossless_at_16_bits() {
     let dir = tempfile::tempdir().unwrap();
     let dims = Dims::image(16, 12, 4, 3);
     let t = scene(dims);
-    let raw = write_raw(dir.path(), "c.raw", dims, &t);
+    let raw = write_raw(&dir.path().join("c.raw"), dims, &t, None, 64 << 10);
     for col_filter in Filter::ALL {
         let opts: CompressOptions = CodeOptions {
             bits: 16,
@@ -516,7 +521,7 @@ fn keep_mode_keeps_at_most_n_per_column_and_adaptive_is_no_worse_than_2d() {
     let dir = tempfile::tempdir().unwrap();
     let dims = Dims::image(32, 32, 4, 1);
     let t = scene(dims);
-    let raw = write_raw(dir.path(), "t.raw", dims, &t);
+    let raw = write_raw(&dir.path().join("t.raw"), dims, &t, None, 64 << 10);
     let mut errors = Vec::new();
     for mode in [Mode::TwoD, Mode::Adaptive] {
         let opts: CompressOptions = CodeOptions {
@@ -551,7 +556,7 @@ fn monochrome_rgb_is_stored_as_one_channel() {
         ..dims
     });
     let t: Vec<f32> = grey.iter().flat_map(|&v| [v, v, v]).collect();
-    let raw = write_raw(dir.path(), "g.raw", dims, &t);
+    let raw = write_raw(&dir.path().join("g.raw"), dims, &t, None, 64 << 10);
     let (out, stats) = run(dir.path(), &raw, &CompressOptions::default(), "g.ltm");
     assert_eq!(stats.channels, 1);
     assert_eq!(LtmFile::open(&out).unwrap().meta().dims.channels, 1);
@@ -588,7 +593,7 @@ fn hard_numerical_cases_never_produce_nan() {
     for (name, dims, f) in cases {
         let m = dims.lights();
         let t: Vec<f32> = (0..dims.pixels() * m).map(|i| f(i / m, i % m)).collect();
-        let raw = write_raw(dir.path(), "h.raw", dims, &t);
+        let raw = write_raw(&dir.path().join("h.raw"), dims, &t, None, 64 << 10);
         for bits in [4, 6, 8, 9, 10, 12, 16] {
             for mode in [Mode::TwoD, Mode::FourD, Mode::Adaptive] {
                 let opts: CompressOptions = CodeOptions {
@@ -620,7 +625,7 @@ fn out_of_core_transpose_gives_the_same_file() {
     let dir = tempfile::tempdir().unwrap();
     let dims = Dims::image(64, 48, 8, 1);
     let t = scene(dims);
-    let raw = write_raw(dir.path(), "big.raw", dims, &t);
+    let raw = write_raw(&dir.path().join("big.raw"), dims, &t, None, 64 << 10);
     assert!(dims.raw_bytes() > 3 << 20);
     let mut opts = CompressOptions::default();
     let (a, sa) = run(dir.path(), &raw, &opts, "a.ltm");
@@ -638,7 +643,13 @@ fn out_of_core_transpose_gives_the_same_file() {
 fn one_transpose_codes_every_setting_like_compress() {
     let dir = tempfile::tempdir().unwrap();
     let dims = Dims::image(64, 48, 4, 3);
-    let raw_path = write_raw(dir.path(), "m.raw", dims, &scene(dims));
+    let raw_path = write_raw(
+        &dir.path().join("m.raw"),
+        dims,
+        &scene(dims),
+        None,
+        64 << 10,
+    );
     let raw = RawStore::open(&raw_path).unwrap();
     for budget in [1u64 << 30, 1 << 20] {
         let transpose = TransposeOptions {
@@ -707,7 +718,7 @@ fn raise_bits_meets_a_target_that_fixed_bits_miss() {
     let dir = tempfile::tempdir().unwrap();
     let dims = Dims::image(32, 24, 4, 1);
     let t = scene(dims);
-    let raw = write_raw(dir.path(), "m.raw", dims, &t);
+    let raw = write_raw(&dir.path().join("m.raw"), dims, &t, None, 64 << 10);
     let mut opts: CompressOptions = CodeOptions {
         bits: 4,
         target: Target::MaxError(0.002),
@@ -737,7 +748,14 @@ fn raise_bits_meets_a_target_that_fixed_bits_miss() {
 fn stages_run_per_column_range_give_the_same_file() {
     let dir = tempfile::tempdir().unwrap();
     let dims = Dims::image(32, 24, 4, 3);
-    let raw = RawStore::open(&write_raw(dir.path(), "m.raw", dims, &scene(dims))).unwrap();
+    let raw = RawStore::open(&write_raw(
+        &dir.path().join("m.raw"),
+        dims,
+        &scene(dims),
+        None,
+        64 << 10,
+    ))
+    .unwrap();
     let transpose = TransposeOptions {
         mem_budget: 1 << 20,
         temp_dir: Some(dir.path().into()),
@@ -820,7 +838,14 @@ fn stages_run_per_column_range_give_the_same_file() {
 fn mismatched_plans_and_column_ranges_are_typed_errors() {
     let dir = tempfile::tempdir().unwrap();
     let dims = Dims::image(8, 6, 2, 1);
-    let raw = RawStore::open(&write_raw(dir.path(), "m.raw", dims, &scene(dims))).unwrap();
+    let raw = RawStore::open(&write_raw(
+        &dir.path().join("m.raw"),
+        dims,
+        &scene(dims),
+        None,
+        64 << 10,
+    ))
+    .unwrap();
     let t = Transposed::new(&raw, &TransposeOptions::default(), &|_, _, _| {}).unwrap();
     let m = dims.lights();
     let code = CodeOptions::default();
@@ -915,7 +940,7 @@ fn hostile_files_error_and_never_panic() {
     let dir = tempfile::tempdir().unwrap();
     let dims = Dims::image(8, 6, 2, 3);
     let t = scene(dims);
-    let raw = write_raw(dir.path(), "x.raw", dims, &t);
+    let raw = write_raw(&dir.path().join("x.raw"), dims, &t, None, 64 << 10);
     let (out, _) = run(dir.path(), &raw, &CompressOptions::default(), "x.ltm");
     let good = std::fs::read(&out).unwrap();
     let check = |bytes: &[u8]| {
@@ -976,7 +1001,13 @@ fn chunk_entry(bytes: &[u8], tag: &[u8; 4]) -> (usize, usize, usize) {
 fn bad_column_norms_are_refused() {
     let dir = tempfile::tempdir().unwrap();
     let dims = Dims::image(8, 6, 2, 3);
-    let raw = write_raw(dir.path(), "x.raw", dims, &scene(dims));
+    let raw = write_raw(
+        &dir.path().join("x.raw"),
+        dims,
+        &scene(dims),
+        None,
+        64 << 10,
+    );
     let (out, _) = run(dir.path(), &raw, &CompressOptions::default(), "x.ltm");
     let good = std::fs::read(&out).unwrap();
     let (_, norm_at, norm_len) = chunk_entry(&good, b"NORM");
@@ -1019,7 +1050,13 @@ fn bad_column_norms_are_refused() {
 fn hostile_raw_stores_error() {
     let dir = tempfile::tempdir().unwrap();
     let dims = Dims::image(4, 4, 2, 1);
-    let raw = write_raw(dir.path(), "r.raw", dims, &scene(dims));
+    let raw = write_raw(
+        &dir.path().join("r.raw"),
+        dims,
+        &scene(dims),
+        None,
+        64 << 10,
+    );
     let good = std::fs::read(&raw).unwrap();
     let path = dir.path().join("bad.raw");
     for len in [0, 7, 63, 64, 100, good.len() - 1] {
@@ -1070,7 +1107,7 @@ fn golden_hashes_of_deterministic_outputs() {
     let dims = Dims::image(24, 20, 4, 3);
     // Arithmetic only (no libm), so the input is bit-identical everywhere.
     let t = golden_matrix(dims);
-    let raw = write_raw(dir.path(), "g.raw", dims, &t);
+    let raw = write_raw(&dir.path().join("g.raw"), dims, &t, None, 64 << 10);
     let raw_crc = crc32fast::hash(&std::fs::read(&raw).unwrap());
     let (out, _) = run(dir.path(), &raw, &CompressOptions::default(), "g.ltm");
     let ltm_crc = crc32fast::hash(&std::fs::read(&out).unwrap());

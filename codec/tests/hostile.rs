@@ -13,23 +13,12 @@ use ltm_codec::npy::decode_matrix;
 use ltm_codec::{
     ColumnDecoder, Dims, Error, Filter, Limits, Meta, RawHeader, RawStore, RawWriter, SparseColumn,
 };
+use ltm_testkit::write_raw;
 use proptest::prelude::*;
 use std::path::{Path, PathBuf};
 
 // ---------------------------------------------------------------------------
 // Helpers
-
-/// Writes a raw store of `t` (P × M × C), blocks of about `block_bytes`.
-fn write_raw(
-    dir: &Path,
-    dims: Dims,
-    t: &[f32],
-    albedo: Option<&[f32]>,
-    block_bytes: u64,
-) -> PathBuf {
-    let header = RawHeader::new(dims, albedo.is_some(), block_bytes);
-    RawWriter::write_dense(&dir.join("m.raw"), header, t, albedo).unwrap()
-}
 
 /// Deterministic values in `[0, 1)`.
 fn lcg(s: &mut u64) -> f64 {
@@ -139,7 +128,14 @@ fn in_range(t: &[f32]) -> bool {
 /// values; outside, an out-of-range error naming the quantity and no file.
 fn check_round_trip(dims: Dims, t: &[f32], code: CodeOptions, what: &str) {
     let dir = tempfile::tempdir().unwrap();
-    let raw = RawStore::open(&write_raw(dir.path(), dims, t, None, 4 << 10)).unwrap();
+    let raw = RawStore::open(&write_raw(
+        &dir.path().join("m.raw"),
+        dims,
+        t,
+        None,
+        4 << 10,
+    ))
+    .unwrap();
     let out = dir.path().join("m.ltm");
     let target = match code.target {
         Target::MaxError(e) => e,
@@ -266,7 +262,14 @@ fn tiny_matrices_keep_their_values() {
     let dims = Dims::image(12, 10, 2, 1);
     let t = scaled(&base(Shape::Scene, dims), -23).unwrap();
     let dir = tempfile::tempdir().unwrap();
-    let raw = RawStore::open(&write_raw(dir.path(), dims, &t, None, 4 << 10)).unwrap();
+    let raw = RawStore::open(&write_raw(
+        &dir.path().join("m.raw"),
+        dims,
+        &t,
+        None,
+        4 << 10,
+    ))
+    .unwrap();
     let out = dir.path().join("m.ltm");
     let stats = compress(&raw, &out, &CompressOptions::default(), &|_, _, _| {}).unwrap();
     assert!(stats.target_met && stats.nonzeros > 0, "{stats:?}");
@@ -282,7 +285,14 @@ fn recoding_lowers_the_threshold_across_a_gap() {
     let dims = Dims::image(12, 10, 2, 1);
     let t = scaled(&base(Shape::Mixed, dims), 10).unwrap();
     let dir = tempfile::tempdir().unwrap();
-    let raw = RawStore::open(&write_raw(dir.path(), dims, &t, None, 4 << 10)).unwrap();
+    let raw = RawStore::open(&write_raw(
+        &dir.path().join("m.raw"),
+        dims,
+        &t,
+        None,
+        4 << 10,
+    ))
+    .unwrap();
     let out = dir.path().join("m.ltm");
     let code = CodeOptions {
         bits: 16,
@@ -308,7 +318,14 @@ fn huge_matrices_are_refused_up_front() {
     let big = scaled(&base(Shape::Scene, dims), 36).unwrap();
     for t in [constant, big] {
         let dir = tempfile::tempdir().unwrap();
-        let raw = RawStore::open(&write_raw(dir.path(), dims, &t, None, 4 << 10)).unwrap();
+        let raw = RawStore::open(&write_raw(
+            &dir.path().join("m.raw"),
+            dims,
+            &t,
+            None,
+            4 << 10,
+        ))
+        .unwrap();
         let out = dir.path().join("m.ltm");
         let err = compress(&raw, &out, &CompressOptions::default(), &|_, _, _| {}).unwrap_err();
         let msg = err.to_string();
@@ -345,7 +362,7 @@ fn non_finite_albedo_is_refused() {
         );
     }
     let albedo = vec![0.5f32; 3 * dims.pixels()];
-    let path = write_raw(dir.path(), dims, &t, Some(&albedo), 1 << 10);
+    let path = write_raw(&dir.path().join("m.raw"), dims, &t, Some(&albedo), 1 << 10);
     let mut bytes = std::fs::read(&path).unwrap();
     let f = Fields::of(&bytes);
     let at = f.albedo_offset + 4 * 7;
@@ -414,7 +431,13 @@ fn several_reads(dir: &Path, dims: Dims) -> (PathBuf, CompressOptions) {
     );
     let c = dims.channels as usize;
     let t: Vec<f32> = grey.iter().flat_map(|v| vec![*v as f32; c]).collect();
-    let path = write_raw(dir, dims, &t, None, 8 * dims.row_len() as u64 * 4);
+    let path = write_raw(
+        &dir.join("m.raw"),
+        dims,
+        &t,
+        None,
+        8 * dims.row_len() as u64 * 4,
+    );
     let mut opts = CompressOptions::default();
     opts.transpose.mem_budget = 1 << 20;
     (path, opts)
@@ -577,7 +600,7 @@ fn crafted(dir: &Path) -> (Vec<u8>, PathBuf) {
     let dims = Dims::image(8, 6, 2, 1);
     let t: Vec<f32> = base(Shape::Scene, dims).iter().map(|v| *v as f32).collect();
     let good = std::fs::read(write_raw(
-        dir,
+        &dir.join("m.raw"),
         dims,
         &t,
         None,

@@ -6,24 +6,8 @@
 use ltm_codec::compress::{compress, CompressOptions};
 use ltm_codec::compress::{compress_pca, PcaOptions};
 use ltm_codec::npy::decode_matrix;
-use ltm_codec::{Dims, Limits, LtmFile, Mode, RawHeader, RawStore, RawWriter};
-use std::path::{Path, PathBuf};
-
-fn write_raw(dir: &Path, name: &str, dims: Dims, t: &[f32], albedo: Option<&[f32]>) -> PathBuf {
-    let header = RawHeader::new(dims, albedo.is_some(), (5 * dims.row_len() * 4) as u64);
-    RawWriter::write_dense(&dir.join(name), header, t, albedo).unwrap()
-}
-
-struct Rng(u64);
-impl Rng {
-    fn next(&mut self) -> f64 {
-        self.0 = self.0.wrapping_add(0x9E37_79B9_7F4A_7C15);
-        let mut z = self.0;
-        z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
-        z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
-        ((z ^ (z >> 31)) >> 11) as f64 / (1u64 << 53) as f64 - 0.5
-    }
-}
+use ltm_codec::{Dims, Limits, LtmFile, Mode, RawStore};
+use ltm_testkit::{block_bytes, write_raw, Rng};
 
 /// A matrix with a large mean row, a decaying spectrum of 8 smooth
 /// components and a little noise; every ninth pixel is zero.
@@ -36,7 +20,7 @@ pub fn matrix(d: Dims, seed: u64) -> Vec<f32> {
     let comps: Vec<(Vec<f64>, Vec<f64>)> = (0..8)
         .map(|a| {
             let s = 0.6f64.powi(a);
-            let u = (0..p).map(|_| s * rng.next()).collect();
+            let u = (0..p).map(|_| s * (rng.uniform() - 0.5)).collect();
             let v = (0..n)
                 .map(|i| ((i as f64 + 1.0) * 0.07 * (a + 1) as f64).cos())
                 .collect();
@@ -47,7 +31,7 @@ pub fn matrix(d: Dims, seed: u64) -> Vec<f32> {
     for px in (0..p).filter(|px| px % 9 != 4) {
         for i in 0..n {
             let x: f64 = mean[i] + comps.iter().map(|(u, v)| u[px] * v[i]).sum::<f64>();
-            t[px * n + i] = (x + 1e-4 * rng.next()) as f32;
+            t[px * n + i] = (x + 1e-4 * (rng.uniform() - 0.5)) as f32;
         }
     }
     t
@@ -86,7 +70,13 @@ fn recorded_error_is_the_decoded_error_and_near_optimal() {
         let a: Vec<f32> = (0..3 * d.pixels())
             .map(|i| 0.2 + (i % 7) as f32 * 0.1)
             .collect();
-        let raw_path = write_raw(dir.path(), "t.raw", d, &t, albedo.then_some(&a[..]));
+        let raw_path = write_raw(
+            &dir.path().join("t.raw"),
+            d,
+            &t,
+            albedo.then_some(&a[..]),
+            block_bytes(d, 5),
+        );
         let raw = RawStore::open(&raw_path).unwrap();
         let norm2: f64 = t.iter().map(|&v| v as f64 * v as f64).sum();
         let sv = centred_singular_values(&t, d.pixels(), d.row_len());
@@ -141,7 +131,14 @@ fn max_error_picks_a_rank_that_meets_it() {
     let dir = tempfile::tempdir().unwrap();
     let d = Dims::image(12, 12, 2, 3);
     let t = matrix(d, 9);
-    let raw = RawStore::open(&write_raw(dir.path(), "t.raw", d, &t, None)).unwrap();
+    let raw = RawStore::open(&write_raw(
+        &dir.path().join("t.raw"),
+        d,
+        &t,
+        None,
+        block_bytes(d, 5),
+    ))
+    .unwrap();
     let mut last_rank = usize::MAX;
     for target in [0.001, 0.01, 0.05] {
         let out = dir.path().join("e.ltm");
@@ -173,7 +170,14 @@ fn bad_ranks_and_unreachable_targets_are_refused() {
     let dir = tempfile::tempdir().unwrap();
     let d = Dims::image(4, 3, 1, 1); // 12 pixels, 6 values per row
     let t = matrix(d, 3);
-    let raw = RawStore::open(&write_raw(dir.path(), "t.raw", d, &t, None)).unwrap();
+    let raw = RawStore::open(&write_raw(
+        &dir.path().join("t.raw"),
+        d,
+        &t,
+        None,
+        block_bytes(d, 5),
+    ))
+    .unwrap();
     let out = dir.path().join("x.ltm");
     for k in [0, 7, 1000] {
         let opts = PcaOptions {
@@ -200,7 +204,14 @@ fn bad_ranks_and_unreachable_targets_are_refused() {
     .is_ok());
     // Rank 1 of a noisy matrix cannot reach 1e-6.
     let d2 = Dims::image(10, 10, 2, 3);
-    let raw2 = RawStore::open(&write_raw(dir.path(), "u.raw", d2, &matrix(d2, 4), None)).unwrap();
+    let raw2 = RawStore::open(&write_raw(
+        &dir.path().join("u.raw"),
+        d2,
+        &matrix(d2, 4),
+        None,
+        block_bytes(d2, 5),
+    ))
+    .unwrap();
     let opts = PcaOptions {
         max_error: 1e-6,
         max_rank: 2,
@@ -236,7 +247,14 @@ fn zero_and_constant_matrices() {
     let d = Dims::image(5, 4, 2, 3);
     for (name, v) in [("zero", 0.0f32), ("constant", 3.5)] {
         let t = vec![v; d.pixels() * d.row_len()];
-        let raw = RawStore::open(&write_raw(dir.path(), name, d, &t, None)).unwrap();
+        let raw = RawStore::open(&write_raw(
+            &dir.path().join(name),
+            d,
+            &t,
+            None,
+            block_bytes(d, 5),
+        ))
+        .unwrap();
         let out = dir.path().join(format!("{name}.ltm"));
         let stats = compress_pca(
             &raw,
@@ -297,7 +315,14 @@ fn chunk_range(b: &[u8], tag: &[u8; 4]) -> std::ops::Range<usize> {
 fn corrupted_pca_files_are_errors_never_panics() {
     let dir = tempfile::tempdir().unwrap();
     let d = Dims::image(6, 5, 2, 3);
-    let raw = RawStore::open(&write_raw(dir.path(), "t.raw", d, &matrix(d, 1), None)).unwrap();
+    let raw = RawStore::open(&write_raw(
+        &dir.path().join("t.raw"),
+        d,
+        &matrix(d, 1),
+        None,
+        block_bytes(d, 5),
+    ))
+    .unwrap();
     let out = dir.path().join("t.ltm");
     compress_pca(
         &raw,
@@ -371,7 +396,14 @@ fn version_1_wavelet_files_still_open_and_pca_needs_version_2() {
     let dir = tempfile::tempdir().unwrap();
     let d = Dims::image(8, 8, 2, 1);
     let t = matrix(d, 2);
-    let raw = RawStore::open(&write_raw(dir.path(), "t.raw", d, &t, None)).unwrap();
+    let raw = RawStore::open(&write_raw(
+        &dir.path().join("t.raw"),
+        d,
+        &t,
+        None,
+        block_bytes(d, 5),
+    ))
+    .unwrap();
     let w = dir.path().join("w.ltm");
     compress(&raw, &w, &CompressOptions::default(), &|_, _, _| {}).unwrap();
     let mut b = std::fs::read(&w).unwrap();

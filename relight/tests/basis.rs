@@ -3,41 +3,14 @@
 //! behind one `dyn Relight`.
 
 use ltm_codec::compress::{compress, CompressOptions};
-use ltm_codec::{cubemap, sh, Dims, PcaBasis, RawHeader, RawStore, RawWriter, ShProjection};
+use ltm_codec::{cubemap, sh, Dims, PcaBasis, RawStore, ShProjection};
 use ltm_relight::{
     reference, relative_l2, BasisRelighter, Frame, Relight, Relighter, Request, Weighting,
 };
-use std::path::{Path, PathBuf};
-
-/// Writes a raw store of `t` (P·M·C values) in blocks of `block_pixels`
-/// rows, with an albedo image when given.
-fn write_raw(
-    dir: &Path,
-    dims: Dims,
-    t: &[f32],
-    albedo: Option<&[f32]>,
-    block_pixels: usize,
-) -> PathBuf {
-    let bytes = (block_pixels * dims.row_len() * 4) as u64;
-    let header = RawHeader::new(dims, albedo.is_some(), bytes);
-    RawWriter::write_dense(&dir.join("t.raw"), header, t, albedo).unwrap()
-}
+use ltm_testkit::{block_bytes, write_raw, Rng};
 
 fn dims(width: u32, height: u32, face_res: u32, channels: u32) -> Dims {
     Dims::image(width, height, face_res, channels)
-}
-
-/// splitmix64, uniform in [0, 1).
-struct Rng(u64);
-
-impl Rng {
-    fn uniform(&mut self) -> f64 {
-        self.0 = self.0.wrapping_add(0x9E37_79B9_7F4A_7C15);
-        let mut z = self.0;
-        z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
-        z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
-        ((z ^ (z >> 31)) >> 11) as f64 / (1u64 << 53) as f64
-    }
 }
 
 /// A deterministic random matrix with every third pixel zero.
@@ -141,7 +114,14 @@ fn assert_close(got: &Frame, want: &[[f64; 3]], what: &str) {
 fn check_sh_relight(d: Dims, albedo: Option<Vec<f32>>) {
     let dir = tempfile::tempdir().unwrap();
     let t = random_matrix(d, 5);
-    let raw = RawStore::open(&write_raw(dir.path(), d, &t, albedo.as_deref(), 3)).unwrap();
+    let raw = RawStore::open(&write_raw(
+        &dir.path().join("t.raw"),
+        d,
+        &t,
+        albedo.as_deref(),
+        block_bytes(d, 3),
+    ))
+    .unwrap();
     let relighter = BasisRelighter::sh(ShProjection::fit(&raw, 4).unwrap(), &raw).unwrap();
     assert_eq!(relighter.max_terms(), 4);
     let n = d.face_res() as usize;
@@ -190,7 +170,14 @@ fn pca_relight_matches_dense_product_and_full_rank_is_exact() {
     let d = dims(4, 3, 2, 1); // 12 rows, 24 lights
     let albedo: Vec<f32> = (0..3 * d.pixels()).map(|i| 0.5 + 0.01 * i as f32).collect();
     let t = random_matrix(d, 3);
-    let raw = RawStore::open(&write_raw(dir.path(), d, &t, Some(&albedo), 2)).unwrap();
+    let raw = RawStore::open(&write_raw(
+        &dir.path().join("t.raw"),
+        d,
+        &t,
+        Some(&albedo),
+        block_bytes(d, 2),
+    ))
+    .unwrap();
     let basis = PcaBasis::fit(&raw, 6, 1).unwrap();
     let relighter = BasisRelighter::pca(&basis, &raw).unwrap();
     let light = random_light(d.lights());
@@ -236,7 +223,14 @@ fn pca_relight_matches_dense_product_and_full_rank_is_exact() {
     // A basis fitted to another store is refused.
     let d2 = dims(3, 4, 2, 1);
     let dir2 = tempfile::tempdir().unwrap();
-    let raw2 = RawStore::open(&write_raw(dir2.path(), d2, &t, None, 2)).unwrap();
+    let raw2 = RawStore::open(&write_raw(
+        &dir2.path().join("t.raw"),
+        d2,
+        &t,
+        None,
+        block_bytes(d2, 2),
+    ))
+    .unwrap();
     assert!(BasisRelighter::pca(&basis, &raw2).is_err());
 }
 
@@ -245,7 +239,14 @@ fn three_relighters_behind_one_trait_share_a_frame() {
     let dir = tempfile::tempdir().unwrap();
     let d = dims(8, 6, 4, 3);
     let t = random_matrix(d, 11);
-    let raw = RawStore::open(&write_raw(dir.path(), d, &t, None, 5)).unwrap();
+    let raw = RawStore::open(&write_raw(
+        &dir.path().join("t.raw"),
+        d,
+        &t,
+        None,
+        block_bytes(d, 5),
+    ))
+    .unwrap();
     let ltm = dir.path().join("t.ltm");
     compress(&raw, &ltm, &CompressOptions::default(), &|_, _, _| {}).unwrap();
     let relighters: Vec<Box<dyn Relight + Send + Sync>> = vec![

@@ -8,18 +8,8 @@ use ltm_codec::{Dims, Limits, LtmFile, RawHeader, RawStore, RawWriter};
 use ltm_relight::{
     open_relighter, reference, relative_l2, PcaRelighter, Relight, Relighter, Request, Weighting,
 };
+use ltm_testkit::Rng;
 use std::path::Path;
-
-struct Rng(u64);
-impl Rng {
-    fn next(&mut self) -> f64 {
-        self.0 = self.0.wrapping_add(0x9E37_79B9_7F4A_7C15);
-        let mut z = self.0;
-        z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
-        z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
-        ((z ^ (z >> 31)) >> 11) as f64 / (1u64 << 53) as f64
-    }
-}
 
 /// Non-negative transport with a shadow edge and a highlight, so that the
 /// spectrum decays but is not exactly low rank.
@@ -44,7 +34,7 @@ fn matrix(d: Dims) -> Vec<f32> {
                 let spec = if (j + 3 * px) % 97 == 0 { 5.0 } else { 0.0 };
                 t[(px * m + j) * c + ch] = ((lit + spec)
                     * (1.0 + 0.1 * y + 0.05 * ch as f64)
-                    * (0.9 + 0.2 * rng.next())
+                    * (0.9 + 0.2 * rng.uniform())
                     * 1e-3) as f32;
             }
         }
@@ -58,9 +48,9 @@ fn light(m: usize) -> Vec<[f32; 3]> {
         .map(|j| {
             let sun = if j == m / 3 { 500.0 } else { 0.0 };
             [
-                (rng.next() + sun) as f32,
-                (2.0 * rng.next()) as f32,
-                (0.5 + rng.next() + sun) as f32,
+                (rng.uniform() + sun) as f32,
+                (2.0 * rng.uniform()) as f32,
+                (0.5 + rng.uniform() + sun) as f32,
             ]
         })
         .collect()

@@ -1,15 +1,18 @@
 //! The exact reference image T·L from a raw store, and image output.
 
-use ltm_codec::{Dims, RawHeader, RawWriter};
+use ltm_codec::{Dims, RawHeader};
 use ltm_relight::{reference, relative_l2, EnvMap, Image, RelightError, Rotation};
+use ltm_testkit::{block_bytes, write_raw};
 use std::path::{Path, PathBuf};
 
 /// Writes a raw store of `t` (P·M·C values) with small blocks (several per
 /// store), and an albedo image when given.
-fn write_raw(dir: &Path, name: &str, dims: Dims, t: &[f32], albedo: Option<&[f32]>) -> PathBuf {
-    let header = RawHeader::new(dims, albedo.is_some(), 2 * dims.row_len() as u64 * 4);
-    assert!(header.block_count() > 1);
-    RawWriter::write_dense(&dir.join(name), header, t, albedo).unwrap()
+/// Writes a raw store in blocks of two rows, so that the matrix spans
+/// several blocks.
+fn write_blocks(dir: &Path, name: &str, dims: Dims, t: &[f32], albedo: Option<&[f32]>) -> PathBuf {
+    let bytes = block_bytes(dims, 2);
+    assert!(RawHeader::new(dims, albedo.is_some(), bytes).block_count() > 1);
+    write_raw(&dir.join(name), dims, t, albedo, bytes)
 }
 
 /// A deterministic matrix with some all-zero rows (every third pixel) and
@@ -88,7 +91,7 @@ fn rgb_transport_matches_the_hand_product() {
     let dir = tempfile::tempdir().unwrap();
     let d = dims(5, 3, 2, 3);
     let t = matrix(d);
-    let path = write_raw(dir.path(), "rgb.raw", d, &t, None);
+    let path = write_blocks(dir.path(), "rgb.raw", d, &t, None);
     let raw = ltm_codec::RawStore::open(&path).unwrap();
     let l = light(d.lights());
     let img = reference(&raw, &l).unwrap();
@@ -106,12 +109,12 @@ fn grey_transport_multiplies_rgb_light_and_albedo() {
         .collect();
     let l = light(d.lights());
 
-    let path = write_raw(dir.path(), "albedo.raw", d, &t, Some(&albedo));
+    let path = write_blocks(dir.path(), "albedo.raw", d, &t, Some(&albedo));
     let raw = ltm_codec::RawStore::open(&path).unwrap();
     let img = reference(&raw, &l).unwrap();
     assert_matches(&img, &expected(d, &t, &l, Some(&albedo)));
 
-    let path = write_raw(dir.path(), "grey.raw", d, &t, None);
+    let path = write_blocks(dir.path(), "grey.raw", d, &t, None);
     let raw = ltm_codec::RawStore::open(&path).unwrap();
     let img = reference(&raw, &l).unwrap();
     assert_matches(&img, &expected(d, &t, &l, None));
@@ -127,7 +130,7 @@ fn constant_environment_gives_row_sums() {
     let dir = tempfile::tempdir().unwrap();
     let d = dims(3, 2, 4, 1);
     let t = matrix(d);
-    let path = write_raw(dir.path(), "env.raw", d, &t, None);
+    let path = write_blocks(dir.path(), "env.raw", d, &t, None);
     let raw = ltm_codec::RawStore::open(&path).unwrap();
     let env = EnvMap::constant(64, 32, [2.0, 0.5, 0.0]).unwrap();
     let cube = env.to_cubemap(4, &Rotation::yaw(33.0));
@@ -146,7 +149,7 @@ fn bad_lighting_and_damaged_stores_are_errors() {
     let dir = tempfile::tempdir().unwrap();
     let d = dims(3, 3, 1, 3);
     let t = matrix(d);
-    let path = write_raw(dir.path(), "s.raw", d, &t, None);
+    let path = write_blocks(dir.path(), "s.raw", d, &t, None);
     let raw = ltm_codec::RawStore::open(&path).unwrap();
     let e = reference(&raw, &light(5)).unwrap_err();
     assert!(matches!(e, RelightError::OutOfRange { .. }), "{e}");
@@ -179,7 +182,7 @@ fn exr_and_png_output() {
     let dir = tempfile::tempdir().unwrap();
     let d = dims(6, 4, 1, 3);
     let t = matrix(d);
-    let path = write_raw(dir.path(), "o.raw", d, &t, None);
+    let path = write_blocks(dir.path(), "o.raw", d, &t, None);
     let raw = ltm_codec::RawStore::open(&path).unwrap();
     let img = reference(&raw, &light(6)).unwrap();
 

@@ -1,6 +1,6 @@
 //! `ltm bake`.
 
-use crate::progress;
+use crate::common::{progress, Ctx};
 use anyhow::Context;
 use clap::Args;
 use ltm_bake::{bake, BakeOptions, Overrides, ResumeState, Scene, SceneDesc};
@@ -62,7 +62,7 @@ fn resume_message(state: &ResumeState, partial: &str) -> Option<String> {
     }
 }
 
-pub fn run(args: BakeArgs) -> anyhow::Result<()> {
+pub fn run(args: BakeArgs, _ctx: &Ctx) -> anyhow::Result<()> {
     let mut desc = SceneDesc::load(&args.scene)?;
     desc.apply(&Overrides {
         width: args.width,

@@ -1,7 +1,7 @@
 //! `ltm import`, `ltm compress`, `ltm inspect`, `ltm export`.
 
-use crate::paths;
-use crate::progress;
+use crate::common::size::default_mem_budget;
+use crate::common::{check_files, partial, progress, Ctx};
 use anyhow::{bail, Context, Result};
 use clap::Args;
 use ltm_codec::compress::{
@@ -35,9 +35,9 @@ pub struct ImportArgs {
     pub output: PathBuf,
 }
 
-pub fn import(a: ImportArgs) -> Result<()> {
-    let partial = paths::partial(&a.output);
-    paths::check_files(
+pub fn import(a: ImportArgs, _ctx: &Ctx) -> Result<()> {
+    let partial = partial(&a.output);
+    check_files(
         &[("input", &a.npy)],
         &[("-o", &a.output), ("its temporary file", &partial)],
     )?;
@@ -108,9 +108,10 @@ pub struct CompressArgs {
     /// Target relative L2 error of the whole decoded matrix [default: 0.01].
     #[arg(long)]
     pub max_error: Option<f64>,
-    /// Memory for the transpose, e.g. 512M or 4G [default: a quarter of RAM, at most 8G].
-    #[arg(long)]
-    pub mem_budget: Option<String>,
+    /// Memory for the transpose: a size as for --max-memory, e.g. 512M or
+    /// 1.5G [default: a quarter of RAM, at most 8G].
+    #[arg(long, value_name = "SIZE", value_parser = crate::common::size::size)]
+    pub mem_budget: Option<u64>,
     /// Dither seed.
     #[arg(long, default_value_t = 0x6c74_6d00)]
     pub seed: u64,
@@ -123,37 +124,6 @@ pub struct CompressArgs {
     pub entropy: Option<Entropy>,
 }
 
-/// Parses `512M`, `4G`, `100000`…
-pub fn parse_size(s: &str) -> Result<u64> {
-    let s = s.trim();
-    let (num, mult) = match s.char_indices().last() {
-        Some((i, 'k' | 'K')) => (&s[..i], 1u64 << 10),
-        Some((i, 'm' | 'M')) => (&s[..i], 1 << 20),
-        Some((i, 'g' | 'G')) => (&s[..i], 1 << 30),
-        Some((i, 't' | 'T')) => (&s[..i], 1 << 40),
-        _ => (s, 1),
-    };
-    let v: f64 = num.parse().with_context(|| {
-        format!("size '{s}' is not a number with an optional K, M, G or T suffix")
-    })?;
-    if !(v.is_finite() && v > 0.0) {
-        bail!("size '{s}' must be positive");
-    }
-    Ok((v * mult as f64) as u64)
-}
-
-pub fn default_mem_budget() -> u64 {
-    let total = std::fs::read_to_string("/proc/meminfo")
-        .ok()
-        .and_then(|m| {
-            m.lines()
-                .find(|l| l.starts_with("MemTotal:"))
-                .and_then(|l| l.split_whitespace().nth(1)?.parse::<u64>().ok())
-        })
-        .map_or(4 << 30, |kb| kb * 1024);
-    (total / 4).min(8 << 30)
-}
-
 /// Refuses `ltm compress --terms`, renamed to `--keep`.
 fn renamed_terms(_: &str) -> std::result::Result<usize, String> {
     Err(
@@ -163,9 +133,9 @@ fn renamed_terms(_: &str) -> std::result::Result<usize, String> {
     )
 }
 
-pub fn compress_cmd(a: CompressArgs) -> Result<()> {
-    paths::check_files(&[("input", &a.raw)], &[("-o", &a.output)])?;
-    let raw = RawStore::open_with_limits(&a.raw, crate::limits())
+pub fn compress_cmd(a: CompressArgs, ctx: &Ctx) -> Result<()> {
+    check_files(&[("input", &a.raw)], &[("-o", &a.output)])?;
+    let raw = RawStore::open_with_limits(&a.raw, ctx.limits())
         .with_context(|| format!("opening {}", a.raw.display()))?;
     if a.mode == Mode::Pca {
         return compress_pca_cmd(&a, &raw);
@@ -181,12 +151,7 @@ pub fn compress_cmd(a: CompressArgs) -> Result<()> {
         (None, Some(e)) => Target::MaxError(e),
         (None, None) => Target::MaxError(DEFAULT_MAX_ERROR),
     };
-    let mem_budget = a
-        .mem_budget
-        .as_deref()
-        .map(parse_size)
-        .transpose()?
-        .unwrap_or_else(default_mem_budget);
+    let mem_budget = a.mem_budget.unwrap_or_else(default_mem_budget);
     let opts = CompressOptions {
         transpose: TransposeOptions {
             row_filter: a.row_filter,
@@ -263,12 +228,7 @@ fn compress_pca_cmd(a: &CompressArgs, raw: &RawStore) -> Result<()> {
     if a.entropy.is_some() {
         bail!("--entropy chooses how wavelet columns are stored; --mode pca stores its basis and coefficients with zstd");
     }
-    let mem_budget = a
-        .mem_budget
-        .as_deref()
-        .map(parse_size)
-        .transpose()?
-        .unwrap_or_else(default_mem_budget);
+    let mem_budget = a.mem_budget.unwrap_or_else(default_mem_budget);
     let opts = PcaOptions {
         rank: a.rank,
         max_error: a.max_error.unwrap_or(DEFAULT_MAX_ERROR),
@@ -396,8 +356,8 @@ pub fn inspect(file: &LtmFile) -> Inspection {
     }
 }
 
-pub fn inspect_cmd(a: InspectArgs) -> Result<()> {
-    let file = LtmFile::open_with_limits(&a.file, crate::limits())
+pub fn inspect_cmd(a: InspectArgs, ctx: &Ctx) -> Result<()> {
+    let file = LtmFile::open_with_limits(&a.file, ctx.limits())
         .with_context(|| format!("opening {}", a.file.display()))?;
     let i = inspect(&file);
     if a.json {
@@ -480,11 +440,11 @@ pub struct ExportArgs {
     pub output: PathBuf,
 }
 
-pub fn export(a: ExportArgs) -> Result<()> {
-    paths::check_files(&[("input", &a.file)], &[("-o", &a.output)])?;
-    let file = LtmFile::open_with_limits(&a.file, crate::limits())
+pub fn export(a: ExportArgs, ctx: &Ctx) -> Result<()> {
+    check_files(&[("input", &a.file)], &[("-o", &a.output)])?;
+    let file = LtmFile::open_with_limits(&a.file, ctx.limits())
         .with_context(|| format!("opening {}", a.file.display()))?;
-    export_npy(&file, &a.output, crate::limits())
+    export_npy(&file, &a.output, ctx.limits())
         .with_context(|| format!("exporting to {}", a.output.display()))?;
     eprintln!("wrote {}", a.output.display());
     Ok(())

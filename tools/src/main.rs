@@ -2,11 +2,8 @@
 
 mod bake;
 mod codec_cmds;
+mod common;
 mod demo;
-mod output;
-mod paths;
-mod progress;
-mod ranges;
 mod reference;
 mod relight_cmd;
 mod render_cmd;
@@ -14,9 +11,9 @@ mod report;
 mod view;
 
 use clap::{Parser, Subcommand};
+use common::Ctx;
 use ltm_codec::Limits;
 use std::process::ExitCode;
-use std::sync::OnceLock;
 
 /// Compressed precomputed light-transport matrices.
 ///
@@ -28,45 +25,13 @@ use std::sync::OnceLock;
 struct Cli {
     /// Largest buffer any command may allocate for a size read from a file
     /// (a column table, the relighter's arena, a dense export): bytes, or
-    /// with a binary suffix K, M, G or T. Files that need more are refused
-    /// with the size they need; raise this only for files you trust.
-    #[arg(long, global = true, value_name = "SIZE", default_value = "4G", value_parser = parse_size)]
+    /// with a binary suffix K, M, G, T, P or E (`1.5G`), 1M or more. Files
+    /// that need more are refused with the size they need; raise this only
+    /// for files you trust.
+    #[arg(long, global = true, value_name = "SIZE", default_value = "4G", value_parser = common::size::size)]
     max_memory: u64,
     #[command(subcommand)]
     command: Command,
-}
-
-/// The decoding limits of this run (`--max-memory`).
-static LIMITS: OnceLock<Limits> = OnceLock::new();
-
-/// The decoding limits every command passes to the libraries.
-pub fn limits() -> &'static Limits {
-    LIMITS.get_or_init(Limits::default)
-}
-
-/// Parses a byte count with an optional binary suffix (K, M, G, T).
-fn parse_size(s: &str) -> Result<u64, String> {
-    let t = s.trim();
-    let (digits, shift) = match t.char_indices().last() {
-        Some((i, c)) if c.is_ascii_alphabetic() => {
-            let shift = match c.to_ascii_uppercase() {
-                'K' => 10,
-                'M' => 20,
-                'G' => 30,
-                'T' => 40,
-                _ => return Err(format!("unknown size suffix '{c}' (valid: K, M, G, T)")),
-            };
-            (&t[..i], shift)
-        }
-        _ => (t, 0),
-    };
-    let n: u64 = digits
-        .parse()
-        .map_err(|_| format!("'{s}' is not a size (e.g. 512M, 16G or 1000000)"))?;
-    match n.checked_mul(1 << shift) {
-        Some(v) if v >= 1 << 20 => Ok(v),
-        _ => Err(format!("'{s}' is out of range (valid: 1M to 16E bytes)")),
-    }
 }
 
 #[derive(Subcommand)]
@@ -118,19 +83,19 @@ fn main() -> ExitCode {
     #[cfg(unix)]
     exit_quietly_on_closed_pipe();
     let cli = Cli::parse();
-    let _ = LIMITS.set(Limits::with_max_alloc(cli.max_memory));
+    let ctx = Ctx::new(Limits::with_max_alloc(cli.max_memory));
     let result = match cli.command {
-        Command::Demo(args) => demo::run(args),
-        Command::Bake(args) => bake::run(args),
-        Command::Import(args) => codec_cmds::import(args),
-        Command::Compress(args) => codec_cmds::compress_cmd(args),
-        Command::Inspect(args) => codec_cmds::inspect_cmd(args),
-        Command::Export(args) => codec_cmds::export(args),
-        Command::Relight(args) => relight_cmd::run(args),
-        Command::Render(args) => render_cmd::run(args),
-        Command::Reference(args) => reference::run(args),
-        Command::Report(args) => report::run(args),
-        Command::View(args) => view::run(args),
+        Command::Demo(args) => demo::run(args, &ctx),
+        Command::Bake(args) => bake::run(args, &ctx),
+        Command::Import(args) => codec_cmds::import(args, &ctx),
+        Command::Compress(args) => codec_cmds::compress_cmd(args, &ctx),
+        Command::Inspect(args) => codec_cmds::inspect_cmd(args, &ctx),
+        Command::Export(args) => codec_cmds::export(args, &ctx),
+        Command::Relight(args) => relight_cmd::run(args, &ctx),
+        Command::Render(args) => render_cmd::run(args, &ctx),
+        Command::Reference(args) => reference::run(args, &ctx),
+        Command::Report(args) => report::run(args, &ctx),
+        Command::View(args) => view::run(args, &ctx),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,

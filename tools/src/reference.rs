@@ -1,6 +1,6 @@
 //! `ltm reference`: the exact relit image T·L from a raw store.
 
-use crate::progress;
+use crate::common::{check_files, progress, Ctx, ImageOutput};
 use anyhow::Context;
 use clap::Args;
 use ltm_codec::RawStore;
@@ -27,9 +27,6 @@ pub struct ReferenceArgs {
     /// width = 2·height; negative values are clamped to 0.
     #[arg(long, value_name = "MAP")]
     pub env: PathBuf,
-    /// Output image: 32-bit float RGB OpenEXR.
-    #[arg(short, long, value_name = "REF.exr")]
-    pub output: PathBuf,
     /// Rotate the lighting by YAW,PITCH,ROLL degrees: yaw about +Y (positive
     /// turns the light from +Z toward +X), then pitch about +X (+Y toward
     /// +Z), then roll about +Z (+X toward +Y).
@@ -40,29 +37,15 @@ pub struct ReferenceArgs {
         allow_hyphen_values = true
     )]
     pub rotate: Rotation,
-    /// Also write a tone-mapped 8-bit sRGB PNG.
-    #[arg(long, value_name = "OUT.png")]
-    pub png: Option<PathBuf>,
-    /// Exposure of the PNG in stops: values are multiplied by 2^EV before
-    /// clamping to [0, 1].
-    #[arg(
-        long,
-        value_name = "EV",
-        default_value_t = 0.0,
-        allow_negative_numbers = true,
-        value_parser = crate::ranges::exposure
-    )]
-    pub exposure: f32,
+    #[command(flatten)]
+    pub out: ImageOutput,
 }
 
-pub fn run(args: ReferenceArgs) -> anyhow::Result<()> {
-    let mut outputs = vec![("-o", args.output.as_path())];
-    if let Some(png) = &args.png {
-        outputs.push(("--png", png.as_path()));
-    }
-    crate::paths::check_files(&[("input", &args.raw), ("--env", &args.env)], &outputs)?;
+pub fn run(args: ReferenceArgs, ctx: &Ctx) -> anyhow::Result<()> {
+    let out = &args.out;
+    check_files(&[("input", &args.raw), ("--env", &args.env)], &out.roles())?;
     let start = Instant::now();
-    let raw = RawStore::open_with_limits(&args.raw, crate::limits())
+    let raw = RawStore::open_with_limits(&args.raw, ctx.limits())
         .with_context(|| format!("opening raw store {}", args.raw.display()))?;
     let dims = raw.dims();
     let env = EnvMap::load(&args.env)
@@ -75,17 +58,10 @@ pub fn run(args: ReferenceArgs) -> anyhow::Result<()> {
         .with_context(|| format!("computing T·L from {}", args.raw.display()))?;
     bar.finish_and_clear();
 
-    image
-        .write_exr(&args.output)
-        .with_context(|| format!("writing {}", args.output.display()))?;
-    if let Some(png) = &args.png {
-        image
-            .write_png(png, args.exposure)
-            .with_context(|| format!("writing {}", png.display()))?;
-    }
+    out.write(&image)?;
     eprintln!(
         "wrote {}: {}×{} pixels, {} lights (n = {}), {} channel(s){}, lighting {} rotated {}, {:.2} s",
-        args.output.display(),
+        out.output.display(),
         dims.width(),
         dims.height(),
         dims.lights(),

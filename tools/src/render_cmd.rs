@@ -1,13 +1,12 @@
 //! `ltm render`: relight a texture-space file once and draw the relit mesh
 //! from one camera or an orbit of cameras.
 
-use crate::relight_cmd::Terms;
+use crate::common::{check_files, Ctx, ImageOutput, TermsArgs};
 use anyhow::{bail, Context, Result};
 use clap::Args;
 use glam::DVec3;
 use ltm_relight::{
-    EnvMap, Relight, Relighter, Request, Rotation, TexturedMesh, ViewCamera, Weighting,
-    MAX_SUPERSAMPLE,
+    EnvMap, Relight, Relighter, Request, Rotation, TexturedMesh, ViewCamera, MAX_SUPERSAMPLE,
 };
 use std::path::{Path, PathBuf};
 use std::time::Instant;
@@ -23,12 +22,8 @@ pub struct RenderArgs {
     /// Environment map: lat-long (width = 2·height) EXR or Radiance .hdr.
     #[arg(long)]
     pub env: PathBuf,
-    /// Wavelet lights per frame (non-linear approximation), or `all`.
-    #[arg(long, default_value = "200")]
-    pub terms: Terms,
-    /// Priority of wavelet lights (as for `ltm relight`).
-    #[arg(long, default_value = "unweighted")]
-    pub weighting: Weighting,
+    #[command(flatten)]
+    pub terms: TermsArgs,
     /// Rotate the lighting: yaw,pitch,roll in degrees.
     #[arg(long, default_value = "0,0,0", allow_hyphen_values = true)]
     pub rotate: Rotation,
@@ -54,15 +49,8 @@ pub struct RenderArgs {
     /// axis) from one relight; outputs are numbered VIEW-000.exr, ...
     #[arg(long, default_value_t = 1, value_parser = views)]
     pub views: usize,
-    /// Output view, linear RGB EXR.
-    #[arg(short, long)]
-    pub output: PathBuf,
-    /// Also write a tone-mapped sRGB PNG (numbered like the EXR for orbits).
-    #[arg(long)]
-    pub png: Option<PathBuf>,
-    /// Exposure for the PNG, in stops.
-    #[arg(long, default_value_t = 0.0, allow_hyphen_values = true, value_parser = crate::ranges::exposure)]
-    pub exposure: f32,
+    #[command(flatten)]
+    pub out: ImageOutput,
     /// Also write the relit texture (EXR).
     #[arg(long)]
     pub texture: Option<PathBuf>,
@@ -123,7 +111,7 @@ fn numbered(path: &Path, k: usize, count: usize) -> PathBuf {
     path.with_file_name(name)
 }
 
-pub fn run(a: RenderArgs) -> Result<()> {
+pub fn run(a: RenderArgs, ctx: &Ctx) -> Result<()> {
     if !(1..=MAX_SUPERSAMPLE).contains(&a.supersample) {
         bail!(
             "--supersample {} is out of range (valid: 1..={MAX_SUPERSAMPLE})",
@@ -140,18 +128,18 @@ pub fn run(a: RenderArgs) -> Result<()> {
     };
     camera.validate()?;
     let mut names: Vec<PathBuf> = (0..a.views)
-        .map(|k| numbered(&a.output, k, a.views))
+        .map(|k| numbered(&a.out.output, k, a.views))
         .collect();
-    if let Some(png) = &a.png {
+    if let Some(png) = &a.out.png {
         names.extend((0..a.views).map(|k| numbered(png, k, a.views)));
     }
     names.extend(a.texture.clone());
     let outputs: Vec<(&str, &Path)> = names.iter().map(|p| ("output", p.as_path())).collect();
-    crate::paths::check_files(
+    check_files(
         &[("input", a.file.as_path()), ("--env", a.env.as_path())],
         &outputs,
     )?;
-    let relighter = Relighter::open_with_limits(&a.file, crate::limits())
+    let relighter = Relighter::open_with_limits(&a.file, ctx.limits())
         .with_context(|| format!("opening {}", a.file.display()))?;
     let mesh = TexturedMesh::from_file(relighter.file())
         .with_context(|| format!("{}", a.file.display()))?;
@@ -159,8 +147,8 @@ pub fn run(a: RenderArgs) -> Result<()> {
     let light = env.to_cubemap(relighter.meta().dims.face_res() as usize, &a.rotate);
     let mut frame = relighter.frame();
     let request = Request {
-        terms: a.terms.0,
-        weighting: a.weighting,
+        terms: a.terms.resolve(&relighter),
+        weighting: a.terms.weighting,
     };
     let stats = relighter.relight(&light, &request, &mut frame)?;
     if let Some(t) = &a.texture {
@@ -176,16 +164,9 @@ pub fn run(a: RenderArgs) -> Result<()> {
         let start = Instant::now();
         let image = mesh.render(&frame.image, &view, a.supersample)?;
         render_ms.push(start.elapsed().as_secs_f64() * 1e3);
-        let out = numbered(&a.output, k, a.views);
-        image
-            .write_exr(&out)
-            .with_context(|| format!("writing {}", out.display()))?;
-        if let Some(png) = &a.png {
-            let p = numbered(png, k, a.views);
-            image
-                .write_png(&p, a.exposure)
-                .with_context(|| format!("writing {}", p.display()))?;
-        }
+        let exr = numbered(&a.out.output, k, a.views);
+        let png = a.out.png.as_ref().map(|p| numbered(p, k, a.views));
+        a.out.write_to(&image, &exr, png.as_deref())?;
     }
     render_ms.sort_by(f64::total_cmp);
     let median = render_ms[render_ms.len() / 2];
@@ -193,7 +174,7 @@ pub fn run(a: RenderArgs) -> Result<()> {
     if a.json {
         let line = serde_json::json!({
             "file": a.file,
-            "terms": a.terms.0.min(relighter.lights()),
+            "terms": request.terms.min(relighter.lights()),
             "views": a.views,
             "width": a.size.0,
             "height": a.size.1,
@@ -209,7 +190,7 @@ pub fn run(a: RenderArgs) -> Result<()> {
         stats.lights,
         a.views,
         mesh.triangle_count(),
-        numbered(&a.output, 0, a.views).display()
+        numbered(&a.out.output, 0, a.views).display()
     );
     Ok(())
 }

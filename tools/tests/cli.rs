@@ -2,18 +2,9 @@
 //! that must exit non-zero with a clear message.
 
 use std::path::Path;
-use std::process::Command;
 
 fn ltm(args: &[&str]) -> (bool, String, String) {
-    let out = Command::new(env!("CARGO_BIN_EXE_ltm"))
-        .args(args)
-        .output()
-        .expect("run ltm");
-    (
-        out.status.success(),
-        String::from_utf8_lossy(&out.stdout).into_owned(),
-        String::from_utf8_lossy(&out.stderr).into_owned(),
-    )
+    ltm_testkit::run(env!("CARGO_BIN_EXE_ltm"), args).into()
 }
 
 #[test]

@@ -6,10 +6,7 @@ use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
 
 fn ltm(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_ltm"))
-        .args(args)
-        .output()
-        .expect("run ltm")
+    ltm_testkit::run_output(env!("CARGO_BIN_EXE_ltm"), args)
 }
 
 fn assets() -> PathBuf {

@@ -5,18 +5,9 @@
 use ltm_codec::{Dims, RawHeader, RawWriter, Surface, SurfacePoint};
 use ltm_relight::{relative_l2, Image};
 use std::path::{Path, PathBuf};
-use std::process::Command;
 
 fn ltm(args: &[&str]) -> (bool, String, String) {
-    let out = Command::new(env!("CARGO_BIN_EXE_ltm"))
-        .args(args)
-        .output()
-        .expect("run ltm");
-    (
-        out.status.success(),
-        String::from_utf8_lossy(&out.stdout).into_owned(),
-        String::from_utf8_lossy(&out.stderr).into_owned(),
-    )
+    ltm_testkit::run(env!("CARGO_BIN_EXE_ltm"), args).into()
 }
 
 fn repo(p: &str) -> PathBuf {

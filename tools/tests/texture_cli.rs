@@ -4,16 +4,11 @@
 
 use std::fmt::Write as _;
 use std::path::Path;
-use std::process::Command;
 
 fn ltm(args: &[&str]) -> (bool, String) {
-    let out = Command::new(env!("CARGO_BIN_EXE_ltm"))
-        .args(args)
-        .output()
-        .expect("run ltm");
-    let stderr = String::from_utf8_lossy(&out.stderr).into_owned();
-    assert!(!stderr.contains("panicked"), "{args:?}: {stderr}");
-    (out.status.success(), stderr)
+    let run = ltm_testkit::run(env!("CARGO_BIN_EXE_ltm"), args);
+    assert!(!run.stderr.contains("panicked"), "{args:?}: {}", run.stderr);
+    (run.ok, run.stderr)
 }
 
 fn fails(args: &[&str], expect: &[&str]) {

@@ -140,16 +140,8 @@ pub fn sh(raw: &RawStore, orders: &[usize]) -> Result<(Vec<BaselinePoint>, ShPro
 #[cfg(test)]
 mod tests {
     use super::*;
-    use ltm_codec::{Dims, RawHeader, RawWriter};
-    use ltm_relight::{reference, relative_l2, BasisRelighter, Relight, Request, Weighting};
-    use std::path::{Path, PathBuf};
-
-    /// Writes a raw store of `t` (P·M·C values) in blocks of `block_pixels`
-    /// rows.
-    fn write_raw(dir: &Path, name: &str, dims: Dims, t: &[f32], block_pixels: usize) -> PathBuf {
-        let header = RawHeader::new(dims, false, (block_pixels * dims.row_len() * 4) as u64);
-        RawWriter::write_dense(&dir.join(name), header, t, None).unwrap()
-    }
+    use ltm_codec::Dims;
+    use ltm_testkit::{block_bytes, write_raw};
 
     fn dims(width: u32, height: u32, face_res: u32, channels: u32) -> Dims {
         Dims::image(width, height, face_res, channels)
@@ -173,7 +165,14 @@ mod tests {
     fn sh_orders_sorted_with_sizes_from_the_error_curve() {
         let dir = tempfile::tempdir().unwrap();
         let d = dims(6, 5, 4, 3);
-        let raw = RawStore::open(&write_raw(dir.path(), "t.raw", d, &matrix(d), 4)).unwrap();
+        let raw = RawStore::open(&write_raw(
+            &dir.path().join("t.raw"),
+            d,
+            &matrix(d),
+            None,
+            block_bytes(d, 4),
+        ))
+        .unwrap();
         let (points, projection) = sh(&raw, &[6, 1, 2, 3, 5, 2, 4]).unwrap();
         assert_eq!(
             points.iter().map(|p| p.param).collect::<Vec<_>>(),
@@ -194,7 +193,14 @@ mod tests {
         let t: Vec<f32> = (0..d.pixels() * d.row_len())
             .map(|i| ((i % 113) as f32 * 0.05).sin() * 1e-3)
             .collect();
-        let raw = RawStore::open(&write_raw(dir.path(), "t.raw", d, &t, 4)).unwrap();
+        let raw = RawStore::open(&write_raw(
+            &dir.path().join("t.raw"),
+            d,
+            &t,
+            None,
+            block_bytes(d, 4),
+        ))
+        .unwrap();
         let want: Vec<u8> = raw
             .rows(0..d.pixels())
             .iter()
@@ -216,46 +222,5 @@ mod tests {
             ("zstd-raw", 0, 0.0)
         );
         assert!(point.bytes < want.len() as u64);
-    }
-
-    /// Timing on a real store (`LTM_BASELINE_RAW`, default
-    /// /tmp/e2e/default128.raw): `cargo test --release -p ltm-tools --bin ltm
-    /// report::baselines -- --ignored --nocapture`.
-    #[test]
-    #[ignore]
-    fn timing_on_store() {
-        let path = std::env::var("LTM_BASELINE_RAW").unwrap_or("/tmp/e2e/default128.raw".into());
-        let raw = RawStore::open(Path::new(&path)).unwrap();
-        println!(
-            "{path}: {:?}, {} threads",
-            raw.dims(),
-            rayon::current_num_threads()
-        );
-        let t0 = std::time::Instant::now();
-        let z = zstd_raw(&raw, 3).unwrap();
-        println!(
-            "zstd-raw level 3: {:.2} s, {z:?}",
-            t0.elapsed().as_secs_f64()
-        );
-        let t0 = std::time::Instant::now();
-        let (points, projection) = sh(&raw, &(2..=20).collect::<Vec<_>>()).unwrap();
-        println!("sh: {:.2} s", t0.elapsed().as_secs_f64());
-        for p in &points {
-            println!("  {p:?}");
-        }
-        let relighter = BasisRelighter::sh(projection, &raw).unwrap();
-        let light = vec![[1.0f32; 3]; raw.dims().lights()];
-        let mut frame = relighter.frame();
-        let request = Request {
-            terms: 20,
-            weighting: Weighting::Transport,
-        };
-        let stats = relighter.relight(&light, &request, &mut frame).unwrap();
-        let reference = reference(&raw, &light).unwrap();
-        println!(
-            "sh relight order 20: {:.3} s, image error under uniform light {:.4}",
-            stats.total().as_secs_f64(),
-            relative_l2(&frame.image, &reference).unwrap()
-        );
     }
 }

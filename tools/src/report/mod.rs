@@ -12,9 +12,8 @@ pub mod peers;
 pub mod plot;
 pub mod texture;
 
-use crate::codec_cmds::{default_mem_budget, parse_size};
-use crate::demo::{assets_dir, bake_cached, env_maps, load_maps};
-use crate::progress;
+use crate::common::size::default_mem_budget;
+use crate::common::{assets_dir, bake_cached, env_maps, load_maps, progress, Ctx};
 use anyhow::{bail, Context, Result};
 use clap::Args;
 use ltm_bake::{Overrides, SceneDesc};
@@ -23,7 +22,7 @@ use ltm_codec::{
     compress_pca, CodeOptions, Mode, PcaOptions, RawStore, Target, TransposeOptions, Transposed,
 };
 use ltm_relight::{
-    reference, relative_l2, BasisRelighter, Frame, Image, PcaRelighter, Relight, Relighter,
+    reference, relative_l2, BasisRelighter, EnvMap, Frame, Image, PcaRelighter, Relight, Relighter,
     Request, Rotation, Weighting,
 };
 use serde::{Deserialize, Serialize};
@@ -100,9 +99,10 @@ pub struct ReportArgs {
     /// [default: 2..=20; quick: 2,4,8].
     #[arg(long, value_delimiter = ',')]
     pub sh_orders: Vec<usize>,
-    /// Memory for the transpose, e.g. 512M or 4G [default: a quarter of RAM, at most 8 GiB].
-    #[arg(long)]
-    pub mem_budget: Option<String>,
+    /// Memory for the transpose: a size as for --max-memory, e.g. 512M or
+    /// 1.5G [default: a quarter of RAM, at most 8 GiB].
+    #[arg(long, value_name = "SIZE", value_parser = crate::common::size::size)]
+    pub mem_budget: Option<u64>,
     /// Keep every coded .ltm file (by default only the equal-quality pair).
     #[arg(long)]
     pub keep_files: bool,
@@ -161,7 +161,9 @@ pub struct SceneInfo {
 #[derive(Clone, Debug, Serialize, Deserialize)]
 pub struct RelightPoint {
     pub env: String,
-    pub weighting: String,
+    /// The rule that chose the lights (serialized by its name).
+    #[serde(with = "weighting_name")]
+    pub weighting: Weighting,
     /// Requested wavelet lights.
     pub n: usize,
     /// Lights used (≤ n).
@@ -180,7 +182,8 @@ pub struct RelightPoint {
 /// One coded setting.
 #[derive(Clone, Debug, Serialize, Deserialize)]
 pub struct Coding {
-    pub mode: String,
+    /// Serialized by its name (`2d`, `4d`, `adaptive`, `pca`).
+    pub mode: Mode,
     pub bits: u32,
     pub target_error: f64,
     pub file_bytes: u64,
@@ -236,6 +239,21 @@ pub struct Results {
     #[serde(default)]
     pub texture: Option<texture::TexturePoint>,
     pub timings: Timings,
+}
+
+/// [`Weighting`] in `results.json`: its name.
+mod weighting_name {
+    use ltm_relight::Weighting;
+    use serde::{Deserialize, Deserializer, Serializer};
+
+    pub fn serialize<S: Serializer>(w: &Weighting, s: S) -> Result<S::Ok, S::Error> {
+        s.serialize_str(w.name())
+    }
+
+    pub fn deserialize<'de, D: Deserializer<'de>>(d: D) -> Result<Weighting, D::Error> {
+        let name = String::deserialize(d)?;
+        name.parse().map_err(serde::de::Error::custom)
+    }
 }
 
 fn or_default<T: Clone>(given: &[T], full: &[T], quick: &[T], is_quick: bool) -> Vec<T> {
@@ -340,7 +358,7 @@ fn measure(
     let dense = stats.lights as f64 * (w * h) as f64 * channels as f64;
     Ok(RelightPoint {
         env: env.name.clone(),
-        weighting: weighting.name().to_string(),
+        weighting,
         n,
         lights: stats.lights,
         frame_ms: median(times) * 1e3,
@@ -419,7 +437,7 @@ fn file_name(mode: Mode, bits: u32, err: f64) -> String {
     format!("{}-{bits}b-e{err}.ltm", mode.name())
 }
 
-pub fn run(a: ReportArgs) -> Result<()> {
+pub fn run(a: ReportArgs, ctx: &Ctx) -> Result<()> {
     if a.replot {
         return replot(&a.output, a.peers.as_deref());
     }
@@ -439,19 +457,9 @@ pub fn run(a: ReportArgs) -> Result<()> {
     // 1. The matrix: a raw store, or a scene baked once into the output.
     let t = Instant::now();
     let (raw_path, source) = matrix_source(&a)?;
-    let raw = RawStore::open_with_limits(&raw_path, crate::limits())?;
+    let raw = RawStore::open_with_limits(&raw_path, ctx.limits())?;
     let bake_or_open_s = t.elapsed().as_secs_f64();
-    let dims = raw.dims();
-    let scene = SceneInfo {
-        source,
-        width: dims.width(),
-        height: dims.height(),
-        face_res: dims.face_res(),
-        lights: dims.lights(),
-        channels: dims.channels,
-        raw_bytes: dims.raw_bytes(),
-        has_albedo: raw.albedo().is_some(),
-    };
+    let scene = scene_info(&raw, source);
     let peers = match &a.peers {
         Some(path) => peers::load(path, &scene)?,
         None => Vec::new(),
@@ -459,68 +467,20 @@ pub fn run(a: ReportArgs) -> Result<()> {
 
     // 2. Lighting and the exact images.
     let t = Instant::now();
-    let mut envs = Vec::new();
-    for (name, map) in maps {
-        let light = map.to_cubemap(dims.face_res() as usize, &Rotation::IDENTITY);
-        let exact = reference(&raw, &light)?;
-        envs.push(Env { name, light, exact });
-    }
+    let envs = exact_images(&raw, maps)?;
     let references_s = t.elapsed().as_secs_f64();
     eprintln!("{} exact images in {references_s:.1} s", envs.len());
 
-    // 3. Row transform and transpose, once.
-    let transpose = TransposeOptions {
-        mem_budget: match &a.mem_budget {
-            Some(v) => parse_size(v)?,
-            None => default_mem_budget(),
-        },
-        temp_dir: Some(files_dir.clone()),
-        ..Default::default()
-    };
-    let t = Instant::now();
-    let bar = progress::bar(0, "transpose");
-    let transposed = Transposed::new(&raw, &transpose, &|_, d, n| {
-        bar.set_length(n);
-        bar.set_position(d);
-    })?;
-    bar.finish_and_clear();
-    let transpose_s = t.elapsed().as_secs_f64();
-    eprintln!("row transform and transpose in {transpose_s:.1} s");
-
-    // 4. The sweep: every mode × bits × target error, plus the pair.
-    let plan = sweep(&s);
-    let mut codings = Vec::new();
-    for (i, &setting) in plan.iter().enumerate() {
-        let label = format!("[{}/{}]", i + 1, plan.len());
-        codings.push(code_and_relight(
-            &transposed,
-            setting,
-            &label,
-            &s,
-            &envs,
-            &files_dir,
-            a.keep_files,
-        )?);
-    }
-    let (out_of_core, matrix_norm) = (transposed.out_of_core(), transposed.norm());
-    drop(transposed);
-    let mut pca_errors = s.errors.clone();
-    if !pca_errors.contains(&s.quality) {
-        pca_errors.push(s.quality);
-    }
-    for (i, &err) in pca_errors.iter().enumerate() {
-        let label = format!("[pca {}/{}]", i + 1, pca_errors.len());
-        let files = (files_dir.as_path(), a.keep_files);
-        codings.extend(code_and_relight_pca(&raw, err, &label, &s, &envs, files)?);
-    }
+    // 3. and 4. The sweep, coded from one transposed matrix, and pca.
+    let sweep = code_sweep(&a, &s, &raw, &envs, ctx)?;
 
     // Texture-space matrices: the relit texture and two views of the
     // equal-quality adaptive file.
-    let texture = match (dims.rows.is_texture(), envs.first()) {
+    let texture = match (raw.dims().rows.is_texture(), envs.first()) {
         (true, Some(env)) => {
             let file = files_dir.join(file_name(Mode::Adaptive, s.quality_bits, s.quality));
             let map = (env.name.as_str(), env.light.as_slice());
-            Some(texture::measure(&a.output, &file, map, s.frames)?)
+            Some(texture::measure(&a.output, &file, map, s.frames, ctx)?)
         }
         _ => None,
     };
@@ -538,9 +498,9 @@ pub fn run(a: ReportArgs) -> Result<()> {
         scene,
         envs: envs.iter().map(|e| e.name.clone()).collect(),
         settings: s,
-        out_of_core,
-        matrix_norm,
-        codings,
+        out_of_core: sweep.out_of_core,
+        matrix_norm: sweep.matrix_norm,
+        codings: sweep.codings,
         baselines,
         peers,
         sh_relight,
@@ -548,7 +508,7 @@ pub fn run(a: ReportArgs) -> Result<()> {
         timings: Timings {
             bake_or_open_s,
             references_s,
-            transpose_s,
+            transpose_s: sweep.transpose_s,
             baselines_s,
             total_s: start.elapsed().as_secs_f64(),
         },
@@ -560,6 +520,112 @@ pub fn run(a: ReportArgs) -> Result<()> {
         start.elapsed().as_secs_f64()
     );
     Ok(())
+}
+
+/// What the report says of the matrix.
+fn scene_info(raw: &RawStore, source: String) -> SceneInfo {
+    let dims = raw.dims();
+    SceneInfo {
+        source,
+        width: dims.width(),
+        height: dims.height(),
+        face_res: dims.face_res(),
+        lights: dims.lights(),
+        channels: dims.channels,
+        raw_bytes: dims.raw_bytes(),
+        has_albedo: raw.albedo().is_some(),
+    }
+}
+
+/// Every map's cubemap lighting and exact image `T·L`.
+fn exact_images(raw: &RawStore, maps: Vec<(String, EnvMap)>) -> Result<Vec<Env>> {
+    let n = raw.dims().face_res() as usize;
+    let mut envs = Vec::with_capacity(maps.len());
+    for (name, map) in maps {
+        let light = map.to_cubemap(n, &Rotation::IDENTITY);
+        let exact = reference(raw, &light)?;
+        envs.push(Env { name, light, exact });
+    }
+    Ok(envs)
+}
+
+/// Every coded setting of a run, and what the transpose found.
+struct Sweep {
+    codings: Vec<Coding>,
+    out_of_core: bool,
+    matrix_norm: f64,
+    transpose_s: f64,
+}
+
+/// Row-transforms and transposes the matrix once, codes and relights every
+/// wavelet setting of the sweep from it, then the pca mode at every target
+/// error.
+fn code_sweep(
+    a: &ReportArgs,
+    s: &Settings,
+    raw: &RawStore,
+    envs: &[Env],
+    ctx: &Ctx,
+) -> Result<Sweep> {
+    let files_dir = a.output.join("files");
+    let transpose = TransposeOptions {
+        mem_budget: a.mem_budget.unwrap_or_else(default_mem_budget),
+        temp_dir: Some(files_dir.clone()),
+        ..Default::default()
+    };
+    let t = Instant::now();
+    let bar = progress::bar(0, "transpose");
+    let transposed = Transposed::new(raw, &transpose, &|_, d, n| {
+        bar.set_length(n);
+        bar.set_position(d);
+    })?;
+    bar.finish_and_clear();
+    let transpose_s = t.elapsed().as_secs_f64();
+    eprintln!("row transform and transpose in {transpose_s:.1} s");
+
+    // The sweep: every mode × bits × target error, plus the pair.
+    let plan = sweep(s);
+    let mut codings = Vec::new();
+    let files = Files {
+        dir: &files_dir,
+        keep: a.keep_files,
+        ctx,
+    };
+    for (i, &setting) in plan.iter().enumerate() {
+        let label = format!("[{}/{}]", i + 1, plan.len());
+        codings.push(code_and_relight(
+            &transposed,
+            setting,
+            &label,
+            s,
+            envs,
+            &files,
+        )?);
+    }
+    let (out_of_core, matrix_norm) = (transposed.out_of_core(), transposed.norm());
+    drop(transposed);
+    let mut pca_errors = s.errors.clone();
+    if !pca_errors.contains(&s.quality) {
+        pca_errors.push(s.quality);
+    }
+    for (i, &err) in pca_errors.iter().enumerate() {
+        let label = format!("[pca {}/{}]", i + 1, pca_errors.len());
+        codings.extend(code_and_relight_pca(raw, err, &label, s, envs, &files)?);
+    }
+    Ok(Sweep {
+        codings,
+        out_of_core,
+        matrix_norm,
+        transpose_s,
+    })
+}
+
+/// Where coded files go, whether they are kept, and the run's limits to
+/// open them with.
+struct Files<'a> {
+    dir: &'a Path,
+    keep: bool,
+    ctx: &'a Ctx,
 }
 
 /// `--replot`: redraws the pages from a report's `results.json`.
@@ -629,8 +695,7 @@ fn code_and_relight(
     counter: &str,
     s: &Settings,
     envs: &[Env],
-    files_dir: &Path,
-    keep_files: bool,
+    files: &Files,
 ) -> Result<Coding> {
     let opts = CodeOptions {
         mode,
@@ -638,7 +703,7 @@ fn code_and_relight(
         target: Target::MaxError(err),
         ..Default::default()
     };
-    let path = files_dir.join(file_name(mode, bits, err));
+    let path = files.dir.join(file_name(mode, bits, err));
     let label = format!("{counter} {} {bits} bits {err}", mode.name());
     let bar = progress::bar(0, &label);
     let t = Instant::now();
@@ -649,7 +714,7 @@ fn code_and_relight(
     bar.finish_and_clear();
     let code_s = t.elapsed().as_secs_f64();
     let quality_pair = bits == s.quality_bits && err == s.quality && mode != Mode::FourD;
-    let relighter = Relighter::open_with_limits(&path, crate::limits())?;
+    let relighter = Relighter::open_with_limits(&path, files.ctx.limits())?;
     // Frame times below are of frames alone, with every column decoded.
     relighter.decode_all()?;
     let mut terms: Vec<usize> = s.terms.iter().map(|&n| n.min(relighter.lights())).collect();
@@ -673,7 +738,7 @@ fn code_and_relight(
         }
     }
     let coding = Coding {
-        mode: mode.name().to_string(),
+        mode,
         bits,
         target_error: err,
         file_bytes: stats.file_bytes,
@@ -687,7 +752,7 @@ fn code_and_relight(
         relight,
     };
     drop(relighter);
-    if !(quality_pair || keep_files) {
+    if !(quality_pair || files.keep) {
         std::fs::remove_file(&path).with_context(|| format!("removing {}", path.display()))?;
     }
     eprintln!(
@@ -708,7 +773,7 @@ fn code_and_relight_pca(
     label: &str,
     s: &Settings,
     envs: &[Env],
-    (files_dir, keep_files): (&Path, bool),
+    files: &Files,
 ) -> Result<Option<Coding>> {
     let dims = raw.dims();
     let full = dims.pixels().min(dims.row_len());
@@ -718,7 +783,7 @@ fn code_and_relight_pca(
         max_rank,
         ..Default::default()
     };
-    let path = files_dir.join(format!("pca-e{err}.ltm"));
+    let path = files.dir.join(format!("pca-e{err}.ltm"));
     let t = Instant::now();
     let stats = match compress_pca(raw, &path, &opts, &|_, _| {}) {
         Ok(stats) => stats,
@@ -736,7 +801,7 @@ fn code_and_relight_pca(
         Err(e) => return Err(e.into()),
     };
     let code_s = t.elapsed().as_secs_f64();
-    let relighter = PcaRelighter::open_with_limits(&path, crate::limits())?;
+    let relighter = PcaRelighter::open_with_limits(&path, files.ctx.limits())?;
     let mut terms: Vec<usize> = s.pca_ranks.iter().map(|&n| n.min(stats.rank)).collect();
     terms.push(stats.rank);
     terms.sort_unstable();
@@ -759,7 +824,7 @@ fn code_and_relight_pca(
     }
     drop(relighter);
     let quality_pair = err == s.quality;
-    if !(quality_pair || keep_files) {
+    if !(quality_pair || files.keep) {
         std::fs::remove_file(&path).with_context(|| format!("removing {}", path.display()))?;
     }
     eprintln!(
@@ -770,7 +835,7 @@ fn code_and_relight_pca(
         100.0 * stats.achieved_error
     );
     Ok(Some(Coding {
-        mode: Mode::Pca.name().into(),
+        mode: Mode::Pca,
         bits: stats.bits,
         target_error: err,
         file_bytes: stats.file_bytes,

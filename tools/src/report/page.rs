@@ -3,12 +3,17 @@
 
 use super::plot::{write_svg, Axis, Chart, Series, Style};
 use super::{Coding, RelightPoint, Results};
-use crate::output::write_atomic;
+use crate::common::write_atomic;
 use anyhow::Result;
+use ltm_codec::Mode;
+use ltm_relight::Weighting;
 use std::fmt::Write as _;
 use std::path::Path;
 
-const MODES: [&str; 4] = ["2d", "4d", "adaptive", "pca"];
+/// The modes in the order of the tables and plots.
+const MODES: [Mode; 4] = [Mode::TwoD, Mode::FourD, Mode::Adaptive, Mode::Pca];
+/// The weightings in the order of the tables and plots.
+const WEIGHTINGS: [Weighting; 3] = [Weighting::Unweighted, Weighting::Transport, Weighting::Area];
 
 /// The relit-frame numbers of one (setting, weighting, N), averaged over maps.
 #[derive(Clone, Copy, Debug, Default)]
@@ -22,7 +27,7 @@ struct Frame {
 }
 
 /// Mean over maps of each N's points with `weighting`, in N order.
-fn frames(points: &[RelightPoint], weighting: &str) -> Vec<Frame> {
+fn frames(points: &[RelightPoint], weighting: Weighting) -> Vec<Frame> {
     let mut ns: Vec<usize> = points.iter().map(|p| p.n).collect();
     ns.sort_unstable();
     ns.dedup();
@@ -61,7 +66,7 @@ fn pareto(mut pts: Vec<(f64, f64)>) -> Vec<(f64, f64)> {
 
 /// Bytes a mode needs for matrix error `e`: log-log interpolation on its
 /// size/error front; None outside the front's range.
-fn size_at_error(codings: &[Coding], mode: &str, e: f64) -> Option<f64> {
+fn size_at_error(codings: &[Coding], mode: Mode, e: f64) -> Option<f64> {
     let front = pareto(
         codings
             .iter()
@@ -79,7 +84,7 @@ fn size_at_error(codings: &[Coding], mode: &str, e: f64) -> Option<f64> {
 }
 
 /// The smallest file of `mode` coded for target error `target` that met it.
-fn coded_at<'a>(r: &'a Results, mode: &str, target: f64) -> Option<&'a Coding> {
+fn coded_at(r: &Results, mode: Mode, target: f64) -> Option<&Coding> {
     r.codings
         .iter()
         .filter(|c| c.mode == mode && c.target_met && (c.target_error - target).abs() < 1e-9)
@@ -115,7 +120,7 @@ fn peers_table(md: &mut String, r: &Results) -> Result<()> {
         )
     };
     for &t in &targets {
-        let ours = |mode: &str| coded_at(r, mode, t);
+        let ours = |mode: Mode| coded_at(r, mode, t);
         let peer = |m: &str| r.peers.iter().find(|p| p.method == m && p.target == t);
         let ltm_cell =
             |c: Option<&Coding>| c.map_or("–".into(), |c| cell(c.file_bytes, c.matrix_error));
@@ -124,7 +129,7 @@ fn peers_table(md: &mut String, r: &Results) -> Result<()> {
                 format!("{} [{}]", cell(p.bytes, p.matrix_error), p.shape)
             })
         };
-        let ratio = match (ours("adaptive"), peer("sz3")) {
+        let ratio = match (ours(Mode::Adaptive), peer("sz3")) {
             (Some(a), Some(p)) => format!("{:.2}", a.file_bytes as f64 / p.bytes as f64),
             _ => "–".into(),
         };
@@ -132,8 +137,8 @@ fn peers_table(md: &mut String, r: &Results) -> Result<()> {
             md,
             "| {} | {} | {} | {} | {} | {} |",
             pct(t),
-            ltm_cell(ours("2d")),
-            ltm_cell(ours("adaptive")),
+            ltm_cell(ours(Mode::TwoD)),
+            ltm_cell(ours(Mode::Adaptive)),
             peer_cell("sz3"),
             peer_cell("zfp"),
             ratio
@@ -163,7 +168,7 @@ fn peer_name(method: &str) -> &str {
     super::peers::name(method)
 }
 
-fn pair<'a>(r: &'a Results, mode: &str) -> Option<&'a Coding> {
+fn pair(r: &Results, mode: Mode) -> Option<&Coding> {
     r.codings.iter().find(|c| c.quality_pair && c.mode == mode)
 }
 
@@ -276,7 +281,7 @@ fn headline(md: &mut String, r: &Results) -> Result<()> {
     let s = &r.settings;
     writeln!(md, "## Headline\n")?;
     let raw = r.scene.raw_bytes as f64;
-    if let Some(a) = pair(r, "adaptive") {
+    if let Some(a) = pair(r, Mode::Adaptive) {
         writeln!(
             md,
             "Adaptive at `--bits {} --max-error {}`: {} MB, **{:.1}× smaller than the raw matrix** ({} MB), matrix error {}.\n",
@@ -300,7 +305,7 @@ fn headline(md: &mut String, r: &Results) -> Result<()> {
     for e in errors {
         let sz: Vec<Option<f64>> = MODES
             .iter()
-            .map(|m| size_at_error(&r.codings, m, e))
+            .map(|&m| size_at_error(&r.codings, m, e))
             .collect();
         let cell = |v: Option<f64>| v.map_or("–".into(), mb);
         let ratio = |a: Option<f64>, b: Option<f64>| match (a, b) {
@@ -325,7 +330,7 @@ fn headline(md: &mut String, r: &Results) -> Result<()> {
         "\n\"–\": the error lies outside the errors that mode reached in this sweep.\n"
     )?;
     best_at_relit_error(md, r, 0.01)?;
-    if let (Some(a), Some(d)) = (pair(r, "adaptive"), pair(r, "2d")) {
+    if let (Some(a), Some(d)) = (pair(r, Mode::Adaptive), pair(r, Mode::TwoD)) {
         writeln!(
             md,
             "Relighting the equal-quality pair (both at {} target matrix error, {} bits; transport-weighted wavelet lights):\n",
@@ -334,8 +339,8 @@ fn headline(md: &mut String, r: &Results) -> Result<()> {
         )?;
         writeln!(md, "| N | 2d frames/s | adaptive frames/s | adaptive vs 2d | relit error 2d | relit error adaptive |\n|---|---|---|---|---|---|")?;
         let (fa, fd) = (
-            frames(&a.relight, "transport"),
-            frames(&d.relight, "transport"),
+            frames(&a.relight, Weighting::Transport),
+            frames(&d.relight, Weighting::Transport),
         );
         for (x, y) in fd.iter().zip(&fa) {
             writeln!(
@@ -356,7 +361,7 @@ fn headline(md: &mut String, r: &Results) -> Result<()> {
 
 /// Each mode's Pareto front of (median frame time, relit error) over every
 /// coded setting and N (transport weighting, means over maps).
-fn speed_fronts(r: &Results) -> Vec<(&'static str, Vec<(f64, f64)>)> {
+fn speed_fronts(r: &Results) -> Vec<(Mode, Vec<(f64, f64)>)> {
     MODES
         .into_iter()
         .map(|mode| {
@@ -364,7 +369,7 @@ fn speed_fronts(r: &Results) -> Vec<(&'static str, Vec<(f64, f64)>)> {
                 .codings
                 .iter()
                 .filter(|c| c.mode == mode)
-                .flat_map(|c| frames(&c.relight, "transport"))
+                .flat_map(|c| frames(&c.relight, Weighting::Transport))
                 .map(|f| (f.frame_ms, f.relit_error))
                 .collect();
             (mode, pareto(pts))
@@ -378,7 +383,7 @@ fn best_at_relit_error(md: &mut String, r: &Results, e: f64) -> Result<()> {
     let fronts = speed_fronts(r);
     let fastest: Vec<(&str, f64)> = fronts
         .iter()
-        .filter_map(|(m, f)| f.iter().find(|p| p.1 <= e).map(|p| (*m, p.0)))
+        .filter_map(|(m, f)| f.iter().find(|p| p.1 <= e).map(|p| (m.name(), p.0)))
         .collect();
     let Some(best) = fastest.iter().min_by(|a, b| a.1.total_cmp(&b.1)) else {
         writeln!(
@@ -409,10 +414,28 @@ fn best_at_relit_error(md: &mut String, r: &Results, e: f64) -> Result<()> {
 
 fn size_error(md: &mut String, dir: &Path, r: &Results) -> Result<()> {
     writeln!(md, "## 1. Size against matrix error\n")?;
+    md.push_str(&svg(
+        dir,
+        "size-error.svg",
+        chart(
+            "Size against matrix error",
+            "relative L2 matrix error",
+            "file size (MB)",
+            LOG,
+            size_series(r),
+        ),
+    )?);
+    codings_table(md, r)?;
+    baselines_table(md, r)
+}
+
+/// The size/error plot's series: each mode per bit depth, the baselines,
+/// the peers, and the lossless and raw sizes across the errors shown.
+fn size_series(r: &Results) -> Vec<Series> {
     let mut ser = Vec::new();
     for mode in MODES {
         // pca files choose their bits: one series over all of them.
-        let bit_sets: Vec<Option<u32>> = if mode == "pca" {
+        let bit_sets: Vec<Option<u32>> = if mode == Mode::Pca {
             vec![None]
         } else {
             r.settings.bits.iter().map(|&b| Some(b)).collect()
@@ -426,8 +449,8 @@ fn size_error(md: &mut String, dir: &Path, r: &Results) -> Result<()> {
                 .collect();
             pts.sort_by(|a, b| a.0.total_cmp(&b.0));
             let name = match b {
-                Some(b) => format!("{mode} {b} bits"),
-                None => format!("{mode} (Eigentransport)"),
+                Some(b) => format!("{} {b} bits", mode.name()),
+                None => format!("{} (Eigentransport)", mode.name()),
             };
             ser.push(series(name, pts, Style::LinePoints));
         }
@@ -491,24 +514,18 @@ fn size_error(md: &mut String, dir: &Path, r: &Results) -> Result<()> {
             Style::Dashed,
         ));
     }
-    md.push_str(&svg(
-        dir,
-        "size-error.svg",
-        chart(
-            "Size against matrix error",
-            "relative L2 matrix error",
-            "file size (MB)",
-            LOG,
-            ser,
-        ),
-    )?);
+    ser
+}
+
+/// Every coded setting, one row each.
+fn codings_table(md: &mut String, r: &Results) -> Result<()> {
     writeln!(md, "\nEvery coded setting (`ltm compress --mode M --bits B --max-error E`, coded from one transposed matrix):\n")?;
     writeln!(md, "| mode | bits | target | MB | ratio vs raw | matrix error | target met | nonzeros | coding s |\n|---|---|---|---|---|---|---|---|---|")?;
     for c in &r.codings {
         writeln!(
             md,
             "| {} | {} | {} | {} | {:.1}× | {} | {} | {} | {:.1} |",
-            c.mode,
+            c.mode.name(),
             c.bits,
             pct(c.target_error),
             mb(c.file_bytes as f64),
@@ -519,6 +536,11 @@ fn size_error(md: &mut String, dir: &Path, r: &Results) -> Result<()> {
             c.code_s
         )?;
     }
+    Ok(())
+}
+
+/// The baselines on the same matrix, one row each.
+fn baselines_table(md: &mut String, r: &Results) -> Result<()> {
     writeln!(md, "\nBaselines on the same matrix: lossless zstd (level {}) of the raw f32 rows; PCA over rows (rank-k randomized SVD, f32 factors, error measured in f64); spherical-harmonics projection of each row (order L, L² f32 coefficients per pixel and channel):\n", r.settings.zstd_raw_level)?;
     writeln!(
         md,
@@ -544,54 +566,11 @@ fn relit_error(md: &mut String, dir: &Path, r: &Results) -> Result<()> {
         md,
         "## 2. Relit error against the number of wavelet lights\n"
     )?;
-    let Some(a) = pair(r, "adaptive") else {
+    let Some(a) = pair(r, Mode::Adaptive) else {
         return Ok(());
     };
     writeln!(md, "The adaptive file of the equal-quality pair, with each rule for choosing the N wavelet lights (Ng et al. 2003): unweighted (largest |L|), transport-weighted (|L| × column norm) and area-weighted (|L| × support area). The pca file at the same target matrix error relit with its first N eigen-transports, and spherical harmonics with L² coefficients, are on the same axes.\n")?;
-    let weightings = ["unweighted", "transport", "area"];
     for env in &r.envs {
-        let pts: Vec<RelightPoint> = a
-            .relight
-            .iter()
-            .filter(|p| &p.env == env)
-            .cloned()
-            .collect();
-        let mut ser: Vec<Series> = weightings
-            .iter()
-            .map(|w| {
-                let f = frames(&pts, w);
-                series(
-                    format!("adaptive, {w}"),
-                    f.iter().map(|f| (f.lights as f64, f.relit_error)).collect(),
-                    Style::LinePoints,
-                )
-            })
-            .collect();
-        if let Some(p) = pair(r, "pca") {
-            let pts: Vec<RelightPoint> = p
-                .relight
-                .iter()
-                .filter(|x| &x.env == env)
-                .cloned()
-                .collect();
-            ser.push(series(
-                "pca (first N eigen-transports)",
-                frames(&pts, "transport")
-                    .iter()
-                    .map(|f| (f.lights as f64, f.relit_error))
-                    .collect(),
-                Style::LinePoints,
-            ));
-        }
-        ser.push(series(
-            "spherical harmonics (L² terms)",
-            r.sh_relight
-                .iter()
-                .filter(|p| &p.env == env)
-                .map(|p| (p.coefficients as f64, p.relit_error))
-                .collect(),
-            Style::LinePoints,
-        ));
         md.push_str(&svg(
             dir,
             &format!("relit-error-{env}.svg"),
@@ -600,16 +579,62 @@ fn relit_error(md: &mut String, dir: &Path, r: &Results) -> Result<()> {
                 "lighting terms N",
                 "relative L2 error vs T·L",
                 LOG,
-                ser,
+                relit_series(r, a, env),
             ),
         )?);
     }
+    relit_tables(md, r, a)
+}
+
+/// The relit-error plot's series under one map: the adaptive file with
+/// each weighting, the pca file and spherical harmonics.
+fn relit_series(r: &Results, a: &Coding, env: &str) -> Vec<Series> {
+    let under = |c: &Coding| -> Vec<RelightPoint> {
+        c.relight.iter().filter(|p| p.env == env).cloned().collect()
+    };
+    let pts = under(a);
+    let mut ser: Vec<Series> = WEIGHTINGS
+        .iter()
+        .map(|&w| {
+            let f = frames(&pts, w);
+            series(
+                format!("adaptive, {}", w.name()),
+                f.iter().map(|f| (f.lights as f64, f.relit_error)).collect(),
+                Style::LinePoints,
+            )
+        })
+        .collect();
+    if let Some(p) = pair(r, Mode::Pca) {
+        ser.push(series(
+            "pca (first N eigen-transports)",
+            frames(&under(p), Weighting::Transport)
+                .iter()
+                .map(|f| (f.lights as f64, f.relit_error))
+                .collect(),
+            Style::LinePoints,
+        ));
+    }
+    ser.push(series(
+        "spherical harmonics (L² terms)",
+        r.sh_relight
+            .iter()
+            .filter(|p| p.env == env)
+            .map(|p| (p.coefficients as f64, p.relit_error))
+            .collect(),
+        Style::LinePoints,
+    ));
+    ser
+}
+
+/// The relit errors' means over maps: the adaptive file per weighting, and
+/// spherical harmonics per order.
+fn relit_tables(md: &mut String, r: &Results, a: &Coding) -> Result<()> {
     writeln!(md, "\nMean over maps:\n")?;
     writeln!(
         md,
         "| N | unweighted | transport | area |\n|---|---|---|---|"
     )?;
-    let f: Vec<Vec<Frame>> = weightings.iter().map(|w| frames(&a.relight, w)).collect();
+    let f: Vec<Vec<Frame>> = WEIGHTINGS.iter().map(|&w| frames(&a.relight, w)).collect();
     for ((u, t), a) in f[0].iter().zip(&f[1]).zip(&f[2]) {
         writeln!(
             md,
@@ -644,8 +669,8 @@ fn relit_error(md: &mut String, dir: &Path, r: &Results) -> Result<()> {
 
 fn frame_time(md: &mut String, dir: &Path, r: &Results) -> Result<()> {
     writeln!(md, "## 3. Frame time and dynamic compression against N\n")?;
-    let pairs: Vec<&Coding> = ["2d", "adaptive", "pca"]
-        .iter()
+    let pairs: Vec<&Coding> = [Mode::TwoD, Mode::Adaptive, Mode::Pca]
+        .into_iter()
         .filter_map(|m| pair(r, m))
         .collect();
     if pairs.is_empty() {
@@ -654,7 +679,7 @@ fn frame_time(md: &mut String, dir: &Path, r: &Results) -> Result<()> {
     writeln!(md, "The equal-quality pair (Fig. 9), transport weighting. The dynamic compression rate is the dense size of the N columns used (N × pixels × channels) over the coefficients multiply-added. G coef./s is the coefficients multiply-added per second of the whole frame (light transform, selection, multiply-add and inverse steps); each coefficient carries all stored channels.\n")?;
     let f: Vec<Vec<Frame>> = pairs
         .iter()
-        .map(|c| frames(&c.relight, "transport"))
+        .map(|c| frames(&c.relight, Weighting::Transport))
         .collect();
     let ser = |g: fn(&Frame) -> f64| -> Vec<Series> {
         pairs
@@ -662,7 +687,7 @@ fn frame_time(md: &mut String, dir: &Path, r: &Results) -> Result<()> {
             .zip(&f)
             .map(|(c, f)| {
                 series(
-                    format!("{} ({} MB)", c.mode, mb(c.file_bytes as f64)),
+                    format!("{} ({} MB)", c.mode.name(), mb(c.file_bytes as f64)),
                     f.iter().map(|x| (x.lights as f64, g(x))).collect(),
                     Style::LinePoints,
                 )
@@ -696,7 +721,7 @@ fn frame_time(md: &mut String, dir: &Path, r: &Results) -> Result<()> {
         write!(
             md,
             " {m} ms | {m} frames/s | {m} dyn. compression | {m} G coef./s |",
-            m = c.mode
+            m = c.mode.name()
         )?;
     }
     writeln!(md, "\n|---|{}", "---|".repeat(4 * pairs.len()))?;
@@ -725,7 +750,11 @@ fn frame_time(md: &mut String, dir: &Path, r: &Results) -> Result<()> {
 fn depth_by_level(md: &mut String, dir: &Path, r: &Results) -> Result<()> {
     writeln!(md, "## 4. Average column depth by row-wavelet level\n")?;
     writeln!(md, "Adaptive files (Fig. 8). Level 0 is each face's scaling function; higher levels are finer wavelet lights.\n")?;
-    let adaptive: Vec<&Coding> = r.codings.iter().filter(|c| c.mode == "adaptive").collect();
+    let adaptive: Vec<&Coding> = r
+        .codings
+        .iter()
+        .filter(|c| c.mode == Mode::Adaptive)
+        .collect();
     let ser = adaptive
         .iter()
         .map(|c| {
@@ -805,7 +834,7 @@ fn speed_error(md: &mut String, dir: &Path, r: &Results) -> Result<()> {
             .codings
             .iter()
             .filter(|c| c.mode == mode)
-            .flat_map(|c| frames(&c.relight, "transport"))
+            .flat_map(|c| frames(&c.relight, Weighting::Transport))
             .map(|f| (f.frame_ms, f.relit_error))
             .collect();
         let front = pareto(pts.clone());
@@ -815,7 +844,7 @@ fn speed_error(md: &mut String, dir: &Path, r: &Results) -> Result<()> {
         ] {
             ser.push(Series {
                 color: Some(i),
-                ..series(format!("{mode} {name}"), pts, style)
+                ..series(format!("{} {name}", mode.name()), pts, style)
             });
         }
         fronts.push((mode, front));
@@ -834,7 +863,7 @@ fn speed_error(md: &mut String, dir: &Path, r: &Results) -> Result<()> {
     writeln!(md, "\nFastest frame time reaching each relit error:\n")?;
     write!(md, "| relit error |")?;
     for (mode, _) in &fronts {
-        write!(md, " {mode} ms |")?;
+        write!(md, " {} ms |", mode.name())?;
     }
     writeln!(md, "\n|---|{}", "---|".repeat(fronts.len()))?;
     for e in [0.1, 0.05, 0.02, 0.01, 0.005, 0.002] {

@@ -472,70 +472,9 @@ pub fn render_svg(chart: &Chart) -> Result<String> {
             .light_line_style(BLACK.mix(0.05))
             .draw()?;
 
-        for (n, (s, runs)) in chart.series.iter().zip(&data).enumerate() {
-            let color = PALETTE[s.color.unwrap_or(n) % PALETTE.len()];
-            let line = color.stroke_width(2);
-            for run in runs {
-                match s.style {
-                    Style::Points => {}
-                    Style::Dashed => {
-                        ctx.draw_series(DashedLineSeries::new(run.iter().copied(), 8, 5, line))?;
-                    }
-                    Style::Line | Style::LinePoints => {
-                        ctx.draw_series(LineSeries::new(run.iter().copied(), line))?;
-                    }
-                }
-                // A lone point of a line has no line to show: mark it.
-                if matches!(s.style, Style::Points | Style::LinePoints) || run.len() == 1 {
-                    ctx.draw_series(run.iter().map(|&p| Circle::new(p, MARKER, color.filled())))?;
-                }
-            }
-            // The legend entry: an empty series carrying the label, so a
-            // series split into runs (or with nothing drawable) gets one entry.
-            let anno = ctx.draw_series(std::iter::empty::<Circle<(f64, f64), u32>>())?;
-            let glyph = Glyph::of(s.style);
-            let [piece0, piece1] = glyph.pieces;
-            // Transparent parts are not written to the SVG.
-            let line_style = if glyph.line { line } else { TRANSPARENT.into() };
-            let marker_style = if glyph.marker {
-                color.filled()
-            } else {
-                TRANSPARENT.into()
-            };
-            // The closure must return a concrete element: plotters' dynamic
-            // elements would need a 'static backend.
-            anno.label(s.name.as_str()).legend(move |at| {
-                EmptyElement::at(at)
-                    + PathElement::new(piece0.to_vec(), line_style)
-                    + PathElement::new(piece1.to_vec(), line_style)
-                    + Circle::new((10, 0), MARKER, marker_style)
-            });
-        }
+        draw_series(&mut ctx, chart, &data)?;
         if outside.is_some() {
-            // The legend to the right of the plot, drawn in pixels.
-            let x0 = (SIZE.0 - MARGIN + 10) as i32;
-            for (i, s) in chart.series.iter().enumerate() {
-                let color = PALETTE[s.color.unwrap_or(i) % PALETTE.len()];
-                let y = (MARGIN + 2 * CAPTION_SIZE) as i32 + i as i32 * (LEGEND_SIZE as i32 + 7);
-                let glyph = Glyph::of(s.style);
-                if glyph.line {
-                    for piece in glyph.pieces {
-                        let pts: Vec<(i32, i32)> =
-                            piece.iter().map(|&(px, py)| (x0 + px, y + py)).collect();
-                        root.draw(&PathElement::new(pts, color.stroke_width(2)))?;
-                    }
-                }
-                if glyph.marker {
-                    root.draw(&Circle::new((x0 + 10, y), MARKER, color.filled()))?;
-                }
-                let style = ("sans-serif", LEGEND_SIZE).into_text_style(&root).pos(
-                    plotters::style::text_anchor::Pos::new(
-                        plotters::style::text_anchor::HPos::Left,
-                        plotters::style::text_anchor::VPos::Center,
-                    ),
-                );
-                root.draw(&Text::new(s.name.as_str(), (x0 + 28, y), style))?;
-            }
+            draw_legend_outside(&root, chart)?;
         } else if !chart.series.is_empty() {
             ctx.configure_series_labels()
                 .position(corner)
@@ -545,25 +484,113 @@ pub fn render_svg(chart: &Chart) -> Result<String> {
                 .draw()?;
         }
         if empty {
-            let area = ctx.plotting_area();
-            let (w, h) = area.dim_in_pixel();
-            let grey = BLACK.mix(0.6);
-            let style = ("sans-serif", LABEL_SIZE + 3)
-                .into_text_style(area)
-                .color(&grey)
-                .pos(plotters::style::text_anchor::Pos::new(
-                    plotters::style::text_anchor::HPos::Center,
-                    plotters::style::text_anchor::VPos::Center,
-                ));
-            area.strip_coord_spec().draw(&Text::new(
-                "no data",
-                ((w / 2) as i32, (h / 2) as i32),
-                style,
-            ))?;
+            draw_no_data(&ctx)?;
         }
         root.present()?;
     }
     Ok(svg)
+}
+
+/// The chart's coordinates on an SVG.
+type SvgChart<'a, 'b> = ChartContext<'a, SVGBackend<'b>, Cartesian2d<Scale, Scale>>;
+
+/// Draws every series' runs and its legend entry.
+fn draw_series<'a, 'b: 'a>(
+    ctx: &mut SvgChart<'a, 'b>,
+    chart: &Chart,
+    data: &[Vec<Vec<(f64, f64)>>],
+) -> Result<()> {
+    for (n, (s, runs)) in chart.series.iter().zip(data).enumerate() {
+        let color = PALETTE[s.color.unwrap_or(n) % PALETTE.len()];
+        let line = color.stroke_width(2);
+        for run in runs {
+            match s.style {
+                Style::Points => {}
+                Style::Dashed => {
+                    ctx.draw_series(DashedLineSeries::new(run.iter().copied(), 8, 5, line))?;
+                }
+                Style::Line | Style::LinePoints => {
+                    ctx.draw_series(LineSeries::new(run.iter().copied(), line))?;
+                }
+            }
+            // A lone point of a line has no line to show: mark it.
+            if matches!(s.style, Style::Points | Style::LinePoints) || run.len() == 1 {
+                ctx.draw_series(run.iter().map(|&p| Circle::new(p, MARKER, color.filled())))?;
+            }
+        }
+        // The legend entry: an empty series carrying the label, so a
+        // series split into runs (or with nothing drawable) gets one entry.
+        let anno = ctx.draw_series(std::iter::empty::<Circle<(f64, f64), u32>>())?;
+        let glyph = Glyph::of(s.style);
+        let [piece0, piece1] = glyph.pieces;
+        // Transparent parts are not written to the SVG.
+        let line_style = if glyph.line { line } else { TRANSPARENT.into() };
+        let marker_style = if glyph.marker {
+            color.filled()
+        } else {
+            TRANSPARENT.into()
+        };
+        // The closure must return a concrete element: plotters' dynamic
+        // elements would need a 'static backend.
+        anno.label(s.name.as_str()).legend(move |at| {
+            EmptyElement::at(at)
+                + PathElement::new(piece0.to_vec(), line_style)
+                + PathElement::new(piece1.to_vec(), line_style)
+                + Circle::new((10, 0), MARKER, marker_style)
+        });
+    }
+    Ok(())
+}
+
+/// The legend to the right of the plot, drawn in pixels.
+fn draw_legend_outside(
+    root: &DrawingArea<SVGBackend, plotters::coord::Shift>,
+    chart: &Chart,
+) -> Result<()> {
+    let x0 = (SIZE.0 - MARGIN + 10) as i32;
+    for (i, s) in chart.series.iter().enumerate() {
+        let color = PALETTE[s.color.unwrap_or(i) % PALETTE.len()];
+        let y = (MARGIN + 2 * CAPTION_SIZE) as i32 + i as i32 * (LEGEND_SIZE as i32 + 7);
+        let glyph = Glyph::of(s.style);
+        if glyph.line {
+            for piece in glyph.pieces {
+                let pts: Vec<(i32, i32)> =
+                    piece.iter().map(|&(px, py)| (x0 + px, y + py)).collect();
+                root.draw(&PathElement::new(pts, color.stroke_width(2)))?;
+            }
+        }
+        if glyph.marker {
+            root.draw(&Circle::new((x0 + 10, y), MARKER, color.filled()))?;
+        }
+        let style = ("sans-serif", LEGEND_SIZE).into_text_style(root).pos(
+            plotters::style::text_anchor::Pos::new(
+                plotters::style::text_anchor::HPos::Left,
+                plotters::style::text_anchor::VPos::Center,
+            ),
+        );
+        root.draw(&Text::new(s.name.as_str(), (x0 + 28, y), style))?;
+    }
+    Ok(())
+}
+
+/// "no data" in the middle of an empty plot.
+fn draw_no_data(ctx: &SvgChart) -> Result<()> {
+    let area = ctx.plotting_area();
+    let (w, h) = area.dim_in_pixel();
+    let grey = BLACK.mix(0.6);
+    let style = ("sans-serif", LABEL_SIZE + 3)
+        .into_text_style(area)
+        .color(&grey)
+        .pos(plotters::style::text_anchor::Pos::new(
+            plotters::style::text_anchor::HPos::Center,
+            plotters::style::text_anchor::VPos::Center,
+        ));
+    area.strip_coord_spec().draw(&Text::new(
+        "no data",
+        ((w / 2) as i32, (h / 2) as i32),
+        style,
+    ))?;
+    Ok(())
 }
 
 /// The legend sample of a series, relative to its anchor.
@@ -595,7 +622,7 @@ impl Glyph {
 
 /// Writes it atomically (temporary file in the same directory, then rename).
 pub fn write_svg(path: &Path, chart: &Chart) -> Result<()> {
-    crate::output::write_atomic(path, render_svg(chart)?.as_bytes())
+    crate::common::write_atomic(path, render_svg(chart)?.as_bytes())
 }
 
 #[cfg(test)]

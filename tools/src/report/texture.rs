@@ -5,6 +5,7 @@
 //! The figures are the paper's Fig. 10 pair: frame time of the relight
 //! alone, and of the relight plus one view.
 
+use crate::common::Ctx;
 use anyhow::{Context, Result};
 use glam::DVec3;
 use ltm_relight::{Relight, Relighter, Request, TexturedMesh, ViewCamera, Weighting};
@@ -48,8 +49,9 @@ pub fn measure(
     file: &Path,
     (env, light): (&str, &[[f32; 3]]),
     frames: usize,
+    ctx: &Ctx,
 ) -> Result<TexturePoint> {
-    let relighter = Relighter::open_with_limits(file, crate::limits())
+    let relighter = Relighter::open_with_limits(file, ctx.limits())
         .with_context(|| format!("opening {}", file.display()))?;
     // Frame times below are of frames alone, with every column decoded.
     relighter.decode_all()?;

@@ -40,6 +40,7 @@ mod http;
 pub mod params;
 mod state;
 
+use crate::common::{check_files, map_files, Ctx};
 use anyhow::{bail, Context, Result};
 use clap::Args;
 use std::net::{IpAddr, Ipv4Addr, SocketAddr};
@@ -85,19 +86,7 @@ pub struct ViewArgs {
 
 /// The maps in ./assets/envmaps (EXR and HDR, by name), if any.
 fn asset_maps() -> Vec<PathBuf> {
-    let dir = Path::new("assets/envmaps");
-    let Ok(entries) = std::fs::read_dir(dir) else {
-        return Vec::new();
-    };
-    let mut maps: Vec<PathBuf> = entries
-        .filter_map(|e| e.ok().map(|e| e.path()))
-        .filter(|p| {
-            p.extension()
-                .is_some_and(|x| x.eq_ignore_ascii_case("exr") || x.eq_ignore_ascii_case("hdr"))
-        })
-        .collect();
-    maps.sort();
-    maps
+    map_files(Path::new("assets/envmaps")).unwrap_or_default()
 }
 
 /// The `--env` maps, then the asset maps not already given.
@@ -112,19 +101,20 @@ fn map_list(given: &[PathBuf]) -> Vec<PathBuf> {
     maps
 }
 
-pub fn run(a: ViewArgs) -> Result<()> {
+pub fn run(a: ViewArgs, ctx: &Ctx) -> Result<()> {
     let mut inputs: Vec<(&str, &Path)> = a.files.iter().map(|f| ("input", f.as_path())).collect();
     inputs.extend(a.env.iter().map(|m| ("--env", m.as_path())));
     if let Some(r) = &a.reference {
         inputs.push(("--reference", r.as_path()));
     }
-    crate::paths::check_files(&inputs, &[])?;
+    check_files(&inputs, &[])?;
     let maps = map_list(&a.env);
     let viewer = Arc::new(state::Viewer::open(
         &a.files,
         &maps,
         a.reference.as_deref(),
         a.slots as usize,
+        ctx.limits(),
     )?);
     let ip = a.bind.unwrap_or(IpAddr::V4(Ipv4Addr::LOCALHOST));
     let loopback = ip.is_loopback();

@@ -5,7 +5,7 @@
 use super::params::{Client, FrameParams, Lighting};
 use anyhow::{bail, Context, Result};
 use ltm_codec::container::LtmFile;
-use ltm_codec::{RawStore, RowLayout};
+use ltm_codec::{Limits, RawStore, RowLayout};
 use ltm_relight::{
     open_relighter, reference, relative_l2, EnvMap, Frame, FrameStats, Image, Relight, Request,
 };
@@ -128,8 +128,7 @@ fn file_name(p: &Path) -> String {
 }
 
 impl ViewFile {
-    fn open(path: &Path) -> Result<ViewFile> {
-        let limits = crate::limits();
+    fn open(path: &Path, limits: &Limits) -> Result<ViewFile> {
         let relighter =
             open_relighter(path, limits).with_context(|| format!("opening {}", path.display()))?;
         let file = LtmFile::open_with_limits(path, limits)
@@ -200,10 +199,11 @@ impl Viewer {
         maps: &[PathBuf],
         raw: Option<&Path>,
         slots: usize,
+        limits: &Limits,
     ) -> Result<Viewer> {
         let files = files
             .iter()
-            .map(|p| ViewFile::open(p))
+            .map(|p| ViewFile::open(p, limits))
             .collect::<Result<Vec<_>>>()?;
         let maps = maps
             .iter()
@@ -221,7 +221,7 @@ impl Viewer {
             bail!("no environment map: give --env MAP (or run from the repository, where assets/envmaps has some)");
         }
         let raw = match raw {
-            Some(p) => Some((p.to_path_buf(), open_raw(p, &files)?)),
+            Some(p) => Some((p.to_path_buf(), open_raw(p, &files, limits)?)),
             None => None,
         };
         Ok(Viewer {
@@ -377,8 +377,8 @@ impl Viewer {
 }
 
 /// Opens the raw store and checks that it is the matrix of the files.
-fn open_raw(p: &Path, files: &[ViewFile]) -> Result<RawStore> {
-    let raw = RawStore::open_with_limits(p, crate::limits())
+fn open_raw(p: &Path, files: &[ViewFile], limits: &Limits) -> Result<RawStore> {
+    let raw = RawStore::open_with_limits(p, limits)
         .with_context(|| format!("opening raw store {}", p.display()))?;
     let d = raw.dims();
     let size = (d.width() as usize, d.height() as usize);

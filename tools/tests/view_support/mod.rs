@@ -12,16 +12,7 @@ use std::sync::OnceLock;
 use std::time::Duration;
 
 pub fn ltm(args: &[&str]) -> String {
-    let out = Command::new(env!("CARGO_BIN_EXE_ltm"))
-        .args(args)
-        .output()
-        .expect("run ltm");
-    assert!(
-        out.status.success(),
-        "ltm {args:?} failed: {}",
-        String::from_utf8_lossy(&out.stderr)
-    );
-    String::from_utf8_lossy(&out.stdout).into_owned()
+    ltm_testkit::run_ok(env!("CARGO_BIN_EXE_ltm"), args)
 }
 
 pub fn assets() -> PathBuf {

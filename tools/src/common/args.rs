@@ -1,0 +1,132 @@
+//! Argument groups shared by several commands, flattened into their
+//! argument structs: the image outputs and the number of terms per frame.
+
+use anyhow::{Context, Result};
+use clap::Args;
+use ltm_relight::{Image, Relight, Weighting};
+use std::path::{Path, PathBuf};
+use std::str::FromStr;
+
+/// The image outputs of `ltm relight`, `ltm render` and `ltm reference`:
+/// a linear EXR and an optional tone-mapped PNG.
+#[derive(Args)]
+pub struct ImageOutput {
+    /// Output image: 32-bit float linear RGB OpenEXR (`ltm render --views`:
+    /// numbered VIEW-000.exr, ...).
+    #[arg(short, long, value_name = "OUT.exr")]
+    pub output: PathBuf,
+    /// Also write a tone-mapped 8-bit sRGB PNG (numbered like the EXR for
+    /// orbits).
+    #[arg(long, value_name = "OUT.png")]
+    pub png: Option<PathBuf>,
+    /// Exposure of the PNG in stops: values are multiplied by 2^EV before
+    /// clamping to [0, 1].
+    #[arg(
+        long,
+        value_name = "EV",
+        default_value_t = 0.0,
+        allow_hyphen_values = true,
+        value_parser = super::ranges::exposure
+    )]
+    pub exposure: f32,
+}
+
+impl ImageOutput {
+    /// The outputs as (role, path) pairs for [`super::check_files`].
+    pub fn roles(&self) -> Vec<(&'static str, &Path)> {
+        let mut outputs = vec![("-o", self.output.as_path())];
+        if let Some(png) = &self.png {
+            outputs.push(("--png", png.as_path()));
+        }
+        outputs
+    }
+
+    /// Writes `image` as the EXR and, when asked for, the PNG.
+    pub fn write(&self, image: &Image) -> Result<()> {
+        self.write_to(image, &self.output, self.png.as_deref())
+    }
+
+    /// Writes `image` as the EXR `exr` and, when given, the PNG `png` at
+    /// this exposure.
+    pub fn write_to(&self, image: &Image, exr: &Path, png: Option<&Path>) -> Result<()> {
+        image
+            .write_exr(exr)
+            .with_context(|| format!("writing {}", exr.display()))?;
+        if let Some(png) = png {
+            image
+                .write_png(png, self.exposure)
+                .with_context(|| format!("writing {}", png.display()))?;
+        }
+        Ok(())
+    }
+}
+
+/// How many terms a frame uses: a positive count, or `all`.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Terms(pub usize);
+
+impl Terms {
+    /// `all`.
+    pub const ALL: Terms = Terms(usize::MAX);
+}
+
+impl FromStr for Terms {
+    type Err = String;
+    fn from_str(s: &str) -> std::result::Result<Terms, String> {
+        if s == "all" {
+            return Ok(Terms::ALL);
+        }
+        match s.parse::<usize>() {
+            Ok(0) | Err(_) => Err(format!("terms '{s}' must be a positive integer or 'all'")),
+            Ok(n) => Ok(Terms(n)),
+        }
+    }
+}
+
+/// The terms of a frame: `--terms` and `--weighting`.
+#[derive(Args)]
+pub struct TermsArgs {
+    /// Wavelet lights per frame (non-linear approximation), or `all`.
+    /// Values above the number of lights use them all. For a pca file: the
+    /// first N eigen-transports (at most the rank stored). [default: 200
+    /// wavelet lights; every eigen-transport of a pca file]
+    #[arg(long)]
+    pub terms: Option<Terms>,
+    /// Priority of wavelet lights: unweighted |c|, transport |c|·‖T_j‖, or
+    /// area |c|·support area (Ng et al. 2003).
+    #[arg(long, default_value = "unweighted")]
+    pub weighting: Weighting,
+}
+
+/// Wavelet lights per frame when `--terms` is not given.
+pub const DEFAULT_WAVELET_TERMS: usize = 200;
+
+impl TermsArgs {
+    /// The number of terms to request from `relighter`. A linear basis (a
+    /// pca file) refuses more terms than it stores; `all` and the default
+    /// mean all of them there.
+    pub fn resolve(&self, relighter: &dyn Relight) -> usize {
+        let linear = relighter.max_terms() < relighter.lights();
+        match self.terms {
+            Some(Terms::ALL) => relighter.max_terms(),
+            Some(Terms(t)) => t,
+            None if linear => relighter.max_terms(),
+            None => DEFAULT_WAVELET_TERMS,
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn terms_are_positive_or_all() {
+        assert_eq!("all".parse::<Terms>(), Ok(Terms::ALL));
+        assert_eq!("7".parse::<Terms>(), Ok(Terms(7)));
+        for bad in ["0", "-1", "x", "", "1.5"] {
+            let e = bad.parse::<Terms>().unwrap_err();
+            assert!(e.contains(&format!("'{bad}'")), "{e}");
+        }
+    }
+}

@@ -1,0 +1,20 @@
+//! What the commands share: the run's context, argument groups and value
+//! parsers, file checks and atomic outputs, progress bars, the assets and
+//! the bake cache.
+
+mod args;
+mod assets;
+mod bake_cache;
+mod ctx;
+mod output;
+mod paths;
+pub mod progress;
+pub mod ranges;
+pub mod size;
+
+pub use args::{ImageOutput, TermsArgs};
+pub use assets::{assets_dir, auto_exposure, env_maps, load_maps, map_files};
+pub use bake_cache::bake_cached;
+pub use ctx::Ctx;
+pub use output::write_atomic;
+pub use paths::{check_files, partial};

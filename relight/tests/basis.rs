@@ -3,7 +3,8 @@
 //! behind one `dyn Relight`.
 
 use ltm_codec::compress::{compress, CompressOptions};
-use ltm_codec::{cubemap, sh, Dims, PcaBasis, RawStore, ShProjection};
+use ltm_codec::baseline::sh;
+use ltm_codec::{cubemap, Dims, PcaBasis, RawStore, ShProjection};
 use ltm_relight::{
     reference, relative_l2, BasisRelighter, Frame, Relight, Relighter, Request, Weighting,
 };

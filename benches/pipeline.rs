@@ -149,7 +149,15 @@ fn code_column(
             e >= tau_sq && e > 0.0
         })
         .collect();
-    quant::quantize(coefs, 1, &kept, groups, depth, bits, seed, j)
+    quant::quantize(
+        coefs,
+        1,
+        &kept,
+        groups,
+        depth,
+        bits,
+        quant::Dither { seed, column: j },
+    )
 }
 
 fn quantize(c: &mut Criterion) {

@@ -2,12 +2,12 @@
 //! a 512×512 image, in pixels per second. `rgb_inverse_256`: a relighting
 //! frame's inverse column steps (every level of a 256×256 RGB image, LeGall
 //! 5/3 and D4) as three single-plane steps per level against one step of
-//! the interleaved `[r, g, b, 0]` pixels (`inverse_step_lanes`), and as a
+//! the interleaved `[r, g, b, 0]` pixels (a four-lane `PlaneMut`), and as a
 //! frame runs them (`frame_steps`: the row-skipping steps, every row live,
 //! the last into a second buffer).
 
 use criterion::{criterion_group, criterion_main, BenchmarkId, Criterion, Throughput};
-use ltm::codec::wavelet::{self, max_levels};
+use ltm::codec::wavelet::{self, max_levels, PlaneMut, RowMode};
 use ltm::codec::Filter;
 
 const SIDE: usize = 512;
@@ -46,12 +46,14 @@ fn bench(c: &mut Criterion) {
         });
         group.bench_function(BenchmarkId::new("forward_step", filter), |b| {
             b.iter(|| {
-                wavelet::forward_step(filter, &mut data, SIDE, SIDE, SIDE, &mut work).unwrap()
+                let plane = PlaneMut::image(&mut data, SIDE, SIDE, 1).unwrap();
+                wavelet::forward_step(filter, plane, &mut work).unwrap()
             })
         });
         group.bench_function(BenchmarkId::new("inverse_step", filter), |b| {
             b.iter(|| {
-                wavelet::inverse_step(filter, &mut data, SIDE, SIDE, SIDE, &mut work).unwrap()
+                let plane = PlaneMut::image(&mut data, SIDE, SIDE, 1).unwrap();
+                wavelet::inverse_step(filter, plane, &mut work, RowMode::Dense).unwrap()
             })
         });
     }
@@ -82,7 +84,8 @@ fn rgb_inverse(c: &mut Criterion) {
                     d.copy_from_slice(p);
                     for level in (0..levels).rev() {
                         let (w, h) = wavelet::band_size(S, S, level);
-                        wavelet::inverse_step(filter, d, S, w, h, &mut work).unwrap();
+                        let plane = PlaneMut::new(d, S, w, h, 1).unwrap();
+                        wavelet::inverse_step(filter, plane, &mut work, RowMode::Dense).unwrap();
                     }
                 }
             })
@@ -93,7 +96,8 @@ fn rgb_inverse(c: &mut Criterion) {
                 inter.copy_from_slice(&pixels);
                 for level in (0..levels).rev() {
                     let (w, h) = wavelet::band_size(S, S, level);
-                    wavelet::inverse_step_lanes(filter, &mut inter, S, w, h, 4, &mut work).unwrap();
+                    let plane = PlaneMut::new(&mut inter, S, w, h, 4).unwrap();
+                    wavelet::inverse_step(filter, plane, &mut work, RowMode::Dense).unwrap();
                 }
             })
         });
@@ -108,21 +112,17 @@ fn rgb_inverse(c: &mut Criterion) {
                 flags.fill(true);
                 for level in (1..levels).rev() {
                     let (w, h) = wavelet::band_size(S, S, level);
-                    wavelet::inverse_step_lanes_sparse(
-                        filter, &mut inter, S, w, h, 4, &mut work, &mut flags,
-                    )
-                    .unwrap();
+                    let plane = PlaneMut::new(&mut inter, S, w, h, 4).unwrap();
+                    let rows = RowMode::sparse(&mut flags);
+                    wavelet::inverse_step(filter, plane, &mut work, rows).unwrap();
                 }
+                let plane = PlaneMut::image(&mut inter, S, S, 4).unwrap();
                 if filter.is_lifting() {
-                    wavelet::inverse_step_lanes_sparse_into(
-                        filter, &mut inter, S, S, 4, &mut out, &mut flags,
-                    )
-                    .unwrap();
+                    let rows = RowMode::sparse_into(&mut flags, &mut out);
+                    wavelet::inverse_step(filter, plane, &mut [], rows).unwrap();
                 } else {
-                    wavelet::inverse_step_lanes_sparse(
-                        filter, &mut inter, S, S, S, 4, &mut work, &mut flags,
-                    )
-                    .unwrap();
+                    let rows = RowMode::sparse(&mut flags);
+                    wavelet::inverse_step(filter, plane, &mut work, rows).unwrap();
                 }
             })
         });

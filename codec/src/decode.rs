@@ -8,7 +8,7 @@ use crate::container::{LtmFile, Meta};
 use crate::empty::EmptyRows;
 use crate::error::{Error, Result};
 use crate::quant::{decode_scale, levels, scale_groups, BandWeights};
-use crate::wavelet::{self, band_size};
+use crate::wavelet::{self, band_size, PlaneMut, RowMode};
 
 /// Scales above this are dequantized in f64: `q·s` in f32 could overflow
 /// (`|q| < 2^15`). The encoder never writes one (its matrices have norms of
@@ -187,57 +187,28 @@ impl ColumnDecoder {
         Ok((w, bw, bh))
     }
 
-    /// One inverse column step from depth `level` to `level − 1`.
-    pub fn inverse_step(&self, level: u32, plane: &mut [f32], work: &mut [f32]) -> Result<()> {
-        let (w, bw, bh) = self.step_band(level)?;
-        wavelet::inverse_step(self.meta.col_filter, plane, w, bw, bh, work)
-    }
-
-    /// [`ColumnDecoder::inverse_step`] on `lanes` interleaved planes at once
-    /// (bit-identical to stepping each alone); `work` needs `lanes ·
-    /// width · height` values.
-    pub fn inverse_step_lanes(
+    /// One inverse column step from depth `level` to `level − 1` of `lanes`
+    /// interleaved planes (bit-identical to stepping each alone), with the
+    /// rows filtered as `rows` says ([`wavelet::inverse_step`]); `work`
+    /// needs `lanes · width · height` values.
+    pub fn inverse_step(
         &self,
         level: u32,
         planes: &mut [f32],
         lanes: usize,
         work: &mut [f32],
+        rows: RowMode<'_>,
     ) -> Result<()> {
         let (w, bw, bh) = self.step_band(level)?;
-        wavelet::inverse_step_lanes(self.meta.col_filter, planes, w, bw, bh, lanes, work)
-    }
-
-    /// [`ColumnDecoder::inverse_step_lanes`] skipping image rows that are
-    /// zero: `nonzero` holds one flag per image row (see
-    /// [`wavelet::inverse_step_lanes_sparse`]), updated for the rows the
-    /// step writes. Equal to the dense step as f32 values.
-    pub fn inverse_step_lanes_sparse(
-        &self,
-        level: u32,
-        planes: &mut [f32],
-        lanes: usize,
-        work: &mut [f32],
-        nonzero: &mut [bool],
-    ) -> Result<()> {
-        let (w, bw, bh) = self.step_band(level)?;
-        wavelet::inverse_step_lanes_sparse(
-            self.meta.col_filter,
-            planes,
-            w,
-            bw,
-            bh,
-            lanes,
-            work,
-            nonzero,
-        )
+        let plane = PlaneMut::new(planes, w, bw, bh, lanes)?;
+        wavelet::inverse_step(self.meta.col_filter, plane, work, rows)
     }
 
     /// The last inverse step (from depth 1, whose region is the whole
-    /// image) as [`ColumnDecoder::inverse_step_lanes_sparse`]. With a
-    /// lifting column filter the result goes to `out` in one pass and
-    /// `planes` is left as scratch (see
-    /// [`wavelet::inverse_step_lanes_sparse_into`]); with the others the
-    /// step runs in place in `planes`, with `out` as its scratch. Returns
+    /// image), skipping zero rows as [`RowMode::Sparse`] says of
+    /// `nonzero`. With a lifting column filter the result goes to `out` in
+    /// one pass and `planes` is left as scratch; with the others the step
+    /// runs in place in `planes`, with `out` as its scratch. Returns
     /// whether the result is in `out`.
     pub fn last_inverse_step_lanes_sparse(
         &self,
@@ -246,15 +217,14 @@ impl ColumnDecoder {
         out: &mut [f32],
         nonzero: &mut [bool],
     ) -> Result<bool> {
-        let filter = self.meta.col_filter;
-        if !filter.is_lifting() {
-            self.inverse_step_lanes_sparse(1, planes, lanes, out, nonzero)?;
-            return Ok(false);
-        }
-        let (w, bw, bh) = self.step_band(1)?;
-        debug_assert_eq!(w, bw);
-        wavelet::inverse_step_lanes_sparse_into(filter, planes, bw, bh, lanes, out, nonzero)?;
-        Ok(true)
+        let into = self.meta.col_filter.is_lifting();
+        let (work, rows) = if into {
+            (&mut [][..], RowMode::sparse_into(nonzero, out))
+        } else {
+            (out, RowMode::sparse(nonzero))
+        };
+        self.inverse_step(1, planes, lanes, work, rows)?;
+        Ok(into)
     }
 
     /// Decodes channel `channel` of a column into `plane` (overwritten), in
@@ -287,7 +257,7 @@ impl ColumnDecoder {
         self.accumulate(col, channel, 1.0, plane);
         self.unweight(col.depth, plane);
         for level in (1..=col.depth).rev() {
-            self.inverse_step(level, plane, work)?;
+            self.inverse_step(level, plane, 1, work, RowMode::Dense)?;
         }
         if let Some(e) = &self.empty_rows {
             e.zero(plane);

@@ -36,6 +36,16 @@ pub fn dither(seed: u64, column: u32, index: u32, channel: u32) -> f32 {
     (z >> 40) as f32 / (1u64 << 24) as f32
 }
 
+/// Which dither stream a column is quantized with: [`dither`]'s `seed`
+/// and `column`.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Dither {
+    /// The compressor's seed.
+    pub seed: u64,
+    /// The column's index.
+    pub column: u32,
+}
+
 /// Scale group of every position of a `width` × `height` column image at
 /// `depth`: 0 in the low band (the whole image at depth 0), `k` in the detail
 /// bands of level `k` (1 = finest). Each group has its own quantizer scale, so
@@ -75,10 +85,10 @@ pub fn encode_scale(s: f32) -> u16 {
 /// column transform's layout at `depth`). Each scale group (`groups`, from
 /// [`scale_groups`]) and channel gets one log-coded scale, its largest kept
 /// magnitude; values become `floor(u/s·Q + d)` with `Q = levels(bits)` and
-/// `d` the dither of (`seed`, `column`, position, channel). Positions whose
-/// every channel is below half a step are dropped (dithering them costs
-/// more error than dropping them), as are positions that quantize to zero.
-#[allow(clippy::too_many_arguments)]
+/// `d` the dither of (the [`Dither`]'s `seed` and `column`, position,
+/// channel). Positions whose every channel is below half a step are dropped
+/// (dithering them costs more error than dropping them), as are positions
+/// that quantize to zero.
 pub fn quantize(
     coefs: &[f32],
     channels: usize,
@@ -86,8 +96,7 @@ pub fn quantize(
     groups: &[u8],
     depth: u32,
     bits: u32,
-    seed: u64,
-    column: u32,
+    Dither { seed, column }: Dither,
 ) -> SparseColumn {
     let p = coefs.len() / channels.max(1);
     let c_n = channels;

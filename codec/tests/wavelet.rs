@@ -1,7 +1,7 @@
 //! The wavelet filter bank against PyWavelets fixtures, perfect
 //! reconstruction, energy, vanishing moments and random sizes.
 
-use ltm_codec::wavelet::{self, band_size, max_levels};
+use ltm_codec::wavelet::{self, band_size, max_levels, PlaneMut, RowMode};
 use ltm_codec::Filter;
 use proptest::prelude::*;
 use serde::Deserialize;
@@ -263,7 +263,8 @@ fn separable_step_matches_scalar_rows_then_columns() {
             let x = noise(w * h, 7);
             let mut step = x.clone();
             let mut work = vec![0.0; w * h];
-            wavelet::forward_step(filter, &mut step, w, w, h, &mut work).unwrap();
+            let plane = PlaneMut::image(&mut step, w, h, 1).unwrap();
+            wavelet::forward_step(filter, plane, &mut work).unwrap();
 
             let mut naive = x.clone();
             let mut tmp = vec![0.0; w.max(h)];
@@ -305,7 +306,8 @@ fn single_steps_compose_to_full_transform_inside_a_larger_image() {
         let mut data = x.clone();
         let mut work = vec![0.0; w * h];
         let (rw, rh) = band_size(w, h, 1);
-        wavelet::forward_step(filter, &mut data, w, rw, rh, &mut work).unwrap();
+        let plane = PlaneMut::new(&mut data, w, rw, rh, 1).unwrap();
+        wavelet::forward_step(filter, plane, &mut work).unwrap();
         for y in 0..h {
             for xx in 0..w {
                 if y >= rh || xx >= rw {
@@ -313,7 +315,8 @@ fn single_steps_compose_to_full_transform_inside_a_larger_image() {
                 }
             }
         }
-        wavelet::inverse_step(filter, &mut data, w, rw, rh, &mut work).unwrap();
+        let plane = PlaneMut::new(&mut data, w, rw, rh, 1).unwrap();
+        wavelet::inverse_step(filter, plane, &mut work, RowMode::Dense).unwrap();
         let err = data
             .iter()
             .zip(&x)
@@ -329,8 +332,32 @@ fn bad_arguments_are_errors() {
     assert!(wavelet::forward(Filter::Haar, &mut data, 4, 4, 3, &mut work).is_err());
     assert!(wavelet::forward(Filter::Haar, &mut data, 4, 5, 1, &mut work).is_err());
     assert!(wavelet::forward(Filter::Haar, &mut data, 4, 4, 1, &mut work[..8]).is_err());
-    assert!(wavelet::forward_step(Filter::Haar, &mut data, 2, 4, 4, &mut work).is_err());
-    assert!(wavelet::forward_step(Filter::Haar, &mut data, 4, 0, 4, &mut work).is_err());
+    assert!(PlaneMut::new(&mut data, 2, 4, 4, 1).is_err());
+    assert!(PlaneMut::new(&mut data, 4, 0, 4, 1).is_err());
+    assert!(PlaneMut::new(&mut data, 4, 4, 4, 0).is_err());
+    assert!(PlaneMut::new(&mut data, 4, 4, 4, 2).is_err());
+    assert!(PlaneMut::new(&mut data, usize::MAX / 2, 4, 4, 1).is_err());
+    /// A step of the region `w` × 4 of a 4 × 4 image.
+    fn step(
+        data: &mut [f32],
+        w: usize,
+        work: &mut [f32],
+        rows: RowMode<'_>,
+    ) -> ltm_codec::Result<()> {
+        let plane = PlaneMut::new(data, 4, w, 4, 1).unwrap();
+        wavelet::inverse_step(Filter::Haar, plane, work, rows)
+    }
+    let (mut flags, mut out) = (vec![true; 4], vec![0.0; 16]);
+    assert!(step(&mut data, 4, &mut work[..15], RowMode::Dense).is_err());
+    assert!(step(&mut data, 4, &mut work, RowMode::sparse(&mut flags[..3])).is_err());
+    let into = RowMode::sparse_into(&mut flags, &mut out[..15]);
+    assert!(step(&mut data, 4, &mut [], into).is_err());
+    let into = RowMode::sparse_into(&mut flags, &mut out);
+    assert!(step(&mut data, 2, &mut [], into).is_err());
+    let into = RowMode::sparse_into(&mut flags, &mut out);
+    assert!(step(&mut data, 4, &mut [], into).is_ok());
+    let plane = PlaneMut::new(&mut data, 2, 2, 2, 4).unwrap();
+    assert!(wavelet::forward_step(Filter::Haar, plane, &mut work).is_err());
     assert_eq!(max_levels(1, 1), 0);
     assert_eq!(max_levels(640, 480), 10);
     assert_eq!(max_levels(97, 61), 7);
@@ -361,8 +388,8 @@ proptest! {
     }
 }
 
-/// `inverse_step_lanes` on interleaved images gives every image exactly the
-/// bits `inverse_step` gives it alone: every filter, odd and even sizes,
+/// `inverse_step` on a plane of interleaved images gives every image exactly
+/// the bits it gives the image alone: every filter, odd and even sizes,
 /// 1 to 4 lanes, strides wider than the region, values over 1e-6..1e5, and
 /// a region larger than the parallel threshold.
 #[test]
@@ -404,11 +431,12 @@ fn interleaved_inverse_steps_match_single_images_bit_for_bit() {
                     .map(|i| images[i % lanes][i / lanes])
                     .collect();
                 let mut work = vec![0.0; stride * h * lanes];
-                wavelet::inverse_step_lanes(filter, &mut inter, stride, w, h, lanes, &mut work)
-                    .unwrap();
+                let plane = PlaneMut::new(&mut inter, stride, w, h, lanes).unwrap();
+                wavelet::inverse_step(filter, plane, &mut work, RowMode::Dense).unwrap();
                 for (c, image) in images.iter().enumerate() {
                     let mut single = image.clone();
-                    wavelet::inverse_step(filter, &mut single, stride, w, h, &mut work).unwrap();
+                    let plane = PlaneMut::new(&mut single, stride, w, h, 1).unwrap();
+                    wavelet::inverse_step(filter, plane, &mut work, RowMode::Dense).unwrap();
                     for (i, v) in single.iter().enumerate() {
                         assert_eq!(
                             v.to_bits(),
@@ -429,7 +457,7 @@ fn interleaved_inverse_steps_match_single_images_bit_for_bit() {
 /// exact and conservative flags, and the scratch poisoned with NaN so that
 /// a skipped row that was read would show. Flags stay conservative: a row
 /// marked zero is zero. The last step is also run into a second buffer
-/// (poisoned too) with [`wavelet::inverse_step_lanes_sparse_into`].
+/// (poisoned too) with [`RowMode::sparse_into`].
 #[test]
 fn row_skipping_inverse_steps_equal_the_dense_ones() {
     let mut seed = 0x0bad_cafe_1234_5678u64;
@@ -481,26 +509,17 @@ fn row_skipping_inverse_steps_equal_the_dense_ones() {
                     let mut work = vec![0.0; w * h * lanes];
                     for level in (0..max_levels(w, h)).rev() {
                         let (bw, bh) = band_size(w, h, level);
-                        wavelet::inverse_step_lanes(
-                            filter, &mut dense, w, bw, bh, lanes, &mut work,
-                        )
-                        .unwrap();
+                        let plane = PlaneMut::new(&mut dense, w, bw, bh, lanes).unwrap();
+                        wavelet::inverse_step(filter, plane, &mut work, RowMode::Dense).unwrap();
                         work.fill(f32::NAN);
                         if level == 0 {
                             // The whole image, into a second buffer.
                             let mut into_flags = flags.clone();
                             let mut scratch = data.clone();
                             let mut out = vec![f32::NAN; data.len()];
-                            wavelet::inverse_step_lanes_sparse_into(
-                                filter,
-                                &mut scratch,
-                                w,
-                                h,
-                                lanes,
-                                &mut out,
-                                &mut into_flags,
-                            )
-                            .unwrap();
+                            let plane = PlaneMut::image(&mut scratch, w, h, lanes).unwrap();
+                            let rows = RowMode::sparse_into(&mut into_flags, &mut out);
+                            wavelet::inverse_step(filter, plane, &mut [], rows).unwrap();
                             for (i, (a, b)) in dense.iter().zip(&out).enumerate() {
                                 let what = format!("into: {filter} {w}x{h} {lanes} lanes, pattern {pattern}, sample {i}");
                                 assert!(a == b, "{what}: dense {a} vs into {b}");
@@ -510,10 +529,9 @@ fn row_skipping_inverse_steps_equal_the_dense_ones() {
                                 );
                             }
                         }
-                        wavelet::inverse_step_lanes_sparse(
-                            filter, &mut data, w, bw, bh, lanes, &mut work, &mut flags,
-                        )
-                        .unwrap();
+                        let plane = PlaneMut::new(&mut data, w, bw, bh, lanes).unwrap();
+                        let rows = RowMode::sparse(&mut flags);
+                        wavelet::inverse_step(filter, plane, &mut work, rows).unwrap();
                         for (i, (a, b)) in dense.iter().zip(&data).enumerate() {
                             let what = format!("{filter} {w}x{h} {lanes} lanes, pattern {pattern}, level {level}, sample {i}");
                             assert!(a == b, "{what}: dense {a} vs skipping {b}");

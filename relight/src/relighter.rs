@@ -26,7 +26,7 @@ use crate::image_io::Image;
 use crate::kernel::{self, Kernel};
 use crate::select::{select, support_area, Weighting};
 use ltm_codec::container::{LtmFile, Meta};
-use ltm_codec::wavelet::row_forward;
+use ltm_codec::wavelet::{row_forward, RowMode};
 use ltm_codec::{ColumnDecoder, Limits};
 use rayon::prelude::*;
 use std::path::Path;
@@ -325,12 +325,12 @@ impl Relighter {
                     std::mem::swap(&mut s.pixels, &mut s.work);
                 }
             } else if depth > 0 {
-                self.decoder.inverse_step_lanes_sparse(
+                self.decoder.inverse_step(
                     depth as u32,
                     s.pixels.as_flattened_mut(),
                     LANES,
                     s.work.as_flattened_mut(),
-                    &mut s.rows,
+                    RowMode::sparse(&mut s.rows),
                 )?;
             }
             stats.inverse += ti.elapsed();

@@ -17,7 +17,7 @@ use crate::decode::ColumnDecoder;
 use crate::dims::Dims;
 use crate::entropy::ColumnShape;
 use crate::error::{Error, Result};
-use crate::quant::{decode_scale, levels, quantize, scale_groups, BandWeights};
+use crate::quant::{decode_scale, levels, quantize, scale_groups, BandWeights, Dither};
 use crate::wavelet::{self, max_levels};
 use rayon::prelude::*;
 use std::ops::Range;
@@ -448,8 +448,10 @@ impl<'t> Coder<'t> {
             &self.groups[depth as usize],
             depth,
             self.opts.bits,
-            self.opts.seed,
-            j as u32,
+            Dither {
+                seed: self.opts.seed,
+                column: j as u32,
+            },
         )
     }
 

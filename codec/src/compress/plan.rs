@@ -486,7 +486,7 @@ pub(super) fn quantization_error(x: f64, step: f64) -> Option<f64> {
 mod tests {
     use super::super::analysis::{depth_stats, tests::analysis};
     use super::*;
-    use crate::quant::{decode_scale, quantize};
+    use crate::quant::{decode_scale, quantize, Dither};
 
     /// One channel; one scale group of peak 4 over 4 values: Δ = 4/Q, and
     /// Q = 1 at 2 bits, so Δ = 4.
@@ -571,7 +571,15 @@ mod tests {
                 let kept: Vec<u32> = (0..p as u32)
                     .filter(|&i| energy(i as usize) >= tau_sq)
                     .collect();
-                let col = quantize(&coefs, 1, &kept, &groups, 0, bits, 1, 0);
+                let col = quantize(
+                    &coefs,
+                    1,
+                    &kept,
+                    &groups,
+                    0,
+                    bits,
+                    Dither { seed: 1, column: 0 },
+                );
                 let step = decode_scale(col.scale_codes[0]) / levels(bits);
                 let mut decoded = vec![0.0f32; p];
                 for (&i, &v) in col.indices.iter().zip(&col.values) {

@@ -1,6 +1,7 @@
 //! Separable 2D steps in the Mallat layout, and the multi-level transforms
 //! built on them.
 
+use super::plane::{PlaneMut, RowMode};
 use super::{lifting, periodic, Filter, Kind};
 use crate::error::{Error, Result};
 use rayon::prelude::*;
@@ -19,11 +20,13 @@ pub(crate) struct Rows<'a> {
     pub rows: usize,
 }
 
-/// A read-only view of [`Rows`].
+/// `rows` rows of `w` used values each, `stride` apart, in `data`, to read.
+#[derive(Clone, Copy)]
 pub(crate) struct RowsRef<'a> {
-    data: &'a [f32],
-    stride: usize,
-    w: usize,
+    pub data: &'a [f32],
+    pub stride: usize,
+    pub w: usize,
+    pub rows: usize,
 }
 
 impl<'a> Rows<'a> {
@@ -41,11 +44,21 @@ impl<'a> Rows<'a> {
             data: self.data,
             stride: self.stride,
             w: self.w,
+            rows: self.rows,
         }
     }
 }
 
-impl RowsRef<'_> {
+impl<'a> RowsRef<'a> {
+    pub fn new(data: &'a [f32], stride: usize, w: usize, rows: usize) -> RowsRef<'a> {
+        RowsRef {
+            data,
+            stride,
+            w,
+            rows,
+        }
+    }
+
     #[inline]
     pub fn row(&self, i: usize) -> &[f32] {
         &self.data[i * self.stride..][..self.w]
@@ -92,39 +105,6 @@ pub fn max_levels(width: usize, height: usize) -> u32 {
     usize::BITS - (n - 1).leading_zeros()
 }
 
-fn check_region(data: &[f32], stride: usize, w: usize, h: usize, work: &[f32]) -> Result<()> {
-    if w == 0 || h == 0 {
-        return Err(Error::range(
-            "wavelet region size",
-            format!("{w}x{h}"),
-            "at least 1x1",
-        ));
-    }
-    if stride < w {
-        return Err(Error::range(
-            "wavelet row stride",
-            stride,
-            format!(">= width {w}"),
-        ));
-    }
-    let need = (h - 1) * stride + w;
-    if data.len() < need {
-        return Err(Error::BufferTooSmall {
-            what: "wavelet data",
-            len: data.len(),
-            need,
-        });
-    }
-    if work.len() < w * h {
-        return Err(Error::BufferTooSmall {
-            what: "wavelet scratch",
-            len: work.len(),
-            need: w * h,
-        });
-    }
-    Ok(())
-}
-
 fn forward_row(filter: Filter, x: &[f32], out: &mut [f32]) {
     match filter.kind() {
         Kind::Periodic(t) => periodic::forward_1d(t, x, out),
@@ -146,18 +126,20 @@ fn inverse_row_lanes<const L: usize>(filter: Filter, bands: &[[f32; L]], out: &m
     }
 }
 
-/// One forward step on the top-left `w` × `h` region of `data` (rows
-/// `stride` apart): rows are split into low | high halves (if `w >= 2`),
-/// then columns (if `h >= 2`). `work` needs `w · h` values.
-pub fn forward_step(
-    filter: Filter,
-    data: &mut [f32],
-    stride: usize,
-    w: usize,
-    h: usize,
-    work: &mut [f32],
-) -> Result<()> {
-    check_region(data, stride, w, h, work)?;
+/// One forward step on the region of `plane` (one lane): rows are split
+/// into low | high halves (if `width >= 2`), then columns (if
+/// `height >= 2`). `work` needs `width · height` values.
+pub fn forward_step(filter: Filter, plane: PlaneMut<'_>, work: &mut [f32]) -> Result<()> {
+    if plane.lanes != 1 {
+        return Err(Error::range(
+            "forward step lanes",
+            plane.lanes,
+            "1 (interleaved images are transformed one at a time)",
+        ));
+    }
+    plane.check_scratch("wavelet scratch", work)?;
+    let (stride, w, h) = (plane.stride, plane.width, plane.height);
+    let data = plane.data;
     let parallel = w * h >= PARALLEL_MIN;
     let work = &mut work[..w * h];
     // Horizontal: data rows -> work rows.
@@ -185,39 +167,62 @@ pub fn forward_step(
     Ok(())
 }
 
-/// One inverse step: the exact inverse of [`forward_step`] on the same region.
+/// One inverse step: the exact inverse of [`forward_step`] on the region of
+/// `plane`, on every lane of it (each interleaved image gets exactly the
+/// arithmetic it would get alone, so the results are bit-identical to
+/// stepping the images one by one; the vertical pass runs once over all
+/// lanes, the horizontal one per row and lane).
+///
+/// `rows` says which rows are filtered: all of them ([`RowMode::Dense`]),
+/// or only those that may be nonzero ([`RowMode::Sparse`], in place or
+/// into a second buffer). `work` is scratch of [`PlaneMut::samples`]
+/// values (unused, and may be empty, for a sparse step into a second
+/// buffer).
 pub fn inverse_step(
     filter: Filter,
-    data: &mut [f32],
-    stride: usize,
-    w: usize,
-    h: usize,
+    plane: PlaneMut<'_>,
     work: &mut [f32],
+    rows: RowMode<'_>,
 ) -> Result<()> {
-    inverse_step_lanes(filter, data, stride, w, h, 1, work)
+    let RowMode::Sparse { nonzero, out } = rows else {
+        plane.check_scratch("wavelet scratch", work)?;
+        dense_step(filter, plane, work);
+        return Ok(());
+    };
+    if nonzero.len() < plane.height {
+        return Err(Error::BufferTooSmall {
+            what: "nonzero row flags",
+            len: nonzero.len(),
+            need: plane.height,
+        });
+    }
+    let nonzero = &mut nonzero[..plane.height];
+    match out {
+        None => {
+            plane.check_scratch("wavelet scratch", work)?;
+            sparse_step(filter, plane, work, nonzero);
+        }
+        Some(out) => {
+            if plane.stride != plane.width {
+                return Err(Error::range(
+                    "row stride of a step into a second buffer",
+                    plane.stride,
+                    format!("{} (the width: a whole image)", plane.width),
+                ));
+            }
+            plane.check_scratch("wavelet output", out)?;
+            sparse_step_into(filter, plane, out, nonzero);
+        }
+    }
+    Ok(())
 }
 
-/// [`inverse_step`] on `lanes` interleaved images at once: pixel `(x, y)` of
-/// image `c` is `data[(y·stride + x)·lanes + c]` (`stride` and `w` count
-/// pixels). Every image gets exactly the arithmetic [`inverse_step`] would
-/// give it alone, so the results are bit-identical; the vertical pass runs
-/// once over all lanes, the horizontal one per row and lane. `work` needs
-/// `w · h · lanes` values.
-pub fn inverse_step_lanes(
-    filter: Filter,
-    data: &mut [f32],
-    stride: usize,
-    w: usize,
-    h: usize,
-    lanes: usize,
-    work: &mut [f32],
-) -> Result<()> {
-    if lanes == 0 {
-        return Err(Error::range("interleaved lanes", lanes, "at least 1"));
-    }
-    check_region(data, stride * lanes, w * lanes, h, work)?;
+/// [`RowMode::Dense`]: every row, in place (`work` checked).
+fn dense_step(filter: Filter, plane: PlaneMut<'_>, work: &mut [f32]) {
+    let (w, h, lanes) = (plane.width, plane.height, plane.lanes);
     let parallel = w * h >= PARALLEL_MIN / lanes;
-    let (wl, sl) = (w * lanes, stride * lanes);
+    let (wl, sl) = (plane.row_len(), plane.row_stride());
+    let data = plane.data;
     let work = &mut work[..wl * h];
     // Vertical: data rows -> work rows. Each sample of a row is filtered on
     // its own, so the lanes need no special care. Lifting leaves the rows in
@@ -241,7 +246,6 @@ pub fn inverse_step_lanes(
     for_each_row(&mut dst, parallel, |k, out| {
         synthesize_row(filter, w, lanes, src.row(signal_row(k, h, band_order)), out)
     });
-    Ok(())
 }
 
 /// Signal row `k` of a vertical synthesis's output in `work`: lifting
@@ -284,101 +288,56 @@ fn synthesize_row(filter: Filter, w: usize, lanes: usize, bands: &[f32], out: &m
     }
 }
 
-/// [`inverse_step_lanes`] that skips rows known to be zero.
-///
-/// `nonzero[y]` (at least `h` flags) says whether image row `y` (all
-/// `stride` pixels of it) may hold a nonzero value; a row marked `false`
-/// must be all zero. Rows that are zero in both of their band rows' inputs
-/// are neither filtered nor read, and come out zero. On return the first
-/// `h` flags describe the rows after the step the same way (a flag may be
-/// `true` for a row that happens to be zero, never the reverse).
-///
-/// The output equals [`inverse_step_lanes`]'s as f32 values: computed rows
-/// get the same arithmetic bit for bit; a skipped row is `+0.0` where the
-/// full step may give `−0.0`.
-#[allow(clippy::too_many_arguments)]
-pub fn inverse_step_lanes_sparse(
-    filter: Filter,
-    data: &mut [f32],
-    stride: usize,
-    w: usize,
-    h: usize,
-    lanes: usize,
-    work: &mut [f32],
-    nonzero: &mut [bool],
-) -> Result<()> {
-    if lanes == 0 {
-        return Err(Error::range("interleaved lanes", lanes, "at least 1"));
-    }
-    check_region(data, stride * lanes, w * lanes, h, work)?;
-    if nonzero.len() < h {
-        return Err(Error::BufferTooSmall {
-            what: "nonzero row flags",
-            len: nonzero.len(),
-            need: h,
-        });
-    }
+/// [`RowMode::Sparse`] in place (`work` and `nonzero`, `height` flags,
+/// checked).
+fn sparse_step(filter: Filter, mut plane: PlaneMut<'_>, work: &mut [f32], nonzero: &mut [bool]) {
+    let (w, h, lanes) = (plane.width, plane.height, plane.lanes);
     let parallel = w * h >= PARALLEL_MIN / lanes;
-    let (wl, sl) = (w * lanes, stride * lanes);
+    let wl = plane.row_len();
     let work = &mut work[..wl * h];
-    let rows_in = nonzero[..h].to_vec();
+    let rows_in = nonzero.to_vec();
     // Vertical: data rows -> work rows; `live[r]` says whether work row `r`
     // was written (rows not written hold stale values and are not read).
     let mut live = rows_in.clone();
     match (filter.kind(), h >= 2) {
         (Kind::Lifting(scheme), true) => {
             // Lifting: vertical and horizontal together, strip by strip.
-            let region = Region {
-                filter,
-                scheme,
-                w,
-                h,
-                lanes,
-                stride: sl,
-            };
-            live = region.synthesize_strips(data, work, &rows_in, parallel, false);
-            region.write_back(data, work, &rows_in, &live, parallel);
+            let region = Region::new(filter, scheme, &plane);
+            live = region.synthesize_strips(plane.data, work, &rows_in, parallel, false);
+            region.write_back(plane.data, work, &rows_in, &live, parallel);
         }
         (Kind::Periodic(t), true) => {
-            periodic::inverse_rows_sparse(t, data, sl, work, wl, h, parallel, &mut live);
-            synthesize_live_rows(
-                filter, data, sl, work, w, h, lanes, &rows_in, &live, parallel,
-            );
+            let src = RowsRef::new(plane.data, plane.row_stride(), wl, h);
+            periodic::inverse_rows_sparse(t, src, work, parallel, &mut live);
+            synthesize_live_rows(filter, &mut plane, work, &rows_in, &live, parallel);
         }
         (_, false) => {
             if live[0] {
-                work[..wl].copy_from_slice(&data[..wl]);
+                work[..wl].copy_from_slice(&plane.data[..wl]);
             }
-            synthesize_live_rows(
-                filter, data, sl, work, w, h, lanes, &rows_in, &live, parallel,
-            );
+            synthesize_live_rows(filter, &mut plane, work, &rows_in, &live, parallel);
         }
     }
     // A row's pixels right of the region (finer detail bands) are untouched.
-    for (k, flag) in nonzero[..h].iter_mut().enumerate() {
-        *flag = live[k] || (rows_in[k] && w < stride);
+    for (k, flag) in nonzero.iter_mut().enumerate() {
+        *flag = live[k] || (rows_in[k] && w < plane.stride);
     }
-    Ok(())
 }
 
-/// The horizontal pass of [`inverse_step_lanes_sparse`]: live work rows
-/// (signal order) -> data rows; dead rows are zeroed (or left alone when
-/// they already are).
-#[allow(clippy::too_many_arguments)]
+/// The horizontal pass of [`sparse_step`]: live work rows (signal order)
+/// -> the plane's rows; dead rows are zeroed (or left alone when they
+/// already are).
 fn synthesize_live_rows(
     filter: Filter,
-    data: &mut [f32],
-    stride: usize,
+    plane: &mut PlaneMut<'_>,
     work: &[f32],
-    w: usize,
-    h: usize,
-    lanes: usize,
     rows_in: &[bool],
     live: &[bool],
     parallel: bool,
 ) {
+    let (w, h, lanes) = (plane.width, plane.height, plane.lanes);
     let wl = w * lanes;
-    let mut dst = Rows::new(data, stride, wl, h);
+    let mut dst = Rows::new(plane.data, plane.row_stride(), wl, h);
     for_each_row(&mut dst, parallel, |k, out| {
         if live[k] {
             synthesize_row(filter, w, lanes, &work[k * wl..][..wl], out)
@@ -388,58 +347,37 @@ fn synthesize_live_rows(
     });
 }
 
-/// [`inverse_step_lanes_sparse`] of a whole image (`w` pixels per row, no
-/// stride) into `out` instead of in place: `out` gets every row of the
-/// result (zero where `nonzero` comes back `false`), and `data` is left as
-/// scratch (its values afterwards are unspecified). For a lifting filter
-/// this is one pass, where the in-place step also copies its result back.
-/// `out` needs `w · h · lanes` values; the result equals the in-place
-/// step's as f32 values.
-#[allow(clippy::too_many_arguments)]
-pub fn inverse_step_lanes_sparse_into(
-    filter: Filter,
-    data: &mut [f32],
-    w: usize,
-    h: usize,
-    lanes: usize,
-    out: &mut [f32],
-    nonzero: &mut [bool],
-) -> Result<()> {
-    if lanes == 0 {
-        return Err(Error::range("interleaved lanes", lanes, "at least 1"));
-    }
-    let wl = w * lanes;
-    check_region(data, wl, wl, h, out)?;
-    if nonzero.len() < h {
-        return Err(Error::BufferTooSmall {
-            what: "nonzero row flags",
-            len: nonzero.len(),
-            need: h,
-        });
-    }
-    let (data, out) = (&mut data[..wl * h], &mut out[..wl * h]);
+/// [`RowMode::Sparse`] into `out` (a whole image: `stride = width`; `out`
+/// and `nonzero`, `height` flags, checked). For a lifting filter one pass
+/// into `out`; otherwise `out` gets a copy of the plane, stepped in place
+/// with the plane's data as scratch.
+fn sparse_step_into(filter: Filter, plane: PlaneMut<'_>, out: &mut [f32], nonzero: &mut [bool]) {
+    let (w, h, lanes) = (plane.width, plane.height, plane.lanes);
+    let n = plane.samples();
     if let (Kind::Lifting(scheme), true) = (filter.kind(), h >= 2) {
-        let region = Region {
-            filter,
-            scheme,
-            w,
-            h,
-            lanes,
-            stride: wl,
-        };
+        let region = Region::new(filter, scheme, &plane);
         let parallel = w * h >= PARALLEL_MIN / lanes;
-        let live = region.synthesize_strips(data, out, &nonzero[..h], parallel, true);
-        nonzero[..h].copy_from_slice(&live);
-        return Ok(());
+        let (data, out) = (&plane.data[..n], &mut out[..n]);
+        let live = region.synthesize_strips(data, out, nonzero, parallel, true);
+        nonzero.copy_from_slice(&live);
+        return;
     }
+    let (data, out) = (&mut plane.data[..n], &mut out[..n]);
     out.copy_from_slice(data);
-    inverse_step_lanes_sparse(filter, out, w, w, h, lanes, data, nonzero)
+    let plane = PlaneMut {
+        data: out,
+        stride: w,
+        width: w,
+        height: h,
+        lanes,
+    };
+    sparse_step(filter, plane, data, nonzero)
 }
 
 /// Samples of a strip's window, at most (256 KiB: a core's L2 holds it).
 const STRIP_SAMPLES: usize = 1 << 16;
 
-/// A lifting region of [`inverse_step_lanes_sparse`], synthesized in
+/// A lifting region of a [`RowMode::Sparse`] step, synthesized in
 /// horizontal strips: each strip's rows are lifted vertically in a window
 /// of their own (a few rows wider, [`lifting::inverse_rows_window`]) and
 /// synthesized horizontally while the window is in cache, into `work`; then
@@ -455,7 +393,18 @@ struct Region<'a> {
     stride: usize,
 }
 
-impl Region<'_> {
+impl<'a> Region<'a> {
+    fn new(filter: Filter, scheme: &'a lifting::Scheme, plane: &PlaneMut<'_>) -> Region<'a> {
+        Region {
+            filter,
+            scheme,
+            w: plane.width,
+            h: plane.height,
+            lanes: plane.lanes,
+            stride: plane.row_stride(),
+        }
+    }
+
     /// Rows per strip: a window within [`STRIP_SAMPLES`], and at least two
     /// strips per thread when the region has the rows.
     fn strip_rows(&self) -> usize {
@@ -479,21 +428,13 @@ impl Region<'_> {
         let (wl, h) = (self.w * self.lanes, self.h);
         let strip = self.strip_rows();
         let mut live = vec![false; h];
+        let bands = RowsRef::new(data, self.stride, wl, h);
         let task = |(i, (out, live)): (usize, (&mut [f32], &mut [bool]))| {
-            WINDOW.with_borrow_mut(|(buf, flags)| {
+            WINDOW.with_borrow_mut(|win| {
                 let a = i * strip;
                 let rows = a..a + live.len();
-                let w0 = lifting::inverse_rows_window(
-                    self.scheme,
-                    data,
-                    self.stride,
-                    wl,
-                    h,
-                    rows_in,
-                    rows,
-                    buf,
-                    flags,
-                );
+                let w0 = lifting::inverse_rows_window(self.scheme, bands, rows_in, rows, win);
+                let (buf, flags) = (&win.buf, &win.flags);
                 for (k, (o, l)) in out.chunks_exact_mut(wl).zip(live.iter_mut()).enumerate() {
                     let r = a + k - w0;
                     *l = flags[r];
@@ -541,10 +482,9 @@ impl Region<'_> {
 
 thread_local! {
     /// A strip's window rows and flags, per thread, for [`Region`].
-    #[allow(clippy::type_complexity)]
-    static WINDOW: std::cell::RefCell<(Vec<f32>, Vec<bool>)> =
-        const { std::cell::RefCell::new((Vec::new(), Vec::new())) };
-    /// One lane's row and its synthesis, per thread, for [`inverse_step_lanes`].
+    static WINDOW: std::cell::RefCell<lifting::Window> =
+        const { std::cell::RefCell::new(lifting::Window::new()) };
+    /// One lane's row and its synthesis, per thread, for [`synthesize_row`].
     static LANE_ROWS: std::cell::RefCell<Vec<f32>> = const { std::cell::RefCell::new(Vec::new()) };
 }
 
@@ -573,7 +513,7 @@ pub fn forward(
     check_levels(width, height, levels)?;
     for level in 0..levels {
         let (w, h) = band_size(width, height, level);
-        forward_step(filter, data, width, w, h, work)?;
+        forward_step(filter, PlaneMut::new(data, width, w, h, 1)?, work)?;
     }
     Ok(())
 }
@@ -590,7 +530,8 @@ pub fn inverse(
     check_levels(width, height, levels)?;
     for level in (0..levels).rev() {
         let (w, h) = band_size(width, height, level);
-        inverse_step(filter, data, width, w, h, work)?;
+        let plane = PlaneMut::new(data, width, w, h, 1)?;
+        inverse_step(filter, plane, work, RowMode::Dense)?;
     }
     Ok(())
 }

@@ -6,7 +6,7 @@
 //! and update steps (`low[i] += c·(high[i-1] + high[i])`), then a scaling of
 //! each band. Low band = even samples, high band = odd samples.
 
-use super::dwt2::{for_each_row, Rows};
+use super::dwt2::{for_each_row, Rows, RowsRef};
 
 #[derive(Clone, Copy)]
 pub(crate) enum Step {
@@ -318,35 +318,50 @@ pub(crate) fn inverse_rows(
     }
 }
 
+/// A window of signal rows of a vertical synthesis and their flags
+/// ([`inverse_rows_window`]), kept per thread between calls.
+pub(crate) struct Window {
+    /// The window's rows (and scratch past them), in signal order.
+    pub buf: Vec<f32>,
+    /// Whether each of the window's rows may be nonzero.
+    pub flags: Vec<bool>,
+}
+
+impl Window {
+    pub const fn new() -> Window {
+        Window {
+            buf: Vec::new(),
+            flags: Vec::new(),
+        }
+    }
+}
+
 /// The signal rows `rows` of a vertical synthesis ([`inverse_rows`]),
-/// computed in a window of rows alone: `src` holds the `h` band rows
+/// computed in a window of rows alone: `bands` holds the `h` band rows
 /// (`stride` apart, `w` used, low rows first) and `live_in` their flags (a
 /// row marked `false` is all zero and is not read). The window `[w0, w1)`
-/// (returned as `w0`) widens `rows` by one row per lifting step; `buf` gets
-/// its rows in signal order and `flags` whether each may be nonzero. A
+/// (returned as `w0`) widens `rows` by one row per lifting step; `win.buf`
+/// gets its rows in signal order and `win.flags` whether each may be nonzero. A
 /// lifting step whose two sources are zero is skipped (it would add `±0`);
 /// every other row gets exactly the arithmetic of [`inverse_rows`] (and of
 /// [`inverse_1d`] down the columns), so splitting a region into windows
 /// changes no bit.
-#[allow(clippy::too_many_arguments)]
 pub(crate) fn inverse_rows_window(
     scheme: &Scheme,
-    src: &[f32],
-    stride: usize,
-    w: usize,
-    h: usize,
+    bands: RowsRef<'_>,
     live_in: &[bool],
     rows: std::ops::Range<usize>,
-    buf: &mut Vec<f32>,
-    flags: &mut Vec<bool>,
+    win: &mut Window,
 ) -> usize {
     if let Some((cp, cu)) = scheme.two_step() {
-        return two_step_window(cp, cu, src, stride, w, h, live_in, rows, buf, flags);
+        return two_step_window((cp, cu), bands, live_in, rows, win);
     }
+    let (w, h) = (bands.w, bands.rows);
     let steps = scheme.steps.len();
     let ns = h.div_ceil(2);
     let (w0, w1) = (rows.start.saturating_sub(steps), (rows.end + steps).min(h));
-    gather_window(scheme, src, stride, w, ns, live_in, w0..w1, buf, flags);
+    gather_window(scheme, bands, live_in, w0..w1, win);
+    let Window { buf, flags } = win;
     let (last_even, last_odd) = (2 * (ns - 1), 2 * (h / 2) - 1);
     for (t, step) in scheme.steps.iter().rev().enumerate() {
         // Rows still needed after this step: `rows` widened by the steps left.
@@ -374,20 +389,18 @@ pub(crate) fn inverse_rows_window(
     w0
 }
 
-/// The band rows of the signal rows `window` into `buf` (signal order),
-/// unscaled; rows not live are written as zeros.
-#[allow(clippy::too_many_arguments)]
+/// The band rows of the signal rows `window` into `win.buf` (signal
+/// order), unscaled; rows not live are written as zeros.
 fn gather_window(
     scheme: &Scheme,
-    src: &[f32],
-    stride: usize,
-    w: usize,
-    ns: usize,
+    bands: RowsRef<'_>,
     live_in: &[bool],
     window: std::ops::Range<usize>,
-    buf: &mut Vec<f32>,
-    flags: &mut Vec<bool>,
+    win: &mut Window,
 ) {
+    let (src, stride, w) = (bands.data, bands.stride, bands.w);
+    let ns = bands.rows.div_ceil(2);
+    let Window { buf, flags } = win;
     let inverse = [1.0 / scheme.low_scale, 1.0 / scheme.high_scale];
     buf.resize(window.len() * w, 0.0);
     flags.clear();
@@ -440,20 +453,17 @@ pub(crate) fn copy_scaled(dst: &mut [f32], src: &[f32], s: f32) {
 /// rows of `[start − 1, end + 1)` by the update, then the odd rows of
 /// `rows` by the predict. The same arithmetic as the general path: a row
 /// is `own + (−c)·(a + b)`, with rows that are not live read as `+0.0`, and
-/// left as it is when both sources are not live.
-#[allow(clippy::too_many_arguments)]
+/// left as it is when both sources are not live. `(cp, cu)` are the
+/// scheme's predict and update coefficients.
 fn two_step_window(
-    cp: f32,
-    cu: f32,
-    src: &[f32],
-    stride: usize,
-    w: usize,
-    h: usize,
+    (cp, cu): (f32, f32),
+    bands: RowsRef<'_>,
     live_in: &[bool],
     rows: std::ops::Range<usize>,
-    buf: &mut Vec<f32>,
-    flags: &mut Vec<bool>,
+    win: &mut Window,
 ) -> usize {
+    let (src, stride, w, h) = (bands.data, bands.stride, bands.w, bands.rows);
+    let Window { buf, flags } = win;
     let ns = h.div_ceil(2);
     let (last_even, last_odd) = (2 * (ns - 1), 2 * (h / 2) - 1);
     let (w0, w1) = (rows.start.saturating_sub(2), (rows.end + 2).min(h));

@@ -14,6 +14,10 @@
 //! Any size works, odd and non-power-of-two included; an axis of length 1 is
 //! left as it is. [`forward_step`] and [`inverse_step`] are public because
 //! relighting inverts one level at a time (Cheslack-Postava et al. 2007, eq. 6).
+//! A step works on a [`PlaneMut`]: a region of a plane of one or more
+//! interleaved images, checked when it is made. [`inverse_step`]'s
+//! [`RowMode`] filters every row, or skips rows known to be zero (in place
+//! or into a second buffer).
 //! The row transform over cube faces ([`row_forward`], [`row_inverse`],
 //! [`row_level`]) is shared by the compressor and the relighter.
 //!
@@ -31,12 +35,13 @@ mod cube;
 mod dwt2;
 mod lifting;
 mod periodic;
+mod plane;
 
 pub use cube::{row_forward, row_inverse, row_level};
 pub use dwt2::{
-    band_size, forward, forward_1d, forward_step, inverse, inverse_1d, inverse_step,
-    inverse_step_lanes, inverse_step_lanes_sparse, inverse_step_lanes_sparse_into, max_levels,
+    band_size, forward, forward_1d, forward_step, inverse, inverse_1d, inverse_step, max_levels,
 };
+pub use plane::{PlaneMut, RowMode};
 
 use std::fmt;
 use std::str::FromStr;

@@ -5,7 +5,7 @@
 //! An odd length `2q + 1` transforms its first `2q` samples with period `2q`
 //! and appends the last sample to the low band unchanged.
 
-use super::dwt2::{for_each_row, Rows};
+use super::dwt2::{for_each_row, Rows, RowsRef};
 use std::f64::consts::FRAC_1_SQRT_2;
 
 /// Haar analysis low-pass taps (PyWavelets `haar.dec_lo`).
@@ -248,21 +248,20 @@ pub(crate) fn inverse_rows(
     });
 }
 
-/// [`inverse_rows`] skipping zero rows. On entry `live[i]` says whether
-/// band row `i` of `src` may be nonzero (a row marked `false` is all zero);
-/// on return it says whether signal row `k` of `work` was written (a row
-/// none of whose taps reads a nonzero band row is zero and is not written).
-#[allow(clippy::too_many_arguments)]
+/// [`inverse_rows`] skipping zero rows: `bands` holds the `h` band rows
+/// (low rows first), and the `h` signal rows of `w` go compactly to `work`.
+/// On entry `live[i]` says whether band row `i` may be nonzero (a row
+/// marked `false` is all zero); on return it says whether signal row `k` of
+/// `work` was written (a row none of whose taps reads a nonzero band row is
+/// zero and is not written).
 pub(crate) fn inverse_rows_sparse(
     dec_lo: &[f64],
-    src: &[f32],
-    stride: usize,
+    bands: RowsRef<'_>,
     work: &mut [f32],
-    w: usize,
-    h: usize,
     parallel: bool,
     live: &mut [bool],
 ) {
+    let (src, stride, w, h) = (bands.data, bands.stride, bands.w, bands.rows);
     let taps = Taps::new(dec_lo);
     let m = h & !1;
     let ns = h.div_ceil(2);

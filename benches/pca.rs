@@ -24,7 +24,7 @@ fn pca_dot(c: &mut Criterion) {
                 rank: Some(64),
                 ..Default::default()
             };
-            compress_pca(&raw, &path, &opts, &|_, _| {}).unwrap();
+            compress_pca(&raw, &path, &opts, ltm_codec::Progress::NONE).unwrap();
             path
         }
     };

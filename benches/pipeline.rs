@@ -54,7 +54,7 @@ fn bench(c: &mut Criterion) {
                 target: Target::MaxError(0.01),
                 ..Default::default()
             };
-            compress(&raw, &path, &opts.into(), &|_, _, _| {}).unwrap();
+            compress(&raw, &path, &opts.into(), ltm_codec::Progress::NONE).unwrap();
             let relighter = Relighter::open(&path).unwrap();
             relighter.decode_all().unwrap();
             (mode, relighter)
@@ -291,7 +291,7 @@ fn multiply_add(c: &mut Criterion) {
                         target: Target::MaxError(0.01),
                         ..Default::default()
                     };
-                    compress(&raw, &path, &opts.into(), &|_, _, _| {}).unwrap();
+                    compress(&raw, &path, &opts.into(), ltm_codec::Progress::NONE).unwrap();
                     (mode.name().to_string(), path)
                 })
                 .collect()

@@ -28,7 +28,13 @@ fn bake_default(dir: &Path) -> PathBuf {
     .unwrap();
     let scene = Scene::build(&desc).unwrap();
     let raw = dir.join("scene.raw");
-    bake(&scene, &raw, &BakeOptions::default(), &|_| {}).unwrap();
+    bake(
+        &scene,
+        &raw,
+        &BakeOptions::default(),
+        ltm_codec::Progress::NONE,
+    )
+    .unwrap();
     raw
 }
 
@@ -71,7 +77,7 @@ fn relighting_matches_the_dense_reference_and_eq3() {
                     ..Default::default()
                 },
             };
-            compress(&raw, &out, &opts, &|_, _, _| {}).unwrap();
+            compress(&raw, &out, &opts, ltm_codec::Progress::NONE).unwrap();
             let relighter = Relighter::open(&out).unwrap();
             let mut bufs = relighter.frame();
             relighter
@@ -120,7 +126,7 @@ fn more_terms_give_less_error_and_threads_agree() {
             ..Default::default()
         }
         .into(),
-        &|_, _, _| {},
+        ltm_codec::Progress::NONE,
     )
     .unwrap();
     let relighter = Relighter::open(&out).unwrap();
@@ -177,7 +183,13 @@ fn bad_lighting_is_an_error_and_large_n_is_clamped() {
     let raw_path = bake_default(dir.path());
     let raw = RawStore::open(&raw_path).unwrap();
     let out = dir.path().join("scene.ltm");
-    compress(&raw, &out, &CompressOptions::default(), &|_, _, _| {}).unwrap();
+    compress(
+        &raw,
+        &out,
+        &CompressOptions::default(),
+        ltm_codec::Progress::NONE,
+    )
+    .unwrap();
     let relighter = Relighter::open(&out).unwrap();
     let mut bufs = relighter.frame();
     let m = relighter.lights();

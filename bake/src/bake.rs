@@ -17,14 +17,14 @@
 //! others are baked. Every row is a pure function of those inputs and the
 //! row index, so a resumed bake is byte-identical to an uninterrupted one. A
 //! partial file from other inputs (or without an identity) is started over,
-//! and [`BakeReport::resume`] and [`BakeProgress::resume`] say why. The file
+//! and [`BakeReport::resume`] and the progress reports ([`Stage::Bake`]) say why. The file
 //! is renamed to `PATH` only when every block is complete.
 
 use crate::error::{BakeError, Result};
 use crate::transport::{RowStats, Scratch, Tables};
 use crate::world::Scene;
 use ltm_codec::raw::ResumeState;
-use ltm_codec::{RawHeader, RawWriter, Surface, SurfacePoint};
+use ltm_codec::{Progress, RawHeader, RawWriter, Stage, Surface, SurfacePoint};
 use rayon::prelude::*;
 use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicU64, Ordering};
@@ -48,22 +48,6 @@ impl Default for BakeOptions {
             block_bytes: DEFAULT_BLOCK_BYTES,
         }
     }
-}
-
-/// Progress, reported after every row.
-#[derive(Clone, Copy, Debug)]
-pub struct BakeProgress {
-    /// What was done with an existing `PATH.partial` (the same in every
-    /// report of a bake): resumed, or started over and why.
-    pub resume: ResumeState,
-    /// Rows baked in this run.
-    pub rows_done: u64,
-    /// Rows to bake in this run (resumed rows excluded).
-    pub rows_total: u64,
-    /// Shadow rays traced in this run.
-    pub shadow_rays: u64,
-    /// Time since the bake started.
-    pub elapsed: Duration,
 }
 
 /// Summary of a finished bake.
@@ -189,7 +173,7 @@ pub fn bake(
     scene: &Scene,
     out: &Path,
     options: &BakeOptions,
-    progress: &(dyn Fn(BakeProgress) + Sync),
+    progress: Progress<'_>,
 ) -> Result<BakeReport> {
     let start = Instant::now();
     let header = raw_header(scene, options.block_bytes);
@@ -202,18 +186,13 @@ pub fn bake(
         .iter()
         .map(|&b| header.block_range(b).len() as u64)
         .sum();
-    let rows_done = AtomicU64::new(0);
+    let all_rows = header.dims.pixels() as u64;
+    let rows_done = AtomicU64::new(all_rows - rows_total);
     let shadow = AtomicU64::new(0);
     let on_row = |s: RowStats| {
         let done = rows_done.fetch_add(1, Ordering::Relaxed) + 1;
         let rays = shadow.fetch_add(s.shadow_rays, Ordering::Relaxed) + s.shadow_rays;
-        progress(BakeProgress {
-            resume,
-            rows_done: done,
-            rows_total,
-            shadow_rays: rays,
-            elapsed: start.elapsed(),
-        });
+        progress.report_work(Stage::Bake { resume }, done, all_rows, rays);
     };
     let rays = bake_blocks(&baker, &mut writer, &pending, &on_row)?;
     let path = writer.finish()?;

@@ -15,7 +15,7 @@
 //! use ltm_bake::{bake, BakeOptions, Scene, SceneDesc};
 //! let desc = SceneDesc::load("scene.toml".as_ref())?;
 //! let scene = Scene::build(&desc)?;
-//! bake(&scene, "scene.raw".as_ref(), &BakeOptions::default(), &|_| {})?;
+//! bake(&scene, "scene.raw".as_ref(), &BakeOptions::default(), ltm_codec::Progress::NONE)?;
 //! # Ok::<(), ltm_bake::BakeError>(())
 //! ```
 
@@ -40,8 +40,7 @@ pub mod transport;
 mod world;
 
 pub use bake::{
-    bake, raw_header, row_surface, BakeOptions, BakeProgress, BakeReport, BlockBaker,
-    DEFAULT_BLOCK_BYTES,
+    bake, raw_header, row_surface, BakeOptions, BakeReport, BlockBaker, DEFAULT_BLOCK_BYTES,
 };
 pub use error::{BakeError, Result};
 pub use inside::INSIDE_LIMIT;

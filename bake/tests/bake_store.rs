@@ -4,7 +4,7 @@ mod common;
 
 use common::*;
 use ltm_bake::{bake, raw_header, BakeOptions, BlockBaker, Overrides, Scene, SceneDesc};
-use ltm_codec::{RawStore, RawWriter};
+use ltm_codec::{Progress, RawStore, RawWriter, Stage, Step};
 use std::sync::atomic::{AtomicU64, Ordering};
 
 fn small_default(width: u32, height: u32, face_res: u32) -> Scene {
@@ -35,10 +35,11 @@ fn default_scene_bakes_into_a_valid_store() {
         &BakeOptions {
             block_bytes: 1 << 20,
         },
-        &|p| {
+        Progress::new(&|s: Step| {
             calls.fetch_add(1, Ordering::Relaxed);
-            assert!(p.rows_done <= p.rows_total);
-        },
+            assert!(s.done <= s.total && s.total == 64 * 64);
+            assert!(matches!(s.stage, Stage::Bake { .. }));
+        }),
     )
     .unwrap();
     assert_eq!(calls.load(Ordering::Relaxed), 64 * 64);
@@ -83,7 +84,7 @@ fn resumed_bake_is_byte_identical() {
     assert!(header.block_count() >= 4, "{}", header.block_count());
     let dir = tempfile::tempdir().unwrap();
     let whole = dir.path().join("whole.raw");
-    bake(&scene, &whole, &options, &|_| {}).unwrap();
+    bake(&scene, &whole, &options, ltm_codec::Progress::NONE).unwrap();
 
     // Interrupt: write blocks 0, 1 and 3, then drop the writer.
     let resumed = dir.path().join("resumed.raw");
@@ -108,7 +109,7 @@ fn resumed_bake_is_byte_identical() {
     part[at] ^= 0x55;
     std::fs::write(&partial, &part).unwrap();
 
-    let report = bake(&scene, &resumed, &options, &|_| {}).unwrap();
+    let report = bake(&scene, &resumed, &options, ltm_codec::Progress::NONE).unwrap();
     assert_eq!(report.blocks_resumed, 2, "blocks 0 and 3 kept, 1 redone");
     assert_eq!(
         report.rows_baked as usize,
@@ -131,7 +132,13 @@ fn grey_scene_stores_the_albedo_image() {
     let (dir, r) = build(&toml, &[]);
     let scene = r.unwrap();
     let out = dir.path().join("grey.raw");
-    bake(&scene, &out, &BakeOptions::default(), &|_| {}).unwrap();
+    bake(
+        &scene,
+        &out,
+        &BakeOptions::default(),
+        ltm_codec::Progress::NONE,
+    )
+    .unwrap();
     let store = RawStore::open(&out).unwrap();
     assert_eq!(store.dims().channels, 1);
     let albedo = store.albedo().expect("albedo image");
@@ -146,7 +153,13 @@ fn failed_bake_leaves_no_complete_output() {
     let scene = small_default(8, 8, 2);
     let dir = tempfile::tempdir().unwrap();
     let out = dir.path().join("missing-dir").join("x.raw");
-    let err = bake(&scene, &out, &BakeOptions::default(), &|_| {}).unwrap_err();
+    let err = bake(
+        &scene,
+        &out,
+        &BakeOptions::default(),
+        ltm_codec::Progress::NONE,
+    )
+    .unwrap_err();
     assert!(err.to_string().contains("missing-dir"), "{err}");
     assert!(!out.exists());
 }

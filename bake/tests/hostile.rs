@@ -8,7 +8,7 @@ use common::*;
 use glam::{DMat3, DVec3};
 use ltm_bake::{bake, raw_header, BakeError, BakeOptions, BlockBaker, Overrides, Scene, SceneDesc};
 use ltm_codec::raw::{RestartReason, ResumeState};
-use ltm_codec::{RawHeader, RawWriter};
+use ltm_codec::{Progress, RawHeader, RawWriter, Stage, Step};
 use std::path::Path;
 
 // ---------------------------------------------------------------------------
@@ -537,7 +537,13 @@ fn degenerate_geometry_bakes() {
         let (dir, r) = build(&toml, &[("m.obj", obj.as_bytes())]);
         let scene = r.unwrap_or_else(|e| panic!("{e}"));
         let out = dir.path().join("d.raw");
-        bake(&scene, &out, &BakeOptions::default(), &|_| {}).unwrap();
+        bake(
+            &scene,
+            &out,
+            &BakeOptions::default(),
+            ltm_codec::Progress::NONE,
+        )
+        .unwrap();
         let store = ltm_codec::RawStore::open(&out).unwrap();
         let rows = store.rows(0..store.dims().pixels()).to_vec();
         (rows, scene.stats().meshes[0].triangles)
@@ -839,8 +845,8 @@ fn stale_partial_is_never_resumed() {
         let o = change(dir.path());
         let after = load(dir.path(), &o);
         let fresh = dir.path().join("fresh.raw");
-        bake(&after, &fresh, &BLOCK, &|_| {}).unwrap();
-        let report = bake(&after, &out, &BLOCK, &|_| {}).unwrap();
+        bake(&after, &fresh, &BLOCK, ltm_codec::Progress::NONE).unwrap();
+        let report = bake(&after, &out, &BLOCK, ltm_codec::Progress::NONE).unwrap();
         assert!(
             std::fs::read(&out).unwrap() == std::fs::read(&fresh).unwrap(),
             "{what}: rows of the old scene were spliced in"
@@ -868,9 +874,16 @@ fn partial_from_the_same_inputs_resumes() {
     // Re-loading the same files gives the same identity.
     let again = load(dir.path(), &Overrides::default());
     let seen = std::sync::Mutex::new(None);
-    let report = bake(&again, &out, &BLOCK, &|p| {
-        *seen.lock().unwrap() = Some(p.resume);
-    })
+    let report = bake(
+        &again,
+        &out,
+        &BLOCK,
+        Progress::new(&|s: Step| {
+            if let Stage::Bake { resume } = s.stage {
+                *seen.lock().unwrap() = Some(resume);
+            }
+        }),
+    )
     .unwrap();
     assert_eq!(report.blocks_resumed, 3);
     assert!(
@@ -884,7 +897,7 @@ fn partial_from_the_same_inputs_resumes() {
         "progress carries it"
     );
     let fresh = dir.path().join("fresh.raw");
-    let r = bake(&again, &fresh, &BLOCK, &|_| {}).unwrap();
+    let r = bake(&again, &fresh, &BLOCK, ltm_codec::Progress::NONE).unwrap();
     assert_eq!(r.resume, ResumeState::New);
     assert!(std::fs::read(&out).unwrap() == std::fs::read(&fresh).unwrap());
 }
@@ -907,7 +920,7 @@ fn partial_without_identity_is_started_over() {
         let row = vec![7.0f32; header.block_range(0).len() * scene.dims().row_len()];
         w.write_block(0, &row, None).unwrap();
     }
-    let report = bake(&scene, &out, &BLOCK, &|_| {}).unwrap();
+    let report = bake(&scene, &out, &BLOCK, ltm_codec::Progress::NONE).unwrap();
     assert_eq!(
         report.resume,
         ResumeState::Restarted(RestartReason::NoIdentity)

@@ -121,7 +121,13 @@ fn baked(toml: &str, files: &[(&str, &[u8])]) -> (Scene, RawStore, tempfile::Tem
     let (dir, scene) = build(toml, files);
     let scene = scene.unwrap();
     let out = dir.path().join("t.raw");
-    bake(&scene, &out, &BakeOptions::default(), &|_| {}).unwrap();
+    bake(
+        &scene,
+        &out,
+        &BakeOptions::default(),
+        ltm_codec::Progress::NONE,
+    )
+    .unwrap();
     let store = RawStore::open(&out).unwrap();
     (scene, store, dir)
 }

@@ -25,7 +25,13 @@ pub fn small_scene(dir: &Path) -> PathBuf {
     .unwrap();
     let raw_path = dir.join("scene.raw");
     let scene = Scene::build(&desc).unwrap();
-    bake(&scene, &raw_path, &BakeOptions::default(), &|_| {}).unwrap();
+    bake(
+        &scene,
+        &raw_path,
+        &BakeOptions::default(),
+        ltm_codec::Progress::NONE,
+    )
+    .unwrap();
     raw_path
 }
 

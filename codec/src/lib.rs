@@ -29,6 +29,7 @@ mod mmap;
 pub mod npy;
 mod output;
 pub mod pca;
+mod progress;
 /// The quantizer's internals: public only with the `benchmarks` feature.
 #[cfg(feature = "benchmarks")]
 pub mod quant;
@@ -43,7 +44,7 @@ pub use baseline::{PcaBasis, ShProjection, MAX_SH_ORDER};
 pub use column::SparseColumn;
 pub use compress::{
     compress, compress_pca, Analysis, CodeOptions, Coder, CompressOptions, CompressStats, Entropy,
-    Mode, PcaOptions, PcaStats, Plan, Stage, Target, TransposeOptions, Transposed,
+    Mode, PcaOptions, PcaStats, Plan, Target, TransposeOptions, Transposed,
 };
 pub use container::{LtmFile, LtmWriter, Meta, OptionalChunks};
 pub use decode::ColumnDecoder;
@@ -56,6 +57,7 @@ pub use error::{Error, Result};
 pub use limits::Limits;
 pub use output::AtomicFile;
 pub use pca::PcaModel;
+pub use progress::{Progress, Stage, Step};
 pub use quant::BandWeights;
 pub use raw::{RawHeader, RawStore, RawWriter};
 pub use surface::{Surface, SurfacePoint, SURFACE_RECORD_LEN};

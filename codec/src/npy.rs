@@ -7,6 +7,7 @@ use crate::dims::Dims;
 use crate::error::{Error, Result};
 use crate::limits::Limits;
 use crate::output::AtomicFile;
+use crate::progress::{Progress, Stage};
 use crate::raw::{RawHeader, RawWriter};
 use crate::wavelet::row_inverse;
 use std::fs::File;
@@ -242,14 +243,15 @@ impl DictParser<'_> {
     }
 }
 
-/// Imports a `(P, M)` or `(P, M, C)` `.npy` matrix as a raw store.
+/// Imports a `(P, M)` or `(P, M, C)` `.npy` matrix as a raw store,
+/// reporting ([`Stage::Import`], blocks written, blocks).
 /// On failure nothing is left behind.
 pub fn import_npy(
     npy: &Path,
     width: u32,
     height: u32,
     out: &Path,
-    progress: &dyn Fn(u64, u64),
+    progress: Progress<'_>,
 ) -> Result<Dims> {
     let result = import_npy_inner(npy, width, height, out, progress);
     if result.is_err() {
@@ -265,7 +267,7 @@ fn import_npy_inner(
     width: u32,
     height: u32,
     out: &Path,
-    progress: &dyn Fn(u64, u64),
+    progress: Progress<'_>,
 ) -> Result<Dims> {
     let file = File::open(npy).map_err(|e| Error::io(npy, e))?;
     let file_len = file.metadata().map_err(|e| Error::io(npy, e))?.len();
@@ -343,7 +345,7 @@ fn import_npy_inner(
             )));
         }
         writer.write_block(b, &values, None)?;
-        progress((b + 1) as u64, blocks as u64);
+        progress.report(Stage::Import, (b + 1) as u64, blocks as u64);
     }
     writer.finish()?;
     Ok(dims)

@@ -71,7 +71,7 @@ fn run(
 ) -> (PathBuf, ltm_codec::CompressStats) {
     let out = dir.join(name);
     let store = RawStore::open(raw).unwrap();
-    let stats = compress(&store, &out, opts, &|_, _, _| {}).unwrap();
+    let stats = compress(&store, &out, opts, ltm_codec::Progress::NONE).unwrap();
     (out, stats)
 }
 
@@ -657,7 +657,7 @@ fn one_transpose_codes_every_setting_like_compress() {
             temp_dir: Some(dir.path().into()),
             ..Default::default()
         };
-        let shared = Transposed::new(&raw, &transpose, &|_, _, _| {}).unwrap();
+        let shared = Transposed::new(&raw, &transpose, ltm_codec::Progress::NONE).unwrap();
         assert_eq!(shared.out_of_core(), budget == 1 << 20);
         for (mode, bits, target) in [
             (Mode::Adaptive, 12, Target::MaxError(0.01)),
@@ -676,8 +676,8 @@ fn one_transpose_codes_every_setting_like_compress() {
             };
             let a = dir.path().join("shared.ltm");
             let b = dir.path().join("alone.ltm");
-            let sa = shared.code(&a, &code, &|_, _, _| {}).unwrap();
-            let sb = compress(&raw, &b, &opts, &|_, _, _| {}).unwrap();
+            let sa = shared.code(&a, &code, ltm_codec::Progress::NONE).unwrap();
+            let sb = compress(&raw, &b, &opts, ltm_codec::Progress::NONE).unwrap();
             assert_eq!(sa.file_bytes, sb.file_bytes);
             assert_eq!(std::fs::read(&a).unwrap(), std::fs::read(&b).unwrap());
         }
@@ -685,7 +685,9 @@ fn one_transpose_codes_every_setting_like_compress() {
             row_filter: Filter::LeGall53,
             ..transpose.clone()
         };
-        let err = Transposed::new(&raw, &other, &|_, _, _| {}).err().unwrap();
+        let err = Transposed::new(&raw, &other, ltm_codec::Progress::NONE)
+            .err()
+            .unwrap();
         assert!(err.to_string().contains("row filter"), "{err}");
         let d4 = TransposeOptions {
             row_filter: Filter::D4,
@@ -693,9 +695,9 @@ fn one_transpose_codes_every_setting_like_compress() {
         };
         let a = dir.path().join("d4.ltm");
         let code = CodeOptions::default();
-        let stats = Transposed::new(&raw, &d4, &|_, _, _| {})
+        let stats = Transposed::new(&raw, &d4, ltm_codec::Progress::NONE)
             .unwrap()
-            .code(&a, &code, &|_, _, _| {})
+            .code(&a, &code, ltm_codec::Progress::NONE)
             .unwrap();
         assert_eq!(LtmFile::open(&a).unwrap().meta().row_filter, Filter::D4);
         let b = dir.path().join("d4-alone.ltm");
@@ -704,7 +706,9 @@ fn one_transpose_codes_every_setting_like_compress() {
             code,
         };
         assert_eq!(
-            compress(&raw, &b, &opts, &|_, _, _| {}).unwrap().file_bytes,
+            compress(&raw, &b, &opts, ltm_codec::Progress::NONE)
+                .unwrap()
+                .file_bytes,
             stats.file_bytes
         );
         assert_eq!(std::fs::read(&a).unwrap(), std::fs::read(&b).unwrap());
@@ -761,7 +765,7 @@ fn stages_run_per_column_range_give_the_same_file() {
         temp_dir: Some(dir.path().into()),
         ..Default::default()
     };
-    let t = Transposed::new(&raw, &transpose, &|_, _, _| {}).unwrap();
+    let t = Transposed::new(&raw, &transpose, ltm_codec::Progress::NONE).unwrap();
     let code = CodeOptions {
         bits: 12,
         target: Target::MaxError(0.02),
@@ -769,9 +773,9 @@ fn stages_run_per_column_range_give_the_same_file() {
     };
     let coder = Coder::new(&t, &code).unwrap();
     let (m, k) = (dims.lights(), 37);
-    let whole = coder.analyze(0..m, &|_, _, _| {}).unwrap();
-    let first = coder.analyze(0..k, &|_, _, _| {}).unwrap();
-    let second = coder.analyze(k..m, &|_, _, _| {}).unwrap();
+    let whole = coder.analyze(0..m, ltm_codec::Progress::NONE).unwrap();
+    let first = coder.analyze(0..k, ltm_codec::Progress::NONE).unwrap();
+    let second = coder.analyze(k..m, ltm_codec::Progress::NONE).unwrap();
     assert_eq!(first.clone().merge(second.clone()).unwrap(), whole);
     assert!(second.merge(first).is_err());
     // The driver's codings, by column range: the plan for the target, then
@@ -821,7 +825,11 @@ fn stages_run_per_column_range_give_the_same_file() {
         plan = Plan::at_threshold(&whole, code.bits, tau_sq, &depths).unwrap();
     }
     let stats = t
-        .code(&dir.path().join("driver.ltm"), &code, &|_, _, _| {})
+        .code(
+            &dir.path().join("driver.ltm"),
+            &code,
+            ltm_codec::Progress::NONE,
+        )
         .unwrap();
     assert!(codings >= 2);
     assert_eq!(stats.codings, codings);
@@ -846,11 +854,16 @@ fn mismatched_plans_and_column_ranges_are_typed_errors() {
         64 << 10,
     ))
     .unwrap();
-    let t = Transposed::new(&raw, &TransposeOptions::default(), &|_, _, _| {}).unwrap();
+    let t = Transposed::new(
+        &raw,
+        &TransposeOptions::default(),
+        ltm_codec::Progress::NONE,
+    )
+    .unwrap();
     let m = dims.lights();
     let code = CodeOptions::default();
     let coder = Coder::new(&t, &code).unwrap();
-    let analysis = coder.analyze(0..m, &|_, _, _| {}).unwrap();
+    let analysis = coder.analyze(0..m, ltm_codec::Progress::NONE).unwrap();
     let other_bits = Plan::new(&analysis, code.bits + 2, coder.budget()).unwrap();
     let err = coder.code_columns(0..m, &other_bits).err().unwrap();
     assert!(
@@ -891,7 +904,7 @@ fn mismatched_plans_and_column_ranges_are_typed_errors() {
         matches!(err, Error::SettingsDiffer { field: "mode", .. }),
         "{err}"
     );
-    assert!(coder.analyze(0..m + 1, &|_, _, _| {}).is_err());
+    assert!(coder.analyze(0..m + 1, ltm_codec::Progress::NONE).is_err());
     let keep = Coder::new(
         &t,
         &CodeOptions {
@@ -900,7 +913,7 @@ fn mismatched_plans_and_column_ranges_are_typed_errors() {
         },
     )
     .unwrap();
-    assert!(keep.analyze(0..m, &|_, _, _| {}).is_err());
+    assert!(keep.analyze(0..m, ltm_codec::Progress::NONE).is_err());
 
     // The writer: a gap, an overlap and a range past the last column.
     let coded = coder.code_columns(0..m, &plan).unwrap();

@@ -6,12 +6,13 @@
 
 use ltm_codec::compress::Mode;
 use ltm_codec::compress::{
-    compress, CodeOptions, CompressOptions, Stage, Target, MAX_NORM, MIN_NONZERO_RMS,
+    compress, CodeOptions, CompressOptions, Target, MAX_NORM, MIN_NONZERO_RMS,
 };
 use ltm_codec::container::LtmFile;
 use ltm_codec::npy::decode_matrix;
 use ltm_codec::{
-    ColumnDecoder, Dims, Error, Filter, Limits, Meta, RawHeader, RawStore, RawWriter, SparseColumn,
+    ColumnDecoder, Dims, Error, Filter, Limits, Meta, Progress, RawHeader, RawStore, RawWriter,
+    SparseColumn, Stage, Step,
 };
 use ltm_testkit::write_raw;
 use proptest::prelude::*;
@@ -141,7 +142,7 @@ fn check_round_trip(dims: Dims, t: &[f32], code: CodeOptions, what: &str) {
         Target::MaxError(e) => e,
         _ => unreachable!(),
     };
-    match compress(&raw, &out, &code.into(), &|_, _, _| {}) {
+    match compress(&raw, &out, &code.into(), ltm_codec::Progress::NONE) {
         Ok(stats) => {
             assert!(in_range(t), "{what}: accepted outside the range");
             let file = LtmFile::open(&out).unwrap_or_else(|e| panic!("{what}: {e}"));
@@ -271,7 +272,13 @@ fn tiny_matrices_keep_their_values() {
     ))
     .unwrap();
     let out = dir.path().join("m.ltm");
-    let stats = compress(&raw, &out, &CompressOptions::default(), &|_, _, _| {}).unwrap();
+    let stats = compress(
+        &raw,
+        &out,
+        &CompressOptions::default(),
+        ltm_codec::Progress::NONE,
+    )
+    .unwrap();
     assert!(stats.target_met && stats.nonzeros > 0, "{stats:?}");
     assert_eq!(stats.bits, 10);
 }
@@ -299,7 +306,7 @@ fn recoding_lowers_the_threshold_across_a_gap() {
         target: Target::MaxError(0.01),
         ..Default::default()
     };
-    let stats = compress(&raw, &out, &code.into(), &|_, _, _| {}).unwrap();
+    let stats = compress(&raw, &out, &code.into(), ltm_codec::Progress::NONE).unwrap();
     assert!(
         stats.target_met && stats.achieved_error <= 0.01,
         "{stats:?}"
@@ -327,7 +334,13 @@ fn huge_matrices_are_refused_up_front() {
         ))
         .unwrap();
         let out = dir.path().join("m.ltm");
-        let err = compress(&raw, &out, &CompressOptions::default(), &|_, _, _| {}).unwrap_err();
+        let err = compress(
+            &raw,
+            &out,
+            &CompressOptions::default(),
+            ltm_codec::Progress::NONE,
+        )
+        .unwrap_err();
         let msg = err.to_string();
         assert!(
             msg.contains("matrix norm") && msg.contains("2^100"),
@@ -462,14 +475,14 @@ fn truncating_the_input_during_the_row_pass_is_an_error() {
     let (path, opts) = several_reads(dir.path(), dims);
     let raw = RawStore::open(&path).unwrap();
     let out = dir.path().join("m.ltm");
-    let truncate = |stage: Stage, done: u64, total: u64| {
-        if stage == Stage::Rows && done < total {
+    let truncate = |s: Step| {
+        if s.stage == Stage::Rows && s.done < s.total {
             let f = std::fs::OpenOptions::new().write(true).open(&path).unwrap();
             f.set_len(std::fs::metadata(&path).unwrap().len() / 4)
                 .unwrap();
         }
     };
-    let err = compress(&raw, &out, &opts, &truncate).unwrap_err();
+    let err = compress(&raw, &out, &opts, Progress::new(&truncate)).unwrap_err();
     assert!(matches!(err, Error::Io { .. }), "{err}");
     assert!(chain(&err).contains("truncated while being read"), "{err}");
     only_the_input(dir.path());
@@ -488,7 +501,7 @@ fn reading_a_truncated_input_is_an_error() {
     let f = std::fs::OpenOptions::new().write(true).open(&path).unwrap();
     f.set_len(len / 2).unwrap();
     let out = dir.path().join("m.ltm");
-    let err = compress(&raw, &out, &opts, &|_, _, _| {}).unwrap_err();
+    let err = compress(&raw, &out, &opts, ltm_codec::Progress::NONE).unwrap_err();
     assert!(chain(&err).contains("truncated while being read"), "{err}");
     only_the_input(dir.path());
     let last = raw.header().block_count() - 1;
@@ -509,8 +522,8 @@ fn changing_the_input_during_compress_is_an_error() {
     let out = dir.path().join("m.ltm");
     let data_offset = Fields::of(&std::fs::read(&path).unwrap()).data_offset;
     let len = std::fs::metadata(&path).unwrap().len();
-    let overwrite = |stage: Stage, done: u64, total: u64| {
-        if stage == Stage::Rows && done < total {
+    let overwrite = |s: Step| {
+        if s.stage == Stage::Rows && s.done < s.total {
             use std::os::unix::fs::FileExt;
             let f = std::fs::OpenOptions::new().write(true).open(&path).unwrap();
             let at = data_offset as u64 + (len - data_offset as u64) * 9 / 10;
@@ -518,20 +531,20 @@ fn changing_the_input_during_compress_is_an_error() {
         }
     };
     let raw = RawStore::open(&path).unwrap();
-    let err = compress(&raw, &out, &opts, &overwrite).unwrap_err();
+    let err = compress(&raw, &out, &opts, Progress::new(&overwrite)).unwrap_err();
     assert!(matches!(err, Error::Crc { .. }), "{err}");
     only_the_input(dir.path());
 
     let (path, opts) = several_reads(dir.path(), dims);
     let raw = RawStore::open(&path).unwrap();
-    let touch = |stage: Stage, _: u64, _: u64| {
-        if stage == Stage::Coding {
+    let touch = |s: Step| {
+        if s.stage == Stage::Coding {
             let f = std::fs::OpenOptions::new().write(true).open(&path).unwrap();
             f.set_modified(std::time::UNIX_EPOCH + std::time::Duration::from_secs(1000))
                 .unwrap();
         }
     };
-    let err = compress(&raw, &out, &opts, &touch).unwrap_err();
+    let err = compress(&raw, &out, &opts, Progress::new(&touch)).unwrap_err();
     assert!(chain(&err).contains("changed while it was read"), "{err}");
     only_the_input(dir.path());
 }
@@ -725,7 +738,13 @@ fn a_zero_flag_is_verified_against_the_row() {
         "{err}"
     );
     let out = dir.path().join("m.ltm");
-    let err = compress(&raw, &out, &CompressOptions::default(), &|_, _, _| {}).unwrap_err();
+    let err = compress(
+        &raw,
+        &out,
+        &CompressOptions::default(),
+        ltm_codec::Progress::NONE,
+    )
+    .unwrap_err();
     assert!(err.to_string().contains("flagged all zero"), "{err}");
     assert!(!out.exists());
 }
@@ -752,7 +771,13 @@ fn non_finite_data_names_the_value() {
         "{err}"
     );
     let out = dir.path().join("m.ltm");
-    let err = compress(&raw, &out, &CompressOptions::default(), &|_, _, _| {}).unwrap_err();
+    let err = compress(
+        &raw,
+        &out,
+        &CompressOptions::default(),
+        ltm_codec::Progress::NONE,
+    )
+    .unwrap_err();
     assert!(err.to_string().contains("value = -inf (row 9"), "{err}");
     assert!(!out.exists());
 }

@@ -35,7 +35,7 @@ fn import_compress_export_round_trip() {
     let npy = dir.path().join("t.npy");
     write_npy(&npy, "<f4", &format!("({p}, {m})"), &f32_bytes(&t));
     let raw = dir.path().join("t.raw");
-    let dims = import_npy(&npy, 4, 3, &raw, &|_, _| {}).unwrap();
+    let dims = import_npy(&npy, 4, 3, &raw, ltm_codec::Progress::NONE).unwrap();
     assert_eq!((dims.face_res(), dims.channels), (2, 1));
     let store = RawStore::open(&raw).unwrap();
     assert_eq!(store.rows(0..p), &t[..]);
@@ -45,7 +45,7 @@ fn import_compress_export_round_trip() {
         target: Target::MaxError(0.0005),
         ..Default::default()
     };
-    compress(&store, &ltm, &opts.into(), &|_, _, _| {}).unwrap();
+    compress(&store, &ltm, &opts.into(), ltm_codec::Progress::NONE).unwrap();
     let out = dir.path().join("d.npy");
     let file = LtmFile::open(&ltm).unwrap();
     export_npy(&file, &out, &Limits::default()).unwrap();
@@ -83,7 +83,7 @@ fn float64_and_three_channels_import() {
         &v.iter().flat_map(|x| x.to_le_bytes()).collect::<Vec<_>>(),
     );
     let raw = dir.path().join("t.raw");
-    let dims = import_npy(&npy, 2, 1, &raw, &|_, _| {}).unwrap();
+    let dims = import_npy(&npy, 2, 1, &raw, ltm_codec::Progress::NONE).unwrap();
     assert_eq!((dims.face_res(), dims.channels), (1, 3));
     let store = RawStore::open(&raw).unwrap();
     assert_eq!(store.row(1)[0], 9.0);
@@ -134,7 +134,7 @@ fn bad_npy_files_are_refused_and_leave_nothing() {
     for (descr, shape, data, width, what) in cases {
         let npy = dir.path().join("bad.npy");
         write_npy(&npy, descr, &shape, &data);
-        let err = import_npy(&npy, width, 1, &raw, &|_, _| {}).expect_err(what);
+        let err = import_npy(&npy, width, 1, &raw, ltm_codec::Progress::NONE).expect_err(what);
         assert!(!err.to_string().is_empty());
         if what == "channels" {
             assert!(err.to_string().contains("channels"), "{err}");
@@ -145,8 +145,22 @@ fn bad_npy_files_are_refused_and_leave_nothing() {
         );
     }
     std::fs::write(dir.path().join("junk.npy"), b"not numpy at all").unwrap();
-    assert!(import_npy(&dir.path().join("junk.npy"), 1, 1, &raw, &|_, _| {}).is_err());
-    assert!(import_npy(&dir.path().join("missing.npy"), 1, 1, &raw, &|_, _| {}).is_err());
+    assert!(import_npy(
+        &dir.path().join("junk.npy"),
+        1,
+        1,
+        &raw,
+        ltm_codec::Progress::NONE
+    )
+    .is_err());
+    assert!(import_npy(
+        &dir.path().join("missing.npy"),
+        1,
+        1,
+        &raw,
+        ltm_codec::Progress::NONE
+    )
+    .is_err());
 }
 
 #[test]

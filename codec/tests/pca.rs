@@ -89,7 +89,7 @@ fn recorded_error_is_the_decoded_error_and_near_optimal() {
                     raise_bits: false,
                     ..Default::default()
                 };
-                let stats = compress_pca(&raw, &out, &opts, &|_, _| {}).unwrap();
+                let stats = compress_pca(&raw, &out, &opts, ltm_codec::Progress::NONE).unwrap();
                 let file = LtmFile::open(&out).unwrap();
                 assert_eq!(file.meta().mode, Mode::Pca);
                 assert_eq!(file.pca().unwrap().rank(), k);
@@ -147,7 +147,7 @@ fn max_error_picks_a_rank_that_meets_it() {
             max_rank: 20,
             ..Default::default()
         };
-        let stats = compress_pca(&raw, &out, &opts, &|_, _| {}).unwrap();
+        let stats = compress_pca(&raw, &out, &opts, ltm_codec::Progress::NONE).unwrap();
         assert!(
             stats.target_met && stats.achieved_error <= target,
             "{target}: {stats:?}"
@@ -184,7 +184,7 @@ fn bad_ranks_and_unreachable_targets_are_refused() {
             rank: Some(k),
             ..Default::default()
         };
-        let e = compress_pca(&raw, &out, &opts, &|_, _| {})
+        let e = compress_pca(&raw, &out, &opts, ltm_codec::Progress::NONE)
             .unwrap_err()
             .to_string();
         assert!(
@@ -199,7 +199,7 @@ fn bad_ranks_and_unreachable_targets_are_refused() {
             rank: Some(6),
             ..Default::default()
         },
-        &|_, _| {}
+        ltm_codec::Progress::NONE
     )
     .is_ok());
     // Rank 1 of a noisy matrix cannot reach 1e-6.
@@ -217,7 +217,7 @@ fn bad_ranks_and_unreachable_targets_are_refused() {
         max_rank: 2,
         ..Default::default()
     };
-    let e = compress_pca(&raw2, &out, &opts, &|_, _| {})
+    let e = compress_pca(&raw2, &out, &opts, ltm_codec::Progress::NONE)
         .unwrap_err()
         .to_string();
     assert!(
@@ -229,7 +229,7 @@ fn bad_ranks_and_unreachable_targets_are_refused() {
             max_error: bad,
             ..Default::default()
         };
-        assert!(compress_pca(&raw2, &out, &opts, &|_, _| {}).is_err());
+        assert!(compress_pca(&raw2, &out, &opts, ltm_codec::Progress::NONE).is_err());
     }
     std::fs::remove_file(&out).unwrap();
     let opts = PcaOptions {
@@ -237,7 +237,7 @@ fn bad_ranks_and_unreachable_targets_are_refused() {
         max_rank: 2,
         ..Default::default()
     };
-    assert!(compress_pca(&raw2, &out, &opts, &|_, _| {}).is_err());
+    assert!(compress_pca(&raw2, &out, &opts, ltm_codec::Progress::NONE).is_err());
     assert!(!out.exists(), "a refused target writes nothing");
 }
 
@@ -263,7 +263,7 @@ fn zero_and_constant_matrices() {
                 rank: Some(2),
                 ..Default::default()
             },
-            &|_, _| {},
+            ltm_codec::Progress::NONE,
         )
         .unwrap();
         let decoded = decode_matrix(&LtmFile::open(&out).unwrap(), &Limits::default()).unwrap();
@@ -331,7 +331,7 @@ fn corrupted_pca_files_are_errors_never_panics() {
             rank: Some(3),
             ..Default::default()
         },
-        &|_, _| {},
+        ltm_codec::Progress::NONE,
     )
     .unwrap();
     let good = std::fs::read(&out).unwrap();
@@ -405,7 +405,13 @@ fn version_1_wavelet_files_still_open_and_pca_needs_version_2() {
     ))
     .unwrap();
     let w = dir.path().join("w.ltm");
-    compress(&raw, &w, &CompressOptions::default(), &|_, _, _| {}).unwrap();
+    compress(
+        &raw,
+        &w,
+        &CompressOptions::default(),
+        ltm_codec::Progress::NONE,
+    )
+    .unwrap();
     let mut b = std::fs::read(&w).unwrap();
     assert_eq!(u32::from_le_bytes(b[8..12].try_into().unwrap()), 5);
     // A version-1 file is a version-5 wavelet file with version 1 when it
@@ -474,7 +480,7 @@ fn version_1_wavelet_files_still_open_and_pca_needs_version_2() {
             rank: Some(2),
             ..Default::default()
         },
-        &|_, _| {},
+        ltm_codec::Progress::NONE,
     )
     .unwrap();
     let mut b = std::fs::read(&p).unwrap();

@@ -57,7 +57,13 @@ fn compressed(dir: &Path, dims: Dims, with_surface: bool) -> (PathBuf, Surface) 
     .unwrap();
     let out = dir.join("t.ltm");
     let store = ltm_codec::RawStore::open(&raw).unwrap();
-    compress(&store, &out, &CompressOptions::default(), &|_, _, _| {}).unwrap();
+    compress(
+        &store,
+        &out,
+        &CompressOptions::default(),
+        ltm_codec::Progress::NONE,
+    )
+    .unwrap();
     (out, s)
 }
 

@@ -76,7 +76,7 @@ pub fn small_pca_file() -> Option<Vec<u8>> {
             rank: Some(4),
             ..Default::default()
         };
-        ltm_codec::compress_pca(&raw, &out, &opts, &|_, _| {}).ok()?;
+        ltm_codec::compress_pca(&raw, &out, &opts, ltm_codec::Progress::NONE).ok()?;
         std::fs::read(&out).ok()
     })
     .clone()

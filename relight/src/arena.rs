@@ -512,7 +512,7 @@ mod file_tests {
                     target: Target::MaxError(1e-3),
                     ..Default::default()
                 };
-                compress(&raw, &out, &opts.into(), &|_, _, _| {}).unwrap();
+                compress(&raw, &out, &opts.into(), ltm_codec::Progress::NONE).unwrap();
                 let file = LtmFile::open(&out).unwrap();
                 let meta = file.meta().clone();
                 let decoder = ColumnDecoder::new(&meta);

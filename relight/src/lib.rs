@@ -35,7 +35,7 @@
 //!
 //! // Compress it, then relight under a sky that is brighter above.
 //! let ltm = dir.path().join("t.ltm");
-//! compress(&raw, &ltm, &CompressOptions::default(), &|_, _, _| {})?;
+//! compress(&raw, &ltm, &CompressOptions::default(), ltm_codec::Progress::NONE)?;
 //! let sky = EnvMap::from_fn(64, 32, |_, y| [1.0, 1.0, if y < 16 { 4.0 } else { 0.5 }])?;
 //! let light = sky.to_cubemap(4, &Rotation::IDENTITY);
 //!

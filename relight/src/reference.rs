@@ -4,7 +4,7 @@
 
 use crate::error::{RelightError, Result};
 use crate::image_io::Image;
-use ltm_codec::RawStore;
+use ltm_codec::{Progress, RawStore, Stage};
 use rayon::prelude::*;
 use std::sync::atomic::{AtomicUsize, Ordering};
 
@@ -21,15 +21,15 @@ use std::sync::atomic::{AtomicUsize, Ordering};
 /// Each block's checksum is verified before its rows are used. Runs in
 /// parallel over rows on rayon's pool.
 pub fn reference(raw: &RawStore, light: &[[f32; 3]]) -> Result<Image> {
-    reference_with_progress(raw, light, &|_, _| {})
+    reference_with_progress(raw, light, Progress::NONE)
 }
 
-/// [`reference()`], calling `progress(rows_done, rows_total)` after each block
-/// of rows (from several threads).
+/// [`reference()`], reporting ([`Stage::Reference`], rows done, rows) after
+/// each block of rows (from several threads).
 pub fn reference_with_progress(
     raw: &RawStore,
     light: &[[f32; 3]],
-    progress: &(dyn Fn(usize, usize) + Sync),
+    progress: Progress<'_>,
 ) -> Result<Image> {
     let dims = raw.dims();
     let m = dims.lights();
@@ -84,7 +84,7 @@ pub fn reference_with_progress(
                 *out = sum.map(|v| v as f32);
             });
             let now = done.fetch_add(rows.len(), Ordering::Relaxed) + rows.len();
-            progress(now, total);
+            progress.report(Stage::Reference, now as u64, total as u64);
             Ok(())
         })?;
     raw.check_unchanged()?;

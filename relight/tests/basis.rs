@@ -2,8 +2,8 @@
 //! dense product `T̂·L` of their reconstruction, and the three relighters
 //! behind one `dyn Relight`.
 
-use ltm_codec::compress::{compress, CompressOptions};
 use ltm_codec::baseline::sh;
+use ltm_codec::compress::{compress, CompressOptions};
 use ltm_codec::{cubemap, Dims, PcaBasis, RawStore, ShProjection};
 use ltm_relight::{
     reference, relative_l2, BasisRelighter, Frame, Relight, Relighter, Request, Weighting,
@@ -249,7 +249,13 @@ fn three_relighters_behind_one_trait_share_a_frame() {
     ))
     .unwrap();
     let ltm = dir.path().join("t.ltm");
-    compress(&raw, &ltm, &CompressOptions::default(), &|_, _, _| {}).unwrap();
+    compress(
+        &raw,
+        &ltm,
+        &CompressOptions::default(),
+        ltm_codec::Progress::NONE,
+    )
+    .unwrap();
     let relighters: Vec<Box<dyn Relight + Send + Sync>> = vec![
         Box::new(Relighter::open(&ltm).unwrap()),
         Box::new(BasisRelighter::pca(&PcaBasis::fit(&raw, 8, 2).unwrap(), &raw).unwrap()),

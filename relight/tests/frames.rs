@@ -15,7 +15,13 @@ fn relighter(dir: &std::path::Path) -> Relighter {
     writer.write_block(0, &rows, None).unwrap();
     let raw = RawStore::open(&writer.finish().unwrap()).unwrap();
     let ltm = dir.join("t.ltm");
-    compress(&raw, &ltm, &CompressOptions::default(), &|_, _, _| {}).unwrap();
+    compress(
+        &raw,
+        &ltm,
+        &CompressOptions::default(),
+        ltm_codec::Progress::NONE,
+    )
+    .unwrap();
     Relighter::open(&ltm).unwrap()
 }
 
@@ -128,7 +134,7 @@ fn zero_rows_are_skipped_without_changing_the_image() {
             target: Target::MaxError(1e-3),
             ..Default::default()
         };
-        compress(&raw, &ltm, &opts.into(), &|_, _, _| {}).unwrap();
+        compress(&raw, &ltm, &opts.into(), ltm_codec::Progress::NONE).unwrap();
         let r = Relighter::open(&ltm).unwrap();
         let mut frame = r.frame();
         for terms in [1, 5, 60, 7, usize::MAX, 2] {

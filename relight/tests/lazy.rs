@@ -31,7 +31,13 @@ fn file(dir: &Path) -> PathBuf {
     writer.write_block(0, &rows, None).unwrap();
     let raw = RawStore::open(&writer.finish().unwrap()).unwrap();
     let ltm = dir.join("t.ltm");
-    compress(&raw, &ltm, &CompressOptions::default(), &|_, _, _| {}).unwrap();
+    compress(
+        &raw,
+        &ltm,
+        &CompressOptions::default(),
+        ltm_codec::Progress::NONE,
+    )
+    .unwrap();
     ltm
 }
 

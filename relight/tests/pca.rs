@@ -72,7 +72,7 @@ fn setup(dir: &Path, d: Dims, rank: usize, albedo: bool) -> (RawStore, std::path
         raise_bits: false,
         ..Default::default()
     };
-    compress_pca(&raw, &out, &opts, &|_, _| {}).unwrap();
+    compress_pca(&raw, &out, &opts, ltm_codec::Progress::NONE).unwrap();
     (raw, out)
 }
 
@@ -260,7 +260,7 @@ fn point_lights_on_an_analytic_sphere() {
         raise_bits: false,
         ..Default::default()
     };
-    compress_pca(&raw, &out, &opts, &|_, _| {}).unwrap();
+    compress_pca(&raw, &out, &opts, ltm_codec::Progress::NONE).unwrap();
     let r = PcaRelighter::open_with_limits(&out, &Limits::default()).unwrap();
     let light = PointLight {
         position: [0.7, 6.0, -0.4],
@@ -444,7 +444,7 @@ fn empty_rows_decode_and_relight_to_zero() {
         raise_bits: false,
         ..Default::default()
     };
-    compress_pca(&raw, &out, &opts, &|_, _| {}).unwrap();
+    compress_pca(&raw, &out, &opts, ltm_codec::Progress::NONE).unwrap();
     let file = LtmFile::open(&out).unwrap();
     let mask = file.empty_rows().expect("an EMPT chunk");
     assert_eq!(mask.count(), empty.len());

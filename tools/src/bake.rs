@@ -4,7 +4,10 @@ use crate::common::{progress, Ctx};
 use anyhow::Context;
 use clap::Args;
 use ltm_bake::{bake, BakeOptions, Overrides, ResumeState, Scene, SceneDesc};
+use ltm_codec::{Progress, Stage};
 use std::path::PathBuf;
+use std::sync::Once;
+use std::time::Instant;
 
 /// Arguments of `ltm bake`.
 #[derive(Args)]
@@ -122,19 +125,29 @@ pub fn run(args: BakeArgs, _ctx: &Ctx) -> anyhow::Result<()> {
     let bar = progress::bar(dims.pixels() as u64, "bake");
     let options = BakeOptions::default();
     let partial = format!("{}.partial", args.output.display());
-    let result = bake(&scene, &args.output, &options, &|p| {
-        // The bar counts all rows; resumed ones are complete already.
-        bar.set_position(dims.pixels() as u64 - p.rows_total + p.rows_done);
-        if p.rows_done == 1 {
-            bar.reset_eta();
-            if let Some(line) = resume_message(&p.resume, &partial) {
-                // Printed even when the bar is hidden (stderr not a terminal).
-                bar.suspend(|| eprintln!("{line}"));
-            }
-        }
-        let secs = p.elapsed.as_secs_f64().max(1e-9);
-        bar.set_message(format!("{:.1} Mray/s", p.shadow_rays as f64 / secs / 1e6));
-    });
+    let start = Instant::now();
+    let first = Once::new();
+    let result = bake(
+        &scene,
+        &args.output,
+        &options,
+        Progress::new(&|s| {
+            // The bar counts all rows; resumed ones are complete already.
+            bar.set_position(s.done);
+            let Stage::Bake { resume } = s.stage else {
+                return;
+            };
+            first.call_once(|| {
+                bar.reset_eta();
+                if let Some(line) = resume_message(&resume, &partial) {
+                    // Printed even when the bar is hidden (stderr not a terminal).
+                    bar.suspend(|| eprintln!("{line}"));
+                }
+            });
+            let secs = start.elapsed().as_secs_f64().max(1e-9);
+            bar.set_message(format!("{:.1} Mray/s", s.work as f64 / secs / 1e6));
+        }),
+    );
     bar.finish_and_clear();
     let report = result.with_context(|| format!("baking {}", args.scene.display()))?;
     let secs = report.elapsed.as_secs_f64().max(1e-9);

@@ -5,14 +5,14 @@ use crate::common::{check_files, partial, progress, Ctx};
 use anyhow::{bail, Context, Result};
 use clap::Args;
 use ltm_codec::compress::{
-    compress, CodeOptions, CompressOptions, Stage, Target, TransposeOptions, DEFAULT_BITS,
+    compress, CodeOptions, CompressOptions, Target, TransposeOptions, DEFAULT_BITS,
     DEFAULT_MAX_ERROR,
 };
 use ltm_codec::compress::{Entropy, Mode};
 use ltm_codec::container::LtmFile;
 use ltm_codec::npy::{export_npy, import_npy};
 use ltm_codec::wavelet::row_level;
-use ltm_codec::{compress_pca, Filter, PcaOptions, RawStore};
+use ltm_codec::{compress_pca, Filter, PcaOptions, Progress, RawStore, Stage};
 use serde::Serialize;
 use std::path::PathBuf;
 use std::sync::Mutex;
@@ -42,10 +42,16 @@ pub fn import(a: ImportArgs, _ctx: &Ctx) -> Result<()> {
         &[("-o", &a.output), ("its temporary file", &partial)],
     )?;
     let bar = progress::bar(0, "import");
-    let dims = import_npy(&a.npy, a.width, a.height, &a.output, &|done, total| {
-        bar.set_length(total);
-        bar.set_position(done);
-    })
+    let dims = import_npy(
+        &a.npy,
+        a.width,
+        a.height,
+        &a.output,
+        Progress::new(&|s| {
+            bar.set_length(s.total);
+            bar.set_position(s.done);
+        }),
+    )
     .with_context(|| format!("importing {}", a.npy.display()))?;
     bar.finish_and_clear();
     eprintln!(
@@ -171,16 +177,21 @@ pub fn compress_cmd(a: CompressArgs, ctx: &Ctx) -> Result<()> {
     };
     let bar = Mutex::new((progress::bar(0, "rows"), None::<Stage>));
     let start = std::time::Instant::now();
-    let stats = compress(&raw, &a.output, &opts, &|stage, done, total| {
-        let mut g = bar.lock().expect("progress lock");
-        if g.1 != Some(stage) {
-            g.0.reset();
-            g.0.set_message(format!("{stage:?}").to_lowercase());
-            g.1 = Some(stage);
-        }
-        g.0.set_length(total);
-        g.0.set_position(done);
-    })
+    let stats = compress(
+        &raw,
+        &a.output,
+        &opts,
+        Progress::new(&|s| {
+            let mut g = bar.lock().expect("progress lock");
+            if g.1 != Some(s.stage) {
+                g.0.reset();
+                g.0.set_message(format!("{:?}", s.stage).to_lowercase());
+                g.1 = Some(s.stage);
+            }
+            g.0.set_length(s.total);
+            g.0.set_position(s.done);
+        }),
+    )
     .with_context(|| format!("compressing {}", a.raw.display()))?;
     bar.lock().expect("progress lock").0.finish_and_clear();
     let secs = start.elapsed().as_secs_f64();
@@ -241,10 +252,15 @@ fn compress_pca_cmd(a: &CompressArgs, raw: &RawStore) -> Result<()> {
     };
     let bar = progress::bar(0, "passes");
     let start = std::time::Instant::now();
-    let stats = compress_pca(raw, &a.output, &opts, &|done, total| {
-        bar.set_length(total as u64);
-        bar.set_position(done as u64);
-    })
+    let stats = compress_pca(
+        raw,
+        &a.output,
+        &opts,
+        Progress::new(&|s| {
+            bar.set_length(s.total);
+            bar.set_position(s.done);
+        }),
+    )
     .with_context(|| format!("compressing {}", a.raw.display()))?;
     bar.finish_and_clear();
     let secs = start.elapsed().as_secs_f64();

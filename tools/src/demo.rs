@@ -10,7 +10,7 @@ use anyhow::{Context, Result};
 use clap::Args;
 use ltm_bake::{Overrides, SceneDesc};
 use ltm_codec::compress::{compress, CodeOptions, CompressStats, Mode, Target};
-use ltm_codec::{Dims, RawStore};
+use ltm_codec::{Dims, Progress, RawStore};
 use ltm_relight::{
     reference, relative_l2, EnvMap, Image, Relight, Relighter, Request, Rotation, Weighting,
 };
@@ -52,7 +52,7 @@ fn compress_2d_to_size(raw: &RawStore, out: &Path, bits: u32, bytes: u64) -> Res
             target: Target::MaxError(e),
             ..Default::default()
         };
-        let s = compress(raw, out, &opts.into(), &|_, _, _| {})?;
+        let s = compress(raw, out, &opts.into(), ltm_codec::Progress::NONE)?;
         Ok((s.file_bytes, s.achieved_error))
     };
     let (mut e0, mut e1) = (0.05, 0.01);
@@ -141,10 +141,15 @@ fn compress_pair(raw: &RawStore, a: &DemoArgs, opts: CodeOptions) -> Result<File
     let bar = progress::bar(0, "compress");
     let t = Instant::now();
     let adaptive_path = a.output.join("scene-adaptive.ltm");
-    let adaptive = compress(raw, &adaptive_path, &opts.into(), &|_, done, total| {
-        bar.set_length(total);
-        bar.set_position(done);
-    })?;
+    let adaptive = compress(
+        raw,
+        &adaptive_path,
+        &opts.into(),
+        Progress::new(&|s| {
+            bar.set_length(s.total);
+            bar.set_position(s.done);
+        }),
+    )?;
     bar.finish_and_clear();
     let compress_s = t.elapsed().as_secs_f64();
     eprintln!(

@@ -3,7 +3,7 @@
 use crate::common::{check_files, progress, Ctx, ImageOutput};
 use anyhow::Context;
 use clap::Args;
-use ltm_codec::RawStore;
+use ltm_codec::{Progress, RawStore};
 use ltm_relight::{reference_with_progress, EnvMap, Rotation};
 use std::path::PathBuf;
 use std::time::Instant;
@@ -54,7 +54,7 @@ pub fn run(args: ReferenceArgs, ctx: &Ctx) -> anyhow::Result<()> {
     let light = env.to_cubemap(n, &args.rotate);
 
     let bar = progress::bar(dims.pixels() as u64, "reference");
-    let image = reference_with_progress(&raw, &light, &|done, _| bar.set_position(done as u64))
+    let image = reference_with_progress(&raw, &light, Progress::new(&|s| bar.set_position(s.done)))
         .with_context(|| format!("computing T·L from {}", args.raw.display()))?;
     bar.finish_and_clear();
 

@@ -12,8 +12,8 @@
 
 use super::code::Coder;
 use super::Mode;
-use super::Stage;
 use crate::error::{Error, Result};
+use crate::progress::{Progress, Stage};
 use crate::wavelet::{max_levels, Filter};
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
@@ -307,11 +307,7 @@ impl Coder<'_> {
     /// Analyzes `columns` for this coder's target error: the input of
     /// [`Plan::new`](super::Plan::new). `progress` gets
     /// ([`Stage::Analysis`], columns done, columns in the range).
-    pub fn analyze(
-        &self,
-        columns: Range<usize>,
-        progress: &(dyn Fn(Stage, u64, u64) + Sync),
-    ) -> Result<Analysis> {
+    pub fn analyze(&self, columns: Range<usize>, progress: Progress<'_>) -> Result<Analysis> {
         self.transposed().check_columns(&columns)?;
         let (channels, p) = (self.channels(), self.transposed().dims().pixels());
         let mut analysis = Analysis::empty(self.analysis_settings()?, columns.start);
@@ -328,7 +324,7 @@ impl Coder<'_> {
                 .collect::<Result<_>>()?;
             stats.into_iter().for_each(|s| analysis.push(s));
             let done = batch.end - columns.start;
-            progress(Stage::Analysis, done as u64, columns.len() as u64);
+            progress.report(Stage::Analysis, done as u64, columns.len() as u64);
         }
         Ok(analysis)
     }

@@ -47,6 +47,7 @@ pub use transpose::{Transposed, MAX_NORM, MIN_NONZERO_RMS};
 
 use crate::container::{LtmWriter, OptionalChunks};
 use crate::error::{Error, Result};
+use crate::progress::{Progress, Stage};
 use crate::raw::RawStore;
 use crate::wavelet::Filter;
 use std::path::{Path, PathBuf};
@@ -224,18 +225,6 @@ impl From<CodeOptions> for CompressOptions {
     }
 }
 
-/// Stages reported to the progress callback.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-#[non_exhaustive]
-pub enum Stage {
-    /// Row transform and transpose (rows done of P).
-    Rows,
-    /// Analysis (columns done of M).
-    Analysis,
-    /// Coding (columns done of M).
-    Coding,
-}
-
 /// What `compress` measured.
 #[derive(Clone, Debug, Default)]
 pub struct CompressStats {
@@ -266,7 +255,7 @@ pub struct CompressStats {
 }
 
 /// Compresses a raw store into `out` (written atomically). `progress` gets
-/// (stage, done, total) updates.
+/// a [`Step`](crate::Step) per batch of rows or columns.
 ///
 /// The same as [`Transposed::new`] followed by [`Transposed::code`], with
 /// the temporary file beside `out` unless `opts.transpose.temp_dir` says
@@ -276,7 +265,7 @@ pub fn compress(
     raw: &RawStore,
     out: &Path,
     opts: &CompressOptions,
-    progress: &(dyn Fn(Stage, u64, u64) + Sync),
+    progress: Progress<'_>,
 ) -> Result<CompressStats> {
     opts.code.validate()?;
     let mut transpose = opts.transpose.clone();
@@ -296,7 +285,7 @@ impl Transposed<'_> {
         &self,
         out: &Path,
         opts: &CodeOptions,
-        progress: &(dyn Fn(Stage, u64, u64) + Sync),
+        progress: Progress<'_>,
     ) -> Result<CompressStats> {
         let mut coder = Coder::new(self, opts)?;
         let m = self.dims().lights();
@@ -354,7 +343,7 @@ fn code_at_bits(
     coder: &Coder,
     out: &Path,
     analysis: Option<&Analysis>,
-    progress: &(dyn Fn(Stage, u64, u64) + Sync),
+    progress: Progress<'_>,
 ) -> Result<CompressStats> {
     let budget = coder.budget();
     let (aim, low) = (budget * TARGET_AIM.powi(2), budget * TARGET_LOW.powi(2));
@@ -493,7 +482,7 @@ fn write_columns(
     coder: &Coder,
     out: &Path,
     plan: &Plan,
-    progress: &(dyn Fn(Stage, u64, u64) + Sync),
+    progress: Progress<'_>,
 ) -> Result<(LtmWriter, CompressStats, Coding)> {
     let t = coder.transposed();
     let m = t.dims().lights();
@@ -533,7 +522,7 @@ fn write_columns(
             err_total += err;
         }
         writer.push_columns(coded.first, coded.columns)?;
-        progress(Stage::Coding, batch.end as u64, m as u64);
+        progress.report(Stage::Coding, batch.end as u64, m as u64);
     }
     let norm = t.norm();
     stats.achieved_error = if norm > 0.0 {

@@ -8,6 +8,7 @@ use crate::empty::EmptyRows;
 use crate::error::{Error, Result};
 use crate::limits::Limits;
 use crate::pca::{check_rank, fit, PcaModel, QuantizedMatrix};
+use crate::progress::Progress;
 use crate::raw::RawStore;
 use crate::wavelet::Filter;
 use std::path::Path;
@@ -76,12 +77,12 @@ pub struct PcaStats {
 }
 
 /// Compresses `raw` into a PCA file at `out` (written atomically).
-/// `progress` gets (done, total) passes over the store.
+/// `progress` gets ([`Stage::Fit`](crate::Stage::Fit), done, total) passes over the store.
 pub fn compress_pca(
     raw: &RawStore,
     out: &Path,
     opts: &PcaOptions,
-    progress: &dyn Fn(usize, usize),
+    progress: Progress<'_>,
 ) -> Result<PcaStats> {
     let dims = raw.dims();
     let fitted = fitted_rank(opts, dims)?;

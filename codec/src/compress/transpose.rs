@@ -8,10 +8,11 @@
 //! columns, which fit half the budget.
 
 use super::analysis::BINS_PER_OCTAVE;
-use super::{Stage, TransposeOptions};
+use super::TransposeOptions;
 use crate::dims::Dims;
 use crate::empty::EmptyRows;
 use crate::error::{Error, Result};
+use crate::progress::{Progress, Stage};
 use crate::raw::{RawStore, RowBlocks};
 use crate::wavelet::{row_forward, Filter};
 use rayon::prelude::*;
@@ -81,7 +82,7 @@ impl<'a> Transposed<'a> {
     pub fn new(
         raw: &'a RawStore,
         opts: &TransposeOptions,
-        progress: &(dyn Fn(Stage, u64, u64) + Sync),
+        progress: Progress<'_>,
     ) -> Result<Transposed<'a>> {
         opts.validate()?;
         let src = raw.dims();
@@ -120,7 +121,7 @@ impl<'a> Transposed<'a> {
     /// codec's range, transforms the rows, accumulates the norm and the
     /// depth-0 histogram, and scatters them into the store. Fails if the
     /// raw store changed meanwhile.
-    fn fill(&mut self, block: usize, progress: &(dyn Fn(Stage, u64, u64) + Sync)) -> Result<()> {
+    fn fill(&mut self, block: usize, progress: Progress<'_>) -> Result<()> {
         let p = self.dims.pixels();
         let mut tbuf = vec![0.0f32; block * self.dims.row_len()];
         let mut reader = RowReader {
@@ -135,7 +136,7 @@ impl<'a> Transposed<'a> {
             self.add_stats(&rbuf);
             self.scatter(&rbuf, rows.clone(), &mut tbuf)?;
             p0 = rows.end;
-            progress(Stage::Rows, p0 as u64, p as u64);
+            progress.report(Stage::Rows, p0 as u64, p as u64);
         }
         reader.range.check()?;
         self.empty_rows = reader.empty;

@@ -14,6 +14,7 @@
 
 use crate::error::Result;
 use crate::limits::Limits;
+use crate::progress::{Progress, Stage};
 use crate::raw::RawStore;
 use crate::rsvd::{
     power_iterations, rayleigh_ritz, sketch, Ritz, Rows, OVERSAMPLING, POWER_ITERATIONS,
@@ -47,23 +48,25 @@ pub(crate) fn fit(
     seed: u64,
     block_values: usize,
     limits: &Limits,
-    progress: &dyn Fn(usize, usize),
+    progress: Progress<'_>,
 ) -> Result<CentredFit> {
     let dims = raw.dims();
     let (p, n) = (dims.pixels(), dims.row_len());
     let l = (rank + OVERSAMPLING).min(p.min(n));
     limits.check_alloc("PCA sketch", (n * l) as u64, 8)?;
     limits.check_alloc("PCA row coefficients", (p * l) as u64, 4)?;
-    let passes = 3 + POWER_ITERATIONS;
-    progress(0, passes);
+    let passes = 3 + POWER_ITERATIONS as u64;
+    progress.report(Stage::Fit, 0, passes);
     let (mean, norm2) = mean_pass(raw, block_values)?;
-    progress(1, passes);
+    progress.report(Stage::Fit, 1, passes);
     let a = Rows::centred(raw, block_values, &mean);
     let z = sketch(&a, l, (seed, SKETCH_SALT), false, |_| {})?;
-    progress(2, passes);
-    let q = power_iterations(&a, &z, norm2, |i| progress(3 + i, passes))?;
+    progress.report(Stage::Fit, 2, passes);
+    let q = power_iterations(&a, &z, norm2, |i| {
+        progress.report(Stage::Fit, 3 + i as u64, passes)
+    })?;
     let ritz = rayleigh_ritz(&a, &q, rank, Some(p))?;
-    progress(passes, passes);
+    progress.report(Stage::Fit, passes, passes);
     let (err2, coefficients) = errors_and_coefficients(&ritz, p, rank);
     Ok(CentredFit {
         mean,

@@ -3,6 +3,7 @@
 use super::progress;
 use anyhow::Result;
 use ltm_bake::{bake, BakeOptions, Scene, SceneDesc};
+use ltm_codec::Progress;
 use std::hash::{Hash, Hasher};
 use std::path::{Path, PathBuf};
 
@@ -23,10 +24,15 @@ pub fn bake_cached(desc: &SceneDesc, dir: &Path, label: &str) -> Result<PathBuf>
     }
     let scene = Scene::build(desc)?;
     let bar = progress::bar(0, "bake");
-    let report = bake(&scene, &raw_path, &BakeOptions::default(), &|p| {
-        bar.set_length(p.rows_total);
-        bar.set_position(p.rows_done);
-    })?;
+    let report = bake(
+        &scene,
+        &raw_path,
+        &BakeOptions::default(),
+        Progress::new(&|s| {
+            bar.set_length(s.total);
+            bar.set_position(s.done);
+        }),
+    )?;
     bar.finish_and_clear();
     eprintln!(
         "baked {} rows in {:.1} s",

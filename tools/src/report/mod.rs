@@ -19,7 +19,8 @@ use clap::Args;
 use ltm_bake::{Overrides, SceneDesc};
 use ltm_codec::wavelet::row_level;
 use ltm_codec::{
-    compress_pca, CodeOptions, Mode, PcaOptions, RawStore, Target, TransposeOptions, Transposed,
+    compress_pca, CodeOptions, Mode, PcaOptions, Progress, RawStore, Target, TransposeOptions,
+    Transposed,
 };
 use ltm_relight::{
     reference, relative_l2, BasisRelighter, EnvMap, Frame, Image, PcaRelighter, Relight, Relighter,
@@ -575,10 +576,14 @@ fn code_sweep(
     };
     let t = Instant::now();
     let bar = progress::bar(0, "transpose");
-    let transposed = Transposed::new(raw, &transpose, &|_, d, n| {
-        bar.set_length(n);
-        bar.set_position(d);
-    })?;
+    let transposed = Transposed::new(
+        raw,
+        &transpose,
+        Progress::new(&|s| {
+            bar.set_length(s.total);
+            bar.set_position(s.done);
+        }),
+    )?;
     bar.finish_and_clear();
     let transpose_s = t.elapsed().as_secs_f64();
     eprintln!("row transform and transpose in {transpose_s:.1} s");
@@ -707,10 +712,14 @@ fn code_and_relight(
     let label = format!("{counter} {} {bits} bits {err}", mode.name());
     let bar = progress::bar(0, &label);
     let t = Instant::now();
-    let stats = transposed.code(&path, &opts, &|_, d, n| {
-        bar.set_length(n);
-        bar.set_position(d);
-    })?;
+    let stats = transposed.code(
+        &path,
+        &opts,
+        Progress::new(&|s| {
+            bar.set_length(s.total);
+            bar.set_position(s.done);
+        }),
+    )?;
     bar.finish_and_clear();
     let code_s = t.elapsed().as_secs_f64();
     let quality_pair = bits == s.quality_bits && err == s.quality && mode != Mode::FourD;
@@ -785,7 +794,7 @@ fn code_and_relight_pca(
     };
     let path = files.dir.join(format!("pca-e{err}.ltm"));
     let t = Instant::now();
-    let stats = match compress_pca(raw, &path, &opts, &|_, _| {}) {
+    let stats = match compress_pca(raw, &path, &opts, ltm_codec::Progress::NONE) {
         Ok(stats) => stats,
         // A target no rank up to the largest reaches: left out of the
         // sweep, and said so.

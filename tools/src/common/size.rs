@@ -10,8 +10,8 @@ pub const MIN_SIZE: u64 = 1 << 20;
 const RANGE: &str = "1M to 16E bytes, 16E excluded";
 
 /// Parses a size flag's value: at least [`MIN_SIZE`] and below 16E
-/// (2⁶⁴ bytes). Fractions of a byte are dropped (`1.5K` is 1536 bytes,
-/// `0.3K` 307).
+/// (2⁶⁴ bytes). Fractions of a byte are dropped (`1.5M` is 1572864
+/// bytes, `1.0000001M` 1048576).
 pub fn size(s: &str) -> Result<u64, String> {
     let t = s.trim();
     let (number, shift) = match t.char_indices().last() {

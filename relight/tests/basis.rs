@@ -2,8 +2,9 @@
 //! dense product `T̂·L` of their reconstruction, and the three relighters
 //! behind one `dyn Relight`.
 
+use ltm_codec::baseline::sh;
 use ltm_codec::compress::{compress, CompressOptions};
-use ltm_codec::{cubemap, sh, Dims, PcaBasis, RawHeader, RawStore, RawWriter, ShProjection};
+use ltm_codec::{cubemap, Dims, PcaBasis, RawHeader, RawStore, RawWriter, ShProjection};
 use ltm_relight::{
     reference, relative_l2, BasisRelighter, Frame, Relight, Relighter, Request, Weighting,
 };

@@ -48,9 +48,6 @@
 //! and trusted only once its block is verified: its CRC, finite values, and
 //! every row flagged zero really zero ([`BlockVerifier`]).
 
-#[cfg(target_endian = "big")]
-compile_error!("ltm's file formats are little-endian and are mapped directly; big-endian targets are not supported");
-
 mod blocks;
 mod header;
 mod store;

@@ -1,5 +1,8 @@
 //! The raw store opened for reading.
 
+#[cfg(target_endian = "big")]
+compile_error!("ltm's file formats are little-endian and are mapped directly; big-endian targets are not supported");
+
 use super::header::{Layout, RawHeader, CRC_CHUNK, HEADER_LEN_V3};
 use super::verify::BlockVerifier;
 use super::writer::non_finite_albedo;

@@ -51,7 +51,7 @@ pub use dims::{
 pub use eigen::{compress_pca, PcaModel, PcaOptions, PcaStats};
 pub use empty::EmptyRows;
 pub use error::{Error, Result};
-pub use limits::Limits;
+pub use limits::{Charge, Limits};
 pub use output::AtomicFile;
 pub use pca::PcaBasis;
 pub use quant::BandWeights;

@@ -236,7 +236,7 @@ pub fn run(a: DemoArgs) -> Result<()> {
         exact.write_png(&out(&format!("{name}-reference.png")), ev)?;
         let mut tiles = vec![exact];
         for (mode, relighter) in &relighters {
-            let mut bufs = relighter.frame();
+            let mut bufs = relighter.frame()?;
             for &n in &n_values {
                 let mut times = Vec::new();
                 let mut stats = Default::default();

@@ -26,12 +26,15 @@ use std::sync::OnceLock;
 #[derive(Parser)]
 #[command(name = "ltm", version, about, long_about)]
 struct Cli {
-    /// Largest buffer any command may allocate for a size read from a file
-    /// (a column table, the relighter's arena, a dense export): bytes, or
-    /// with a binary suffix K, M, G or T. Files that need more are refused
-    /// with the size they need; raise this only for files you trust.
-    #[arg(long, global = true, value_name = "SIZE", default_value = "4G", value_parser = parse_size)]
-    max_memory: u64,
+    /// Memory budget, in all, for the buffers a command sizes from its files
+    /// and arguments (column tables, the relighter's arena, frames, a dense
+    /// export; every file a command opens is charged to it): bytes, or with
+    /// a binary suffix K, M, G or T. Work that needs more is refused with
+    /// the size it needs. Default: 75 % of the smaller of the memory
+    /// available and the address-space limit (ulimit -v), or 4G where
+    /// neither is known.
+    #[arg(long, global = true, value_name = "SIZE", value_parser = parse_size)]
+    max_memory: Option<u64>,
     #[command(subcommand)]
     command: Command,
 }
@@ -118,7 +121,11 @@ fn main() -> ExitCode {
     #[cfg(unix)]
     exit_quietly_on_closed_pipe();
     let cli = Cli::parse();
-    let _ = LIMITS.set(Limits::with_max_alloc(cli.max_memory));
+    let limits = match cli.max_memory {
+        Some(total) => Limits::with_max_alloc(total),
+        None => Limits::for_machine(),
+    };
+    let _ = LIMITS.set(limits);
     let result = match cli.command {
         Command::Demo(args) => demo::run(args),
         Command::Bake(args) => bake::run(args),

@@ -4,8 +4,8 @@ use anyhow::{bail, Context, Result};
 use clap::Args;
 use ltm_codec::LtmFile;
 use ltm_relight::{
-    open_relighter, relative_l2, EnvMap, Image, Lookup, PcaRelighter, PointLight, Relight, Request,
-    Rotation, Weighting,
+    relative_l2, EnvMap, Image, Lookup, PcaRelighter, PointLight, Relight, Request, Rotation,
+    TermBasis, Weighting,
 };
 use std::path::PathBuf;
 use std::str::FromStr;
@@ -157,7 +157,7 @@ pub fn run(a: RelightArgs) -> Result<()> {
     let opened = std::time::Instant::now();
     let open = || -> Result<(Option<PcaRelighter>, Option<AnyRelighter>)> {
         Ok(if points.is_empty() {
-            (None, Some(open_relighter(&a.file, crate::limits())?))
+            (None, Some(ltm_relight::open(&a.file, crate::limits())?))
         } else {
             (Some(open_for_points(&a.file)?), None)
         })
@@ -177,21 +177,20 @@ pub fn run(a: RelightArgs) -> Result<()> {
     let light = match &a.env {
         Some(path) => {
             let env = EnvMap::load(path).with_context(|| format!("loading {}", path.display()))?;
-            let n = ((relighter.lights() / 6) as f64).sqrt().round() as usize;
-            Some(env.to_cubemap(n, &a.rotate))
+            Some(env.to_cubemap(relighter.face_res(), &a.rotate))
         }
         None => None,
     };
     // A pca file (linear basis) refuses more terms than it stores; `all`
     // and the default mean all of them there.
-    let linear = relighter.max_terms() < relighter.lights();
+    let linear = relighter.term_basis() == TermBasis::Linear;
     let terms = match a.terms {
         Some(Terms(usize::MAX)) => relighter.max_terms(),
         Some(Terms(t)) => t,
         None if linear => relighter.max_terms(),
         None => 200,
     };
-    let mut bufs = relighter.frame();
+    let mut bufs = relighter.frame()?;
     let request = Request {
         terms,
         weighting: a.weighting,

@@ -245,7 +245,7 @@ mod tests {
         }
         let relighter = BasisRelighter::sh(projection, &raw).unwrap();
         let light = vec![[1.0f32; 3]; raw.dims().lights()];
-        let mut frame = relighter.frame();
+        let mut frame = relighter.frame().unwrap();
         let request = Request {
             terms: 20,
             weighting: Weighting::Transport,

@@ -32,7 +32,7 @@ fn pca_dot(c: &mut Criterion) {
     let env = EnvMap::load(&common::assets().join("envmaps/interior.exr")).unwrap();
     let n = (relighter.lights() as f64 / 6.0).sqrt() as usize;
     let light = env.to_cubemap(n, &Rotation::IDENTITY);
-    let mut frame = relighter.frame();
+    let mut frame = relighter.frame().unwrap();
     let mut group = c.benchmark_group("pca_dot");
     for k in [16, 48, 128, 256] {
         if k > relighter.rank() {

@@ -34,7 +34,7 @@ use ltm::codec::compress::{compress, CodeOptions, Target};
 use ltm::codec::entropy::{self, ColumnShape, ValueCoding};
 use ltm::codec::quant::{self, scale_groups, BandWeights};
 use ltm::codec::wavelet::{self, row_forward};
-use ltm::codec::{ColumnDecoder, Dims, Filter, Meta, RawStore, SparseColumn};
+use ltm::codec::{ColumnDecoder, Dims, Filter, Limits, Meta, RawStore, SparseColumn};
 use ltm::relight::{EnvMap, Relight, Relighter, Request, Rotation, Weighting};
 use std::time::Duration;
 
@@ -63,7 +63,7 @@ fn bench(c: &mut Criterion) {
 
     let mut group = c.benchmark_group("relight_frame");
     for (mode, relighter) in &relighters {
-        let mut bufs = relighter.frame();
+        let mut bufs = relighter.frame().unwrap();
         for n in [50, 200, 1000] {
             let request = Request {
                 terms: n,
@@ -82,7 +82,7 @@ fn bench(c: &mut Criterion) {
     group.finish();
 
     let file = relighters[0].1.file();
-    let decoder = ColumnDecoder::new(file.meta());
+    let decoder = ColumnDecoder::new(file.meta(), &Limits::default()).unwrap();
     let j = (0..file.columns().len())
         .max_by_key(|&j| file.columns()[j].nnz)
         .unwrap();
@@ -169,7 +169,7 @@ fn quantize(c: &mut Criterion) {
     let opts = CodeOptions::default();
     let filter = Filter::LeGall53;
     let image = column_image(W, H, 0x5eed);
-    let weights = BandWeights::new(filter, W, H, DEPTH);
+    let weights = BandWeights::new(filter, W, H, DEPTH, &Limits::default()).unwrap();
     let mut coefs = image.clone();
     let mut work = vec![0.0f32; P];
     wavelet::forward(filter, &mut coefs, W, H, DEPTH, &mut work).unwrap();
@@ -196,7 +196,7 @@ fn quantize(c: &mut Criterion) {
         terms: 0,
         norm: 1.0,
     };
-    let decoder = ColumnDecoder::new(&meta);
+    let decoder = ColumnDecoder::new(&meta, &Limits::default()).unwrap();
     let mut plane = vec![0.0f32; P];
     decoder.decode(&col, 0, &mut plane, &mut work).unwrap();
     let err = plane
@@ -307,7 +307,7 @@ fn multiply_add(c: &mut Criterion) {
             &Rotation::IDENTITY,
         );
         let entry_bytes = 2 * (relighter.meta().dims.channels as u64 + 1);
-        let mut frame = relighter.frame();
+        let mut frame = relighter.frame().unwrap();
         for n in [200, 1000, 5000] {
             let request = Request {
                 terms: n,

@@ -8,11 +8,13 @@
 //! - a matrix's shape: [`Dims`] = [`RowLayout`] × [`LightBasis`] × channels;
 //! - files: [`RawStore`] / [`RawWriter`] (the uncompressed matrix),
 //!   [`LtmFile`] (a compressed one, from a path or from bytes), both opened
-//!   under [`Limits`];
+//!   under [`Limits`], one memory budget that clones share;
 //! - compression: [`compress`] with [`CompressOptions`];
-//! - relighting: the [`Relight`] trait, implemented by the wavelet
-//!   [`Relighter`] and the PCA/SH [`BasisRelighter`], fed by an [`EnvMap`]
-//!   and reusing a [`Frame`];
+//! - relighting: [`open()`](fn@open) opens any `.ltm` file (a [`Source`]:
+//!   path or bytes) as a `Box<dyn` [`Relight`]`>`, the trait implemented by
+//!   the wavelet [`Relighter`], the [`PcaRelighter`] and the PCA/SH
+//!   [`BasisRelighter`], which says its [`TermBasis`] and face resolution,
+//!   is fed by an [`EnvMap`] and reuses a [`Frame`];
 //! - baking: [`Scene`] and [`bake()`](fn@bake).
 //!
 //! Each crate has its own error type: [`CodecError`], [`BakeError`],
@@ -27,10 +29,10 @@ pub use ltm_relight as relight;
 
 pub use ltm_bake::{bake, BakeError, BakeOptions, Scene, SceneDesc};
 pub use ltm_codec::{
-    compress, CompressOptions, Dims, Error as CodecError, LightBasis, Limits, LtmFile, Mode,
-    RawStore, RawWriter, RowLayout,
+    compress, Charge, CompressOptions, Dims, Error as CodecError, LightBasis, Limits, LtmFile,
+    Mode, RawStore, RawWriter, RowLayout,
 };
 pub use ltm_relight::{
-    BasisRelighter, EnvMap, Frame, Image, Relight, RelightError, Relighter, Request, Rotation,
-    Weighting,
+    open, BasisRelighter, EnvMap, Frame, Image, PcaRelighter, Relight, RelightError, Relighter,
+    Request, Rotation, Source, TermBasis, Weighting,
 };

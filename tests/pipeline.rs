@@ -79,7 +79,7 @@ fn relighting_matches_the_dense_reference_and_eq3() {
             };
             compress(&raw, &out, &opts, ltm_codec::Progress::NONE).unwrap();
             let relighter = Relighter::open(&out).unwrap();
-            let mut bufs = relighter.frame();
+            let mut bufs = relighter.frame().unwrap();
             relighter
                 .relight(&l, &req(usize::MAX, Weighting::Unweighted), &mut bufs)
                 .unwrap();
@@ -130,7 +130,7 @@ fn more_terms_give_less_error_and_threads_agree() {
     )
     .unwrap();
     let relighter = Relighter::open(&out).unwrap();
-    let mut bufs = relighter.frame();
+    let mut bufs = relighter.frame().unwrap();
     let mut errors = Vec::new();
     for terms in [5, 50, 384] {
         relighter
@@ -148,7 +148,7 @@ fn more_terms_give_less_error_and_threads_agree() {
         let hs: Vec<_> = (0..2)
             .map(|_| {
                 s.spawn(|| {
-                    let mut b = relighter.frame();
+                    let mut b = relighter.frame().unwrap();
                     relighter
                         .relight(&l, &req(50, Weighting::Unweighted), &mut b)
                         .unwrap();
@@ -167,7 +167,7 @@ fn more_terms_give_less_error_and_threads_agree() {
             .build()
             .unwrap();
         pool.install(|| {
-            let mut b = relighter.frame();
+            let mut b = relighter.frame().unwrap();
             relighter
                 .relight(&l, &req(384, Weighting::Transport), &mut b)
                 .unwrap();
@@ -191,7 +191,7 @@ fn bad_lighting_is_an_error_and_large_n_is_clamped() {
     )
     .unwrap();
     let relighter = Relighter::open(&out).unwrap();
-    let mut bufs = relighter.frame();
+    let mut bufs = relighter.frame().unwrap();
     let m = relighter.lights();
     assert!(relighter
         .relight(

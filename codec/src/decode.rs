@@ -7,6 +7,7 @@ use crate::column::SparseColumn;
 use crate::container::{LtmFile, Meta};
 use crate::empty::EmptyRows;
 use crate::error::{Error, Result};
+use crate::limits::{Charge, Limits};
 use crate::quant::{decode_scale, levels, scale_groups, BandWeights};
 use crate::wavelet::{self, band_size, PlaneMut, RowMode};
 
@@ -36,6 +37,8 @@ pub struct ColumnDecoder {
     groups: Vec<Vec<u8>>,
     /// Rows decoded as exactly 0.
     empty_rows: Option<EmptyRows>,
+    /// The inverse weights' and groups' bytes, charged to the limits.
+    _charge: Charge,
 }
 
 impl ColumnDecoder {
@@ -48,23 +51,30 @@ impl ColumnDecoder {
     pub const MAX_DECODED: f32 = (1u128 << 112) as f32;
 
     /// Precomputes the band weights and scale groups of `meta`'s column
-    /// filter and image size at every depth.
-    pub fn new(meta: &Meta) -> ColumnDecoder {
+    /// filter and image size at every depth, charged to `limits`.
+    pub fn new(meta: &Meta, limits: &Limits) -> Result<ColumnDecoder> {
+        ColumnDecoder::to_depth(meta, meta.max_depth(), limits)
+    }
+
+    /// [`ColumnDecoder::new`] for columns of depth `0..=deepest` only.
+    fn to_depth(meta: &Meta, deepest: u32, limits: &Limits) -> Result<ColumnDecoder> {
         let (w, h) = (meta.dims.width() as usize, meta.dims.height() as usize);
-        let weights = BandWeights::new(meta.col_filter, w, h, meta.max_depth());
-        let inv_weights = (0..=meta.max_depth())
+        let deepest = deepest.min(meta.max_depth());
+        let depths = u64::from(deepest) + 1;
+        let charge = limits.check_alloc("column decoder tables", (w * h) as u64, 5 * depths)?;
+        let weights = BandWeights::new(meta.col_filter, w, h, deepest, limits)?;
+        let inv_weights = (0..=deepest)
             .map(|d| weights.map(d).iter().map(|x| 1.0 / x).collect())
             .collect();
-        let groups = (0..=meta.max_depth())
-            .map(|d| scale_groups(w, h, d))
-            .collect();
-        ColumnDecoder {
+        let groups = (0..=deepest).map(|d| scale_groups(w, h, d)).collect();
+        Ok(ColumnDecoder {
             meta: meta.clone(),
             weights,
             inv_weights,
             groups,
             empty_rows: None,
-        }
+            _charge: charge,
+        })
     }
 
     /// The band weights of every depth (computed once, by
@@ -73,10 +83,13 @@ impl ColumnDecoder {
         &self.weights
     }
 
-    /// The decoder of an opened file: [`ColumnDecoder::new`] with the
-    /// file's empty-row mask.
-    pub fn for_file(file: &LtmFile) -> ColumnDecoder {
-        ColumnDecoder::new(file.meta()).with_empty_rows(file.empty_rows().cloned())
+    /// The decoder of an opened file: [`ColumnDecoder::new`] up to the
+    /// depth of the file's deepest column (the tables of deeper ones would
+    /// never be used), with the file's empty-row mask.
+    pub fn for_file(file: &LtmFile, limits: &Limits) -> Result<ColumnDecoder> {
+        let deepest = file.columns().iter().map(|c| u32::from(c.depth)).max();
+        let decoder = ColumnDecoder::to_depth(file.meta(), deepest.unwrap_or(0), limits)?;
+        Ok(decoder.with_empty_rows(file.empty_rows().cloned()))
     }
 
     /// Sets the rows [`ColumnDecoder::decode`] outputs as exactly 0 (a mask

@@ -75,15 +75,27 @@ pub enum Error {
         /// The checksum of the bytes.
         computed: u32,
     },
-    /// An allocation sized by a file or argument that exceeds the
-    /// [`Limits`](crate::Limits) passed in.
-    #[error("{what} needs {needed} bytes, more than the limit of {limit} bytes (raise the memory limit if the file is trusted)")]
+    /// An allocation sized by a file or argument that exceeds what is left
+    /// of the memory budget ([`Limits`](crate::Limits)) passed in.
+    #[error("{what} needs {needed} bytes, more than the {available} bytes left of the memory budget of {limit} bytes (raise the budget if the file is trusted)")]
     Limit {
         /// What would be allocated.
         what: String,
         /// Bytes needed.
         needed: u64,
-        /// The limit in force.
+        /// Bytes of the budget not charged yet.
+        available: u64,
+        /// The budget in force.
+        limit: u64,
+    },
+    /// An allocation within the memory budget that the system refused.
+    #[error("{what} needs {needed} bytes, which the system could not allocate (memory budget {limit} bytes: lower it to fit the memory available)")]
+    OutOfMemory {
+        /// What would be allocated.
+        what: String,
+        /// Bytes needed.
+        needed: u64,
+        /// The budget in force.
         limit: u64,
     },
     /// Input data that cannot be encoded (NaN, infinity, wrong dtype, ...).

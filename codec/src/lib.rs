@@ -54,7 +54,7 @@ pub use dims::{
 };
 pub use empty::EmptyRows;
 pub use error::{Error, Result};
-pub use limits::Limits;
+pub use limits::{Charge, Limits};
 pub use output::AtomicFile;
 pub use pca::PcaModel;
 pub use progress::{Progress, Stage, Step};

@@ -5,7 +5,7 @@ use crate::container::LtmFile;
 use crate::decode::ColumnDecoder;
 use crate::dims::Dims;
 use crate::error::{Error, Result};
-use crate::limits::Limits;
+use crate::limits::{Charge, Limits};
 use crate::output::AtomicFile;
 use crate::progress::{Progress, Stage};
 use crate::raw::{RawHeader, RawWriter};
@@ -354,13 +354,19 @@ fn import_npy_inner(
 /// Decodes a whole `.ltm` file to the pixel lighting basis: `P × M × C`
 /// values, C order. The dense matrix must fit `limits`.
 pub fn decode_matrix(file: &LtmFile, limits: &Limits) -> Result<Vec<f32>> {
+    decode_matrix_charged(file, limits).map(|(dense, _charge)| dense)
+}
+
+/// [`decode_matrix`], with the dense matrix's charge to `limits`.
+fn decode_matrix_charged(file: &LtmFile, limits: &Limits) -> Result<(Vec<f32>, Charge)> {
     let meta = file.meta();
     let dims = meta.dims;
-    limits.check_alloc("dense decoded matrix", dims.raw_bytes() / 4, 4)?;
+    let values = usize::try_from(dims.raw_bytes() / 4).unwrap_or(usize::MAX);
     if let Some(model) = file.pca() {
         // Reconstructed in f64 in blocks of rows, rounded to f32.
         let n = dims.row_len();
-        let mut dense = Vec::with_capacity(dims.pixels() * n);
+        let (mut dense, charge) = limits.vec("dense decoded matrix", values, 0.0f32)?;
+        dense.clear();
         let mut block = Vec::new();
         let step = ((1usize << 22) / n).max(1);
         for first in (0..dims.pixels()).step_by(step) {
@@ -374,14 +380,14 @@ pub fn decode_matrix(file: &LtmFile, limits: &Limits) -> Result<Vec<f32>> {
                 format!("decoded value {i} exceeds the f32 range"),
             ));
         }
-        return Ok(dense);
+        return Ok((dense, charge));
     }
     let (p, m, c) = (dims.pixels(), dims.lights(), dims.channels as usize);
     let n = dims.face_res() as usize;
-    let decoder = ColumnDecoder::for_file(file);
-    let mut dense = vec![0.0f32; p * m * c];
-    let mut plane = vec![0.0f32; p];
-    let mut work = vec![0.0f32; p.max(n * n)];
+    let decoder = ColumnDecoder::for_file(file, limits)?;
+    let (mut dense, charge) = limits.vec("dense decoded matrix", values, 0.0f32)?;
+    let (mut plane, _plane) = limits.vec("export column plane", p, 0.0f32)?;
+    let (mut work, _work) = limits.vec("export work plane", p.max(n * n), 0.0f32)?;
     for j in 0..m {
         let col = file.column(j)?;
         for ch in 0..c {
@@ -403,14 +409,14 @@ pub fn decode_matrix(file: &LtmFile, limits: &Limits) -> Result<Vec<f32>> {
             }
         }
     }
-    Ok(dense)
+    Ok((dense, charge))
 }
 
 /// Writes the decoded matrix as a float32 `.npy` of shape `(P, M)` or
 /// `(P, M, C)`, atomically. The dense matrix must fit `limits`.
 pub fn export_npy(file: &LtmFile, out: &Path, limits: &Limits) -> Result<()> {
     let dims = file.meta().dims;
-    let dense = decode_matrix(file, limits)?;
+    let (dense, _charge) = decode_matrix_charged(file, limits)?;
     let shape = if dims.channels == 1 {
         format!("({}, {})", dims.pixels(), dims.lights())
     } else {

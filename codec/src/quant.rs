@@ -17,7 +17,27 @@
 
 use crate::bands::{band_count, band_level, band_map, band_rect};
 use crate::column::SparseColumn;
-use crate::wavelet::{self, Filter};
+use crate::error::{Error, Result};
+use crate::limits::{Charge, Limits};
+use crate::wavelet::{self, band_size, Filter};
+
+/// `count` copies of `value`, allocated fallibly (the bytes are charged by
+/// the caller): memory the system refuses is an error naming `what`.
+pub(crate) fn try_vec<T: Clone>(
+    count: usize,
+    value: T,
+    what: &'static str,
+    limits: &Limits,
+) -> Result<Vec<T>> {
+    let mut v = Vec::new();
+    v.try_reserve_exact(count).map_err(|_| Error::OutOfMemory {
+        what: what.to_string(),
+        needed: (count as u64).saturating_mul(std::mem::size_of::<T>() as u64),
+        limit: limits.max_alloc_bytes(),
+    })?;
+    v.resize(count, value);
+    Ok(v)
+}
 
 /// Quantization levels on each side of zero for `bits` (2..=16).
 pub fn levels(bits: u32) -> f32 {
@@ -145,14 +165,26 @@ pub fn quantize(
 /// `height` column image, for each transform depth `0..=max_depth`.
 pub struct BandWeights {
     maps: Vec<Vec<f32>>,
+    /// The maps' bytes, charged to the limits they were made under.
+    _charge: Charge,
 }
 
 impl BandWeights {
     /// Computes the weights by inverse-transforming one impulse per band.
-    pub fn new(filter: Filter, width: usize, height: usize, max_depth: u32) -> BandWeights {
-        let n = width * height;
-        let mut probe = vec![0.0f32; n];
-        let mut work = vec![0.0f32; n];
+    /// The maps (and two work planes while they are made) are charged to
+    /// `limits`.
+    pub fn new(
+        filter: Filter,
+        width: usize,
+        height: usize,
+        max_depth: u32,
+        limits: &Limits,
+    ) -> Result<BandWeights> {
+        let n = width.saturating_mul(height);
+        let depths = max_depth as usize + 1;
+        let charge = limits.check_alloc("band weights", n as u64, 4 * depths as u64)?;
+        let (mut probe, _probe) = limits.vec("band weight probe", n, 0.0f32)?;
+        let (mut work, _work) = limits.vec("band weight work plane", n, 0.0f32)?;
         // norm of an impulse at (x, y) after inverse-transforming `depth` levels.
         let mut norm = |x: usize, y: usize, depth: u32| -> f32 {
             probe.fill(0.0);
@@ -162,9 +194,9 @@ impl BandWeights {
             }
             probe.iter().map(|v| v * v).sum::<f32>().sqrt().max(1e-6)
         };
-        let mut maps = Vec::with_capacity(max_depth as usize + 1);
+        let mut maps = Vec::with_capacity(depths);
         for depth in 0..=max_depth {
-            let mut map = vec![1.0f32; n];
+            let mut map = try_vec(n, 1.0f32, "band weights", limits)?;
             if depth > 0 {
                 for band in 0..band_count(depth) {
                     let (xs, ys) = band_rect(width, height, depth, band);
@@ -179,7 +211,10 @@ impl BandWeights {
             }
             maps.push(map);
         }
-        BandWeights { maps }
+        Ok(BandWeights {
+            maps,
+            _charge: charge,
+        })
     }
 
     /// The weight map for columns transformed to `depth`.

@@ -118,6 +118,11 @@ pub struct Surface {
 }
 
 impl Surface {
+    /// Bytes of its points in memory.
+    pub fn heap_bytes(&self) -> usize {
+        std::mem::size_of_val(self.points.as_slice())
+    }
+
     /// Surface data from one point per row, checked: a valid point has a
     /// finite position and a unit normal, an invalid one is all zero.
     pub fn new(points: Vec<SurfacePoint>) -> Result<Surface> {
@@ -241,7 +246,7 @@ impl Surface {
                 format!("{} (width·height)", dims.pixels()),
             ));
         }
-        limits.check_alloc("surface data", count as u64, SURFACE_RECORD_LEN as u64)?;
+        let _held = limits.check_alloc("surface data", count as u64, SURFACE_RECORD_LEN as u64)?;
         let surface = Surface::decode_records(&bytes[SURF_HEADER_LEN..], count)?;
         Ok((rows, surface))
     }

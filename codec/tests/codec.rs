@@ -287,7 +287,7 @@ fn stored_column_norms_are_those_of_the_decoded_columns() {
         let file = LtmFile::open(&out).unwrap();
         let norms = file.column_norms().expect("a NORM chunk");
         assert_eq!(norms.len(), m);
-        let decoder = ltm_codec::ColumnDecoder::for_file(&file);
+        let decoder = ltm_codec::ColumnDecoder::for_file(&file, &Limits::default()).unwrap();
         for (j, &n) in norms.iter().enumerate() {
             let col = file.column(j).unwrap();
             assert_eq!(n, decoder.weighted_norm(&col) as f32, "{mode:?} column {j}");

@@ -406,7 +406,7 @@ fn crafted_scale_codes_never_decode_to_infinity() {
         terms: 0,
         norm: 1.0,
     };
-    let decoder = ColumnDecoder::new(&meta);
+    let decoder = ColumnDecoder::new(&meta, &Limits::default()).unwrap();
     let depth = meta.max_depth();
     let col = SparseColumn {
         depth,

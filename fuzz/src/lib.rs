@@ -3,16 +3,16 @@
 
 use ltm_codec::{ColumnDecoder, Limits, LtmFile};
 
-/// Limits small enough that a hostile header cannot slow the fuzzer down.
-const LIMITS: Limits = Limits {
-    max_alloc_bytes: 64 << 20,
-};
+/// The budget of a run: small enough that a hostile header cannot slow
+/// the fuzzer down.
+const BUDGET: u64 = 64 << 20;
 
 /// Opens `bytes` with [`LtmFile::from_bytes`], reads every column and, for
 /// small images, decodes it to the pixel domain with [`ColumnDecoder`]. Any
 /// outcome but a panic is fine.
 pub fn decode_through_public_api(bytes: &[u8]) {
-    let Ok(file) = LtmFile::from_bytes(bytes, &LIMITS) else {
+    let limits = Limits::with_max_alloc(BUDGET);
+    let Ok(file) = LtmFile::from_bytes(bytes, &limits) else {
         return;
     };
     let dims = file.meta().dims;
@@ -23,7 +23,9 @@ pub fn decode_through_public_api(bytes: &[u8]) {
         model.reconstruct_rows(0, dims.pixels().min(16), &mut rows);
         return;
     }
-    let decoder = ColumnDecoder::for_file(&file);
+    let Ok(decoder) = ColumnDecoder::for_file(&file, &limits) else {
+        return;
+    };
     let small = dims.pixels() <= 1 << 12;
     let mut plane = vec![0.0f32; if small { dims.pixels() } else { 0 }];
     let mut work = plane.clone();
@@ -46,7 +48,7 @@ pub fn read_raw_store(bytes: &[u8]) {
     if std::fs::write(&path, bytes).is_err() {
         return;
     }
-    let Ok(raw) = ltm_codec::RawStore::open_with_limits(&path, &LIMITS) else {
+    let Ok(raw) = ltm_codec::RawStore::open_with_limits(&path, &Limits::with_max_alloc(BUDGET)) else {
         return;
     };
     for b in 0..raw.header().block_count() {

@@ -80,7 +80,7 @@ struct Bands {
 impl Bands {
     fn new(meta: &Meta, bw: &BandWeights) -> Bands {
         let (w, h) = (meta.dims.width() as usize, meta.dims.height() as usize);
-        let maps: Vec<Vec<u8>> = (0..=meta.max_depth()).map(|d| band_map(w, h, d)).collect();
+        let maps: Vec<Vec<u8>> = (0..=bw.max_depth()).map(|d| band_map(w, h, d)).collect();
         let weights = maps
             .iter()
             .enumerate()
@@ -436,7 +436,7 @@ mod tests {
                 terms: 0,
                 norm: 1.0,
             };
-            let decoder = ColumnDecoder::new(&meta);
+            let decoder = ColumnDecoder::new(&meta, &Limits::default()).unwrap();
             for d in 0..=max {
                 let map = band_map(w, h, d);
                 for (i, b) in map.iter().enumerate() {
@@ -515,13 +515,20 @@ mod file_tests {
                 compress(&raw, &out, &opts.into(), ltm_codec::Progress::NONE).unwrap();
                 let file = LtmFile::open(&out).unwrap();
                 let meta = file.meta().clone();
-                let decoder = ColumnDecoder::new(&meta);
+                let decoder = ColumnDecoder::new(&meta, &Limits::default()).unwrap();
                 let arena = Arena::new(&file, &decoder);
                 assert_eq!(arena.held_bytes(), 0);
                 arena.decode_all(&file, &decoder).unwrap();
                 let norms = arena.norms(&file, &decoder).unwrap();
-                let weights =
-                    BandWeights::new(meta.col_filter, w as usize, h as usize, meta.max_depth());
+                let (wu, hu) = (w as usize, h as usize);
+                let weights = BandWeights::new(
+                    meta.col_filter,
+                    wu,
+                    hu,
+                    meta.max_depth(),
+                    &Limits::default(),
+                )
+                .unwrap();
                 let l = arena.layout;
                 for (j, &norm) in norms.iter().enumerate() {
                     let col = file.column(j).unwrap();

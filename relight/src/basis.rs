@@ -12,9 +12,9 @@
 //! if there is one. Everything is accumulated in f64.
 
 use crate::error::{RelightError, Result};
-use crate::frame::{check_light, Frame, FrameStats, Relight, Request};
+use crate::frame::{check_light, Frame, FrameStats, Relight, Request, TermBasis};
 use crate::image_io::Image;
-use ltm_codec::{Dims, PcaBasis, RawStore, ShProjection};
+use ltm_codec::{Dims, LightBasis, Limits, PcaBasis, RawStore, ShProjection};
 use rayon::prelude::*;
 use std::time::Instant;
 
@@ -27,7 +27,14 @@ pub struct BasisRelighter {
     fit: Fit,
     dims: Dims,
     albedo: Option<Vec<f32>>,
+    /// The budget its frames are charged to (the machine's: the fit is
+    /// made from a raw store already in memory).
+    limits: Limits,
 }
+
+/// The scratch a [`BasisRelighter`] keeps in a [`Frame`]: the lighting
+/// projected on the basis (RGB per basis function).
+struct Projected(Vec<[f64; 3]>);
 
 /// The fitted coefficients and basis.
 enum Fit {
@@ -72,6 +79,7 @@ impl BasisRelighter {
             fit,
             dims,
             albedo: raw.albedo().map(<[f32]>::to_vec),
+            limits: Limits::default(),
         })
     }
 
@@ -144,8 +152,13 @@ impl BasisRelighter {
 }
 
 impl Relight for BasisRelighter {
-    fn lights(&self) -> usize {
-        self.dims.lights()
+    fn light_basis(&self) -> LightBasis {
+        self.dims.lights
+    }
+
+    /// Principal components or spherical-harmonics orders.
+    fn term_basis(&self) -> TermBasis {
+        TermBasis::Linear
     }
 
     fn size(&self) -> (usize, usize) {
@@ -171,13 +184,16 @@ impl Relight for BasisRelighter {
         fit + self.albedo.as_ref().map_or(0, |a| 4 * a.len())
     }
 
-    fn frame(&self) -> Frame {
+    fn frame(&self) -> Result<Frame> {
         let (w, h) = self.size();
-        Frame {
-            image: Image::new(w, h),
-            projected: Vec::with_capacity(self.parts().2),
-            ..Frame::default()
-        }
+        let mut frame = Frame::default();
+        frame.fit_image(w, h, &self.limits)?;
+        let k = self.parts().2;
+        frame.scratch(
+            |_: &Projected| false,
+            || Ok(Projected(Vec::with_capacity(k))),
+        )?;
+        Ok(frame)
     }
 
     /// `T̂·L` with the first `request.terms` components or orders.
@@ -190,11 +206,12 @@ impl Relight for BasisRelighter {
         check_light(light, self.lights(), self.dims.face_res())?;
         let k = self.coefficients_used(request.terms)?;
         let (w, h) = self.size();
-        frame.fit_image(w, h);
+        frame.fit_image(w, h, &self.limits)?;
+        let (s, image) = frame.scratch(|_: &Projected| true, || Ok(Projected(Vec::new())))?;
         let t0 = Instant::now();
-        self.project(light, k, &mut frame.projected);
+        self.project(light, k, &mut s.0);
         let t1 = Instant::now();
-        self.dot_rows(&frame.projected, &mut frame.image);
+        self.dot_rows(&s.0, image);
         if let Some((x, y)) = frame.image.first_non_finite() {
             return Err(RelightError::Invalid(format!(
                 "relit pixel ({x}, {y}) is not finite (exceeds the f32 range)"

@@ -40,7 +40,7 @@
 //! let light = sky.to_cubemap(4, &Rotation::IDENTITY);
 //!
 //! let relighter = Relighter::open(&ltm)?;
-//! let mut frame = relighter.frame(); // reused frame after frame
+//! let mut frame = relighter.frame()?; // reused frame after frame
 //! let request = Request { terms: 50, weighting: Weighting::Transport };
 //! let stats = relighter.relight(&light, &request, &mut frame)?;
 //! let exact = reference(&raw, &light)?;
@@ -59,6 +59,7 @@ mod error;
 mod frame;
 mod image_io;
 mod kernel;
+mod open;
 mod pca;
 mod pca_blocks;
 mod point;
@@ -71,9 +72,10 @@ mod slots;
 pub use basis::BasisRelighter;
 pub use envmap::{EnvMap, Rotation, MAX_ENV_HEIGHT};
 pub use error::{RelightError, Result};
-pub use frame::{Frame, FrameStats, Relight, Request};
+pub use frame::{Frame, FrameStats, Relight, Request, TermBasis};
 pub use image_io::{relative_l2, Image, MAX_READ_PIXELS};
-pub use pca::{open_relighter, PcaRelighter};
+pub use open::{open, Source};
+pub use pca::PcaRelighter;
 pub use point::{point_light_taps, Lookup, PointLight, SurfaceSample, Taps};
 pub use reference::{reference, reference_with_progress};
 pub use relighter::Relighter;

@@ -12,11 +12,12 @@
 //! against.
 
 use crate::error::{RelightError, Result};
-use crate::frame::{check_light, Frame, FrameStats, Relight, Request};
+use crate::frame::{check_light, Frame, FrameStats, Relight, Request, TermBasis};
 use crate::image_io::Image;
+use crate::open::Source;
 use crate::pca_blocks::{Blocks, Path as DotPath};
 use crate::point::{point_light_taps, Lookup, PointLight, SurfaceSample, Taps};
-use ltm_codec::{Dims, Limits, LtmFile};
+use ltm_codec::{Charge, Dims, LightBasis, Limits, LtmFile};
 use rayon::prelude::*;
 use std::path::Path;
 use std::sync::atomic::{AtomicBool, Ordering};
@@ -46,29 +47,62 @@ pub struct PcaRelighter {
     /// `N × K` the basis transposed (column `i` of `B` contiguous), made
     /// by the first point light (the same size as `basis`).
     basis_t: OnceLock<Vec<f32>>,
+    /// The budget the file, these buffers and every frame are charged to.
+    limits: Limits,
+    /// The buffers' bytes, charged to `limits`.
+    _charge: Charge,
+}
+
+/// The scratch a [`PcaRelighter`] keeps in a [`Frame`].
+struct PcaScratch {
+    /// The lighting projected on the mean and the components (RGB each).
+    projected: Vec<[f64; 3]>,
+    /// The projected lighting in f32, one plane per colour channel.
+    planar: Vec<f32>,
 }
 
 impl PcaRelighter {
-    /// Opens a `pca` file with the given limits.
-    pub fn open_with_limits(path: &Path, limits: &Limits) -> Result<PcaRelighter> {
-        PcaRelighter::new(&LtmFile::open_with_limits(path, limits)?, limits)
+    /// Opens a `pca` file, from a path or from bytes in memory, charging
+    /// it and the relighter's buffers to `limits`.
+    pub fn open(source: impl Into<Source>, limits: &Limits) -> Result<PcaRelighter> {
+        PcaRelighter::new(&source.into().open(limits)?, limits)
     }
 
-    /// Prepares a relighter for an opened `pca` file (the decoded
-    /// coefficients and basis are checked against `limits`).
+    /// [`PcaRelighter::open`] of a path.
+    pub fn open_with_limits(path: &Path, limits: &Limits) -> Result<PcaRelighter> {
+        PcaRelighter::open(path, limits)
+    }
+
+    /// Prepares a relighter for an opened `pca` file: copies what it needs
+    /// (the file may be dropped after), charging the decoded coefficients
+    /// and basis to `limits`, whose clone it keeps for its frames.
     pub fn new(file: &LtmFile, limits: &Limits) -> Result<PcaRelighter> {
         let Some(model) = file.pca() else {
             return Err(RelightError::Invalid(format!(
-                "a {} file has no PCA basis: open it with Relighter",
+                "a {} file has no PCA basis: open it with ltm_relight::open (or Relighter)",
                 file.meta().mode.name()
             )));
         };
         let dims = model.dims();
         let rank = model.rank();
         let padded = Blocks::padded_len(dims.pixels(), rank);
-        limits.check_alloc("PCA coefficients", padded as u64, 2)?;
-        limits.check_alloc("PCA basis", (dims.row_len() * rank) as u64, 4)?;
+        let coefficients = limits.check_alloc("PCA coefficients", padded as u64, 2)?;
+        // The basis, and its transpose for point lights where they can be
+        // used (a file with surface data).
+        let copies = 1 + u64::from(file.surface().is_some());
+        let basis = limits.check_alloc("PCA basis", (dims.row_len() * rank) as u64, 4 * copies)?;
+        let per_row = 12
+            + file
+                .surface()
+                .map_or(0, |_| std::mem::size_of::<SurfaceSample>());
+        let rows = limits.check_alloc(
+            "PCA mean, albedo and surface",
+            dims.pixels() as u64,
+            per_row as u64,
+        )?;
         Ok(PcaRelighter {
+            limits: limits.clone(),
+            _charge: coefficients.join(basis).join(rows),
             dims,
             rank,
             mean: model.mean().to_vec(),
@@ -87,6 +121,14 @@ impl PcaRelighter {
     /// The rank `K` stored.
     pub fn rank(&self) -> usize {
         self.rank
+    }
+
+    /// A frame's buffers (of the rank's size: a few hundred bytes).
+    fn scratch(&self) -> PcaScratch {
+        PcaScratch {
+            projected: Vec::with_capacity(self.rank + 1),
+            planar: Vec::with_capacity(3 * self.rank),
+        }
     }
 
     fn check_terms(&self, terms: usize) -> Result<usize> {
@@ -326,8 +368,13 @@ impl PcaRelighter {
 }
 
 impl Relight for PcaRelighter {
-    fn lights(&self) -> usize {
-        self.dims.lights()
+    fn light_basis(&self) -> LightBasis {
+        self.dims.lights
+    }
+
+    /// Principal components (eigen-transports).
+    fn term_basis(&self) -> TermBasis {
+        TermBasis::Linear
     }
 
     fn size(&self) -> (usize, usize) {
@@ -348,14 +395,12 @@ impl Relight for PcaRelighter {
                 .map_or(0, |s| s.len() * std::mem::size_of::<SurfaceSample>())
     }
 
-    fn frame(&self) -> Frame {
+    fn frame(&self) -> Result<Frame> {
         let (w, h) = self.size();
-        Frame {
-            image: Image::new(w, h),
-            projected: Vec::with_capacity(self.rank + 1),
-            planar: Vec::with_capacity(3 * self.rank),
-            ..Frame::default()
-        }
+        let mut frame = Frame::default();
+        frame.fit_image(w, h, &self.limits)?;
+        frame.scratch(|_: &PcaScratch| false, || Ok(self.scratch()))?;
+        Ok(frame)
     }
 
     /// `T̂·L` with the first `request.terms` eigen-transports.
@@ -368,13 +413,14 @@ impl Relight for PcaRelighter {
         check_light(light, self.lights(), self.dims.face_res())?;
         let k = self.check_terms(request.terms)?;
         let (w, h) = self.size();
-        frame.fit_image(w, h);
+        frame.fit_image(w, h, &self.limits)?;
+        let (s, image) = frame.scratch(|_: &PcaScratch| true, || Ok(self.scratch()))?;
         let t0 = Instant::now();
-        self.project(light, k, &mut frame.projected);
+        self.project(light, k, &mut s.projected);
         self.coefficients
-            .scaled_light(&frame.projected[1..], k, &mut frame.planar);
+            .scaled_light(&s.projected[1..], k, &mut s.planar);
         let t1 = Instant::now();
-        let finite = self.dot_rows(&frame.planar, k, frame.projected[0], &mut frame.image);
+        let finite = self.dot_rows(&s.planar, k, s.projected[0], image);
         let bad = if finite {
             None
         } else {
@@ -416,15 +462,4 @@ fn transpose(m: &[f32], rows: usize, cols: usize) -> Vec<f32> {
         }
     }
     t
-}
-
-/// Opens any `.ltm` file as a relighter: [`PcaRelighter`] for `pca` files,
-/// the wavelet [`Relighter`](crate::Relighter) otherwise.
-pub fn open_relighter(path: &Path, limits: &Limits) -> Result<Box<dyn Relight + Send + Sync>> {
-    let file = LtmFile::open_with_limits(path, limits)?;
-    if file.pca().is_some() {
-        Ok(Box::new(PcaRelighter::new(&file, limits)?))
-    } else {
-        Ok(Box::new(crate::Relighter::new(file, limits)?))
-    }
 }

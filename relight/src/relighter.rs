@@ -21,13 +21,13 @@
 
 use crate::arena::{Arena, ArenaColumn};
 use crate::error::{RelightError, Result};
-use crate::frame::{check_light, Frame, FrameStats, Relight, Request};
+use crate::frame::{check_light, Frame, FrameStats, Relight, Request, TermBasis};
 use crate::image_io::Image;
 use crate::kernel::{self, Kernel};
 use crate::select::{select, support_area, Weighting};
 use ltm_codec::container::{LtmFile, Meta};
 use ltm_codec::wavelet::{row_forward, RowMode};
-use ltm_codec::{ColumnDecoder, Limits};
+use ltm_codec::{Charge, ColumnDecoder, LightBasis, Limits};
 use rayon::prelude::*;
 use std::path::Path;
 use std::time::Instant;
@@ -54,10 +54,14 @@ pub struct Relighter {
     /// Per light: the area-weighted priority scales, and ones.
     areas: Vec<f32>,
     ones: Vec<f32>,
+    /// The budget the file, the arena and every frame are charged to.
+    limits: Limits,
+    /// The arena's bytes (allocated whole at open), charged to `limits`.
+    _charge: Charge,
 }
 
-/// The wavelet relighter's part of a [`Frame`]: sized for one file.
-pub(crate) struct WaveletScratch {
+/// The wavelet relighter's scratch in a [`Frame`]: sized for one file.
+struct WaveletScratch {
     light: Vec<[f32; 3]>,
     plane: Vec<f32>,
     work: Vec<[f32; LANES]>,
@@ -78,13 +82,8 @@ pub(crate) struct WaveletScratch {
     /// Whether `rows` describes `pixels` (false while a frame is under way,
     /// or after one failed): the next frame then clears only marked rows.
     rows_valid: bool,
-}
-
-impl WaveletScratch {
-    /// Drops the remembered lighting ([`crate::Frame::forget_light`]).
-    pub(crate) fn forget_light(&mut self) {
-        self.last_light.clear();
-    }
+    /// The buffers' bytes, charged to the relighter's limits.
+    _charge: Charge,
 }
 
 impl Relighter {
@@ -101,13 +100,15 @@ impl Relighter {
     }
 
     /// Prepares a relighter for an opened file: checks every column's CRC
-    /// (a damaged file is refused here, not in a later frame) and the arena
-    /// of decoded coefficients, sized by the file's column table, against
-    /// `limits`. Decodes no column.
+    /// (a damaged file is refused here, not in a later frame) and charges
+    /// the decoder's tables and the arena of decoded coefficients, sized by
+    /// the file's column table, to `limits` (whose clone it keeps for its
+    /// frames). Decodes no column. A `pca` file is refused: [`crate::open`]
+    /// opens any file.
     pub fn new(file: LtmFile, limits: &Limits) -> Result<Relighter> {
         if file.pca().is_some() {
             return Err(RelightError::Invalid(
-                "a pca file has no wavelet columns: open it with PcaRelighter (or open_relighter)"
+                "a pca file has no wavelet columns: open it with ltm_relight::open (or PcaRelighter)"
                     .into(),
             ));
         }
@@ -115,19 +116,21 @@ impl Relighter {
         let dims = meta.dims;
         let nonzeros: u64 = file.columns().iter().map(|c| c.nnz as u64).sum();
         // The arena is allocated whole at open (its pages are touched as
-        // columns are decoded), beside one block index per column.
+        // columns are decoded), beside one block index per column and the
+        // band map of every depth.
         let entry_bytes = Arena::entry_bytes(dims.channels as usize) as u64;
-        limits.check_alloc("relighting arena", nonzeros, entry_bytes)?;
+        let arena = limits.check_alloc("relighting arena", nonzeros, entry_bytes)?;
         let blocks = crate::arena::CodeLayout::new(dims.pixels(), meta.max_depth()).blocks as u64;
-        limits.check_alloc("arena block index", dims.lights() as u64, 4 * (blocks + 1))?;
-        limits.check_alloc(
-            "frame image planes",
-            dims.pixels() as u64,
-            4 * LANES as u64 * 2,
-        )?;
+        let index =
+            limits.check_alloc("arena block index", dims.lights() as u64, 4 * (blocks + 1))?;
+        let deepest = file.columns().iter().map(|c| c.depth).max().unwrap_or(0);
+        let depths = u64::from(deepest) + 1;
+        let maps = limits.check_alloc("arena band maps", dims.pixels() as u64, depths)?;
+        let per_light = limits.check_alloc("per-light tables", dims.lights() as u64, 64)?;
         let n = dims.face_res() as usize;
         file.check_column_crcs()?;
-        let decoder = ColumnDecoder::for_file(&file);
+        let decoder = ColumnDecoder::for_file(&file, limits)?;
+        let arena_charge = arena.join(index).join(maps).join(per_light);
         let arena = Arena::new(&file, &decoder);
         Ok(Relighter {
             decoder,
@@ -136,6 +139,8 @@ impl Relighter {
             areas: (0..dims.lights()).map(|j| support_area(n, j)).collect(),
             ones: vec![1.0; dims.lights()],
             file,
+            limits: limits.clone(),
+            _charge: arena_charge,
         })
     }
 
@@ -192,24 +197,34 @@ impl Relighter {
         self.arena.decode_all(&self.file, &self.decoder)
     }
 
-    /// Buffers for one frame of this file.
-    fn scratch(&self) -> WaveletScratch {
+    /// Buffers for one frame of this file, charged to its limits.
+    fn scratch(&self) -> Result<WaveletScratch> {
         let dims = self.meta().dims;
-        let p = dims.pixels();
+        let (p, m) = (dims.pixels(), dims.lights());
         let n = dims.face_res() as usize;
-        WaveletScratch {
-            light: vec![[0.0; 3]; dims.lights()],
-            plane: vec![0.0; dims.lights()],
-            work: vec![[0.0; LANES]; p.max((n * n).div_ceil(LANES))],
-            pixels: vec![[0.0; LANES]; p],
-            selected: Vec::with_capacity(dims.lights()),
-            order: Vec::with_capacity(dims.lights()),
+        let l = &self.limits;
+        let (light, c0) = l.vec("frame lighting", m, [0.0; 3])?;
+        let (plane, c1) = l.vec("frame light plane", m, 0.0)?;
+        let work_len = p.max((n * n).div_ceil(LANES));
+        let (work, c2) = l.vec("frame work plane", work_len, [0.0; LANES])?;
+        let (pixels, c3) = l.vec("frame pixel planes", p, [0.0; LANES])?;
+        let (rows, c4) = l.vec("frame row flags", dims.height() as usize, true)?;
+        // Selection (`selected`, `order`) and the remembered light.
+        let c5 = l.check_alloc("frame light selection", m as u64, 24)?;
+        Ok(WaveletScratch {
+            light,
+            plane,
+            work,
+            pixels,
+            selected: Vec::with_capacity(m),
+            order: Vec::with_capacity(m),
             tables: Vec::new(),
             table_starts: Vec::new(),
             last_light: Vec::new(),
-            rows: vec![true; dims.height() as usize],
+            rows,
             rows_valid: false,
-        }
+            _charge: c0.join(c1).join(c2).join(c3).join(c4).join(c5),
+        })
     }
 
     /// Whether `s` was made by [`Relighter::scratch`] for a file of this
@@ -488,7 +503,7 @@ impl Relighter {
     /// codec's column decoder and summed — the slow reference the
     /// level-recursive path is tested against.
     pub fn relight_naive(&self, light: &[[f32; 3]], request: &Request) -> Result<Image> {
-        let mut s = self.scratch();
+        let mut s = self.scratch()?;
         self.prepare_light(light, &mut s)?;
         self.select_lights(request, &mut s)?;
         let channels = self.meta().dims.channels as usize;
@@ -521,9 +536,14 @@ impl Relighter {
 }
 
 impl Relight for Relighter {
-    /// The file's cubemap texels (its columns).
-    fn lights(&self) -> usize {
-        self.arena.depths.len()
+    /// The file's cubemap (its columns).
+    fn light_basis(&self) -> LightBasis {
+        self.meta().dims.lights
+    }
+
+    /// Wavelet lights.
+    fn term_basis(&self) -> TermBasis {
+        TermBasis::Wavelet
     }
 
     fn size(&self) -> (usize, usize) {
@@ -543,13 +563,12 @@ impl Relight for Relighter {
         self.decode_all()
     }
 
-    fn frame(&self) -> Frame {
+    fn frame(&self) -> Result<Frame> {
         let (w, h) = self.size();
-        Frame {
-            image: Image::new(w, h),
-            wavelet: Some(self.scratch()),
-            ..Frame::default()
-        }
+        let mut frame = Frame::default();
+        frame.fit_image(w, h, &self.limits)?;
+        frame.scratch(|_: &WaveletScratch| false, || self.scratch())?;
+        Ok(frame)
     }
 
     /// Relights with the `request.terms` most important wavelet lights under
@@ -562,11 +581,12 @@ impl Relight for Relighter {
         frame: &mut Frame,
     ) -> Result<FrameStats> {
         let (w, h) = self.size();
-        frame.fit_image(w, h);
-        let s = match frame.wavelet.take() {
-            Some(s) if self.fits(&s) => frame.wavelet.insert(s),
-            _ => frame.wavelet.insert(self.scratch()),
-        };
+        frame.fit_image(w, h, &self.limits)?;
+        let forget = frame.take_forget_light();
+        let (s, image) = frame.scratch(|s| self.fits(s), || self.scratch())?;
+        if forget {
+            s.last_light.clear();
+        }
         let mut stats = FrameStats::default();
         let t0 = Instant::now();
         self.prepare_light(light, s)?;
@@ -588,7 +608,7 @@ impl Relight for Relighter {
         stats.decode = t3 - t2;
         self.multiply_levels(s, &columns, &mut stats)?;
         let ti = Instant::now();
-        self.finish_image(&s.pixels, &mut frame.image);
+        self.finish_image(&s.pixels, image);
         stats.inverse += ti.elapsed();
         Ok(stats)
     }

@@ -28,7 +28,7 @@
 use crate::error::{RelightError, Result};
 use crate::image_io::Image;
 use glam::{DVec2, DVec3};
-use ltm_codec::{LtmFile, Parameterization, RowLayout, Surface};
+use ltm_codec::{Charge, Limits, LtmFile, Parameterization, RowLayout, Surface};
 use rayon::prelude::*;
 
 /// Triangles with an edge longer than this times the median grid edge are
@@ -159,11 +159,16 @@ pub struct TexturedMesh {
     /// octahedral square (its texture coordinates are not contiguous, so
     /// it is shaded by blending its corners' texels instead).
     folded: Vec<bool>,
+    /// The budget the mesh and every view's buffers are charged to.
+    limits: Limits,
+    /// The mesh's bytes, charged to `limits`.
+    _charge: Charge,
 }
 
 impl TexturedMesh {
-    /// The mesh of a texture-space file; an image-space file is an error.
-    pub fn from_file(file: &LtmFile) -> Result<TexturedMesh> {
+    /// The mesh of a texture-space file, charged (with the buffers of each
+    /// view it draws) to `limits`; an image-space file is an error.
+    pub fn from_file(file: &LtmFile, limits: &Limits) -> Result<TexturedMesh> {
         let dims = file.meta().dims;
         let RowLayout::Texture {
             size,
@@ -177,7 +182,11 @@ impl TexturedMesh {
         let surface = file.surface().ok_or_else(|| {
             RelightError::Invalid("the texture-space file has no surface data".into())
         })?;
-        TexturedMesh::new(size, parameterization, surface)
+        // Positions, normals and flags per texel, up to two triangles each.
+        let charge = limits.check_alloc("mesh of the geometry image", surface.len() as u64, 80)?;
+        let mut mesh = TexturedMesh::new(size, parameterization, surface)?;
+        (mesh.limits, mesh._charge) = (limits.clone(), charge);
+        Ok(mesh)
     }
 
     /// The mesh of an `size × size` geometry image.
@@ -210,6 +219,8 @@ impl TexturedMesh {
             valid,
             triangles: Vec::new(),
             folded: Vec::new(),
+            limits: Limits::default(),
+            _charge: Charge::default(),
         };
         mesh.triangulate(parameterization == Parameterization::Sphere);
         if mesh.triangles.is_empty() {
@@ -404,6 +415,15 @@ impl TexturedMesh {
         let (w, h) = (camera.width as usize, camera.height as usize);
         let ssz = ss as usize;
         let (sw, sh) = (w * ssz, h * ssz);
+        // The view, and one band of samples per thread.
+        let _out = self
+            .limits
+            .check_alloc("rendered view", (w * h) as u64, 12)?;
+        let band = (BAND * ssz * sw) as u64;
+        let threads = rayon::current_num_threads() as u64;
+        let _samples = self
+            .limits
+            .check_alloc("view sample buffers", band * threads, 32)?;
         let projected = self.project(&f, sw as f64, sh as f64);
         let bins = Bins::new(&projected, BAND * ssz, sh);
         let mut out = Image::new(w, h);

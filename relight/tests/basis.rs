@@ -128,7 +128,7 @@ fn check_sh_relight(d: Dims, albedo: Option<Vec<f32>>) {
     let n = d.face_res() as usize;
     let light = random_light(d.lights());
     let a = dense(&raw);
-    let mut frame = relighter.frame();
+    let mut frame = relighter.frame().unwrap();
     for order in 0..=4 {
         let want = dense_image(&dense_sh(&a, n, order), d, &light, albedo.as_deref());
         let request = Request {
@@ -272,7 +272,7 @@ fn three_relighters_behind_one_trait_share_a_frame() {
                 terms: r.max_terms(),
                 weighting: Weighting::Transport,
             };
-            let mut own = r.frame();
+            let mut own = r.frame().unwrap();
             r.relight(&light, &request, &mut own).unwrap();
             r.relight(&light, &request, &mut shared).unwrap();
             assert_eq!(own.image, shared.image);

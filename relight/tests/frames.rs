@@ -41,23 +41,27 @@ fn reused_light_transform_matches_a_fresh_frame_and_changes_are_seen() {
     let a: Vec<[f32; 3]> = (0..r.lights())
         .map(|j| [1.0 + j as f32 * 0.1, 0.5, (j % 5) as f32])
         .collect();
-    let mut frame = r.frame();
+    let mut frame = r.frame().unwrap();
     // Only N changes: each image equals a fresh frame's.
     for terms in [3, 40, 7, usize::MAX] {
         let reused = image(&r, &a, terms, &mut frame);
-        assert_eq!(reused, image(&r, &a, terms, &mut r.frame()), "N = {terms}");
+        assert_eq!(
+            reused,
+            image(&r, &a, terms, &mut r.frame().unwrap()),
+            "N = {terms}"
+        );
     }
     // A brighter light after a reused frame: a different image, the fresh one.
     let twice: Vec<[f32; 3]> = a.iter().map(|l| l.map(|v| 2.0 * v)).collect();
     let bright = image(&r, &twice, 40, &mut frame);
-    assert_ne!(bright, image(&r, &a, 40, &mut r.frame()));
-    assert_eq!(bright, image(&r, &twice, 40, &mut r.frame()));
+    assert_ne!(bright, image(&r, &a, 40, &mut r.frame().unwrap()));
+    assert_eq!(bright, image(&r, &twice, 40, &mut r.frame().unwrap()));
     // One texel changed by one bit, then the sign of a zero: both seen.
     let mut b = a.clone();
     b[17][1] = f32::from_bits(b[17][1].to_bits() + 1);
     assert_eq!(
         image(&r, &b, 40, &mut frame),
-        image(&r, &b, 40, &mut r.frame())
+        image(&r, &b, 40, &mut r.frame().unwrap())
     );
     let mut c = a.clone();
     c[3] = [0.0, 0.0, 0.0];
@@ -66,7 +70,7 @@ fn reused_light_transform_matches_a_fresh_frame_and_changes_are_seen() {
     image(&r, &c, 40, &mut frame);
     assert_eq!(
         image(&r, &d, 40, &mut frame),
-        image(&r, &d, 40, &mut r.frame())
+        image(&r, &d, 40, &mut r.frame().unwrap())
     );
     // Bad lighting after a reused frame is still an error, and the next
     // good frame is right.
@@ -80,13 +84,13 @@ fn reused_light_transform_matches_a_fresh_frame_and_changes_are_seen() {
     assert!(r.relight(&a[1..], &request, &mut frame).is_err());
     assert_eq!(
         image(&r, &a, 40, &mut frame),
-        image(&r, &a, 40, &mut r.frame())
+        image(&r, &a, 40, &mut r.frame().unwrap())
     );
     // forget_light gives the same image.
     frame.forget_light();
     assert_eq!(
         image(&r, &a, 40, &mut frame),
-        image(&r, &a, 40, &mut r.frame())
+        image(&r, &a, 40, &mut r.frame().unwrap())
     );
 }
 
@@ -136,10 +140,10 @@ fn zero_rows_are_skipped_without_changing_the_image() {
         };
         compress(&raw, &ltm, &opts.into(), ltm_codec::Progress::NONE).unwrap();
         let r = Relighter::open(&ltm).unwrap();
-        let mut frame = r.frame();
+        let mut frame = r.frame().unwrap();
         for terms in [1, 5, 60, 7, usize::MAX, 2] {
             let reused = image(&r, &light, terms, &mut frame);
-            let fresh = image(&r, &light, terms, &mut r.frame());
+            let fresh = image(&r, &light, terms, &mut r.frame().unwrap());
             assert_eq!(reused, fresh, "{mode:?} N = {terms}");
             let request = Request {
                 terms,
@@ -189,7 +193,7 @@ fn mutated_files_never_panic_or_give_nan() {
         let Ok(r) = Relighter::new(file, &limits) else {
             continue;
         };
-        let mut frame = r.frame();
+        let mut frame = r.frame().unwrap();
         if r.relight(&light, &request, &mut frame).is_ok() {
             relit += 1;
             assert!(frame.image.first_non_finite().is_none());
@@ -221,13 +225,13 @@ fn every_kernel_relights_like_the_naive_sum() {
         r.set_kernel(kernel).unwrap();
         assert_eq!(r.kernel(), kernel);
         for terms in [1, 40, usize::MAX] {
-            let got = image(&r, &light, terms, &mut r.frame());
+            let got = image(&r, &light, terms, &mut r.frame().unwrap());
             let request = Request {
                 terms,
                 weighting: Weighting::Transport,
             };
             let naive = r.relight_naive(&light, &request).unwrap();
-            let mut frame = r.frame();
+            let mut frame = r.frame().unwrap();
             frame.image.data = got;
             let diff = relative_l2(&frame.image, &naive).unwrap();
             assert!(diff <= 2e-6, "{kernel} N = {terms}: {diff}");

@@ -76,7 +76,7 @@ fn frames_on_demand_equal_preloaded_frames_and_decode_each_column_once() {
     let full = eager.arena_bytes();
     assert!(full > 0);
     assert_eq!(lazy.nonzeros(), eager.nonzeros());
-    let (mut fl, mut fe) = (lazy.frame(), eager.frame());
+    let (mut fl, mut fe) = (lazy.frame().unwrap(), eager.frame().unwrap());
     let mut decoded = 0;
     for k in 0..4 {
         let light = lighting(lazy.lights(), k);
@@ -116,7 +116,7 @@ fn a_frame_decodes_only_its_columns_even_on_two_threads() {
         terms: 5,
         weighting: Weighting::Transport,
     };
-    let (_, decoded, used) = frame(&r, &light, &request, &mut r.frame());
+    let (_, decoded, used) = frame(&r, &light, &request, &mut r.frame().unwrap());
     assert_eq!((decoded, used), (5, 5));
     let preloaded = Relighter::open(&path).unwrap();
     preloaded.decode_all().unwrap();
@@ -125,10 +125,10 @@ fn a_frame_decodes_only_its_columns_even_on_two_threads() {
         terms: usize::MAX,
         weighting: Weighting::Transport,
     };
-    let want = frame(&preloaded, &light, &all, &mut preloaded.frame()).0;
+    let want = frame(&preloaded, &light, &all, &mut preloaded.frame().unwrap()).0;
     std::thread::scope(|s| {
-        let a = s.spawn(|| frame(&r, &light, &all, &mut r.frame()).0);
-        let b = s.spawn(|| frame(&r, &light, &all, &mut r.frame()).0);
+        let a = s.spawn(|| frame(&r, &light, &all, &mut r.frame().unwrap()).0);
+        let b = s.spawn(|| frame(&r, &light, &all, &mut r.frame().unwrap()).0);
         assert_eq!(a.join().unwrap(), want);
         assert_eq!(b.join().unwrap(), want);
     });
@@ -147,20 +147,26 @@ fn version_4_files_rank_lights_by_their_decoded_norms() {
         terms: 9,
         weighting: Weighting::Transport,
     };
-    let (image, decoded, used) = frame(&r, &light, &request, &mut r.frame());
+    let (image, decoded, used) = frame(&r, &light, &request, &mut r.frame().unwrap());
     assert_eq!(used, 9);
     assert!(decoded <= 9);
     let preloaded = Relighter::open(&path).unwrap();
     preloaded.decode_all().unwrap();
     assert_eq!(
         image,
-        frame(&preloaded, &light, &request, &mut preloaded.frame()).0
+        frame(
+            &preloaded,
+            &light,
+            &request,
+            &mut preloaded.frame().unwrap()
+        )
+        .0
     );
     // Every column decoded by the first transport frame.
     assert_eq!(r.arena_bytes(), preloaded.arena_bytes());
-    let mut f = r.frame();
+    let mut f = r.frame().unwrap();
     f.image = r.relight_naive(&light, &request).unwrap();
-    let mut g = r.frame();
+    let mut g = r.frame().unwrap();
     g.image.data = image;
     g.image.width = f.image.width;
     g.image.height = f.image.height;
@@ -205,7 +211,7 @@ fn a_stored_norm_that_disagrees_with_its_column_is_refused() {
     };
     let light = lighting(r.lights(), 0);
     let err = r
-        .relight(&light, &request, &mut r.frame())
+        .relight(&light, &request, &mut r.frame().unwrap())
         .unwrap_err()
         .to_string();
     assert!(

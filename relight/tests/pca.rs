@@ -1,12 +1,12 @@
 //! Relighting `pca` files: the blocked loop against the scalar reference,
 //! relit images against the exact `T·L` and against the dense product of
-//! the decoded matrix, `--terms` below the rank, and `open_relighter`.
+//! the decoded matrix, `--terms` below the rank, and `open`.
 
 use ltm_codec::compress::{compress_pca, PcaOptions};
 use ltm_codec::npy::decode_matrix;
 use ltm_codec::{Dims, Limits, LtmFile, RawHeader, RawStore, RawWriter};
 use ltm_relight::{
-    open_relighter, reference, relative_l2, PcaRelighter, Relight, Relighter, Request, Weighting,
+    open, reference, relative_l2, PcaRelighter, Relight, Relighter, Request, Weighting,
 };
 use ltm_testkit::Rng;
 use std::path::Path;
@@ -88,7 +88,7 @@ fn relit_images_match_the_decoded_matrix_and_the_scalar_loop() {
         let relighter = PcaRelighter::new(&file, &Limits::default()).unwrap();
         let l = light(d.lights());
         let dense = decode_matrix(&file, &Limits::default()).unwrap();
-        let mut frame = relighter.frame();
+        let mut frame = relighter.frame().unwrap();
         for k in [0, 1, 7, 8, 9, rank] {
             relighter
                 .relight(
@@ -179,11 +179,11 @@ fn relit_images_match_the_decoded_matrix_and_the_scalar_loop() {
 }
 
 #[test]
-fn open_relighter_picks_the_mode_and_relighters_refuse_the_other() {
+fn open_picks_the_mode_and_relighters_refuse_the_other() {
     let dir = tempfile::tempdir().unwrap();
     let d = Dims::image(8, 8, 2, 3);
     let (_, out) = setup(dir.path(), d, 5, false);
-    let r = open_relighter(&out, &Limits::default()).unwrap();
+    let r = open(&out, &Limits::default()).unwrap();
     assert_eq!(r.max_terms(), 5);
     let e = Relighter::open(&out).err().unwrap().to_string();
     assert!(e.contains("PcaRelighter"), "{e}");
@@ -450,7 +450,7 @@ fn empty_rows_decode_and_relight_to_zero() {
     assert_eq!(mask.count(), empty.len());
     let dense = decode_matrix(&file, &Limits::default()).unwrap();
     let r = PcaRelighter::new(&file, &Limits::default()).unwrap();
-    let mut frame = r.frame();
+    let mut frame = r.frame().unwrap();
     let request = Request {
         terms: 3,
         weighting: Weighting::Unweighted,

@@ -23,13 +23,15 @@ use std::process::ExitCode;
 #[derive(Parser)]
 #[command(name = "ltm", version, about, long_about)]
 struct Cli {
-    /// Largest buffer any command may allocate for a size read from a file
-    /// (a column table, the relighter's arena, a dense export): bytes, or
-    /// with a binary suffix K, M, G, T, P or E (`1.5G`), 1M or more. Files
-    /// that need more are refused with the size they need; raise this only
-    /// for files you trust.
-    #[arg(long, global = true, value_name = "SIZE", default_value = "4G", value_parser = common::size::size)]
-    max_memory: u64,
+    /// Memory budget, in all, for the buffers a command sizes from its files
+    /// and arguments (column tables, the relighter's arena, frames, a dense
+    /// export; every file a command opens is charged to it): bytes, or with
+    /// a binary suffix K, M, G, T, P or E (`1.5G`), 1M or more. Work that
+    /// needs more is refused with the size it needs. Default: 75 % of the
+    /// smaller of the memory available and the address-space limit
+    /// (ulimit -v), or 4G where neither is known.
+    #[arg(long, global = true, value_name = "SIZE", value_parser = common::size::size)]
+    max_memory: Option<u64>,
     #[command(subcommand)]
     command: Command,
 }
@@ -83,7 +85,11 @@ fn main() -> ExitCode {
     #[cfg(unix)]
     exit_quietly_on_closed_pipe();
     let cli = Cli::parse();
-    let ctx = Ctx::new(Limits::with_max_alloc(cli.max_memory));
+    let limits = match cli.max_memory {
+        Some(total) => Limits::with_max_alloc(total),
+        None => Limits::for_machine(),
+    };
+    let ctx = Ctx::new(limits);
     let result = match cli.command {
         Command::Demo(args) => demo::run(args, &ctx),
         Command::Bake(args) => bake::run(args, &ctx),

@@ -270,8 +270,7 @@ pub fn run(a: RelightArgs, ctx: &Ctx) -> Result<()> {
     let light = match &a.env {
         Some(path) => {
             let env = EnvMap::load(path).with_context(|| format!("loading {}", path.display()))?;
-            let n = ((relighter.lights() / 6) as f64).sqrt().round() as usize;
-            Some(env.to_cubemap(n, &a.rotate))
+            Some(env.to_cubemap(relighter.face_res(), &a.rotate))
         }
         None => None,
     };

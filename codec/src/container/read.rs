@@ -16,7 +16,7 @@ use crate::dims::Dims;
 use crate::empty::EmptyRows;
 use crate::entropy::ColumnShape;
 use crate::error::{Error, Result};
-use crate::limits::Limits;
+use crate::limits::{Charge, Limits};
 use crate::mmap;
 use crate::pca::PcaModel;
 use crate::surface::Surface;
@@ -63,6 +63,24 @@ pub struct LtmIndex {
     pub data: std::ops::Range<usize>,
     /// The decoded PCA model of a `pca` file (chunks PCAM, PCAB, PCAC).
     pub pca: Option<PcaModel>,
+    /// The bytes of all the above, charged to the limits it was parsed with.
+    _charge: Charge,
+}
+
+/// Charges the buffers of a parsed index to `limits`.
+fn index_charge(
+    limits: &Limits,
+    albedo: &Option<Vec<f32>>,
+    surface: &Option<Surface>,
+    norms: &Option<Vec<f32>>,
+    columns: &[ColumnEntry],
+    pca: Option<&PcaModel>,
+) -> Result<Charge> {
+    let bytes = 4 * (albedo.as_ref().map_or(0, Vec::len) + norms.as_ref().map_or(0, Vec::len))
+        + surface.as_ref().map_or(0, Surface::heap_bytes)
+        + std::mem::size_of_val(columns)
+        + pca.map_or(0, PcaModel::heap_bytes);
+    limits.check_alloc("decoded file index", bytes as u64, 1)
 }
 
 /// An opened, validated `.ltm` file (memory-mapped, or held in memory).
@@ -153,7 +171,9 @@ impl LtmFile {
         if meta.mode == Mode::Pca {
             let pca =
                 read_pca_chunks(bytes, &dir, &meta, limits)?.with_empty_rows(empty_rows.clone())?;
+            let charge = index_charge(limits, &albedo, &surface, &column_norms, &[], Some(&pca))?;
             return Ok(LtmIndex {
+                _charge: charge,
                 meta,
                 columns: Vec::new(),
                 albedo,
@@ -171,7 +191,9 @@ impl LtmFile {
             .ok_or_else(|| missing("DATA"))?;
         let data = data_dir.offset as usize..(data_dir.offset + data_dir.len) as usize;
         let columns = read_column_table(cols, &meta, version, data.len() as u64, limits)?;
+        let charge = index_charge(limits, &albedo, &surface, &column_norms, &columns, None)?;
         Ok(LtmIndex {
+            _charge: charge,
             meta,
             columns,
             albedo,
@@ -336,7 +358,7 @@ fn read_column_norms(
             format!("{} bytes, expected {lights} columns × 4", bytes.len()),
         ));
     }
-    limits.check_alloc("column norms", lights as u64, 4)?;
+    let _held = limits.check_alloc("column norms", lights as u64, 4)?;
     let norms: Vec<f32> = bytes
         .chunks_exact(4)
         .map(|b| f32::from_le_bytes([b[0], b[1], b[2], b[3]]))
@@ -374,7 +396,7 @@ fn read_column_table(
             ),
         ));
     }
-    limits.check_alloc(
+    let _held = limits.check_alloc(
         "column table",
         lights as u64,
         std::mem::size_of::<ColumnEntry>() as u64,

@@ -39,7 +39,7 @@ pub(crate) fn read_chunks<'a>(
             ),
         ));
     }
-    limits.check_alloc("PCA mean row", n as u64, 4)?;
+    let _mean = limits.check_alloc("PCA mean row", n as u64, 4)?;
     let mean: Vec<f32> = mean_bytes
         .chunks_exact(4)
         .map(|c| f32::from_le_bytes(c.try_into().expect("4 bytes")))
@@ -57,7 +57,7 @@ pub(crate) fn read_chunks<'a>(
         ));
     }
     // The model also keeps the basis in f64.
-    limits.check_alloc("PCA basis", (k * n) as u64, 8)?;
+    let _basis = limits.check_alloc("PCA basis", (k * n) as u64, 8)?;
     let basis = QuantizedMatrix::decode(
         get(b"PCAB")?,
         "PCAB chunk",

@@ -53,8 +53,8 @@ pub(crate) fn fit(
     let dims = raw.dims();
     let (p, n) = (dims.pixels(), dims.row_len());
     let l = (rank + OVERSAMPLING).min(p.min(n));
-    limits.check_alloc("PCA sketch", (n * l) as u64, 8)?;
-    limits.check_alloc("PCA row coefficients", (p * l) as u64, 4)?;
+    let _sketch = limits.check_alloc("PCA sketch", (n * l) as u64, 8)?;
+    let _coefficients = limits.check_alloc("PCA row coefficients", (p * l) as u64, 4)?;
     let passes = 3 + POWER_ITERATIONS as u64;
     progress.report(Stage::Fit, 0, passes);
     let (mean, norm2) = mean_pass(raw, block_values)?;

@@ -71,6 +71,16 @@ impl PcaModel {
         Ok(self)
     }
 
+    /// Bytes of its buffers in memory (mean, basis in both forms,
+    /// coefficients).
+    pub fn heap_bytes(&self) -> usize {
+        let quantized = |m: &QuantizedMatrix| 4 * (m.q.len() + m.scales.len());
+        4 * self.mean.len()
+            + quantized(&self.basis)
+            + quantized(&self.coefficients)
+            + 8 * self.basis_values.len()
+    }
+
     /// The rows that decode to exactly 0, if any are marked.
     pub fn empty_rows(&self) -> Option<&EmptyRows> {
         self.empty_rows.as_ref()

@@ -142,8 +142,8 @@ impl QuantizedMatrix {
                 ),
             ));
         }
-        limits.check_alloc(what, count, 4)?;
-        limits.check_alloc(what, raw_len as u64, 1)?;
+        let _values = limits.check_alloc(what, count, 4)?;
+        let _stream = limits.check_alloc(what, raw_len as u64, 1)?;
         if r.remaining() < 4 * rows {
             return Err(Error::corrupt(
                 what,

@@ -9,7 +9,7 @@ use super::writer::non_finite_albedo;
 use crate::dims::Dims;
 use crate::error::{Error, Result};
 use crate::fileio::PositionedIo as _;
-use crate::limits::Limits;
+use crate::limits::{Charge, Limits};
 use crate::mmap;
 use crate::surface::{Surface, SURFACE_RECORD_LEN};
 use memmap2::Mmap;
@@ -82,6 +82,8 @@ pub struct RawStore {
     pub(super) albedo: Option<Vec<f32>>,
     pub(super) surface: Option<Surface>,
     pub(super) stamp: Stamp,
+    /// The tables' bytes, charged to the limits it was opened with.
+    pub(super) _charge: Charge,
 }
 
 impl RawStore {
@@ -109,7 +111,11 @@ impl RawStore {
         let surface = read_surface(&file, path, &header, &layout, limits)?;
         let map = mmap::map_read(&file).map_err(|e| Error::io(path, e))?;
         check_length(map.len() as u64, layout.file_len, path)?;
+        let held = 4 * block_crcs.len() + flags.len() + 4 * albedo.as_ref().map_or(0, Vec::len);
+        let held = held + surface.as_ref().map_or(0, Surface::heap_bytes);
+        let charge = limits.check_alloc("raw store tables", held as u64, 1)?;
         Ok(RawStore {
+            _charge: charge,
             file,
             map,
             header,
@@ -314,8 +320,8 @@ pub(super) fn read_block_table(
     layout: &Layout,
     limits: &Limits,
 ) -> Result<Vec<u32>> {
-    let len = limits.check_alloc("raw store block table", layout.block_count, 8)?;
-    let mut table = vec![0u8; len];
+    let count = usize::try_from(layout.block_count).unwrap_or(usize::MAX / 8);
+    let (mut table, _held) = limits.vec("raw store block table", count.saturating_mul(8), 0u8)?;
     read_at(file, path, &mut table, layout.table_offset)?;
     let entry =
         |e: &[u8], k: usize| u32::from_le_bytes(e[4 * k..4 * k + 4].try_into().expect("4 bytes"));
@@ -348,8 +354,7 @@ pub(super) fn read_flags(
     layout: &Layout,
     limits: &Limits,
 ) -> Result<Vec<u8>> {
-    let len = limits.check_alloc("raw store row flags", header.dims.pixels() as u64, 1)?;
-    let mut flags = vec![0u8; len];
+    let (mut flags, _held) = limits.vec("raw store row flags", header.dims.pixels(), 0u8)?;
     read_at(file, path, &mut flags, layout.flags_offset)?;
     if let Some(p) = flags.iter().position(|&f| f > 1) {
         return Err(Error::range(
@@ -374,12 +379,8 @@ pub(super) fn read_surface(
         return Ok(None);
     }
     let rows = header.dims.pixels();
-    let len = limits.check_alloc(
-        "raw store surface data",
-        rows as u64,
-        SURFACE_RECORD_LEN as u64,
-    )?;
-    let mut bytes = vec![0u8; len + 4];
+    let len = rows.saturating_mul(SURFACE_RECORD_LEN);
+    let (mut bytes, _held) = limits.vec("raw store surface data", len.saturating_add(4), 0u8)?;
     read_at(file, path, &mut bytes, layout.surface_offset)?;
     let stored = u32::from_le_bytes(bytes[len..].try_into().expect("4 bytes"));
     let computed = crc32fast::hash(&bytes[..len]);
@@ -404,8 +405,8 @@ pub(super) fn read_albedo(
     if !header.has_albedo {
         return Ok(None);
     }
-    let len = limits.check_alloc("raw store albedo image", header.dims.pixels() as u64, 12)?;
-    let mut albedo = vec![0.0f32; len / 4];
+    let count = header.dims.pixels().saturating_mul(3);
+    let (mut albedo, _held) = limits.vec("raw store albedo image", count, 0.0f32)?;
     read_at(
         file,
         path,

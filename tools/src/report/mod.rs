@@ -734,7 +734,7 @@ fn code_and_relight(
     } else {
         &[Weighting::Transport]
     };
-    let mut bufs = relighter.frame();
+    let mut bufs = relighter.frame()?;
     let mut relight = Vec::new();
     for env in envs {
         for &weighting in weightings {
@@ -815,7 +815,7 @@ fn code_and_relight_pca(
     terms.push(stats.rank);
     terms.sort_unstable();
     terms.dedup();
-    let mut bufs = relighter.frame();
+    let mut bufs = relighter.frame()?;
     let mut relight = Vec::new();
     for env in envs {
         for &n in &terms {
@@ -870,7 +870,7 @@ fn measure_baselines(
     let (sh_points, sh) = baselines::sh(raw, &s.sh_orders)?;
     points.extend(sh_points);
     let sh = BasisRelighter::sh(sh, raw)?;
-    let mut frame = sh.frame();
+    let mut frame = sh.frame()?;
     let mut sh_relight = Vec::new();
     for env in envs {
         for &order in &s.sh_orders {

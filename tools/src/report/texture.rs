@@ -55,13 +55,13 @@ pub fn measure(
         .with_context(|| format!("opening {}", file.display()))?;
     // Frame times below are of frames alone, with every column decoded.
     relighter.decode_all()?;
-    let mesh = TexturedMesh::from_file(relighter.file())?;
+    let mesh = TexturedMesh::from_file(relighter.file(), crate::limits())?;
     let camera = framing_camera(&mesh)?;
     let request = Request {
         terms: TERMS.min(relighter.lights()),
         weighting: Weighting::Transport,
     };
-    let mut frame = relighter.frame();
+    let mut frame = relighter.frame()?;
     let (mut alone, mut with_view) = (Vec::new(), Vec::new());
     for _ in 0..frames.max(1) {
         let t = Instant::now();

@@ -6,9 +6,7 @@ use super::params::{Client, FrameParams, Lighting};
 use anyhow::{bail, Context, Result};
 use ltm_codec::container::LtmFile;
 use ltm_codec::{Limits, RawStore, RowLayout};
-use ltm_relight::{
-    open_relighter, reference, relative_l2, EnvMap, Frame, FrameStats, Image, Relight, Request,
-};
+use ltm_relight::{reference, relative_l2, EnvMap, Frame, FrameStats, Image, Relight, Request};
 use serde::Serialize;
 use std::collections::{HashMap, VecDeque};
 use std::path::{Path, PathBuf};
@@ -130,7 +128,7 @@ fn file_name(p: &Path) -> String {
 impl ViewFile {
     fn open(path: &Path, limits: &Limits) -> Result<ViewFile> {
         let relighter =
-            open_relighter(path, limits).with_context(|| format!("opening {}", path.display()))?;
+            ltm_relight::open(path, limits).with_context(|| format!("opening {}", path.display()))?;
         let file = LtmFile::open_with_limits(path, limits)
             .with_context(|| format!("opening {}", path.display()))?;
         let meta = file.meta();
@@ -177,7 +175,7 @@ impl ViewFile {
 
     /// Cubemap face resolution n (lights = 6·n²).
     fn face_res(&self) -> usize {
-        ((self.relighter.lights() / 6) as f64).sqrt().round() as usize
+        self.relighter.face_res()
     }
 }
 
@@ -311,7 +309,14 @@ impl Viewer {
         }
         let f = &self.files[p.file];
         let (light, resample_time) = self.light(f.face_res(), &p.lighting);
-        let mut frame = lock(&f.frames).pop().unwrap_or_else(|| f.relighter.frame());
+        let kept = lock(&f.frames).pop();
+        let mut frame = match kept {
+            Some(frame) => frame,
+            None => f
+                .relighter
+                .frame()
+                .map_err(|e| FrameError::Bad(e.to_string()))?,
+        };
         let request = Request {
             terms: p.terms,
             weighting: p.weighting,

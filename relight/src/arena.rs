@@ -416,7 +416,7 @@ fn arena_column(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use ltm_codec::{Dims, Meta};
+    use ltm_codec::{Dims, Limits, Meta};
 
     /// Band maps agree with the codec's scale groups, at odd sizes and every
     /// depth, and code layouts always fit the position and band.
@@ -463,7 +463,7 @@ mod tests {
 mod file_tests {
     use super::*;
     use ltm_codec::compress::{compress, CodeOptions, Target};
-    use ltm_codec::{Dims, Filter, Mode, RawHeader, RawStore, RawWriter};
+    use ltm_codec::{Dims, Filter, Limits, Mode, RawHeader, RawStore, RawWriter};
 
     /// A raw store of `w × h` pixels, face resolution 2, with zero columns,
     /// constant columns and values spread over `scale·(1e-6..1e5)`.
@@ -579,7 +579,7 @@ mod file_tests {
                         terms,
                         weighting: crate::Weighting::Transport,
                     };
-                    let mut frame = crate::Relight::frame(&relighter);
+                    let mut frame = crate::Relight::frame(&relighter).unwrap();
                     crate::Relight::relight(&relighter, &light, &request, &mut frame).unwrap();
                     let naive = relighter.relight_naive(&light, &request).unwrap();
                     assert!(frame.image.first_non_finite().is_none());

@@ -19,7 +19,7 @@ use crate::bands::{band_count, band_level, band_map, band_rect};
 use crate::column::SparseColumn;
 use crate::error::{Error, Result};
 use crate::limits::{Charge, Limits};
-use crate::wavelet::{self, band_size, Filter};
+use crate::wavelet::{self, Filter};
 
 /// `count` copies of `value`, allocated fallibly (the bytes are charged by
 /// the caller): memory the system refuses is an error naming `what`.

@@ -27,13 +27,13 @@ fn files(dir: &Path, dims: Dims, mode: Mode) -> (RawStore, PathBuf) {
             rank: Some(8),
             ..Default::default()
         };
-        compress_pca(&raw, &ltm, &opts, &|_, _| {}).unwrap();
+        compress_pca(&raw, &ltm, &opts, ltm_codec::Progress::NONE).unwrap();
     } else {
         let opts = CodeOptions {
             mode,
             ..CodeOptions::default()
         };
-        compress(&raw, &ltm, &opts.into(), &|_, _, _| {}).unwrap();
+        compress(&raw, &ltm, &opts.into(), ltm_codec::Progress::NONE).unwrap();
     }
     (raw, ltm)
 }

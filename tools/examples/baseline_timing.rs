@@ -37,7 +37,7 @@ fn main() -> anyhow::Result<()> {
     }
     let relighter = BasisRelighter::sh(projection, &raw)?;
     let light = vec![[1.0f32; 3]; raw.dims().lights()];
-    let mut frame = relighter.frame();
+    let mut frame = relighter.frame()?;
     let request = Request {
         terms: 20,
         weighting: Weighting::Transport,

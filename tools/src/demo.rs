@@ -188,7 +188,7 @@ fn relight_maps(
         exact.write_png(&out(&format!("{name}-reference.png")), ev)?;
         let mut tiles = vec![exact];
         for (mode, relighter) in relighters {
-            let mut bufs = relighter.frame();
+            let mut bufs = relighter.frame()?;
             for &n in &N_VALUES {
                 let (ms, stats) = time_frame(relighter, &light, n, &mut bufs)?;
                 let err = relative_l2(&bufs.image, &tiles[0])?;

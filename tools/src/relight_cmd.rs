@@ -5,8 +5,8 @@ use anyhow::{bail, Context, Result};
 use clap::Args;
 use ltm_codec::LtmFile;
 use ltm_relight::{
-    open_relighter, relative_l2, EnvMap, Frame, FrameStats, Image, Lookup, PcaRelighter,
-    PointLight, Relight, Request, Rotation,
+    relative_l2, EnvMap, Frame, FrameStats, Image, Lookup, PcaRelighter, PointLight, Relight,
+    Request, Rotation,
 };
 use std::path::{Path, PathBuf};
 use std::time::{Duration, Instant};
@@ -124,7 +124,7 @@ impl Opened {
             Ok(if points {
                 Opened::Points(Box::new(open_for_points(&a.file, ctx)?))
             } else {
-                Opened::Any(open_relighter(&a.file, ctx.limits())?)
+                Opened::Any(ltm_relight::open(&a.file, ctx.limits())?)
             })
         };
         let opened = open().with_context(|| format!("opening {}", a.file.display()))?;
@@ -284,7 +284,7 @@ pub fn run(a: RelightArgs, ctx: &Ctx) -> Result<()> {
             weighting: a.terms.weighting,
         },
     };
-    let mut bufs = relighter.frame();
+    let mut bufs = relighter.frame()?;
     let timing = time_frames(&scene, &mut bufs, a.frames)?;
     a.out.write(&bufs.image)?;
     let error = reference_error(&bufs.image, a.reference.as_deref())?;

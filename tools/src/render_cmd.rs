@@ -142,7 +142,7 @@ pub fn run(a: RenderArgs, ctx: &Ctx) -> Result<()> {
     let relighter = Relighter::open_with_limits(&a.file, ctx.limits())
         .with_context(|| format!("opening {}", a.file.display()))?;
     let mut frame = relighter.frame()?;
-    let mesh = TexturedMesh::from_file(relighter.file(), crate::limits())
+    let mesh = TexturedMesh::from_file(relighter.file(), ctx.limits())
         .with_context(|| format!("{}", a.file.display()))?;
     let env = EnvMap::load(&a.env).with_context(|| format!("loading {}", a.env.display()))?;
     let light = env.to_cubemap(relighter.face_res(), &a.rotate);

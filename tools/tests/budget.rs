@@ -5,7 +5,9 @@
 //! command that reads an `.ltm` file; and `ltm view` makes the first frame
 //! of a small pca file.
 
-use ltm_codec::container::{EncodedColumn, LtmWriter, Meta, Mode, SparseColumn};
+use ltm_codec::column::{EncodedColumn, SparseColumn};
+use ltm_codec::compress::Mode;
+use ltm_codec::container::{LtmWriter, Meta};
 use ltm_codec::{compress_pca, Dims, Filter, PcaOptions, RawHeader, RawStore, RawWriter};
 use std::io::{BufRead, BufReader, Read, Write};
 use std::net::TcpStream;
@@ -84,7 +86,7 @@ fn small_pca(dir: &Path) -> PathBuf {
         rank: Some(4),
         ..Default::default()
     };
-    compress_pca(&raw, &path, &opts, &|_, _| {}).unwrap();
+    compress_pca(&raw, &path, &opts, ltm_codec::Progress::NONE).unwrap();
     path
 }
 

@@ -3,7 +3,7 @@
 
 use anyhow::{Context, Result};
 use clap::Args;
-use ltm_relight::{Image, Relight, Weighting};
+use ltm_relight::{Image, Relight, TermBasis, Weighting};
 use std::path::{Path, PathBuf};
 use std::str::FromStr;
 
@@ -106,7 +106,7 @@ impl TermsArgs {
     /// pca file) refuses more terms than it stores; `all` and the default
     /// mean all of them there.
     pub fn resolve(&self, relighter: &dyn Relight) -> usize {
-        let linear = relighter.max_terms() < relighter.lights();
+        let linear = relighter.term_basis() == TermBasis::Linear;
         match self.terms {
             Some(Terms::ALL) => relighter.max_terms(),
             Some(Terms(t)) => t,

@@ -55,7 +55,7 @@ pub fn measure(
         .with_context(|| format!("opening {}", file.display()))?;
     // Frame times below are of frames alone, with every column decoded.
     relighter.decode_all()?;
-    let mesh = TexturedMesh::from_file(relighter.file(), crate::limits())?;
+    let mesh = TexturedMesh::from_file(relighter.file(), ctx.limits())?;
     let camera = framing_camera(&mesh)?;
     let request = Request {
         terms: TERMS.min(relighter.lights()),

@@ -127,8 +127,8 @@ fn file_name(p: &Path) -> String {
 
 impl ViewFile {
     fn open(path: &Path, limits: &Limits) -> Result<ViewFile> {
-        let relighter =
-            ltm_relight::open(path, limits).with_context(|| format!("opening {}", path.display()))?;
+        let relighter = ltm_relight::open(path, limits)
+            .with_context(|| format!("opening {}", path.display()))?;
         let file = LtmFile::open_with_limits(path, limits)
             .with_context(|| format!("opening {}", path.display()))?;
         let meta = file.meta();

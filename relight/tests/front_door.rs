@@ -158,8 +158,8 @@ impl Relight for Outside {
         let (sums, image) = frame.scratch(|_: &Sums| true, fresh)?;
         sums.total = [0.0; 3];
         for l in light {
-            for c in 0..3 {
-                sums.total[c] += l[c];
+            for (t, v) in sums.total.iter_mut().zip(l) {
+                *t += v;
             }
         }
         sums.frames += 1;

@@ -1,7 +1,7 @@
 //! ltm: compressed precomputed light-transport matrices.
 //!
 //! A facade over the pipeline's crates: [`codec`] (wavelets, file formats, the
-//! adaptive 4D codec of Cheslack-Postava et al. 2007), [`bake`] (ray-traced
+//! adaptive 4D codec of Cheslack-Postava et al. 2007), [`bake`](mod@bake) (ray-traced
 //! transport rows) and [`relight`] (images from compressed matrices under
 //! environment lighting). The types most programs need are re-exported here:
 //!
@@ -9,7 +9,7 @@
 //! - files: [`RawStore`] / [`RawWriter`] (the uncompressed matrix),
 //!   [`LtmFile`] (a compressed one, from a path or from bytes), both opened
 //!   under [`Limits`], one memory budget that clones share;
-//! - compression: [`compress`] with [`CompressOptions`];
+//! - compression: [`compress()`](fn@compress) with [`CompressOptions`];
 //! - relighting: [`open()`](fn@open) opens any `.ltm` file (a [`Source`]:
 //!   path or bytes) as a `Box<dyn` [`Relight`]`>`, the trait implemented by
 //!   the wavelet [`Relighter`], the [`PcaRelighter`] and the PCA/SH

@@ -20,7 +20,7 @@
 //!   are coordinates outside `[0, 1]`; triangles of zero texture area are
 //!   skipped (they cover no texel) and counted.
 //! - `sphere`: a spherical parameterization of a closed genus-0 mesh
-//!   ([`crate::sphere`]), unfolded to the square through the octahedron
+//!   (the `sphere` module), unfolded to the square through the octahedron
 //!   (Praun & Hoppe 2003); every texel is valid.
 //!
 //! A texel's surface samples are spread over its square (rotated

@@ -162,7 +162,7 @@ impl ColumnDecoder {
         decode_scale(code) as f64 / levels(self.meta.bits) as f64
     }
 
-    /// The scale group ([`crate::quant`]'s `scale_groups`: 0 the low band,
+    /// The scale group (the quantizer's `scale_groups`: 0 the low band,
     /// `k` the detail bands of level `k`) of `position` in a column at
     /// `depth` (0 for a depth or position out of range).
     pub fn scale_group(&self, depth: u32, position: usize) -> u8 {

@@ -65,16 +65,10 @@ fn resume_message(state: &ResumeState, partial: &str) -> Option<String> {
     }
 }
 
-pub fn run(args: BakeArgs, _ctx: &Ctx) -> anyhow::Result<()> {
-    let mut desc = SceneDesc::load(&args.scene)?;
-    desc.apply(&Overrides {
-        width: args.width,
-        height: args.height,
-        face_res: args.face_res,
-        texel_samples: args.texel_samples,
-        spp: args.spp,
-    })?;
-    let scene = Scene::build(&desc)?;
+/// Prints what is about to be baked: skipped triangles, the texture's
+/// parameterization, and the matrix's size.
+fn describe(scene: &Scene, desc: &SceneDesc) {
+    let dims = scene.dims();
     for m in &scene.stats().meshes {
         if m.degenerate_skipped > 0 {
             eprintln!(
@@ -85,7 +79,6 @@ pub fn run(args: BakeArgs, _ctx: &Ctx) -> anyhow::Result<()> {
             );
         }
     }
-    let dims = scene.dims();
     if let Some(map) = scene.texel_map() {
         let st = map.stats();
         let stretch = match (st.stretch_mean, st.stretch_max) {
@@ -122,6 +115,20 @@ pub fn run(args: BakeArgs, _ctx: &Ctx) -> anyhow::Result<()> {
         desc.lighting.texel_samples,
         scene.rows().samples_per_row(),
     );
+}
+
+pub fn run(args: BakeArgs, _ctx: &Ctx) -> anyhow::Result<()> {
+    let mut desc = SceneDesc::load(&args.scene)?;
+    desc.apply(&Overrides {
+        width: args.width,
+        height: args.height,
+        face_res: args.face_res,
+        texel_samples: args.texel_samples,
+        spp: args.spp,
+    })?;
+    let scene = Scene::build(&desc)?;
+    describe(&scene, &desc);
+    let dims = scene.dims();
     let bar = progress::bar(dims.pixels() as u64, "bake");
     let options = BakeOptions::default();
     let partial = format!("{}.partial", args.output.display());

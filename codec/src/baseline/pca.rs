@@ -29,7 +29,7 @@ const SKETCH_SALT: u64 = 0x6A09_E667_F3BC_C909;
 
 /// The first `K` principal light vectors of a transport matrix (rows =
 /// (pixel, channel) pairs, uncentered) and the error of every rank up to
-/// `K`. See the [module documentation](self).
+/// `K`. See the module documentation of `baseline::pca`.
 #[derive(Clone, Debug)]
 pub struct PcaBasis {
     dims: Dims,
@@ -156,8 +156,6 @@ mod tests {
     use super::*;
     use crate::baseline::rows::testing::{dense, dims, frobenius2, write_raw};
     use crate::rsvd::SplitMix64;
-    use faer::Side;
-    use std::path::Path;
 
     /// A rank-5 matrix with decaying singular values, plus Gaussian noise of
     /// Frobenius norm about `noise`; every seventh pixel is zero.
@@ -304,47 +302,5 @@ mod tests {
         let raw2 =
             RawStore::open(&write_raw(dir.path(), "o.raw", d2, &t[..9 * 24], None, 5)).unwrap();
         assert!(basis.coefficients(&raw2).is_err());
-    }
-
-    /// The randomized PCA errors against the exact ones (eigenvalues of the
-    /// dense Gram matrix AᵀA) on a real store with few lights
-    /// (`LTM_BASELINE_RAW`, default /tmp/e2e/default128.raw):
-    /// `cargo test --release -p ltm-codec pca -- --ignored --nocapture`.
-    #[test]
-    #[ignore]
-    fn pca_against_exact_on_store() {
-        let path = std::env::var("LTM_BASELINE_RAW").unwrap_or("/tmp/e2e/default128.raw".into());
-        let raw = RawStore::open(Path::new(&path)).unwrap();
-        let m = raw.dims().lights();
-        assert!(m <= 6144, "the dense Gram matrix needs few lights");
-        let mut gram = Mat::<f64>::zeros(m, m);
-        let mut norm2 = 0.0;
-        let mut buf: Vec<f64> = Vec::new();
-        for_each_block(&raw, CHUNK_VALUES, false, &mut buf, |blk| {
-            norm2 += block_norm2(blk.data);
-            matmul(
-                gram.as_mut(),
-                Accum::Add,
-                blk.at(),
-                blk.a(),
-                1.0,
-                Par::rayon(0),
-            );
-            Ok(())
-        })
-        .unwrap();
-        let mut eig = gram.as_ref().self_adjoint_eigenvalues(Side::Lower).unwrap();
-        eig.reverse();
-        let basis = PcaBasis::fit(&raw, 256, 1).unwrap();
-        for k in [1, 2, 4, 8, 16, 32, 64, 128, 256] {
-            let error = basis.rank_errors()[k];
-            let exact = (eig[k..].iter().sum::<f64>().max(0.0) / norm2).sqrt();
-            println!(
-                "rank {k:4}: randomized {error:.6}, exact {exact:.6}, ratio {:.5}",
-                error / exact
-            );
-            assert!(error >= exact * (1.0 - 1e-6));
-            assert!(error <= exact * 1.05);
-        }
     }
 }

@@ -7,9 +7,9 @@
 pub struct SparseColumn {
     /// Column transform depth (0 = rows only).
     pub depth: u32,
-    /// Quantizer scale codes ([`crate::quant::decode_scale`]),
+    /// Quantizer scale codes (`quant::decode_scale`),
     /// `(depth + 1) · channels` of them, group-major: group 0 is the low band,
-    /// group `k` the detail bands of level `k` ([`crate::quant::scale_groups`]).
+    /// group `k` the detail bands of level `k` (`quant::scale_groups`).
     pub scale_codes: Vec<u16>,
     /// Sorted positions of the kept coefficients in the column image.
     pub indices: Vec<u32>,

@@ -10,8 +10,8 @@ pub const MAGIC: [u8; 8] = *b"\x89LTM\r\n\x1a\n";
 /// Format version this build writes. It reads versions 1 to 5; version 2
 /// adds the empty-row mask ([`FEATURE_EMPTY_ROWS`]) and the row layout with
 /// per-row surface data ([`FEATURE_SURFACE`]). A version-1 file has neither.
-/// Version 3 adds column encoding 3 ([`Encoding::Ranged`]), version 4 column
-/// encoding 4 ([`Encoding::Classed`]), version 5 the column norms
+/// Version 3 adds column encoding 3 ([`Encoding::Ranged`](crate::column::Encoding::Ranged)), version 4 column
+/// encoding 4 ([`Encoding::Classed`](crate::column::Encoding::Classed)), version 5 the column norms
 /// ([`FEATURE_COLUMN_NORMS`]).
 pub const VERSION: u32 = 5;
 /// The oldest format version this build reads.

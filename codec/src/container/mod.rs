@@ -7,7 +7,7 @@
 //! ```
 //!
 //! Version 2 adds feature 4 and chunk `SURF`: the row layout (image pixels
-//! or texture texels) and per-row surface data ([`Surface`]). Version-1
+//! or texture texels) and per-row surface data ([`Surface`](crate::Surface)). Version-1
 //! files (features 1 at most) are still read. Version 5 adds feature 8 and
 //! chunk `NORM`: each column's priority norm, so that a relighter can rank
 //! lights by transport without decoding every column first.

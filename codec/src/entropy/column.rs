@@ -635,7 +635,7 @@ fn representable(col: &SparseColumn, shape: &ColumnShape) -> bool {
 /// Encodes a column: its scale codes (2 bytes each, little-endian), then
 /// the range-coded stream (encoding 3), or the range-coded stream's length
 /// (`u32`, little-endian), the stream and the raw bit stream (encoding 4).
-/// `None` when the column cannot be represented (see [`representable`]);
+/// `None` when the column cannot be represented (see `representable`);
 /// the caller then stores it otherwise.
 pub fn encode(col: &SparseColumn, shape: &ColumnShape, coding: ValueCoding) -> Option<Vec<u8>> {
     if !representable(col, shape) {

@@ -1,6 +1,6 @@
 //! Context-modelled entropy coding of column payloads (column encodings 3
 //! and 4, `.ltm` versions 3 and 4): an adaptive range coder ([`range`]),
-//! encoding 4's raw bit stream ([`bits`]) and the column model that drives
+//! encoding 4's raw bit stream (`bits.rs`) and the column model that drives
 //! them ([`column`]).
 
 mod bits;

@@ -295,7 +295,7 @@ impl Encoder {
 }
 
 /// Reads bits under adaptive contexts; input past the end reads as 0 bytes,
-/// at most [`MAX_OVERRUN`] of them.
+/// at most `MAX_OVERRUN` of them.
 pub struct Decoder<'a> {
     code: u32,
     range: u32,
@@ -327,7 +327,7 @@ impl<'a> Decoder<'a> {
         b
     }
 
-    /// Whether more than [`MAX_OVERRUN`] bytes past the end were read:
+    /// Whether more than `MAX_OVERRUN` bytes past the end were read:
     /// the stream ended early. Decoding may go on (its bits are then
     /// meaningless, and every caller's loop is bounded) but must fail.
     pub fn overrun(&self) -> bool {
@@ -380,7 +380,7 @@ impl<'a> Decoder<'a> {
     }
 
     /// Checks that the stream was read to its end: no byte left unread,
-    /// no more than [`MAX_OVERRUN`] read past it.
+    /// no more than `MAX_OVERRUN` read past it.
     pub fn finish(&self) -> Result<()> {
         if self.overrun() {
             return Err(self.overrun_error());

@@ -7,7 +7,7 @@
 //! `B` once and each pixel is a `K`-term dot product.
 //!
 //! [`compress_pca`](crate::compress_pca) fits the basis by a randomized SVD streamed over the raw
-//! store ([`fit`]), quantizes `B` and `F` with one scale per component
+//! store (`fit.rs`), quantizes `B` and `F` with one scale per component
 //! ([`QuantizedMatrix`]) and measures the error of exactly what a decoder
 //! reconstructs ([`PcaModel::reconstruct_rows`]).
 

@@ -39,7 +39,7 @@ pub struct RawHeader {
     /// its identity equals the writer's. Stored in version-2 files; a
     /// header without one is written as version 1.
     pub input_id: Option<[u8; INPUT_ID_LEN]>,
-    /// Per-row surface data ([`Surface`]) is stored (version 3). Texture
+    /// Per-row surface data ([`Surface`](crate::Surface)) is stored (version 3). Texture
     /// rows ([`crate::RowLayout::Texture`]) always have it.
     pub has_surface: bool,
 }

@@ -3,7 +3,7 @@
 //!
 //! One little-endian file (layout in docs/FORMAT.md). Version 2 adds the
 //! input identity, version 3 the row layout and per-row surface data
-//! ([`Surface`]); a header is `hlen` = 64 bytes in version 1, 96 in version
+//! ([`Surface`](crate::Surface)); a header is `hlen` = 64 bytes in version 1, 96 in version
 //! 2 and 112 in version 3:
 //!
 //! | offset | size | field |

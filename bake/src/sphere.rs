@@ -340,6 +340,9 @@ fn stiffness(mesh: &SurfaceMesh) -> Csr {
         val: Vec::new(),
     };
     for (i, mut r) in rows.into_iter().enumerate() {
+        // Sorted before summing: the map's iteration order must not reach
+        // the result (bakes are byte-identical from run to run).
+        r.sort_by_key(|e| e.0);
         let diag: f64 = -r.iter().map(|e| e.1).sum::<f64>();
         r.push((i as u32, diag));
         r.sort_by_key(|e| e.0);

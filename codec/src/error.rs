@@ -98,6 +98,36 @@ pub enum Error {
         /// The budget in force.
         limit: u64,
     },
+    /// An output that cannot be written as named: it is an input, another
+    /// output, a folder, a device or FIFO, or in a folder that does not
+    /// exist or is not writable.
+    #[error("{role} {path}: {reason}")]
+    Output {
+        /// How the command line names the output (e.g. `"-o"`).
+        role: String,
+        /// The output's path.
+        path: PathBuf,
+        /// Why it was refused and what to do instead.
+        reason: String,
+    },
+    /// Another run holds the lock of this output (`PATH.lock`).
+    #[error("{path}: another ltm run is writing this output (it holds the lock {lock}); wait for it to end or choose another output")]
+    OutputBusy {
+        /// The output.
+        path: PathBuf,
+        /// The lock file.
+        lock: PathBuf,
+    },
+    /// The output's filesystem has less free space than the output needs.
+    #[error("{path}: needs {need} bytes but its filesystem has {free} bytes free; free some space or choose another folder")]
+    NoSpace {
+        /// The output.
+        path: PathBuf,
+        /// Bytes the output still needs.
+        need: u64,
+        /// Bytes available to this user.
+        free: u64,
+    },
     /// Input data that cannot be encoded (NaN, infinity, wrong dtype, ...).
     #[error("invalid input: {0}")]
     Invalid(String),

@@ -27,7 +27,7 @@ mod fileio;
 mod limits;
 mod mmap;
 pub mod npy;
-mod output;
+pub mod output;
 pub mod pca;
 mod progress;
 /// The quantizer's internals: public only with the `benchmarks` feature.
@@ -55,7 +55,7 @@ pub use dims::{
 pub use empty::EmptyRows;
 pub use error::{Error, Result};
 pub use limits::{Charge, Limits};
-pub use output::AtomicFile;
+pub use output::{AtomicFile, Claim, OutputLock, RunFiles};
 pub use pca::PcaModel;
 pub use progress::{Progress, Stage, Step};
 pub use quant::BandWeights;

@@ -8,6 +8,7 @@ use crate::error::{Error, Result};
 use crate::limits::{Charge, Limits};
 use crate::output::AtomicFile;
 use crate::progress::{Progress, Stage};
+use crate::raw::Stamp;
 use crate::raw::{RawHeader, RawWriter};
 use crate::wavelet::row_inverse;
 use std::fs::File;
@@ -42,20 +43,30 @@ pub struct NpyHeader {
 /// anything else is an error.
 pub fn read_npy_header(r: &mut impl Read) -> Result<NpyHeader> {
     let bad = |d: String| Error::Invalid(format!("not a readable .npy file: {d}"));
+    let short = |part: &str, e: std::io::Error| {
+        if e.kind() == std::io::ErrorKind::UnexpectedEof {
+            bad(format!("the file ends inside its {part} (truncated)"))
+        } else {
+            bad(e.to_string())
+        }
+    };
     let mut pre = [0u8; 8];
-    r.read_exact(&mut pre).map_err(|e| bad(e.to_string()))?;
+    r.read_exact(&mut pre)
+        .map_err(|e| short("8-byte preamble", e))?;
     if &pre[..6] != NPY_MAGIC {
         return Err(bad("missing \\x93NUMPY magic".into()));
     }
     let (len, prefix) = match pre[6] {
         1 => {
             let mut b = [0u8; 2];
-            r.read_exact(&mut b).map_err(|e| bad(e.to_string()))?;
+            r.read_exact(&mut b)
+                .map_err(|e| short("header length", e))?;
             (u16::from_le_bytes(b) as usize, 10)
         }
         2 | 3 => {
             let mut b = [0u8; 4];
-            r.read_exact(&mut b).map_err(|e| bad(e.to_string()))?;
+            r.read_exact(&mut b)
+                .map_err(|e| short("header length", e))?;
             (u32::from_le_bytes(b) as usize, 12)
         }
         v => return Err(bad(format!("format version {v} (supported: 1, 2, 3)"))),
@@ -64,7 +75,8 @@ pub fn read_npy_header(r: &mut impl Read) -> Result<NpyHeader> {
         return Err(bad(format!("header length {len} (valid: at most 65536)")));
     }
     let mut text = vec![0u8; len];
-    r.read_exact(&mut text).map_err(|e| bad(e.to_string()))?;
+    r.read_exact(&mut text)
+        .map_err(|e| short(&format!("{len}-byte header"), e))?;
     let dict = std::str::from_utf8(&text)
         .map_err(|_| bad("the header dictionary is not UTF-8 text".into()))?;
     let (dtype, shape) = parse_header_dict(dict)?;
@@ -253,13 +265,7 @@ pub fn import_npy(
     out: &Path,
     progress: Progress<'_>,
 ) -> Result<Dims> {
-    let result = import_npy_inner(npy, width, height, out, progress);
-    if result.is_err() {
-        let mut partial = out.as_os_str().to_owned();
-        partial.push(".partial");
-        let _ = std::fs::remove_file(partial);
-    }
-    result
+    import_npy_inner(npy, width, height, out, progress)
 }
 
 fn import_npy_inner(
@@ -315,13 +321,19 @@ fn import_npy_inner(
     }
     let raw = RawHeader::new(dims, false, 16 << 20);
     let mut writer = RawWriter::create(out, raw)?;
+    // An import is never resumed: a failed one leaves nothing.
+    writer.discard_on_drop();
+    let stamp = Stamp::of(r.get_ref(), npy)?;
     let row_len = dims.row_len();
     let mut bytes = Vec::new();
     let blocks = raw.block_count();
     for b in 0..blocks {
         let range = raw.block_range(b);
         bytes.resize(range.len() * row_len * item as usize, 0);
-        r.read_exact(&mut bytes).map_err(|e| Error::io(npy, e))?;
+        r.read_exact(&mut bytes).map_err(|e| {
+            let at = header.data_offset as u64 + (range.start * row_len) as u64 * item;
+            truncated_at(npy, e, at)
+        })?;
         let values: Vec<f32> = if item == 4 {
             bytes
                 .chunks_exact(4)
@@ -347,8 +359,21 @@ fn import_npy_inner(
         writer.write_block(b, &values, None)?;
         progress.report(Stage::Import, (b + 1) as u64, blocks as u64);
     }
+    stamp.check(r.get_ref(), npy)?;
     writer.finish()?;
     Ok(dims)
+}
+
+/// A read of the array's data that failed; one that ran past the end says
+/// that the file was truncated while it was read.
+fn truncated_at(npy: &Path, e: std::io::Error, at: u64) -> Error {
+    if e.kind() != std::io::ErrorKind::UnexpectedEof {
+        return Error::io(npy, e);
+    }
+    let msg = format!(
+        "the file ends inside the block of data from byte {at}: it was truncated while being read"
+    );
+    Error::io(npy, std::io::Error::new(e.kind(), msg))
 }
 
 /// Decodes a whole `.ltm` file to the pixel lighting basis: `P × M × C`

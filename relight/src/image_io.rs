@@ -113,6 +113,16 @@ impl Image {
     /// holding NaN or infinite values.
     #[cfg(feature = "exr")]
     pub fn write_exr(&self, path: &Path) -> Result<()> {
+        Ok(self.stage_exr(path)?.commit()?)
+    }
+
+    /// [`Image::write_exr`] up to, not including, the commit: the file is
+    /// complete under its temporary name, and appears at `path` only when
+    /// the returned file is committed (dropped, it vanishes). Outputs that
+    /// must appear together (the views of an orbit) are staged first and
+    /// committed last.
+    #[cfg(feature = "exr")]
+    pub fn stage_exr(&self, path: &Path) -> Result<AtomicFile> {
         self.check_writable(path)?;
         let mut out = AtomicFile::create(path)?;
         let tmp = out.tmp_path().to_path_buf();
@@ -131,14 +141,22 @@ impl Image {
             .write()
             .to_buffered(BufWriter::new(&mut out))
             .map_err(|e| exr_error(&tmp, e))?;
-        Ok(out.commit()?)
+        Ok(out)
     }
 
     /// Writes an 8-bit sRGB PNG: each value is multiplied by `2^exposure_ev`,
     /// clamped to `[0, 1]` and encoded with the sRGB transfer function. The
-    /// file is written to `PATH.tmp` and renamed to `PATH` when complete.
+    /// file is written under a unique temporary name and renamed to `PATH`
+    /// when complete.
     #[cfg(feature = "png")]
     pub fn write_png(&self, path: &Path, exposure_ev: f32) -> Result<()> {
+        Ok(self.stage_png(path, exposure_ev)?.commit()?)
+    }
+
+    /// [`Image::write_png`] up to, not including, the commit (see
+    /// [`Image::stage_exr`]).
+    #[cfg(feature = "png")]
+    pub fn stage_png(&self, path: &Path, exposure_ev: f32) -> Result<AtomicFile> {
         if !exposure_ev.is_finite() || exposure_ev.abs() > 64.0 {
             return Err(RelightError::range(
                 "exposure (EV)",
@@ -167,7 +185,7 @@ impl Image {
             .map_err(|e| RelightError::image(&tmp, e))?;
         out.flush().map_err(|e| RelightError::io(&tmp, e))?;
         drop(out);
-        Ok(file.commit()?)
+        Ok(file)
     }
 
     /// Reads the first layer with R, G and B channels of an OpenEXR file,

@@ -1,6 +1,6 @@
 //! `ltm bake`.
 
-use crate::common::{progress, Ctx};
+use crate::common::{claim_files, progress, Ctx};
 use anyhow::Context;
 use clap::Args;
 use ltm_bake::{bake, BakeOptions, Overrides, ResumeState, Scene, SceneDesc};
@@ -126,6 +126,10 @@ pub fn run(args: BakeArgs, _ctx: &Ctx) -> anyhow::Result<()> {
         texel_samples: args.texel_samples,
         spp: args.spp,
     })?;
+    let meshes: Vec<PathBuf> = desc.meshes.iter().map(|m| desc.resolve(&m.path)).collect();
+    let mut inputs = vec![("SCENE", args.scene.as_path())];
+    inputs.extend(meshes.iter().map(|m| ("mesh", m.as_path())));
+    let _claim = claim_files(&inputs, &[("-o", &args.output)])?;
     let scene = Scene::build(&desc)?;
     describe(&scene, &desc);
     let dims = scene.dims();

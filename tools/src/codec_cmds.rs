@@ -1,7 +1,7 @@
 //! `ltm import`, `ltm compress`, `ltm inspect`, `ltm export`.
 
 use crate::common::size::default_mem_budget;
-use crate::common::{check_files, partial, progress, Ctx};
+use crate::common::{claim_files, progress, Ctx};
 use anyhow::{bail, Context, Result};
 use clap::Args;
 use ltm_codec::compress::{
@@ -36,11 +36,7 @@ pub struct ImportArgs {
 }
 
 pub fn import(a: ImportArgs, _ctx: &Ctx) -> Result<()> {
-    let partial = partial(&a.output);
-    check_files(
-        &[("input", &a.npy)],
-        &[("-o", &a.output), ("its temporary file", &partial)],
-    )?;
+    let _claim = claim_files(&[("input", &a.npy)], &[("-o", &a.output)])?;
     let bar = progress::bar(0, "import");
     let dims = import_npy(
         &a.npy,
@@ -140,7 +136,7 @@ fn renamed_terms(_: &str) -> std::result::Result<usize, String> {
 }
 
 pub fn compress_cmd(a: CompressArgs, ctx: &Ctx) -> Result<()> {
-    check_files(&[("input", &a.raw)], &[("-o", &a.output)])?;
+    let _claim = claim_files(&[("input", &a.raw)], &[("-o", &a.output)])?;
     let raw = RawStore::open_with_limits(&a.raw, ctx.limits())
         .with_context(|| format!("opening {}", a.raw.display()))?;
     if a.mode == Mode::Pca {
@@ -457,9 +453,12 @@ pub struct ExportArgs {
 }
 
 pub fn export(a: ExportArgs, ctx: &Ctx) -> Result<()> {
-    check_files(&[("input", &a.file)], &[("-o", &a.output)])?;
+    let _claim = claim_files(&[("input", &a.file)], &[("-o", &a.output)])?;
     let file = LtmFile::open_with_limits(&a.file, ctx.limits())
         .with_context(|| format!("opening {}", a.file.display()))?;
+    let dims = file.meta().dims;
+    let npy_bytes = dims.raw_bytes().saturating_add(256);
+    ltm_codec::output::check_space(&a.output, npy_bytes)?;
     export_npy(&file, &a.output, ctx.limits())
         .with_context(|| format!("exporting to {}", a.output.display()))?;
     eprintln!("wrote {}", a.output.display());

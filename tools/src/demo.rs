@@ -4,7 +4,8 @@
 //! summary with sizes, errors against the exact `T·L` and frame rates.
 
 use crate::common::{
-    assets_dir, auto_exposure, bake_cached, env_maps, load_maps, progress, write_atomic, Ctx,
+    assets_dir, auto_exposure, bake_cached, claim_folder, env_maps, load_maps, progress,
+    write_atomic, Ctx,
 };
 use anyhow::{Context, Result};
 use clap::Args;
@@ -86,6 +87,7 @@ pub fn run(a: DemoArgs, ctx: &Ctx) -> Result<()> {
     };
     opts.validate()?;
     let maps = load_maps(&env_maps(&assets)?)?;
+    let _claim = claim_folder(&[], "-o", &a.output)?;
     std::fs::create_dir_all(&a.output)
         .with_context(|| format!("creating {}", a.output.display()))?;
     let start = Instant::now();

@@ -1,6 +1,6 @@
 //! `ltm reference`: the exact relit image T·L from a raw store.
 
-use crate::common::{check_files, progress, Ctx, ImageOutput};
+use crate::common::{claim_files, progress, Ctx, ImageOutput};
 use anyhow::Context;
 use clap::Args;
 use ltm_codec::{Progress, RawStore};
@@ -43,7 +43,7 @@ pub struct ReferenceArgs {
 
 pub fn run(args: ReferenceArgs, ctx: &Ctx) -> anyhow::Result<()> {
     let out = &args.out;
-    check_files(&[("input", &args.raw), ("--env", &args.env)], &out.roles())?;
+    let _claim = claim_files(&[("input", &args.raw), ("--env", &args.env)], &out.roles())?;
     let start = Instant::now();
     let raw = RawStore::open_with_limits(&args.raw, ctx.limits())
         .with_context(|| format!("opening raw store {}", args.raw.display()))?;

@@ -1,6 +1,6 @@
 //! `ltm relight`.
 
-use crate::common::{check_files, Ctx, ImageOutput, TermsArgs};
+use crate::common::{claim_files, Ctx, ImageOutput, TermsArgs};
 use anyhow::{bail, Context, Result};
 use clap::Args;
 use ltm_codec::LtmFile;
@@ -262,7 +262,7 @@ pub fn run(a: RelightArgs, ctx: &Ctx) -> Result<()> {
     if let Some(r) = &a.reference {
         inputs.push(("--reference", r.as_path()));
     }
-    check_files(&inputs, &a.out.roles())?;
+    let _claim = claim_files(&inputs, &a.out.roles())?;
     let opened_at = Instant::now();
     let opened = Opened::open(&a, !points.is_empty(), ctx)?;
     let relighter = opened.relighter();

@@ -1,7 +1,7 @@
 //! `ltm render`: relight a texture-space file once and draw the relit mesh
 //! from one camera or an orbit of cameras.
 
-use crate::common::{check_files, Ctx, ImageOutput, TermsArgs};
+use crate::common::{claim_files, commit_all, Ctx, ImageOutput, TermsArgs};
 use anyhow::{bail, Context, Result};
 use clap::Args;
 use glam::DVec3;
@@ -135,7 +135,7 @@ pub fn run(a: RenderArgs, ctx: &Ctx) -> Result<()> {
     }
     names.extend(a.texture.clone());
     let outputs: Vec<(&str, &Path)> = names.iter().map(|p| ("output", p.as_path())).collect();
-    check_files(
+    let _claim = claim_files(
         &[("input", a.file.as_path()), ("--env", a.env.as_path())],
         &outputs,
     )?;
@@ -151,11 +151,11 @@ pub fn run(a: RenderArgs, ctx: &Ctx) -> Result<()> {
         weighting: a.terms.weighting,
     };
     let stats = relighter.relight(&light, &request, &mut frame)?;
+    // Every file of the run appears together at the end, or none does.
+    let mut staged = Vec::new();
     if let Some(t) = &a.texture {
-        frame
-            .image
-            .write_exr(t)
-            .with_context(|| format!("writing {}", t.display()))?;
+        let file = frame.image.stage_exr(t);
+        staged.push(file.with_context(|| format!("writing {}", t.display()))?);
     }
     let mut render_ms = Vec::with_capacity(a.views);
     for k in 0..a.views {
@@ -166,8 +166,9 @@ pub fn run(a: RenderArgs, ctx: &Ctx) -> Result<()> {
         render_ms.push(start.elapsed().as_secs_f64() * 1e3);
         let exr = numbered(&a.out.output, k, a.views);
         let png = a.out.png.as_ref().map(|p| numbered(p, k, a.views));
-        a.out.write_to(&image, &exr, png.as_deref())?;
+        staged.extend(a.out.stage(&image, &exr, png.as_deref())?);
     }
+    commit_all(staged)?;
     render_ms.sort_by(f64::total_cmp);
     let median = render_ms[render_ms.len() / 2];
     let relight_ms = stats.total().as_secs_f64() * 1e3;

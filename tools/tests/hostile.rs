@@ -13,57 +13,7 @@ fn assets() -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR")).join("../assets")
 }
 
-/// A 1 MiB tmpfs mounted for the test's lifetime: a disk that fills up.
-struct SmallDisk {
-    path: PathBuf,
-    _dir: tempfile::TempDir,
-}
-
-impl SmallDisk {
-    /// Mounts the filesystem, or returns `None` where mounting is not
-    /// allowed (not root). CI runs as root, so there a failed mount fails
-    /// the test instead of skipping it.
-    fn mount() -> Option<SmallDisk> {
-        let dir = tempfile::tempdir().unwrap();
-        let path = dir.path().join("small");
-        std::fs::create_dir(&path).unwrap();
-        let ok = Command::new("mount")
-            .args(["-t", "tmpfs", "-o", "size=1m", "tmpfs"])
-            .arg(&path)
-            .status()
-            .is_ok_and(|s| s.success());
-        if !ok {
-            assert!(
-                std::env::var_os("CI").is_none(),
-                "CI must be able to mount a small tmpfs for the disk-full tests"
-            );
-            eprintln!("skipped: cannot mount a tmpfs here (not root)");
-            return None;
-        }
-        Some(SmallDisk { path, _dir: dir })
-    }
-}
-
-impl Drop for SmallDisk {
-    fn drop(&mut self) {
-        let _ = Command::new("umount").arg(&self.path).status();
-    }
-}
-
-/// Checks that a run failed with a message that names the full disk, by an
-/// exit code rather than a signal.
-fn assert_disk_full_error(out: &Output, what: &str) {
-    let stderr = String::from_utf8_lossy(&out.stderr);
-    assert!(
-        out.status.code() == Some(1),
-        "{what}: expected exit code 1, got {:?} (a signal?): {stderr}",
-        out.status
-    );
-    assert!(
-        stderr.contains("No space left on device"),
-        "{what}: the message does not name the full disk: {stderr}"
-    );
-}
+use ltm_testkit::{assert_disk_full_error, SmallDisk};
 
 fn files_in(dir: &Path) -> Vec<String> {
     let mut v: Vec<String> = std::fs::read_dir(dir)
@@ -93,7 +43,7 @@ fn full_disk_during_import_is_an_error_and_leaves_nothing() {
     bytes.extend_from_slice(dict.as_bytes());
     bytes.extend((0..p * m).flat_map(|i| ((i % 7) as f32 * 0.1).to_le_bytes()));
     std::fs::write(&npy, bytes).unwrap();
-    let out = disk.path.join("t.raw");
+    let out = disk.path().join("t.raw");
     let run = ltm(&[
         "import",
         npy.to_str().unwrap(),
@@ -106,9 +56,9 @@ fn full_disk_during_import_is_an_error_and_leaves_nothing() {
     ]);
     assert_disk_full_error(&run, "import");
     assert!(
-        files_in(&disk.path).is_empty(),
+        files_in(disk.path()).is_empty(),
         "{:?}",
-        files_in(&disk.path)
+        files_in(disk.path())
     );
 }
 
@@ -118,7 +68,7 @@ fn full_disk_during_bake_is_an_error() {
         return;
     };
     // 48·48 pixels × 6·8² lights × 4 bytes = 3.5 MiB of rows.
-    let out = disk.path.join("s.raw");
+    let out = disk.path().join("s.raw");
     let scene = assets().join("scenes/default.toml");
     let run = ltm(&[
         "bake",

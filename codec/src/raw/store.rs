@@ -22,18 +22,39 @@ use std::time::SystemTime;
 /// A file's length and modification time, taken at open and compared after
 /// a run to detect a change of the input while it was read.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub(super) struct Stamp {
+pub(crate) struct Stamp {
     pub(super) len: u64,
     pub(super) modified: Option<SystemTime>,
 }
 
 impl Stamp {
-    pub(super) fn of(file: &File, path: &Path) -> Result<Stamp> {
+    /// The stamp of open `file` (named `path` in messages).
+    pub(crate) fn of(file: &File, path: &Path) -> Result<Stamp> {
         let m = file.metadata().map_err(|e| Error::io(path, e))?;
         Ok(Stamp {
             len: m.len(),
             modified: m.modified().ok(),
         })
+    }
+
+    /// Fails, saying what changed, when `file` no longer has this stamp:
+    /// a run that read it then writes no output from a changed input.
+    pub(crate) fn check(&self, file: &File, path: &Path) -> Result<()> {
+        let now = Stamp::of(file, path)?;
+        if now == *self {
+            return Ok(());
+        }
+        let detail = if now.len != self.len {
+            format!("its length went from {} to {} bytes", self.len, now.len)
+        } else {
+            "its modification time changed".into()
+        };
+        Err(Error::io(
+            path,
+            io::Error::other(format!(
+                "the file changed while it was read ({detail}); no output is written from a changed input"
+            )),
+        ))
     }
 }
 
@@ -240,24 +261,7 @@ impl RawStore {
     /// had when it was opened: a run that read it fails rather than write
     /// an output from an input that changed meanwhile.
     pub fn check_unchanged(&self) -> Result<()> {
-        let now = Stamp::of(&self.file, &self.path)?;
-        if now == self.stamp {
-            return Ok(());
-        }
-        let detail = if now.len != self.stamp.len {
-            format!(
-                "its length went from {} to {} bytes",
-                self.stamp.len, now.len
-            )
-        } else {
-            "its modification time changed".into()
-        };
-        Err(Error::io(
-            &self.path,
-            io::Error::other(format!(
-                "the file changed while it was read ({detail}); no output is written from a changed input"
-            )),
-        ))
+        self.stamp.check(&self.file, &self.path)
     }
 
     /// Lets the kernel drop the mapped pages of rows `range` from this

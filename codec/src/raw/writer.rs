@@ -3,6 +3,7 @@
 use super::header::{Layout, RawHeader, CRC_CHUNK, HEADER_LEN_V3};
 use crate::error::{Error, Result};
 use crate::fileio::PositionedIo as _;
+use crate::output::{partial_path, OutputLock};
 use crate::surface::Surface;
 use std::fs::{File, OpenOptions};
 use std::path::{Path, PathBuf};
@@ -43,6 +44,9 @@ pub enum RestartReason {
     DifferentLayout,
     /// Its length is not the one its header implies (truncated).
     WrongLength,
+    /// Same inputs, but its per-row surface data differs from this run's
+    /// (a parameterization that changed): its rows belong to other texels.
+    DifferentSurface,
 }
 
 impl std::fmt::Display for RestartReason {
@@ -59,6 +63,9 @@ impl std::fmt::Display for RestartReason {
                 "it has another layout (dimensions, albedo image or block size)"
             }
             RestartReason::WrongLength => "its length does not match its header (truncated)",
+            RestartReason::DifferentSurface => {
+                "its surface data (the point each row stands for) differs from this run's"
+            }
         })
     }
 }
@@ -77,25 +84,25 @@ impl std::fmt::Display for ResumeState {
     }
 }
 
-/// `Ok` when the partial file at `partial` can be resumed by a writer of
-/// `header`, else the state to report: no file, or why it is started over.
-pub(super) fn probe_partial(
-    partial: &Path,
+/// `Ok` when the open partial file can be resumed by a writer of `header`
+/// with `surface`, else the state to report: no file, or why it is started
+/// over.
+fn probe_partial(
+    file: &File,
     header: &RawHeader,
     layout: &Layout,
+    surface: Option<&[u8]>,
 ) -> std::result::Result<(), ResumeState> {
     let restart = |why| Err(ResumeState::Restarted(why));
-    let file = match File::open(partial) {
-        Ok(f) => f,
-        Err(e) if e.kind() == std::io::ErrorKind::NotFound => return Err(ResumeState::New),
-        Err(_) => return restart(RestartReason::Unreadable),
-    };
     let len = file.metadata().map(|m| m.len()).unwrap_or(0);
+    if len == 0 {
+        return Err(ResumeState::New);
+    }
     let mut bytes = vec![0u8; len.min(HEADER_LEN_V3) as usize];
     if file.read_exact_at(&mut bytes, 0).is_err() {
         return restart(RestartReason::Unreadable);
     }
-    let Ok((old, old_layout)) = RawHeader::decode(&bytes, len, partial) else {
+    let Ok((old, old_layout)) = RawHeader::decode(&bytes, len, Path::new("")) else {
         return restart(RestartReason::Unreadable);
     };
     match (old.input_id, header.input_id) {
@@ -104,15 +111,51 @@ pub(super) fn probe_partial(
         (Some(_), Some(_)) if len != layout.file_len || len != old_layout.file_len => {
             restart(RestartReason::WrongLength)
         }
+        (Some(_), Some(_)) if !same_surface(file, layout, surface) => {
+            restart(RestartReason::DifferentSurface)
+        }
         (Some(_), Some(_)) => Ok(()),
         _ => restart(RestartReason::NoIdentity),
     }
 }
 
-pub(super) fn partial_path(path: &Path) -> PathBuf {
-    let mut s = path.as_os_str().to_owned();
-    s.push(".partial");
-    PathBuf::from(s)
+/// Whether the file's stored surface records equal `surface` (true when
+/// there are none).
+fn same_surface(file: &File, layout: &Layout, surface: Option<&[u8]>) -> bool {
+    let Some(want) = surface else {
+        return true;
+    };
+    let mut have = vec![0u8; want.len()];
+    file.read_exact_at(&mut have, layout.surface_offset).is_ok() && have == want
+}
+
+/// Opens `PATH.partial` for reading and writing, creating it: never
+/// through a symbolic link, and only when it is (or will be) a regular
+/// file.
+fn open_partial(partial: &Path) -> Result<File> {
+    let refuse = |reason: &str| Error::Output {
+        role: "partial file".into(),
+        path: partial.into(),
+        reason: reason.into(),
+    };
+    if let Ok(m) = std::fs::symlink_metadata(partial) {
+        if m.file_type().is_symlink() {
+            return Err(refuse(
+                "is a symbolic link: refusing to write through it; remove it",
+            ));
+        }
+        if !m.is_file() {
+            return Err(refuse("is not a regular file; remove it"));
+        }
+    }
+    let mut options = OpenOptions::new();
+    options.read(true).write(true).create(true).truncate(false);
+    #[cfg(unix)]
+    std::os::unix::fs::OpenOptionsExt::custom_flags(
+        &mut options,
+        rustix::fs::OFlags::NOFOLLOW.bits() as i32,
+    );
+    options.open(partial).map_err(|e| Error::io(partial, e))
 }
 
 /// Writes a raw store block by block; see the module docs for resuming.
@@ -124,6 +167,11 @@ pub struct RawWriter {
     partial: PathBuf,
     done: Vec<bool>,
     resume: ResumeState,
+    /// Remove the partial file when dropped unfinished (outputs that cannot
+    /// be resumed, see [`RawWriter::discard_on_drop`]).
+    discard: bool,
+    finished: bool,
+    _lock: OutputLock,
 }
 
 impl RawWriter {
@@ -158,16 +206,14 @@ impl RawWriter {
                 "surface data given for a raw store header without it".into(),
             ));
         }
+        crate::output::check_kind("output", path)?;
+        let lock = OutputLock::acquire(path)?;
         let partial = partial_path(path);
         let io = |e| Error::io(&partial, e);
-        let probe = probe_partial(&partial, &header, &layout);
-        let file = OpenOptions::new()
-            .read(true)
-            .write(true)
-            .create(true)
-            .truncate(probe.is_err())
-            .open(&partial)
-            .map_err(io)?;
+        crate::output::check_space(path, layout.file_len)?;
+        let file = open_partial(&partial)?;
+        let records = surface.map(surface_bytes);
+        let probe = probe_partial(&file, &header, &layout, records.as_deref());
         let total = layout.block_count as usize;
         let mut writer = RawWriter {
             file,
@@ -177,6 +223,9 @@ impl RawWriter {
             layout,
             done: vec![false; total],
             resume: ResumeState::New,
+            discard: false,
+            finished: false,
+            _lock: lock,
         };
         match probe {
             Ok(()) => {
@@ -185,6 +234,7 @@ impl RawWriter {
                 writer.resume = ResumeState::Resumed { kept, total };
             }
             Err(state) => {
+                writer.file.set_len(0).map_err(io)?;
                 writer.file.set_len(layout.file_len).map_err(io)?;
                 writer
                     .file
@@ -193,16 +243,20 @@ impl RawWriter {
                 writer.resume = state;
             }
         }
-        if let Some(s) = surface {
-            let mut bytes = s.encode_records();
-            let crc = crc32fast::hash(&bytes);
-            bytes.extend_from_slice(&crc.to_le_bytes());
+        if let Some(bytes) = records {
             writer
                 .file
                 .write_all_at(&bytes, layout.surface_offset)
                 .map_err(io)?;
         }
         Ok(writer)
+    }
+
+    /// Removes the partial file if the writer is dropped before
+    /// [`RawWriter::finish`]: for outputs that can never be resumed
+    /// (`ltm import`), so that a failed run leaves nothing behind.
+    pub fn discard_on_drop(&mut self) {
+        self.discard = true;
     }
 
     /// What was done with an existing `PATH.partial`: started anew, resumed
@@ -386,7 +440,7 @@ impl RawWriter {
 
     /// Checks that every block is complete, syncs, and renames the file into
     /// place.
-    pub fn finish(self) -> Result<PathBuf> {
+    pub fn finish(mut self) -> Result<PathBuf> {
         if let Some(b) = self.done.iter().position(|d| !d) {
             return Err(Error::Invalid(format!(
                 "raw store incomplete: block {b} of {} not written",
@@ -397,8 +451,25 @@ impl RawWriter {
             .sync_all()
             .map_err(|e| Error::io(&self.partial, e))?;
         std::fs::rename(&self.partial, &self.path).map_err(|e| Error::io(&self.path, e))?;
-        Ok(self.path)
+        self.finished = true;
+        Ok(self.path.clone())
     }
+}
+
+impl Drop for RawWriter {
+    fn drop(&mut self) {
+        if self.discard && !self.finished {
+            let _ = std::fs::remove_file(&self.partial);
+        }
+    }
+}
+
+/// The surface records as stored: the records, then their CRC-32.
+fn surface_bytes(s: &Surface) -> Vec<u8> {
+    let mut bytes = s.encode_records();
+    let crc = crc32fast::hash(&bytes);
+    bytes.extend_from_slice(&crc.to_le_bytes());
+    bytes
 }
 
 /// The error for a non-finite albedo value of pixel `p`, channel `c`.

@@ -3,6 +3,7 @@
 
 use anyhow::{Context, Result};
 use clap::Args;
+use ltm_codec::AtomicFile;
 use ltm_relight::{Image, Relight, TermBasis, Weighting};
 use std::path::{Path, PathBuf};
 use std::str::FromStr;
@@ -41,24 +42,40 @@ impl ImageOutput {
         outputs
     }
 
-    /// Writes `image` as the EXR and, when asked for, the PNG.
+    /// Writes `image` as the EXR and, when asked for, the PNG: both
+    /// appear, or neither.
     pub fn write(&self, image: &Image) -> Result<()> {
-        self.write_to(image, &self.output, self.png.as_deref())
+        let staged = self.stage(image, &self.output, self.png.as_deref())?;
+        commit_all(staged)
     }
 
     /// Writes `image` as the EXR `exr` and, when given, the PNG `png` at
-    /// this exposure.
-    pub fn write_to(&self, image: &Image, exr: &Path, png: Option<&Path>) -> Result<()> {
-        image
-            .write_exr(exr)
-            .with_context(|| format!("writing {}", exr.display()))?;
+    /// this exposure, uncommitted ([`Image::stage_exr`]): they appear when
+    /// passed to [`commit_all`].
+    pub fn stage(&self, image: &Image, exr: &Path, png: Option<&Path>) -> Result<Vec<AtomicFile>> {
+        let mut files = vec![image
+            .stage_exr(exr)
+            .with_context(|| format!("writing {}", exr.display()))?];
         if let Some(png) = png {
-            image
-                .write_png(png, self.exposure)
-                .with_context(|| format!("writing {}", png.display()))?;
+            files.push(
+                image
+                    .stage_png(png, self.exposure)
+                    .with_context(|| format!("writing {}", png.display()))?,
+            );
         }
-        Ok(())
+        Ok(files)
     }
+}
+
+/// Commits files staged together, after all of them were written: a run
+/// that fails while writing leaves none of them.
+pub fn commit_all(files: Vec<AtomicFile>) -> Result<()> {
+    for f in files {
+        let path = f.path().to_path_buf();
+        f.commit()
+            .with_context(|| format!("writing {}", path.display()))?;
+    }
+    Ok(())
 }
 
 /// How many terms a frame uses: a positive count, or `all`.

@@ -12,9 +12,9 @@ pub mod progress;
 pub mod ranges;
 pub mod size;
 
-pub use args::{ImageOutput, TermsArgs};
+pub use args::{commit_all, ImageOutput, TermsArgs};
 pub use assets::{assets_dir, auto_exposure, env_maps, load_maps, map_files};
 pub use bake_cache::bake_cached;
 pub use ctx::Ctx;
 pub use output::write_atomic;
-pub use paths::{check_files, partial};
+pub use paths::{claim_files, claim_folder};

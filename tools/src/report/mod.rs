@@ -13,7 +13,7 @@ pub mod plot;
 pub mod texture;
 
 use crate::common::size::default_mem_budget;
-use crate::common::{assets_dir, bake_cached, env_maps, load_maps, progress, Ctx};
+use crate::common::{assets_dir, bake_cached, claim_folder, env_maps, load_maps, progress, Ctx};
 use anyhow::{bail, Context, Result};
 use clap::Args;
 use ltm_bake::{Overrides, SceneDesc};
@@ -451,6 +451,11 @@ pub fn run(a: ReportArgs, ctx: &Ctx) -> Result<()> {
         a.envs.clone()
     };
     let maps = load_maps(&env_paths)?;
+    let mut inputs: Vec<(&str, &Path)> = env_paths.iter().map(|p| ("--env", p.as_path())).collect();
+    inputs.extend(a.raw.iter().map(|p| ("--raw", p.as_path())));
+    inputs.extend(a.scene.iter().map(|p| ("--scene", p.as_path())));
+    inputs.extend(a.peers.iter().map(|p| ("--peers", p.as_path())));
+    let _claim = claim_folder(&inputs, "-o", &a.output)?;
     let files_dir = a.output.join("files");
     std::fs::create_dir_all(&files_dir)
         .with_context(|| format!("creating {}", files_dir.display()))?;

@@ -40,7 +40,7 @@ mod http;
 pub mod params;
 mod state;
 
-use crate::common::{check_files, map_files, Ctx};
+use crate::common::{claim_files, map_files, Ctx};
 use anyhow::{bail, Context, Result};
 use clap::Args;
 use std::net::{IpAddr, Ipv4Addr, SocketAddr};
@@ -107,7 +107,7 @@ pub fn run(a: ViewArgs, ctx: &Ctx) -> Result<()> {
     if let Some(r) = &a.reference {
         inputs.push(("--reference", r.as_path()));
     }
-    check_files(&inputs, &[])?;
+    claim_files(&inputs, &[])?;
     let maps = map_list(&a.env);
     let viewer = Arc::new(state::Viewer::open(
         &a.files,

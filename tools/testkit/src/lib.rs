@@ -1,13 +1,15 @@
 //! Test helpers shared by the tests of the ltm crates, used only as a
-//! dev-dependency: a raw-store writer, a runner for the `ltm` binary and a
-//! deterministic random number generator.
+//! dev-dependency: a raw-store writer, a runner for the `ltm` binary, a
+//! small disk that fills up and a deterministic random number generator.
 
 #![deny(unsafe_code)]
 
 mod cli;
+mod disk;
 mod raw;
 mod rng;
 
 pub use cli::{run, run_ok, run_output, Run};
+pub use disk::{assert_disk_full_error, SmallDisk};
 pub use raw::{block_bytes, write_raw};
 pub use rng::Rng;

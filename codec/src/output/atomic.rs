@@ -2,8 +2,10 @@
 //! the final path (so that concurrent runs never share one, and the rename
 //! stays on one filesystem), synced, then renamed into place. A file
 //! dropped before [`AtomicFile::commit`] is removed, on success paths and
-//! error paths alike.
+//! error paths alike. The output's lock ([`OutputLock`]) is held from
+//! creation to commit or drop.
 
+use super::lock::OutputLock;
 use crate::error::{Error, Result};
 use std::fs::File;
 use std::path::{Path, PathBuf};
@@ -12,18 +14,20 @@ use std::path::{Path, PathBuf};
 pub struct AtomicFile {
     tmp: tempfile::NamedTempFile,
     path: PathBuf,
+    _lock: OutputLock,
 }
 
 impl AtomicFile {
-    /// Creates a temporary file for `path` in `path`'s folder.
+    /// Creates a temporary file for `path` in `path`'s folder, after
+    /// checking that an existing `path` is a regular file and taking its
+    /// lock.
     pub fn create(path: &Path) -> Result<AtomicFile> {
         let name = path
             .file_name()
             .ok_or_else(|| Error::Invalid(format!("{}: not a file path", path.display())))?;
-        let dir = path
-            .parent()
-            .filter(|d| !d.as_os_str().is_empty())
-            .unwrap_or(Path::new("."));
+        super::check_kind("output", path)?;
+        let lock = OutputLock::acquire(path)?;
+        let dir = super::parent_of(path);
         let prefix = format!(".{}.", name.to_string_lossy());
         let mut builder = tempfile::Builder::new();
         builder.prefix(&prefix).suffix(".tmp");
@@ -34,6 +38,7 @@ impl AtomicFile {
         Ok(AtomicFile {
             tmp,
             path: path.into(),
+            _lock: lock,
         })
     }
 
@@ -91,6 +96,7 @@ mod tests {
     fn committed_files_appear_whole_and_dropped_ones_vanish() {
         let dir = tempfile::tempdir().unwrap();
         let out = dir.path().join("a.bin");
+        // Two writers of one process share the output's lock.
         let mut a = AtomicFile::create(&out).unwrap();
         let mut b = AtomicFile::create(&out).unwrap();
         assert_ne!(
@@ -106,6 +112,6 @@ mod tests {
         drop(a);
         assert_eq!(std::fs::read(&out).unwrap(), b"second");
         let names: Vec<_> = std::fs::read_dir(dir.path()).unwrap().collect();
-        assert_eq!(names.len(), 1, "a temporary file was left behind");
+        assert_eq!(names.len(), 1, "a temporary or lock file was left behind");
     }
 }

@@ -635,6 +635,19 @@ impl SceneDesc {
         }
     }
 
+    /// The transport's size in bytes (rows × 6·n² lights × channels × 4),
+    /// known before the scene is built: for checking the free space before
+    /// any work.
+    pub fn transport_bytes(&self) -> u64 {
+        let rows = match &self.texture {
+            Some(t) => t.size as u64 * t.size as u64,
+            None => self.camera.width as u64 * self.camera.height as u64,
+        };
+        let n = self.lighting.face_res as u64;
+        let channels = if self.needs_color_transport() { 3 } else { 1 };
+        rows.saturating_mul(6 * n * n).saturating_mul(channels * 4)
+    }
+
     /// True when some mesh or quad uses a glossy material, so that the
     /// transport needs 3 channels.
     pub fn needs_color_transport(&self) -> bool {

@@ -130,6 +130,7 @@ pub fn run(args: BakeArgs, _ctx: &Ctx) -> anyhow::Result<()> {
     let mut inputs = vec![("SCENE", args.scene.as_path())];
     inputs.extend(meshes.iter().map(|m| ("mesh", m.as_path())));
     let _claim = claim_files(&inputs, &[("-o", &args.output)])?;
+    ltm_codec::output::check_space(&args.output, desc.transport_bytes())?;
     let scene = Scene::build(&desc)?;
     describe(&scene, &desc);
     let dims = scene.dims();

@@ -79,9 +79,11 @@ pub struct CompressArgs {
     /// pca: store exactly K eigen-transports (1..=min(pixels, lights·channels)).
     #[arg(long, value_name = "K", conflicts_with_all = ["max_error", "keep"])]
     pub rank: Option<usize>,
-    /// pca: the largest rank --max-error may choose (the fit's sketch size).
-    #[arg(long, value_name = "K", default_value_t = ltm_codec::compress::DEFAULT_MAX_RANK)]
-    pub max_rank: usize,
+    /// pca: the largest rank --max-error may choose (the fit's sketch size)
+    /// [default: 256, or the matrix's full rank min(pixels, lights·channels)
+    /// when smaller]
+    #[arg(long, value_name = "K")]
+    pub max_rank: Option<usize>,
     /// Row filter over each cube face: haar, d4, d6 or d8.
     #[arg(long, default_value = "haar")]
     pub row_filter: Filter,
@@ -239,7 +241,10 @@ fn compress_pca_cmd(a: &CompressArgs, raw: &RawStore) -> Result<()> {
     let opts = PcaOptions {
         rank: a.rank,
         max_error: a.max_error.unwrap_or(DEFAULT_MAX_ERROR),
-        max_rank: a.max_rank,
+        max_rank: a.max_rank.unwrap_or_else(|| {
+            let d = raw.dims();
+            ltm_codec::compress::DEFAULT_MAX_RANK.min(d.pixels().min(d.row_len()))
+        }),
         bits: a.bits.unwrap_or(ltm_codec::compress::DEFAULT_PCA_BITS),
         raise_bits: a.bits.is_none(),
         seed: a.seed,

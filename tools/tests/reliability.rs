@@ -716,3 +716,93 @@ fn a_resumed_texture_bake_keeps_rows_only_for_the_same_surface() {
     );
     assert_eq!(std::fs::read(&out).unwrap(), whole);
 }
+
+#[test]
+fn issue_29_messages() {
+    let c = corpus();
+    let d = scratch();
+    // bake checks its output before any work, and leaves no DIR.partial.
+    let folder = d.path().join("folder");
+    std::fs::create_dir(&folder).unwrap();
+    fails(
+        &strs(&["bake", &s(&c.scene), "-o", &s(&folder)]),
+        "is a folder",
+    );
+    assert!(!d.path().join("folder.partial").exists());
+    // A store larger than the disk is refused before the bake starts.
+    let big = strs(&["bake", &s(&c.scene), "-o", &s(&d.path().join("big.raw"))]);
+    let big = [
+        big,
+        strs(&["--width", "8192", "--height", "8192", "--face-res", "128"]),
+    ]
+    .concat();
+    fails(&big, "bytes free");
+    // report checks its SH orders before any work.
+    let report = d.path().join("report");
+    let args = strs(&[
+        "report",
+        "--quick",
+        "--raw",
+        &s(&c.raw),
+        "--sh-orders",
+        "100000",
+        "-o",
+        &s(&report),
+    ]);
+    fails(&args, "--sh-orders 100000 is out of range (valid: 1..=");
+    assert!(!report.exists());
+    // --max-memory takes every suffix its message names.
+    run_ok(&strs(&["--max-memory", "2E", "inspect", &s(&c.ltm)]));
+    // A truncated .npy says so.
+    let npy = std::fs::read(&c.npy).unwrap();
+    let short = d.path().join("short.npy");
+    std::fs::write(&short, &npy[..60]).unwrap();
+    let import = strs(&[
+        "import",
+        &s(&short),
+        "--width",
+        "24",
+        "--height",
+        "16",
+        "-o",
+        &s(&d.path().join("i.raw")),
+    ]);
+    fails(&import, "truncated");
+    // pca compress of a matrix of full rank below the default --max-rank.
+    run_ok(&strs(&[
+        "compress",
+        &s(&c.raw),
+        "--mode",
+        "pca",
+        "-o",
+        &s(&d.path().join("p.ltm")),
+    ]));
+}
+
+#[test]
+fn an_orbit_that_fails_at_a_late_view_leaves_no_view() {
+    let Some(disk) = SmallDisk::mount() else {
+        return;
+    };
+    // About 96 KiB free: the first views fit, not all sixteen.
+    let keep = disk.path().join("keep");
+    disk.fill();
+    std::fs::remove_file(disk.path().join("filler")).unwrap();
+    std::fs::write(&keep, vec![0u8; 1024 * 1024 - 96 * 1024]).unwrap();
+    let c = corpus();
+    let out = disk.path().join("view.exr");
+    let mut args = strs(&[
+        "render",
+        &s(&c.tex_ltm),
+        "--env",
+        &s(&c.env),
+        "--camera",
+        "0,1,3",
+        "--target",
+        "0,0.5,0",
+    ]);
+    args.extend(strs(&["--size", "96x96", "--views", "16", "-o", &s(&out)]));
+    let r = run(&args);
+    assert_disk_full_error(&r, "render --views 16");
+    assert_eq!(disk.files(), ["keep"], "views were left behind");
+}

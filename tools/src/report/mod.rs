@@ -318,6 +318,12 @@ fn settings(a: &ReportArgs) -> Result<Settings> {
     if s.pca_ranks.contains(&0) || s.sh_orders.contains(&0) {
         bail!("PCA ranks and SH orders must be at least 1");
     }
+    if let Some(o) = s.sh_orders.iter().find(|&&o| o > ltm_codec::MAX_SH_ORDER) {
+        bail!(
+            "--sh-orders {o} is out of range (valid: 1..={})",
+            ltm_codec::MAX_SH_ORDER
+        );
+    }
     Ok(s)
 }
 

@@ -265,7 +265,10 @@ fn two_runs_writing_one_output_do_not_collide() {
         for child in [a, b] {
             let o = child.wait_with_output().unwrap();
             let e = String::from_utf8_lossy(&o.stderr);
-            assert!(o.status.success() || e.contains("another ltm run is writing"), "{e}");
+            assert!(
+                o.status.success() || e.contains("another ltm run is writing"),
+                "{e}"
+            );
             ok += usize::from(o.status.success());
         }
         assert!(ok >= 1);

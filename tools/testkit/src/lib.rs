@@ -4,11 +4,13 @@
 
 #![deny(unsafe_code)]
 
+mod bombs;
 mod cli;
 mod disk;
 mod raw;
 mod rng;
 
+pub use bombs::ltm_claiming_8192;
 pub use cli::{run, run_ok, run_output, Run};
 pub use disk::{assert_disk_full_error, SmallDisk};
 pub use raw::{block_bytes, write_raw};

@@ -221,33 +221,6 @@ fn fails(args: &[String], expect: &str) {
     );
 }
 
-const SCENE: &str = r#"
-[camera]
-eye = [0.0, 1.0, 3.0]
-target = [0.0, 0.5, 0.0]
-fov = 30.0
-width = 24
-height = 16
-
-[lighting]
-face_res = 4
-texel_samples = 1
-
-[materials.clay]
-type = "lambert"
-albedo = [0.7, 0.6, 0.5]
-
-[[meshes]]
-path = "box.obj"
-material = "clay"
-translation = [0.0, 0.6, 0.0]
-
-[[quads]]
-center = [0.0, 0.0, 0.0]
-size = [4.0, 4.0]
-material = "clay"
-"#;
-
 /// A closed genus-0 mesh of 2·6·k² triangles: a cube of k×k quads per
 /// face, its vertices pushed toward a sphere (welded at the edges).
 fn blob_obj(k: usize) -> String {
@@ -299,17 +272,20 @@ fn blob_obj(k: usize) -> String {
     s
 }
 
-const TEXTURE: &str = "\n[texture]\nmesh = 0\nsize = 16\nparameterization = \"sphere\"\nspp = 1\n";
-
 fn corpus() -> &'static Corpus {
     static CORPUS: OnceLock<Corpus> = OnceLock::new();
     CORPUS.get_or_init(|| {
         let dir = tempfile::tempdir().unwrap().keep();
         let p = |n: &str| dir.join(n);
         std::fs::write(p("box.obj"), blob_obj(6)).unwrap();
-        std::fs::write(p("scene.toml"), SCENE).unwrap();
-        std::fs::write(p("tex.toml"), SCENE.to_string() + TEXTURE).unwrap();
-        let other = SCENE.replace("[0.7, 0.6, 0.5]", "[0.2, 0.6, 0.9]");
+        let scene = ltm_testkit::scene_toml("box.obj", 24, 16, 4);
+        std::fs::write(p("scene.toml"), &scene).unwrap();
+        std::fs::write(
+            p("tex.toml"),
+            scene.clone() + ltm_testkit::TEXTURE_SPHERE_16,
+        )
+        .unwrap();
+        let other = scene.replace("[0.7, 0.6, 0.5]", "[0.2, 0.6, 0.9]");
         std::fs::write(p("other.toml"), other).unwrap();
         let env = Path::new(env!("CARGO_MANIFEST_DIR")).join("../assets/envmaps/studio.exr");
         for (scene, raw) in [

@@ -73,38 +73,11 @@ fn sphere_obj(level: usize, extra: &str) -> String {
     s + extra
 }
 
-const SCENE: &str = r#"
-[camera]
-eye = [0.0, 1.0, 3.0]
-target = [0.0, 0.5, 0.0]
-fov = 30.0
-width = 8
-height = 8
-
-[lighting]
-face_res = 2
-texel_samples = 1
-
-[materials.clay]
-type = "lambert"
-albedo = [0.7, 0.6, 0.5]
-
-[[meshes]]
-path = "MESH"
-material = "clay"
-translation = [0.0, 0.6, 0.0]
-
-[[quads]]
-center = [0.0, 0.0, 0.0]
-size = [4.0, 4.0]
-material = "clay"
-"#;
-
-const TEXTURE: &str = "\n[texture]\nmesh = 0\nsize = 16\nparameterization = \"sphere\"\nspp = 1\n";
+const TEXTURE: &str = ltm_testkit::TEXTURE_SPHERE_16;
 
 fn write_scene(dir: &Path, name: &str, mesh: &str, texture: &str) -> String {
     let path = dir.join(name);
-    std::fs::write(&path, SCENE.replace("MESH", mesh) + texture).unwrap();
+    std::fs::write(&path, ltm_testkit::scene_toml(mesh, 8, 8, 2) + texture).unwrap();
     path.to_str().unwrap().to_string()
 }
 

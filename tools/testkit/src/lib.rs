@@ -9,9 +9,11 @@ mod cli;
 mod disk;
 mod raw;
 mod rng;
+mod scene;
 
 pub use bombs::ltm_claiming_8192;
 pub use cli::{run, run_ok, run_output, Run};
 pub use disk::{assert_disk_full_error, SmallDisk};
 pub use raw::{block_bytes, write_raw};
 pub use rng::Rng;
+pub use scene::{scene_toml, TEXTURE_SPHERE_16};

@@ -218,7 +218,7 @@ fn a_stored_norm_that_disagrees_with_its_column_is_refused_at_open() {
         );
         let bad = dir.path().join("bad.ltm");
         std::fs::write(&bad, &bytes).unwrap();
-        let err = ltm_relight::open(bad.as_path().into(), &limits)
+        let err = ltm_relight::open(bad.as_path(), &limits)
             .err()
             .unwrap()
             .to_string();
@@ -260,12 +260,12 @@ fn lighting_near_the_f32_limit_gives_a_finite_image_or_an_error() {
     let two_127 = 2f32.powi(127);
     for light in [vec![[1.7632415f32; 3]; r.lights()], lighting(r.lights(), 2)] {
         let small = frame(&r, &light, &request, &mut f).0;
-        let big: Vec<[f32; 3]> = light.iter().map(|l| l.map(|v| v * two_127 / 64.0)).collect();
+        let big: Vec<[f32; 3]> = light.iter().map(|l| l.map(|v| v * (two_127 / 64.0))).collect();
         let (image, _, _) = frame(&r, &big, &request, &mut f);
         assert!(image.iter().flatten().all(|v| v.is_finite()));
         let want: Vec<[f32; 3]> = small
             .iter()
-            .map(|p| p.map(|v| v * two_127 / 64.0))
+            .map(|p| p.map(|v| v * (two_127 / 64.0)))
             .collect();
         assert_eq!(image, want);
     }

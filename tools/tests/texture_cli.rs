@@ -191,7 +191,16 @@ fn texture_bakes_render_and_bad_input_is_refused() {
     }
     // A pca texture file renders too.
     let pca = p("tex-pca.ltm");
-    let (ok, stderr) = ltm(&["compress", &p("tex.raw"), "--mode", "pca", "-o", &pca]);
+    let (ok, stderr) = ltm(&[
+        "compress",
+        &p("tex.raw"),
+        "--mode",
+        "pca",
+        "--rank",
+        "8",
+        "-o",
+        &pca,
+    ]);
     assert!(ok, "{stderr}");
     let (ok, stderr) = ltm(&args(&render(&pca, "0,1,3")));
     assert!(ok, "{stderr}");

@@ -5,6 +5,7 @@ use crate::container::LtmFile;
 use crate::decode::ColumnDecoder;
 use crate::dims::Dims;
 use crate::error::{Error, Result};
+use crate::fileio::Stamp;
 use crate::limits::{Charge, Limits};
 use crate::output::AtomicFile;
 use crate::progress::{Progress, Stage};
@@ -270,7 +271,10 @@ fn import_npy_inner(
     progress: Progress<'_>,
 ) -> Result<Dims> {
     let file = File::open(npy).map_err(|e| Error::io(npy, e))?;
-    let file_len = file.metadata().map_err(|e| Error::io(npy, e))?.len();
+    // Checked again before the output is finished: an array rewritten
+    // during the import is an error, not a mix of two arrays.
+    let stamp = Stamp::of(&file, npy)?;
+    let file_len = stamp.len;
     let mut r = BufReader::with_capacity(1 << 20, file);
     let header = read_npy_header(&mut r)?;
     let (rows, cols, channels) = match header.shape[..] {
@@ -321,7 +325,13 @@ fn import_npy_inner(
     for b in 0..blocks {
         let range = raw.block_range(b);
         bytes.resize(range.len() * row_len * item as usize, 0);
-        r.read_exact(&mut bytes).map_err(|e| Error::io(npy, e))?;
+        r.read_exact(&mut bytes).map_err(|e| {
+            if e.kind() != std::io::ErrorKind::UnexpectedEof {
+                return Error::io(npy, e);
+            }
+            let why = format!("the file ends before the {need} bytes its header implies: it was truncated while being read");
+            Error::io(npy, std::io::Error::new(e.kind(), why))
+        })?;
         let values: Vec<f32> = if item == 4 {
             bytes
                 .chunks_exact(4)
@@ -347,6 +357,7 @@ fn import_npy_inner(
         writer.write_block(b, &values, None)?;
         progress.report(Stage::Import, (b + 1) as u64, blocks as u64);
     }
+    stamp.check_unchanged(r.get_ref(), npy)?;
     writer.finish()?;
     Ok(dims)
 }

@@ -1192,5 +1192,8 @@ fn a_file_truncated_after_open_decodes_as_opened() {
     let (whole, _) = run(dir.path(), &raw, &CompressOptions::default(), "whole.ltm");
     let small = Limits::with_max_alloc(len / 2);
     let e = LtmFile::open_with_limits(&whole, &small).err().unwrap();
-    assert!(matches!(e, Error::Limit { needed, .. } if needed == len), "{e}");
+    assert!(
+        matches!(e, Error::Limit { needed, .. } if needed == len),
+        "{e}"
+    );
 }

@@ -284,7 +284,8 @@ fn exr_data_window(path: &Path) -> Option<[i32; 4]> {
         let size = u32::from_le_bytes(rest.get(..4)?.try_into().ok()?) as usize;
         let value = rest.get(4..4 + size)?;
         if name == b"dataWindow" && kind == b"box2i" && size == 16 {
-            let v = |k: usize| i32::from_le_bytes(value[4 * k..4 * k + 4].try_into().unwrap_or([0; 4]));
+            let v =
+                |k: usize| i32::from_le_bytes(value[4 * k..4 * k + 4].try_into().unwrap_or([0; 4]));
             return Some([v(0), v(1), v(2), v(3)]);
         }
         rest = &rest[4 + size..];

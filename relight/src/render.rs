@@ -870,7 +870,10 @@ mod tests {
         // A degenerate look-at names the eye and the target.
         let mut cam = camera(DVec3::new(0.0, 3.0, 0.0));
         let e = cam.validate().unwrap_err().to_string();
-        assert!(e.contains("parallel") && e.contains("target") && e.contains("--up"), "{e}");
+        assert!(
+            e.contains("parallel") && e.contains("target") && e.contains("--up"),
+            "{e}"
+        );
         cam.target = cam.eye;
         let e = cam.validate().unwrap_err().to_string();
         assert!(e.contains("coincide"), "{e}");
@@ -900,7 +903,9 @@ mod tests {
             }
         }
         // Near, the same camera sees the sphere.
-        let img = mesh.render(&tex, &camera(DVec3::new(0.0, 0.0, 3.0)), 1).unwrap();
+        let img = mesh
+            .render(&tex, &camera(DVec3::new(0.0, 0.0, 3.0)), 1)
+            .unwrap();
         assert!(img.data.iter().any(|p| p[0] > 0.0));
     }
 }

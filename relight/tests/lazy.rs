@@ -194,10 +194,7 @@ fn a_stored_norm_that_disagrees_with_its_column_is_refused_at_open() {
     let good = std::fs::read(&path).unwrap();
     let limits = Limits::default();
     let file = LtmFile::open(&path).unwrap();
-    let j = (0..file.columns().len())
-        .filter(|&j| file.columns()[j].nnz > 0)
-        .last()
-        .unwrap();
+    let j = file.columns().iter().rposition(|c| c.nnz > 0).unwrap();
     let (at, _) = chunk(&good, b"NORM");
     let o = at + 4 * j;
     let norm = f32::from_le_bytes(good[o..o + 4].try_into().unwrap());
@@ -222,7 +219,10 @@ fn a_stored_norm_that_disagrees_with_its_column_is_refused_at_open() {
             .err()
             .unwrap()
             .to_string();
-        assert!(err.contains("NORM") && err.contains(&format!("column {j}:")), "{err}");
+        assert!(
+            err.contains("NORM") && err.contains(&format!("column {j}:")),
+            "{err}"
+        );
     }
     // The file as written opens.
     Relighter::new(LtmFile::from_bytes(good, &limits).unwrap(), &limits).unwrap();
@@ -260,7 +260,10 @@ fn lighting_near_the_f32_limit_gives_a_finite_image_or_an_error() {
     let two_127 = 2f32.powi(127);
     for light in [vec![[1.7632415f32; 3]; r.lights()], lighting(r.lights(), 2)] {
         let small = frame(&r, &light, &request, &mut f).0;
-        let big: Vec<[f32; 3]> = light.iter().map(|l| l.map(|v| v * (two_127 / 64.0))).collect();
+        let big: Vec<[f32; 3]> = light
+            .iter()
+            .map(|l| l.map(|v| v * (two_127 / 64.0)))
+            .collect();
         let (image, _, _) = frame(&r, &big, &request, &mut f);
         assert!(image.iter().flatten().all(|v| v.is_finite()));
         let want: Vec<[f32; 3]> = small

@@ -6,9 +6,7 @@ use anyhow::{bail, Context, Result};
 use clap::Args;
 use glam::DVec3;
 use ltm_codec::LtmFile;
-use ltm_relight::{
-    EnvMap, Relight, Request, Rotation, TexturedMesh, ViewCamera, MAX_SUPERSAMPLE,
-};
+use ltm_relight::{EnvMap, Relight, Request, Rotation, TexturedMesh, ViewCamera, MAX_SUPERSAMPLE};
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 

@@ -1,7 +1,7 @@
 //! Readers against the binary, under inputs that change or hold extreme
-//! values: an `.ltm` file or a raw store truncated and rewritten while
-//! `export`, `relight --terms all`, `view`, `reference` and `compress` read
-//! it ends the run with exit 1 and a message, or with the output of the
+//! values: an `.ltm` file, a raw store or an `.npy` array truncated and
+//! rewritten while `export`, `relight --terms all`, `view`, `reference`,
+//! `compress` and `import` read it ends the run with exit 1 and a message, or with the output of the
 //! unchanged input, never with a signal (no reader maps a file); a
 //! `--reference` image with a NaN or infinite pixel, or all zero, is
 //! refused; lighting near the `f32` limit relights to a finite image, as
@@ -100,9 +100,17 @@ fn inputs_truncated_while_read_give_an_error_or_the_right_output() {
     let (raw, ltm) = fixture(d);
     let env = envmap();
     let out = |name: &str| d.join(name);
-    let cases: Vec<(Vec<String>, &Path, PathBuf)> = vec![
+    // An array to import: the export of the compressed file.
+    let npy = out("a.npy");
+    run_ok(BIN, &["export", s(&ltm), "-o", s(&npy)]);
+    let mut cases: Vec<(Vec<String>, &Path, PathBuf)> = vec![
         (
-            vec!["export".into(), s(&ltm).into(), "-o".into(), s(&out("e.npy")).into()],
+            vec![
+                "export".into(),
+                s(&ltm).into(),
+                "-o".into(),
+                s(&out("e.npy")).into(),
+            ],
             &ltm,
             out("e.npy"),
         ),
@@ -125,11 +133,25 @@ fn inputs_truncated_while_read_give_an_error_or_the_right_output() {
             out("x.exr"),
         ),
         (
-            vec!["compress".into(), s(&raw).into(), "-o".into(), s(&out("c.ltm")).into()],
+            vec![
+                "compress".into(),
+                s(&raw).into(),
+                "-o".into(),
+                s(&out("c.ltm")).into(),
+            ],
             &raw,
             out("c.ltm"),
         ),
     ];
+    cases.push((
+        ["import", s(&npy), "--width", "48", "--height", "40", "-o"]
+            .map(String::from)
+            .into_iter()
+            .chain([s(&out("i.raw")).to_string()])
+            .collect(),
+        &npy,
+        out("i.raw"),
+    ));
     for (args, victim, output) in &cases {
         let args: Vec<&str> = args.iter().map(String::as_str).collect();
         // The output of the unchanged input.
@@ -228,7 +250,16 @@ fn references_that_are_not_finite_or_all_zero_are_refused() {
         let o = d.join("o.exr");
         let r = run(
             BIN,
-            &["relight", s(&ltm), "--env", s(&env), "-o", s(&o), "--reference", s(&reference)],
+            &[
+                "relight",
+                s(&ltm),
+                "--env",
+                s(&env),
+                "-o",
+                s(&o),
+                "--reference",
+                s(&reference),
+            ],
         );
         assert!(!r.ok, "{name}: {}", r.stderr);
         assert!(
@@ -249,13 +280,24 @@ fn lighting_near_the_f32_limit_relights_as_reference_computes_it() {
     let map = d.join("huge.exr");
     write_exr(&map, 32, 16, |_, _| 3e38);
     let exact = d.join("exact.exr");
-    run_ok(BIN, &["reference", s(&raw), "--env", s(&map), "-o", s(&exact)]);
+    run_ok(
+        BIN,
+        &["reference", s(&raw), "--env", s(&map), "-o", s(&exact)],
+    );
     let relit = d.join("relit.exr");
     let r = run(
         BIN,
         &[
-            "relight", s(&ltm), "--env", s(&map), "--terms", "all", "-o", s(&relit),
-            "--reference", s(&exact),
+            "relight",
+            s(&ltm),
+            "--env",
+            s(&map),
+            "--terms",
+            "all",
+            "-o",
+            s(&relit),
+            "--reference",
+            s(&exact),
         ],
     );
     assert!(r.ok, "{}", r.stderr);

@@ -129,6 +129,14 @@ impl RawStore {
         )
     }
 
+    /// Row `p` (`M·C` values, channel-interleaved) as stored, read with a
+    /// positioned read ([`RawStore::read_rows`]).
+    pub fn read_row(&self, p: usize) -> Result<Vec<f32>> {
+        let mut row = Vec::new();
+        self.read_rows(p..p.saturating_add(1), &mut row)?;
+        Ok(row)
+    }
+
     /// True when row `p` is flagged all zero (e.g. a background pixel). The
     /// flag is checked against the row's values when its block is verified
     /// ([`RawStore::verify_block`]): trust it only after that.

@@ -59,11 +59,11 @@ fn default_scene_bakes_into_a_valid_store() {
         store.verify_block(b).unwrap();
     }
     // The top rows see the sky behind the scene: zero rows, flagged.
-    assert!(store.is_zero_row(0) && store.row(0).iter().all(|&v| v == 0.0));
+    assert!(store.is_zero_row(0) && store.read_row(0).unwrap().iter().all(|&v| v == 0.0));
     // The bottom rows see the lit ground.
     let p = 63 * 64 + 32;
     assert!(!store.is_zero_row(p));
-    let row = store.row(p);
+    let row = store.read_row(p).unwrap();
     assert!(row.iter().all(|v| v.is_finite() && *v >= 0.0));
     let rgb: Vec<f64> = (0..3)
         .map(|c| row.iter().skip(c).step_by(3).map(|&v| v as f64).sum())

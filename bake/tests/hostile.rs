@@ -545,7 +545,10 @@ fn degenerate_geometry_bakes() {
         )
         .unwrap();
         let store = ltm_codec::RawStore::open(&out).unwrap();
-        let rows = store.rows(0..store.dims().pixels()).to_vec();
+        let mut rows = Vec::new();
+        store
+            .read_rows(0..store.dims().pixels(), &mut rows)
+            .unwrap();
         (rows, scene.stats().meshes[0].triangles)
     };
     let obj_of = |n: usize, f: &Gen| {
@@ -927,7 +930,7 @@ fn partial_without_identity_is_started_over() {
     );
     assert_eq!(report.blocks_resumed, 0);
     let store = ltm_codec::RawStore::open(&out).unwrap();
-    assert!(store.row(0).iter().all(|&v| v != 7.0));
+    assert!(store.read_row(0).unwrap().iter().all(|&v| v != 7.0));
     // And a writer without an identity never resumes anything.
     {
         let mut w = RawWriter::create(&out, anonymous).unwrap();

@@ -154,7 +154,7 @@ fn uv_plane_texels_see_the_whole_sky() {
     assert_eq!(surface.valid_count(), 64);
     let albedo = store.albedo().expect("grey transport with albedo");
     for k in 0..64 {
-        let sum: f64 = store.row(k).iter().map(|&v| v as f64).sum();
+        let sum: f64 = store.read_row(k).unwrap().iter().map(|&v| v as f64).sum();
         assert!((sum - 1.0).abs() < 0.02, "texel {k}: {sum}");
         assert_eq!(albedo[3 * k], 0.5);
         let p = surface.points()[k];
@@ -192,7 +192,7 @@ fn sphere_texels_of_a_convex_mesh_see_a_hemisphere() {
     );
     let surface = store.surface().unwrap();
     for k in 0..256 {
-        let sum: f64 = store.row(k).iter().map(|&v| v as f64).sum();
+        let sum: f64 = store.read_row(k).unwrap().iter().map(|&v| v as f64).sum();
         // Flat facets: the quadrature's cos over texels is approximate.
         assert!((sum - 1.0).abs() < 0.03, "texel {k}: {sum}");
         let p = surface.points()[k];
@@ -210,7 +210,14 @@ fn sphere_texels_of_a_convex_mesh_see_a_hemisphere() {
     );
     let low = (0..256)
         .filter(|&k| shadowed.surface().unwrap().points()[k].normal[1] < -0.5)
-        .map(|k| shadowed.row(k).iter().map(|&v| v as f64).sum::<f64>())
+        .map(|k| {
+            shadowed
+                .read_row(k)
+                .unwrap()
+                .iter()
+                .map(|&v| v as f64)
+                .sum::<f64>()
+        })
         .fold(f64::INFINITY, f64::min);
     assert!(low < 0.2, "underside texel sums {low}");
 }

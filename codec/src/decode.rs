@@ -10,6 +10,7 @@ use crate::error::{Error, Result};
 use crate::limits::{Charge, Limits};
 use crate::quant::{decode_scale, levels, scale_groups, BandWeights};
 use crate::wavelet::{self, band_size, PlaneMut, RowMode};
+use rayon::prelude::*;
 
 /// Scales above this are dequantized in f64: `q·s` in f32 could overflow
 /// (`|q| < 2^15`). The encoder never writes one (its matrices have norms of
@@ -146,6 +147,40 @@ impl ColumnDecoder {
             }
         }
         sum.sqrt()
+    }
+
+    /// Checks column `j`'s stored priority norm against the norm of the
+    /// decoded column, `decoded` ([`ColumnDecoder::weighted_norm`] rounded
+    /// to `f32`): the NORM chunk promises them equal, bit for bit
+    /// (docs/FORMAT.md).
+    pub fn check_norm(j: usize, stored: f32, decoded: f32) -> Result<()> {
+        if decoded.to_bits() == stored.to_bits() {
+            return Ok(());
+        }
+        Err(Error::corrupt(
+            "NORM chunk",
+            format!(
+                "column {j}: the file stores priority norm {stored:e}, the column decodes to {decoded:e} (they must be equal bit for bit)"
+            ),
+        ))
+    }
+
+    /// Checks every norm `file` stores (chunk NORM) against its column:
+    /// each column is decoded once, in parallel, and
+    /// [`ColumnDecoder::check_norm`]ed; the first column (in column order)
+    /// whose norm disagrees is the error. So no light is ranked by a norm
+    /// that was not checked. A file without NORM passes.
+    pub fn check_stored_norms(&self, file: &LtmFile) -> Result<()> {
+        let Some(norms) = file.column_norms() else {
+            return Ok(());
+        };
+        let problem = (0..norms.len()).into_par_iter().find_map_first(|j| {
+            let checked = file.column(j).and_then(|col| {
+                ColumnDecoder::check_norm(j, norms[j], self.weighted_norm(&col) as f32)
+            });
+            checked.err()
+        });
+        problem.map_or(Ok(()), Err)
     }
 
     /// The dequantization step `s/Q` of scale group `group`, channel

@@ -25,7 +25,6 @@ pub mod entropy;
 mod error;
 mod fileio;
 mod limits;
-mod mmap;
 pub mod npy;
 pub mod output;
 pub mod pca;

@@ -5,10 +5,10 @@ use crate::container::LtmFile;
 use crate::decode::ColumnDecoder;
 use crate::dims::Dims;
 use crate::error::{Error, Result};
+use crate::fileio::Stamp;
 use crate::limits::{Charge, Limits};
 use crate::output::AtomicFile;
 use crate::progress::{Progress, Stage};
-use crate::raw::Stamp;
 use crate::raw::{RawHeader, RawWriter};
 use crate::wavelet::row_inverse;
 use std::fs::File;
@@ -276,7 +276,10 @@ fn import_npy_inner(
     progress: Progress<'_>,
 ) -> Result<Dims> {
     let file = File::open(npy).map_err(|e| Error::io(npy, e))?;
-    let file_len = file.metadata().map_err(|e| Error::io(npy, e))?.len();
+    // Checked again before the output is finished: an array rewritten
+    // during the import is an error, not a mix of two arrays.
+    let stamp = Stamp::of(&file, npy)?;
+    let file_len = stamp.len;
     let mut r = BufReader::with_capacity(1 << 20, file);
     let header = read_npy_header(&mut r)?;
     let (rows, cols, channels) = match header.shape[..] {
@@ -323,7 +326,6 @@ fn import_npy_inner(
     let mut writer = RawWriter::create(out, raw)?;
     // An import is never resumed: a failed one leaves nothing.
     writer.discard_on_drop();
-    let stamp = Stamp::of(r.get_ref(), npy)?;
     let row_len = dims.row_len();
     let mut bytes = Vec::new();
     let blocks = raw.block_count();
@@ -331,8 +333,11 @@ fn import_npy_inner(
         let range = raw.block_range(b);
         bytes.resize(range.len() * row_len * item as usize, 0);
         r.read_exact(&mut bytes).map_err(|e| {
-            let at = header.data_offset as u64 + (range.start * row_len) as u64 * item;
-            truncated_at(npy, e, at)
+            if e.kind() != std::io::ErrorKind::UnexpectedEof {
+                return Error::io(npy, e);
+            }
+            let why = format!("the file ends before the {need} bytes its header implies: it was truncated while being read");
+            Error::io(npy, std::io::Error::new(e.kind(), why))
         })?;
         let values: Vec<f32> = if item == 4 {
             bytes
@@ -359,22 +364,11 @@ fn import_npy_inner(
         writer.write_block(b, &values, None)?;
         progress.report(Stage::Import, (b + 1) as u64, blocks as u64);
     }
-    stamp.check(r.get_ref(), npy)?;
+    stamp.check_unchanged(r.get_ref(), npy)?;
     writer.finish()?;
     Ok(dims)
 }
 
-/// A read of the array's data that failed; one that ran past the end says
-/// that the file was truncated while it was read.
-fn truncated_at(npy: &Path, e: std::io::Error, at: u64) -> Error {
-    if e.kind() != std::io::ErrorKind::UnexpectedEof {
-        return Error::io(npy, e);
-    }
-    let msg = format!(
-        "the file ends inside the block of data from byte {at}: it was truncated while being read"
-    );
-    Error::io(npy, std::io::Error::new(e.kind(), msg))
-}
 
 /// Decodes a whole `.ltm` file to the pixel lighting basis: `P × M × C`
 /// values, C order. The dense matrix must fit `limits`.

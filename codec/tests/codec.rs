@@ -1155,3 +1155,45 @@ const GOLDEN_LTM_V4: u32 = 0xd11d_24af;
 /// The committed version-3 fixture `tests/fixtures/golden-v3.ltm`: the
 /// same options, written before version 4 (column encoding 3).
 const GOLDEN_LTM_V3: u32 = 0x0c2f_934d;
+
+/// An `.ltm` file is read whole at open, charged to the budget: truncated
+/// or rewritten after open, it decodes as it was opened (no memory map, so
+/// no SIGBUS); one truncated before open is refused; one larger than the
+/// budget is refused with its size and the budget.
+#[test]
+fn a_file_truncated_after_open_decodes_as_opened() {
+    let dir = tempfile::tempdir().unwrap();
+    let dims = Dims::image(16, 12, 4, 3);
+    let raw = write_raw(&dir.path().join("t.raw"), dims, &scene(dims), None, 1 << 16);
+    let (path, _) = run(dir.path(), &raw, &CompressOptions::default(), "t.ltm");
+    let len = std::fs::metadata(&path).unwrap().len();
+    let limits = Limits::with_max_alloc(1 << 30);
+    let file = LtmFile::open_with_limits(&path, &limits).unwrap();
+    assert!(limits.used_bytes() >= len, "the file's bytes are charged");
+    let want = decode_matrix(&file, &limits).unwrap();
+    let f = std::fs::OpenOptions::new().write(true).open(&path).unwrap();
+    f.set_len(len / 3).unwrap();
+    assert_eq!(decode_matrix(&file, &limits).unwrap(), want);
+    f.set_len(0).unwrap();
+    f.set_len(len).unwrap(); // all zero now
+    assert_eq!(decode_matrix(&file, &limits).unwrap(), want);
+    drop(file);
+    assert_eq!(limits.used_bytes(), 0);
+    let e = LtmFile::open(&path).err().unwrap().to_string();
+    assert!(e.contains("not an .ltm file"), "{e}");
+    let (cut, _) = run(dir.path(), &raw, &CompressOptions::default(), "cut.ltm");
+    std::fs::OpenOptions::new()
+        .write(true)
+        .open(&cut)
+        .unwrap()
+        .set_len(len / 2)
+        .unwrap();
+    assert!(LtmFile::open(&cut).is_err());
+    let (whole, _) = run(dir.path(), &raw, &CompressOptions::default(), "whole.ltm");
+    let small = Limits::with_max_alloc(len / 2);
+    let e = LtmFile::open_with_limits(&whole, &small).err().unwrap();
+    assert!(
+        matches!(e, Error::Limit { needed, .. } if needed == len),
+        "{e}"
+    );
+}

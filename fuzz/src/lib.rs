@@ -55,7 +55,7 @@ pub fn read_raw_store(bytes: &[u8]) {
         let _ = raw.verify_block(b);
     }
     for p in 0..raw.dims().pixels() {
-        let _ = (raw.row(p).len(), raw.is_zero_row(p));
+        let _ = (raw.read_row(p).map(|r| r.len()), raw.is_zero_row(p));
     }
     let _ = raw.albedo();
 }

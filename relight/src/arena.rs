@@ -3,7 +3,8 @@
 //! coefficient and 4 per grey one (Cheslack-Postava et al. 2007 §4.5 keeps
 //! the matrix in memory in its compressed form; this is the decoded form
 //! closest to it). Columns are independent in the file, so a frame with N
-//! lights needs only its N columns: opening decodes none, and a relight
+//! lights needs only its N columns: opening keeps none (it decodes each
+//! once only to check its stored norm), and a relight
 //! with N = 200 of a 1536-light file decodes 13 % of its columns (about a
 //! fifth of its coefficients: low-frequency lights have the densest
 //! columns).
@@ -145,7 +146,7 @@ impl<'a> ArenaColumn<'a> {
 
 /// Every column of a file in compact form, each decoded the first time a
 /// frame needs it (or all at once by [`Arena::decode_all`]): a frame with N
-/// lights decodes at most N columns, so a file opens without decoding any.
+/// lights decodes at most N columns, so a file opens without keeping any.
 /// Columns lie end to end in column order in one buffer sized from the
 /// column table ([`crate::slots`]), as a frame streams them fastest.
 pub(crate) struct Arena {
@@ -252,7 +253,8 @@ impl Arena {
 
     /// Decodes columns `js` in parallel; a column another thread is
     /// decoding is waited for. A column whose norm differs from the one the
-    /// file stores is refused (the file is damaged).
+    /// file stores is refused (the file is damaged; the relighter's open has
+    /// checked every stored norm already).
     fn decode(&self, js: &[usize], file: &LtmFile, decoder: &ColumnDecoder) -> Result<()> {
         let meta = file.meta();
         js.par_iter().try_for_each(|&j| {
@@ -263,12 +265,8 @@ impl Arena {
             let col = file.column(j)?;
             let info = arena_column(&col, j, meta, self, decoder, entries, offsets)?;
             if let Some(&stored) = file.column_norms().and_then(|n| n.get(j)) {
-                if stored != info.norm {
-                    return Err(RelightError::Invalid(format!(
-                        "column {j}: decodes to priority norm {:e}, the file stores {stored:e}",
-                        info.norm
-                    )));
-                }
+                // Checked for every column at open too (`Relighter::new`).
+                ColumnDecoder::check_norm(j, stored, info.norm)?;
             }
             // Only this claim's holder sets it; a holder that failed set
             // nothing.

@@ -203,9 +203,10 @@ impl Image {
 }
 
 /// Relative L2 error `‖a − reference‖ / ‖reference‖` over all pixels and
-/// channels, accumulated in f64. When the reference is all zero it returns
-/// `0` if `a` is too and infinity otherwise. Both images must have the same
-/// size.
+/// channels, accumulated in f64. Both images must have the same size and
+/// hold only finite values (a NaN or infinite pixel is an error naming it),
+/// and the reference must not be all zero (the relative error is then
+/// undefined: an error that says so), so the result is always finite.
 pub fn relative_l2(a: &Image, reference: &Image) -> Result<f64> {
     a.check_len()?;
     reference.check_len()?;
@@ -215,6 +216,14 @@ pub fn relative_l2(a: &Image, reference: &Image) -> Result<f64> {
             a.width, a.height, reference.width, reference.height
         )));
     }
+    for (what, image) in [("reference", reference), ("relit image", a)] {
+        if let Some((x, y)) = image.first_non_finite() {
+            return Err(RelightError::Invalid(format!(
+                "{what} pixel ({x}, {y}) is {:?}: the relative error needs finite values",
+                image.data[y * image.width + x]
+            )));
+        }
+    }
     let (mut diff, mut norm) = (0.0f64, 0.0f64);
     for (p, q) in a.data.iter().zip(&reference.data) {
         for c in 0..3 {
@@ -223,13 +232,13 @@ pub fn relative_l2(a: &Image, reference: &Image) -> Result<f64> {
             norm += q[c] as f64 * q[c] as f64;
         }
     }
-    Ok(if norm > 0.0 {
-        (diff / norm).sqrt()
-    } else if diff == 0.0 {
-        0.0
-    } else {
-        f64::INFINITY
-    })
+    if norm == 0.0 {
+        return Err(RelightError::Invalid(format!(
+            "the {}×{} reference is all zero: the relative error is undefined (relight under the same map, or compare with a reference that is lit)",
+            reference.width, reference.height
+        )));
+    }
+    Ok((diff / norm).sqrt())
 }
 
 /// The sRGB encoding of a linear value, clamped to `[0, 1]`, as 8 bits.
@@ -265,11 +274,71 @@ fn exr_error(path: &Path, e: exr::error::Error) -> RelightError {
     }
 }
 
+/// The data window (`xMin, yMin, xMax, yMax`) of an OpenEXR file's first
+/// header, if its first 64 KiB hold one (a header is a list of attributes:
+/// name, type, size, value, ended by an empty name).
+#[cfg(feature = "exr")]
+fn exr_data_window(path: &Path) -> Option<[i32; 4]> {
+    use std::io::Read;
+    let mut head = Vec::new();
+    std::fs::File::open(path)
+        .ok()?
+        .take(1 << 16)
+        .read_to_end(&mut head)
+        .ok()?;
+    let mut rest = head.get(8..)?;
+    let cstr = |rest: &mut &[u8]| -> Option<Vec<u8>> {
+        let end = rest.iter().position(|&b| b == 0)?;
+        let s = rest[..end].to_vec();
+        *rest = &rest[end + 1..];
+        Some(s)
+    };
+    loop {
+        let name = cstr(&mut rest)?;
+        if name.is_empty() {
+            return None;
+        }
+        let kind = cstr(&mut rest)?;
+        let size = u32::from_le_bytes(rest.get(..4)?.try_into().ok()?) as usize;
+        let value = rest.get(4..4 + size)?;
+        if name == b"dataWindow" && kind == b"box2i" && size == 16 {
+            let v =
+                |k: usize| i32::from_le_bytes(value[4 * k..4 * k + 4].try_into().unwrap_or([0; 4]));
+            return Some([v(0), v(1), v(2), v(3)]);
+        }
+        rest = &rest[4 + size..];
+    }
+}
+
+/// Refuses an OpenEXR file whose first header's data window holds more than
+/// [`MAX_READ_PIXELS`] pixels, naming its size and the limit, before the
+/// OpenEXR reader sees it (which calls such a file corrupt).
+#[cfg(feature = "exr")]
+fn check_exr_data_window(path: &Path) -> Result<()> {
+    let Some([x0, y0, x1, y1]) = exr_data_window(path) else {
+        return Ok(());
+    };
+    let (w, h) = (
+        i64::from(x1) - i64::from(x0) + 1,
+        i64::from(y1) - i64::from(y0) + 1,
+    );
+    if w >= 1 && h >= 1 && (w as u128) * (h as u128) <= MAX_READ_PIXELS as u128 {
+        return Ok(());
+    }
+    Err(RelightError::image(
+        path,
+        format!(
+            "OpenEXR data window ({x0}, {y0})..=({x1}, {y1}) is {w}×{h} pixels (valid: 1 to {MAX_READ_PIXELS} pixels, e.g. 16384×8192)"
+        ),
+    ))
+}
+
 /// Reads the first layer with R, G, B channels of an OpenEXR file:
 /// `(width, height, pixels)`, row-major from the top. The layer's size is
 /// checked against [`MAX_READ_PIXELS`] before its pixels are allocated.
 #[cfg(feature = "exr")]
 pub(crate) fn read_exr_rgb(path: &Path) -> Result<(usize, usize, Vec<[f32; 3]>)> {
+    check_exr_data_window(path)?;
     let meta = exr::meta::MetaData::read_from_file(path, false).map_err(|e| exr_error(path, e))?;
     let header = meta
         .headers

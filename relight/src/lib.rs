@@ -74,7 +74,7 @@ pub use envmap::{EnvMap, Rotation, MAX_ENV_HEIGHT};
 pub use error::{RelightError, Result};
 pub use frame::{Frame, FrameStats, Relight, Request, TermBasis};
 pub use image_io::{relative_l2, Image, MAX_READ_PIXELS};
-pub use open::{open, Source};
+pub use open::{open, open_file, Source};
 pub use pca::PcaRelighter;
 pub use point::{point_light_taps, Lookup, PointLight, SurfaceSample, Taps};
 pub use reference::{reference, reference_with_progress};

@@ -10,7 +10,7 @@ use ltm_codec::{Limits, LtmFile};
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
 
-/// Where an `.ltm` file comes from: a path (memory-mapped) or its bytes
+/// Where an `.ltm` file comes from: a path (read whole into memory) or its bytes
 /// (from a network, an archive, a wasm host).
 #[derive(Clone, Debug)]
 pub enum Source {
@@ -22,7 +22,8 @@ pub enum Source {
 
 impl Source {
     /// Opens and validates the file ([`LtmFile::open_with_limits`] or
-    /// [`LtmFile::from_bytes`]), charging its tables to `limits`.
+    /// [`LtmFile::from_bytes`]), charging its bytes (a path's copy) and tables
+    /// to `limits`.
     pub fn open(self, limits: &Limits) -> Result<LtmFile> {
         Ok(match self {
             Source::Path(p) => LtmFile::open_with_limits(&p, limits)?,
@@ -74,7 +75,12 @@ impl From<&[u8]> for Source {
 /// `Limits`). [`Relight::term_basis`] and [`Relight::face_res`] say how to
 /// light it.
 pub fn open(source: impl Into<Source>, limits: &Limits) -> Result<Box<dyn Relight + Send + Sync>> {
-    let file = source.into().open(limits)?;
+    open_file(source.into().open(limits)?, limits)
+}
+
+/// [`open`] for a file already opened (whose metadata or surface data the
+/// caller reads too): the relighter of its mode, charged to `limits`.
+pub fn open_file(file: LtmFile, limits: &Limits) -> Result<Box<dyn Relight + Send + Sync>> {
     if file.pca().is_some() {
         Ok(Box::new(PcaRelighter::new(&file, limits)?))
     } else {

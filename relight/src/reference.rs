@@ -8,6 +8,9 @@ use ltm_codec::{Progress, RawStore, Stage};
 use rayon::prelude::*;
 use std::sync::atomic::{AtomicUsize, Ordering};
 
+/// Bytes of rows read at a time (at least one row).
+const READ_BYTES: usize = 8 << 20;
+
 /// The exact image `B[p] = Σ_j T[p, j]·L[j]` under the cubemap lighting
 /// `light` (mean radiance per texel, `6·n²` entries in column order, e.g.
 /// from [`crate::EnvMap::to_cubemap`]).
@@ -60,29 +63,34 @@ pub fn reference_with_progress(
         .try_for_each(|(b, pixels)| -> Result<()> {
             raw.verify_block(b)?;
             let rows = header.block_range(b);
-            // Positioned reads, not the map: an input truncated meanwhile is
-            // an error, not SIGBUS.
-            let mut block = Vec::new();
-            raw.read_rows(rows.clone(), &mut block)?;
+            // Positioned reads (an input truncated meanwhile is an error,
+            // not a signal), at most `READ_BYTES` of rows at a time: the
+            // block's size is a file field.
             let row_len = dims.row_len();
-            pixels.par_iter_mut().enumerate().for_each(|(i, out)| {
-                let p = rows.start + i;
-                if raw.is_zero_row(p) {
-                    return;
-                }
-                let row = &block[i * row_len..(i + 1) * row_len];
-                let mut sum = if channels == 3 {
-                    dot_rgb(row, &light)
-                } else {
-                    dot_grey(row, &light)
-                };
-                if let Some(a) = albedo {
-                    for c in 0..3 {
-                        sum[c] *= a[3 * p + c] as f64;
+            let step = (READ_BYTES / (4 * row_len)).max(1);
+            let mut buf = Vec::new();
+            for (k, part) in pixels.chunks_mut(step).enumerate() {
+                let first = rows.start + k * step;
+                raw.read_rows(first..first + part.len(), &mut buf)?;
+                part.par_iter_mut().enumerate().for_each(|(i, out)| {
+                    let p = first + i;
+                    if raw.is_zero_row(p) {
+                        return;
                     }
-                }
-                *out = sum.map(|v| v as f32);
-            });
+                    let row = &buf[i * row_len..(i + 1) * row_len];
+                    let mut sum = if channels == 3 {
+                        dot_rgb(row, &light)
+                    } else {
+                        dot_grey(row, &light)
+                    };
+                    if let Some(a) = albedo {
+                        for c in 0..3 {
+                            sum[c] *= a[3 * p + c] as f64;
+                        }
+                    }
+                    *out = sum.map(|v| v as f32);
+                });
+            }
             let now = done.fetch_add(rows.len(), Ordering::Relaxed) + rows.len();
             progress.report(Stage::Reference, now as u64, total as u64);
             Ok(())

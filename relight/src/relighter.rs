@@ -5,8 +5,9 @@
 //! compact arena ([`crate::arena`]: quantized `i16` values and a
 //! band-and-offset code, 8 bytes per RGB coefficient, 4 per grey one, with
 //! one factor per column, band and channel that carries the quantizer step
-//! and the inverse band weight); opening checks the file and decodes
-//! nothing. Per frame:
+//! and the inverse band weight); opening checks the file, including every
+//! stored column norm against its column (decoded for that and dropped),
+//! and keeps no decoded column. Per frame:
 //! 1. the cubemap lighting gets the file's row transform (kept in the frame:
 //!    a frame under the same lighting, e.g. when only N changes, reuses it);
 //! 2. the N lights of highest priority are chosen ([`select`]; the transport
@@ -40,6 +41,23 @@ const TASKS_PER_THREAD: usize = 4;
 const PREFETCH_COLUMNS: usize = 2;
 /// Lanes of an interleaved pixel: red, green, blue and a zero.
 const LANES: usize = 4;
+/// Lighting whose largest magnitude exceeds this is divided by a power of
+/// two before the row transform and the multiply-add, and the image
+/// multiplied back (exact, unless a value leaves the normal range): sums
+/// of `f32` values near `f32::MAX` would overflow to infinity, and then
+/// NaN, where the image itself is finite.
+const LIGHT_SCALE_ABOVE: f32 = (1u64 << 62) as f32;
+
+/// The power of two the lighting `light` is divided by (1 for lighting up
+/// to [`LIGHT_SCALE_ABOVE`]).
+fn light_scale(light: &[[f32; 3]]) -> f32 {
+    let max = light.iter().flatten().fold(0.0f32, |m, v| m.max(v.abs()));
+    if max <= LIGHT_SCALE_ABOVE {
+        return 1.0;
+    }
+    // The largest power of two at most `max` (finite: `max` is).
+    f32::from_bits(max.to_bits() & 0x7f80_0000)
+}
 
 /// A compressed matrix ready to relight with N wavelet lights (the
 /// [`Relight`] implementation for `.ltm` files). Immutable and `Sync`:
@@ -75,6 +93,9 @@ struct WaveletScratch {
     /// The cubemap lighting `light` was transformed from (empty when none):
     /// a frame under the same lighting reuses the transform.
     last_light: Vec<[f32; 3]>,
+    /// What `light` was divided by ([`light_scale`]); the image is
+    /// multiplied by it.
+    light_scale: f32,
     /// Per image row: whether it may hold a nonzero pixel (a row marked
     /// `false` is all zero). The multiply-add marks the rows of the blocks
     /// it touches; the inverse steps skip rows that are still zero.
@@ -87,7 +108,7 @@ struct WaveletScratch {
 }
 
 impl Relighter {
-    /// Opens an `.ltm` file (memory-mapped) with the default [`Limits`].
+    /// Opens an `.ltm` file (read into memory) with the default [`Limits`].
     /// Columns are decoded when a frame first needs them
     /// ([`Relighter::decode_all`] decodes the rest at once).
     pub fn open(path: &Path) -> Result<Relighter> {
@@ -100,10 +121,13 @@ impl Relighter {
     }
 
     /// Prepares a relighter for an opened file: checks every column's CRC
-    /// (a damaged file is refused here, not in a later frame) and charges
+    /// (a damaged file is refused here, not in a later frame) and every
+    /// stored column norm against its column (each column is decoded once,
+    /// in parallel, and dropped: a norm that disagrees is refused here,
+    /// before it can rank a light), and charges
     /// the decoder's tables and the arena of decoded coefficients, sized by
     /// the file's column table, to `limits` (whose clone it keeps for its
-    /// frames). Decodes no column. A `pca` file is refused: [`crate::open`]
+    /// frames). Keeps no decoded column. A `pca` file is refused: [`crate::open`]
     /// opens any file.
     pub fn new(file: LtmFile, limits: &Limits) -> Result<Relighter> {
         if file.pca().is_some() {
@@ -130,6 +154,8 @@ impl Relighter {
         let n = dims.face_res() as usize;
         file.check_column_crcs()?;
         let decoder = ColumnDecoder::for_file(&file, limits)?;
+        // No light is ever ranked by a stored norm that was not checked.
+        decoder.check_stored_norms(&file)?;
         let arena_charge = arena.join(index).join(maps).join(per_light);
         let arena = Arena::new(&file, &decoder);
         Ok(Relighter {
@@ -221,6 +247,7 @@ impl Relighter {
             tables: Vec::new(),
             table_starts: Vec::new(),
             last_light: Vec::new(),
+            light_scale: 1.0,
             rows,
             rows_valid: false,
             _charge: c0.join(c1).join(c2).join(c3).join(c4).join(c5),
@@ -239,13 +266,16 @@ impl Relighter {
             && s.rows.len() == dims.height() as usize
     }
 
-    /// Row transform of the cubemap lighting into `s.light`.
+    /// Row transform of the cubemap lighting, divided by its
+    /// [`light_scale`], into `s.light`.
     fn transform_light(&self, light: &[[f32; 3]], s: &mut WaveletScratch) -> Result<()> {
         let meta = self.meta();
         let n = meta.dims.face_res() as usize;
+        s.light_scale = light_scale(light);
+        let scale = s.light_scale;
         for c in 0..3 {
             for (v, l) in s.plane.iter_mut().zip(light) {
-                *v = l[c];
+                *v = if scale == 1.0 { l[c] } else { l[c] / scale };
             }
             row_forward(meta.row_filter, n, &mut s.plane, s.work.as_flattened_mut())?;
             for (l, v) in s.light.iter_mut().zip(&s.plane) {
@@ -470,7 +500,10 @@ impl Relighter {
         used
     }
 
-    fn finish_image(&self, pixels: &[[f32; LANES]], image: &mut Image) {
+    /// The image from the summed pixels: the lighting's scale and the
+    /// albedo multiplied in, empty rows set to 0. A pixel that is not
+    /// finite (the image exceeds the `f32` range) is an error naming it.
+    fn finish_image(&self, pixels: &[[f32; LANES]], scale: f32, image: &mut Image) -> Result<()> {
         match self.file.albedo() {
             Some(albedo) => {
                 for ((px, v), a) in image
@@ -488,6 +521,11 @@ impl Relighter {
                 }
             }
         }
+        if scale != 1.0 {
+            for px in &mut image.data {
+                *px = px.map(|v| v * scale);
+            }
+        }
         // Empty rows (open sky) are exactly 0, not the column transform's
         // spill from their neighbours.
         if let Some(e) = self.file.empty_rows() {
@@ -497,6 +535,12 @@ impl Relighter {
                 }
             }
         }
+        if let Some((x, y)) = image.first_non_finite() {
+            return Err(RelightError::Invalid(format!(
+                "relit pixel ({x}, {y}) is not finite: the image T·L exceeds the f32 range"
+            )));
+        }
+        Ok(())
     }
 
     /// The same image by eq. 3: every chosen column fully decoded with the
@@ -530,7 +574,7 @@ impl Relighter {
             .collect();
         let (w, h) = self.size();
         let mut image = Image::new(w, h);
-        self.finish_image(&pixels, &mut image);
+        self.finish_image(&pixels, s.light_scale, &mut image)?;
         Ok(image)
     }
 }
@@ -608,7 +652,7 @@ impl Relight for Relighter {
         stats.decode = t3 - t2;
         self.multiply_levels(s, &columns, &mut stats)?;
         let ti = Instant::now();
-        self.finish_image(&s.pixels, image);
+        self.finish_image(&s.pixels, s.light_scale, image)?;
         stats.inverse += ti.elapsed();
         Ok(stats)
     }

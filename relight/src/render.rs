@@ -58,6 +58,32 @@ pub struct ViewCamera {
     pub height: u32,
 }
 
+/// The larger coordinate magnitude of `a` and `b`, at least the smallest
+/// positive normal `f64`: a scale that brings both within `[-1, 1]`.
+fn magnitude(a: DVec3, b: DVec3) -> f64 {
+    a.abs().max(b.abs()).max_element().max(f64::MIN_POSITIVE)
+}
+
+/// `v` at unit length, computed without overflow or underflow (a far
+/// camera's `v` may have components whose squares overflow); `None` for the
+/// zero vector or a non-finite one.
+fn unit(v: DVec3) -> Option<DVec3> {
+    let m = v.abs().max_element();
+    (m > 0.0 && m.is_finite()).then(|| (v / m).normalize())
+}
+
+/// The unit direction from `eye` to `target`, defined however far apart
+/// they are; `None` when they coincide (closer than 1e-9 of their
+/// magnitude).
+fn view_direction(eye: DVec3, target: DVec3) -> Option<DVec3> {
+    let s = magnitude(eye, target);
+    let d = target / s - eye / s;
+    if d.length() <= 1e-9 {
+        return None;
+    }
+    unit(d)
+}
+
 /// A camera's orthonormal frame.
 struct Frame {
     eye: DVec3,
@@ -85,25 +111,23 @@ impl ViewCamera {
                 ));
             }
         }
-        let d = self.target - self.eye;
-        if d.length()
-            <= 1e-9
-                * self
-                    .eye
-                    .abs()
-                    .max(self.target.abs())
-                    .max_element()
-                    .max(1e-300)
-        {
+        let Some(forward) = view_direction(self.eye, self.target) else {
             return Err(RelightError::Invalid(format!(
-                "camera eye {} and target {} coincide",
+                "camera eye {} and target {} coincide (closer than 1e-9 of their magnitude): a view needs a target apart from the eye",
                 self.eye, self.target
             )));
-        }
-        if d.normalize().cross(self.up.normalize_or_zero()).length() < 1e-9 {
+        };
+        let Some(up) = unit(self.up) else {
+            return Err(RelightError::range(
+                "camera up",
+                format!("{}", self.up),
+                "a nonzero direction",
+            ));
+        };
+        if forward.cross(up).length() < 1e-9 {
             return Err(RelightError::Invalid(format!(
-                "camera up {} is parallel to the view direction {}",
-                self.up, d
+                "camera up {} is parallel to the view from eye {} to target {}: give an up direction across the view (--up)",
+                self.up, self.eye, self.target
             )));
         }
         if !(self.fov > 0.0 && self.fov < 180.0) {
@@ -124,18 +148,21 @@ impl ViewCamera {
     /// View `k` of an orbit of `count`: the eye turned by `k·360°/count`
     /// about the axis through `target` along `up`.
     pub fn orbit(&self, k: usize, count: usize) -> ViewCamera {
-        let axis = self.up.normalize();
+        let axis = unit(self.up).unwrap_or(DVec3::Y);
         let angle = std::f64::consts::TAU * k as f64 / count.max(1) as f64;
         let rot = glam::DQuat::from_axis_angle(axis, angle);
+        // Scaled, so that a far eye does not overflow the difference.
+        let s = magnitude(self.eye, self.target);
         ViewCamera {
-            eye: self.target + rot * (self.eye - self.target),
+            eye: (self.target / s + rot * (self.eye / s - self.target / s)) * s,
             ..*self
         }
     }
 
     fn frame(&self) -> Frame {
-        let forward = (self.target - self.eye).normalize();
-        let right = forward.cross(self.up.normalize()).normalize();
+        let forward = view_direction(self.eye, self.target).unwrap_or(DVec3::NEG_Z);
+        let up = unit(self.up).unwrap_or(DVec3::Y);
+        let right = forward.cross(up).normalize();
         Frame {
             eye: self.eye,
             forward,
@@ -840,5 +867,45 @@ mod tests {
         assert!(mesh.render(&Image::new(8, 8), &cam, 1).is_err());
         assert!(mesh.check_outside(DVec3::new(0.1, 0.0, 0.0)).is_err());
         assert!(mesh.check_outside(DVec3::new(0.0, 0.0, 3.0)).is_ok());
+        // A degenerate look-at names the eye and the target.
+        let mut cam = camera(DVec3::new(0.0, 3.0, 0.0));
+        let e = cam.validate().unwrap_err().to_string();
+        assert!(
+            e.contains("parallel") && e.contains("target") && e.contains("--up"),
+            "{e}"
+        );
+        cam.target = cam.eye;
+        let e = cam.validate().unwrap_err().to_string();
+        assert!(e.contains("coincide"), "{e}");
+    }
+
+    /// A far camera is a valid camera: its view direction is defined even
+    /// where the squares of its coordinates overflow, and it draws a finite
+    /// image (the sphere smaller than a pixel: background), orbits included.
+    #[test]
+    fn far_cameras_draw_finite_images() {
+        let (mesh, tex) = sphere(16);
+        for eye in [
+            DVec3::new(0.0, 0.0, 1e6),
+            DVec3::new(0.3, 0.2, 1e200),
+            DVec3::new(-1e300, 1e300, 1e307),
+        ] {
+            let cam = camera(eye);
+            cam.validate().unwrap();
+            let f = cam.frame();
+            assert!(f.forward.is_finite() && f.right.is_finite() && f.up.is_finite());
+            assert!((f.forward.length() - 1.0).abs() < 1e-12, "{eye}");
+            for k in 0..3 {
+                let view = cam.orbit(k, 3);
+                assert!(view.eye.is_finite(), "{eye} {k}");
+                let img = mesh.render(&tex, &view, 1).unwrap();
+                assert!(img.first_non_finite().is_none(), "{eye}");
+            }
+        }
+        // Near, the same camera sees the sphere.
+        let img = mesh
+            .render(&tex, &camera(DVec3::new(0.0, 0.0, 3.0)), 1)
+            .unwrap();
+        assert!(img.data.iter().any(|p| p[0] > 0.0));
     }
 }

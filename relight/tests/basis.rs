@@ -38,10 +38,12 @@ fn random_light(m: usize) -> Vec<[f32; 3]> {
 fn dense(raw: &RawStore) -> Vec<Vec<f64>> {
     let d = raw.dims();
     let c = d.channels as usize;
+    let mut t = Vec::new();
+    raw.read_rows(0..d.pixels(), &mut t).unwrap();
     (0..d.pixels() * c)
         .map(|r| {
             (0..d.lights())
-                .map(|j| raw.row(r / c)[j * c + r % c] as f64)
+                .map(|j| t[(r / c) * d.row_len() + j * c + r % c] as f64)
                 .collect()
         })
         .collect()

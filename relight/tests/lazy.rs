@@ -2,8 +2,7 @@
 //! columns were all decoded up front, bit for bit; a frame decodes only the
 //! columns it uses, each once; a file without stored norms (version 4)
 //! ranks lights by the norms of its decoded columns; a stored norm that
-//! disagrees with its column is refused when the column is decoded; a
-//! damaged payload is refused at open.
+//! disagrees with its column, or a damaged payload, is refused at open.
 
 use ltm_codec::compress::{compress, CompressOptions};
 use ltm_codec::{Dims, Limits, LtmFile, RawHeader, RawStore, RawWriter};
@@ -184,41 +183,49 @@ fn chunk(bytes: &[u8], tag: &[u8; 4]) -> (usize, usize) {
         .unwrap()
 }
 
-/// A NORM entry doubled (checksums repaired): the file opens, and the
-/// frame that decodes that column fails with a message naming it.
+/// A NORM entry understated or overstated (checksums repaired) is refused
+/// at open, with the column, the stored and the decoded norm: an
+/// understated norm would push its light out of a transport-weighted top N,
+/// where no frame decodes (and so checks) its column.
 #[test]
-fn a_stored_norm_that_disagrees_with_its_column_is_refused() {
+fn a_stored_norm_that_disagrees_with_its_column_is_refused_at_open() {
     let dir = tempfile::tempdir().unwrap();
     let path = file(dir.path());
     let good = std::fs::read(&path).unwrap();
     let limits = Limits::default();
-    let j = LtmFile::open(&path)
-        .unwrap()
-        .columns()
-        .iter()
-        .position(|c| c.nnz > 0)
-        .unwrap();
+    let file = LtmFile::open(&path).unwrap();
+    let j = file.columns().iter().rposition(|c| c.nnz > 0).unwrap();
     let (at, _) = chunk(&good, b"NORM");
-    let mut bytes = good.clone();
     let o = at + 4 * j;
-    let norm = f32::from_le_bytes(bytes[o..o + 4].try_into().unwrap());
-    bytes[o..o + 4].copy_from_slice(&(2.0 * norm).to_le_bytes());
-    ltm_codec::container::repair_checksums(&mut bytes);
-    let r = Relighter::new(LtmFile::from_bytes(bytes, &limits).unwrap(), &limits).unwrap();
-    let request = Request {
-        terms: usize::MAX,
-        weighting: Weighting::Unweighted,
-    };
-    let light = lighting(r.lights(), 0);
-    let err = r
-        .relight(&light, &request, &mut r.frame().unwrap())
-        .unwrap_err()
-        .to_string();
-    assert!(
-        err.contains(&format!("column {j}")) && err.contains("priority norm"),
-        "{err}"
-    );
-    assert!(r.decode_all().is_err());
+    let norm = f32::from_le_bytes(good[o..o + 4].try_into().unwrap());
+    for factor in [0.5f32, 2.0, 1.0 + f32::EPSILON] {
+        let mut bytes = good.clone();
+        let wrong = norm * factor;
+        bytes[o..o + 4].copy_from_slice(&wrong.to_le_bytes());
+        ltm_codec::container::repair_checksums(&mut bytes);
+        // The container alone accepts it (a norm is a finite value ≥ 0) ...
+        let file = LtmFile::from_bytes(bytes.clone(), &limits).unwrap();
+        // ... the relighter, through either door, does not.
+        let err = Relighter::new(file, &limits).err().unwrap().to_string();
+        assert!(
+            err.contains(&format!("column {j}:"))
+                && err.contains(&format!("{wrong:e}"))
+                && err.contains(&format!("{norm:e}")),
+            "{err}"
+        );
+        let bad = dir.path().join("bad.ltm");
+        std::fs::write(&bad, &bytes).unwrap();
+        let err = ltm_relight::open(bad.as_path(), &limits)
+            .err()
+            .unwrap()
+            .to_string();
+        assert!(
+            err.contains("NORM") && err.contains(&format!("column {j}:")),
+            "{err}"
+        );
+    }
+    // The file as written opens.
+    Relighter::new(LtmFile::from_bytes(good, &limits).unwrap(), &limits).unwrap();
 }
 
 /// A payload byte flipped (its CRC not repaired) is refused at open, before
@@ -234,4 +241,41 @@ fn a_damaged_payload_is_refused_at_open() {
     let file = LtmFile::from_bytes(bytes, &limits).unwrap();
     let err = Relighter::new(file, &limits).err().unwrap().to_string();
     assert!(err.contains("CRC") && err.contains("column"), "{err}");
+}
+
+/// Lighting near the `f32` limit (a map of 3e38) relights to a finite
+/// image, the image of the same lighting divided by a power of two times
+/// that power (the relighter scales the lighting down and the image back
+/// up, exactly); an image beyond the `f32` range is an error naming a
+/// pixel, never a NaN.
+#[test]
+fn lighting_near_the_f32_limit_gives_a_finite_image_or_an_error() {
+    let dir = tempfile::tempdir().unwrap();
+    let r = Relighter::open(&file(dir.path())).unwrap();
+    let mut f = r.frame().unwrap();
+    let request = Request {
+        terms: usize::MAX,
+        weighting: Weighting::Transport,
+    };
+    let two_127 = 2f32.powi(127);
+    for light in [vec![[1.7632415f32; 3]; r.lights()], lighting(r.lights(), 2)] {
+        let small = frame(&r, &light, &request, &mut f).0;
+        let big: Vec<[f32; 3]> = light
+            .iter()
+            .map(|l| l.map(|v| v * (two_127 / 64.0)))
+            .collect();
+        let (image, _, _) = frame(&r, &big, &request, &mut f);
+        assert!(image.iter().flatten().all(|v| v.is_finite()));
+        let want: Vec<[f32; 3]> = small
+            .iter()
+            .map(|p| p.map(|v| v * (two_127 / 64.0)))
+            .collect();
+        assert_eq!(image, want);
+    }
+    // 3e38 in every texel: T·L beyond f32 in some pixel is an error.
+    let huge = vec![[3e38f32; 3]; r.lights()];
+    match r.relight(&huge, &request, &mut f) {
+        Ok(_) => assert!(f.image.first_non_finite().is_none()),
+        Err(e) => assert!(e.to_string().contains("exceeds the f32 range"), "{e}"),
+    }
 }

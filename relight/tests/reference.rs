@@ -246,8 +246,60 @@ fn relative_error_measure() {
     let e = relative_l2(&a, &b).unwrap();
     assert!((e - 3.0 / 18f64.sqrt()).abs() < 1e-15);
     assert_eq!(relative_l2(&b, &b).unwrap(), 0.0);
+    // An all-zero reference leaves the relative error undefined; a NaN or
+    // infinite pixel in either image is named.
     let zero = Image::new(2, 1);
-    assert_eq!(relative_l2(&zero, &zero).unwrap(), 0.0);
-    assert_eq!(relative_l2(&a, &zero).unwrap(), f64::INFINITY);
+    for x in [&zero, &a] {
+        let e = relative_l2(x, &zero).unwrap_err().to_string();
+        assert!(e.contains("all zero") && e.contains("undefined"), "{e}");
+    }
+    for bad in [f32::NAN, f32::INFINITY] {
+        let mut c = b.clone();
+        c.data[1][2] = bad;
+        let e = relative_l2(&a, &c).unwrap_err().to_string();
+        assert!(e.contains("reference pixel (1, 0)"), "{e}");
+        let e = relative_l2(&c, &b).unwrap_err().to_string();
+        assert!(e.contains("relit image pixel (1, 0)"), "{e}");
+    }
+    // Values near the f32 limit give a finite error.
+    let big = Image::from_data(2, 1, vec![[3e38; 3], [-3e38; 3]]).unwrap();
+    let e = relative_l2(&a, &big).unwrap();
+    assert!(e.is_finite() && (e - 1.0).abs() < 1e-6, "{e}");
     assert!(relative_l2(&a, &Image::new(1, 2)).is_err());
+}
+
+/// An OpenEXR header whose data window claims 10⁹ × 10⁹ pixels is refused
+/// with its size and the limit, not called corrupt, by the image and the
+/// environment-map readers.
+#[test]
+fn a_huge_exr_data_window_is_refused_with_its_size() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("small.exr");
+    Image::from_data(4, 2, vec![[0.5; 3]; 8])
+        .unwrap()
+        .write_exr(&path)
+        .unwrap();
+    let mut bytes = std::fs::read(&path).unwrap();
+    let at = bytes
+        .windows(17)
+        .position(|w| w == b"dataWindow\0box2i\0")
+        .expect("a data window")
+        + 17
+        + 4;
+    for (k, v) in [0i32, 0, 999_999_999, 999_999_999].into_iter().enumerate() {
+        bytes[at + 4 * k..at + 4 * k + 4].copy_from_slice(&v.to_le_bytes());
+    }
+    let huge = dir.path().join("huge.exr");
+    std::fs::write(&huge, &bytes).unwrap();
+    for e in [
+        Image::read_exr(&huge).unwrap_err().to_string(),
+        EnvMap::load(&huge).err().unwrap().to_string(),
+    ] {
+        assert!(
+            e.contains("1000000000×1000000000")
+                && e.contains(&ltm_relight::MAX_READ_PIXELS.to_string())
+                && !e.contains("corrupt"),
+            "{e}"
+        );
+    }
 }

@@ -106,8 +106,26 @@ fn main() -> ExitCode {
     match result {
         Ok(()) => ExitCode::SUCCESS,
         Err(e) => {
-            eprintln!("error: {e:#}");
+            match budget_hint(&e) {
+                Some(hint) => eprintln!("error: {e:#} ({hint})"),
+                None => eprintln!("error: {e:#}"),
+            }
             ExitCode::FAILURE
         }
     }
+}
+
+/// The way forward for an error that ran out of the memory budget: the
+/// flag that sets it.
+fn budget_hint(e: &anyhow::Error) -> Option<&'static str> {
+    use ltm_codec::Error::Limit;
+    use ltm_relight::RelightError::Codec;
+    let over = e.chain().any(|c| {
+        matches!(c.downcast_ref::<ltm_codec::Error>(), Some(Limit { .. }))
+            || matches!(
+                c.downcast_ref::<ltm_relight::RelightError>(),
+                Some(Codec(Limit { .. }))
+            )
+    });
+    over.then_some("the budget is set with --max-memory SIZE, e.g. `ltm --max-memory 16G ...`")
 }

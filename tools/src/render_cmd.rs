@@ -5,9 +5,8 @@ use crate::common::{claim_files, commit_all, Ctx, ImageOutput, TermsArgs};
 use anyhow::{bail, Context, Result};
 use clap::Args;
 use glam::DVec3;
-use ltm_relight::{
-    EnvMap, Relight, Relighter, Request, Rotation, TexturedMesh, ViewCamera, MAX_SUPERSAMPLE,
-};
+use ltm_codec::LtmFile;
+use ltm_relight::{EnvMap, Relight, Request, Rotation, TexturedMesh, ViewCamera, MAX_SUPERSAMPLE};
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
@@ -17,7 +16,8 @@ pub const MAX_VIEWS: usize = 3600;
 /// Arguments of `ltm render`.
 #[derive(Args)]
 pub struct RenderArgs {
-    /// A compressed texture-space matrix (baked with a `[texture]` section).
+    /// A compressed texture-space matrix (baked with a `[texture]` section),
+    /// of any mode (wavelet or pca).
     pub file: PathBuf,
     /// Environment map: lat-long (width = 2·height) EXR or Radiance .hdr.
     #[arg(long)]
@@ -111,6 +111,16 @@ fn numbered(path: &Path, k: usize, count: usize) -> PathBuf {
     path.with_file_name(name)
 }
 
+/// The relighter of a texture-space file of any mode (wavelet or `pca`)
+/// and the mesh of its geometry image.
+fn open(path: &Path, ctx: &Ctx) -> Result<(Box<dyn Relight + Send + Sync>, TexturedMesh)> {
+    let context = || format!("opening {}", path.display());
+    let file = LtmFile::open_with_limits(path, ctx.limits()).with_context(context)?;
+    let mesh = TexturedMesh::from_file(&file, ctx.limits()).with_context(context)?;
+    let relighter = ltm_relight::open_file(file, ctx.limits()).with_context(context)?;
+    Ok((relighter, mesh))
+}
+
 pub fn run(a: RenderArgs, ctx: &Ctx) -> Result<()> {
     if !(1..=MAX_SUPERSAMPLE).contains(&a.supersample) {
         bail!(
@@ -139,15 +149,12 @@ pub fn run(a: RenderArgs, ctx: &Ctx) -> Result<()> {
         &[("input", a.file.as_path()), ("--env", a.env.as_path())],
         &outputs,
     )?;
-    let relighter = Relighter::open_with_limits(&a.file, ctx.limits())
-        .with_context(|| format!("opening {}", a.file.display()))?;
+    let (relighter, mesh) = open(&a.file, ctx)?;
     let mut frame = relighter.frame()?;
-    let mesh = TexturedMesh::from_file(relighter.file(), ctx.limits())
-        .with_context(|| format!("{}", a.file.display()))?;
     let env = EnvMap::load(&a.env).with_context(|| format!("loading {}", a.env.display()))?;
     let light = env.to_cubemap(relighter.face_res(), &a.rotate);
     let request = Request {
-        terms: a.terms.resolve(&relighter),
+        terms: a.terms.resolve(relighter.as_ref()),
         weighting: a.terms.weighting,
     };
     let stats = relighter.relight(&light, &request, &mut frame)?;

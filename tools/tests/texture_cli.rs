@@ -149,7 +149,36 @@ fn texture_bakes_render_and_bad_input_is_refused() {
     );
     // A camera on its target.
     fails(&args(&render(&p("tex.ltm"), "0,0.6,0")), &["coincide"]);
+    // A camera straight above its target, with the default up: the message
+    // names the eye and the target and says which flag to change.
+    fails(
+        &args(&render(&p("tex.ltm"), "0,5,0")),
+        &["parallel", "eye", "target", "--up"],
+    );
     assert!(!Path::new(&view).exists());
+    // A far camera is a camera: its view direction is defined.
+    for far in ["0,1,1e6", "0,1e200,3e200"] {
+        let (ok, stderr) = ltm(&args(&render(&p("tex.ltm"), far)));
+        assert!(ok, "{far}: {stderr}");
+        std::fs::remove_file(&view).unwrap();
+    }
+    // A pca texture file renders too.
+    let pca = p("tex-pca.ltm");
+    let (ok, stderr) = ltm(&[
+        "compress",
+        &p("tex.raw"),
+        "--mode",
+        "pca",
+        "--rank",
+        "8",
+        "-o",
+        &pca,
+    ]);
+    assert!(ok, "{stderr}");
+    let (ok, stderr) = ltm(&args(&render(&pca, "0,1,3")));
+    assert!(ok, "{stderr}");
+    assert!(Path::new(&view).exists());
+    std::fs::remove_file(&view).unwrap();
 
     // A texture relit and compared with a reference of the image space:
     // the sizes differ.

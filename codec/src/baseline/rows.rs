@@ -48,8 +48,10 @@ pub(crate) mod testing {
     pub fn dense(raw: &RawStore) -> Mat<f64> {
         let d = raw.dims();
         let c = d.channels as usize;
+        let mut t = Vec::new();
+        raw.read_rows(0..d.pixels(), &mut t).unwrap();
         Mat::from_fn(d.pixels() * c, d.lights(), |r, j| {
-            raw.row(r / c)[j * c + r % c] as f64
+            t[(r / c) * d.row_len() + j * c + r % c] as f64
         })
     }
 

@@ -16,18 +16,23 @@ use crate::dims::Dims;
 use crate::empty::EmptyRows;
 use crate::entropy::ColumnShape;
 use crate::error::{Error, Result};
+use crate::fileio::{check_regular, read_at, Stamp};
 use crate::limits::{Charge, Limits};
-use crate::mmap;
 use crate::pca::PcaModel;
 use crate::surface::Surface;
-use memmap2::Mmap;
 use std::fs::File;
 use std::path::Path;
 use std::sync::Arc;
 
-/// The bytes of an opened file: a memory map, or a buffer the caller owns.
+/// The bytes of an opened file: a copy read whole at open (charged to the
+/// limits it was opened with), or a buffer the caller owns. Never a memory
+/// map: a file truncated or replaced after open changes nothing.
 enum Bytes {
-    Mapped(Mmap),
+    Read {
+        bytes: Vec<u8>,
+        /// The bytes, charged to the limits the file was opened with.
+        _charge: Charge,
+    },
     Shared(Arc<[u8]>),
 }
 
@@ -35,7 +40,7 @@ impl std::ops::Deref for Bytes {
     type Target = [u8];
     fn deref(&self) -> &[u8] {
         match self {
-            Bytes::Mapped(m) => m,
+            Bytes::Read { bytes, .. } => bytes,
             Bytes::Shared(b) => b,
         }
     }
@@ -83,7 +88,8 @@ fn index_charge(
     limits.check_alloc("decoded file index", bytes as u64, 1)
 }
 
-/// An opened, validated `.ltm` file (memory-mapped, or held in memory).
+/// An opened, validated `.ltm` file, held in memory: read whole at open
+/// ([`LtmFile::open`]) or given by the caller ([`LtmFile::from_bytes`]).
 pub struct LtmFile {
     bytes: Bytes,
     index: LtmIndex,
@@ -97,20 +103,37 @@ impl LtmFile {
         Self::open_with_limits(path, &Limits::default())
     }
 
-    /// [`LtmFile::open`] with the given limits.
+    /// [`LtmFile::open`] with the given limits. The whole file is read into
+    /// memory with positioned reads, its bytes charged to `limits` (a file
+    /// larger than what is left of the budget is refused with its size and
+    /// the budget), and its length and modification time are checked after
+    /// the read: a file truncated or rewritten while it is read is an error,
+    /// and one changed after open changes nothing (no memory map, no
+    /// SIGBUS).
     pub fn open_with_limits(path: &Path, limits: &Limits) -> Result<LtmFile> {
         let file = File::open(path).map_err(|e| Error::io(path, e))?;
-        let map = mmap::map_read(&file).map_err(|e| Error::io(path, e))?;
-        if map.len() < 8 || map[..8] != MAGIC {
+        check_regular(&file, path)?;
+        let stamp = Stamp::of(&file, path)?;
+        let len = usize::try_from(stamp.len).unwrap_or(usize::MAX);
+        let mut head = [0u8; 8];
+        let head = &mut head[..len.min(8)];
+        read_at(&file, path, head, 0)?;
+        if *head != MAGIC {
             return Err(Error::BadMagic {
                 path: path.into(),
                 expected: "an .ltm file",
-                found: map[..map.len().min(8)].to_vec(),
+                found: head.to_vec(),
             });
         }
-        let index = Self::parse(&map, limits)?;
+        let (mut bytes, charge) = limits.vec("the .ltm file's bytes", len, 0u8)?;
+        read_at(&file, path, &mut bytes, 0)?;
+        stamp.check_unchanged(&file, path)?;
+        let index = Self::parse(&bytes, limits)?;
         Ok(LtmFile {
-            bytes: Bytes::Mapped(map),
+            bytes: Bytes::Read {
+                bytes,
+                _charge: charge,
+            },
             index,
         })
     }

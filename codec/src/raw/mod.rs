@@ -59,6 +59,5 @@ mod writer;
 pub use blocks::RowBlocks;
 pub use header::{RawHeader, INPUT_ID_LEN};
 pub use store::RawStore;
-pub(crate) use store::Stamp;
 pub use verify::BlockVerifier;
 pub use writer::{RawWriter, RestartReason, ResumeState};

@@ -1,98 +1,32 @@
 //! The raw store opened for reading.
 
 #[cfg(target_endian = "big")]
-compile_error!("ltm's file formats are little-endian and are mapped directly; big-endian targets are not supported");
+compile_error!("ltm's file formats are little-endian and are read into native values directly; big-endian targets are not supported");
 
 use super::header::{Layout, RawHeader, CRC_CHUNK, HEADER_LEN_V3};
 use super::verify::BlockVerifier;
 use super::writer::non_finite_albedo;
 use crate::dims::Dims;
 use crate::error::{Error, Result};
-use crate::fileio::PositionedIo as _;
+use crate::fileio::{check_regular, read_at, Stamp};
 use crate::limits::{Charge, Limits};
-use crate::mmap;
 use crate::surface::{Surface, SURFACE_RECORD_LEN};
-use memmap2::Mmap;
 use std::fs::File;
-use std::io;
 use std::ops::Range;
 use std::path::{Path, PathBuf};
-use std::time::SystemTime;
-
-/// A file's length and modification time, taken at open and compared after
-/// a run to detect a change of the input while it was read.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub(crate) struct Stamp {
-    pub(super) len: u64,
-    pub(super) modified: Option<SystemTime>,
-}
-
-impl Stamp {
-    /// The stamp of open `file` (named `path` in messages).
-    pub(crate) fn of(file: &File, path: &Path) -> Result<Stamp> {
-        let m = file.metadata().map_err(|e| Error::io(path, e))?;
-        Ok(Stamp {
-            len: m.len(),
-            modified: m.modified().ok(),
-        })
-    }
-
-    /// Fails, saying what changed, when `file` no longer has this stamp:
-    /// a run that read it then writes no output from a changed input.
-    pub(crate) fn check(&self, file: &File, path: &Path) -> Result<()> {
-        let now = Stamp::of(file, path)?;
-        if now == *self {
-            return Ok(());
-        }
-        let detail = if now.len != self.len {
-            format!("its length went from {} to {} bytes", self.len, now.len)
-        } else {
-            "its modification time changed".into()
-        };
-        Err(Error::io(
-            path,
-            io::Error::other(format!(
-                "the file changed while it was read ({detail}); no output is written from a changed input"
-            )),
-        ))
-    }
-}
-
-/// Reads `buf.len()` bytes at `offset` of `file`; a file that ends too early
-/// (truncated since it was opened) is an error that says so.
-pub(super) fn read_at(file: &File, path: &Path, buf: &mut [u8], offset: u64) -> Result<()> {
-    file.read_exact_at(buf, offset).map_err(|e| {
-        if e.kind() != io::ErrorKind::UnexpectedEof {
-            return Error::io(path, e);
-        }
-        let now = file
-            .metadata()
-            .map_or_else(|_| "unknown".into(), |m| m.len().to_string());
-        let end = offset + buf.len() as u64;
-        Error::io(
-            path,
-            io::Error::new(
-                e.kind(),
-                format!("bytes {offset}..{end} lie past the end of the file (now {now} bytes): it was truncated while being read"),
-            ),
-        )
-    })
-}
 
 /// A raw store opened for reading.
 ///
 /// Opening validates the header and reads the block table, the row flags
 /// and the albedo image into memory with positioned reads, checking every
 /// field: block states 0 or 1 (and every block complete), row flags 0 or 1,
-/// finite albedo values. Row data is read on demand, either with
-/// [`RawStore::read_rows`] (positioned reads: a file truncated meanwhile is
-/// an error; what the compressor uses) or with [`RawStore::rows`] (a memory
-/// map: no copy, but a file truncated while mapped raises SIGBUS). Data is
-/// trusted only once its block is verified ([`RawStore::verify_block`],
-/// [`BlockVerifier`]) against the block table read at open.
+/// finite albedo values. Row data is read on demand with positioned reads
+/// ([`RawStore::read_rows`], [`RawStore::row_blocks`]): a file truncated
+/// meanwhile is an error, never a signal. Data is trusted only once its
+/// block is verified ([`RawStore::verify_block`], [`BlockVerifier`])
+/// against the block table read at open.
 pub struct RawStore {
     pub(super) file: File,
-    pub(super) map: Mmap,
     pub(super) header: RawHeader,
     pub(super) layout: Layout,
     pub(super) path: PathBuf,
@@ -120,7 +54,7 @@ impl RawStore {
     /// [`RawStore::open`] with the given limits.
     pub fn open_with_limits(path: &Path, limits: &Limits) -> Result<RawStore> {
         let file = File::open(path).map_err(|e| Error::io(path, e))?;
-        mmap::check_regular(&file).map_err(|e| Error::io(path, e))?;
+        check_regular(&file, path)?;
         let stamp = Stamp::of(&file, path)?;
         let mut head = vec![0u8; stamp.len.min(HEADER_LEN_V3) as usize];
         read_at(&file, path, &mut head, 0)?;
@@ -130,15 +64,14 @@ impl RawStore {
         let flags = read_flags(&file, path, &header, &layout, limits)?;
         let albedo = read_albedo(&file, path, &header, &layout, limits)?;
         let surface = read_surface(&file, path, &header, &layout, limits)?;
-        let map = mmap::map_read(&file).map_err(|e| Error::io(path, e))?;
-        check_length(map.len() as u64, layout.file_len, path)?;
+        // A file truncated or grown while its tables were read.
+        stamp.check_unchanged(&file, path)?;
         let held = 4 * block_crcs.len() + flags.len() + 4 * albedo.as_ref().map_or(0, Vec::len);
         let held = held + surface.as_ref().map_or(0, Surface::heap_bytes);
         let charge = limits.check_alloc("raw store tables", held as u64, 1)?;
         Ok(RawStore {
             _charge: charge,
             file,
-            map,
             header,
             layout,
             path: path.into(),
@@ -196,19 +129,12 @@ impl RawStore {
         )
     }
 
-    /// Rows `range` as one slice of `range.len() · M · C` values, from the
-    /// memory map. Truncating the file while it is mapped raises SIGBUS on
-    /// access: [`RawStore::read_rows`] is the safe way to read.
-    pub fn rows(&self, range: Range<usize>) -> &[f32] {
-        let row_bytes = self.header.dims.row_len() * 4;
-        let start = self.layout.data_offset as usize + range.start * row_bytes;
-        bytemuck::cast_slice(&self.map[start..start + range.len() * row_bytes])
-    }
-
-    /// Row `p`: M·C values, channel-interleaved (memory-mapped, as
-    /// [`RawStore::rows`]).
-    pub fn row(&self, p: usize) -> &[f32] {
-        self.rows(p..p + 1)
+    /// Row `p` (`M·C` values, channel-interleaved) as stored, read with a
+    /// positioned read ([`RawStore::read_rows`]).
+    pub fn read_row(&self, p: usize) -> Result<Vec<f32>> {
+        let mut row = Vec::new();
+        self.read_rows(p..p.saturating_add(1), &mut row)?;
+        Ok(row)
     }
 
     /// True when row `p` is flagged all zero (e.g. a background pixel). The
@@ -261,16 +187,7 @@ impl RawStore {
     /// had when it was opened: a run that read it fails rather than write
     /// an output from an input that changed meanwhile.
     pub fn check_unchanged(&self) -> Result<()> {
-        self.stamp.check(&self.file, &self.path)
-    }
-
-    /// Lets the kernel drop the mapped pages of rows `range` from this
-    /// process (they stay readable), bounding resident memory on long scans
-    /// through [`RawStore::rows`].
-    pub fn release_rows(&self, range: Range<usize>) {
-        let row_bytes = self.header.dims.row_len() * 4;
-        let start = self.layout.data_offset as usize + range.start * row_bytes;
-        mmap::release(&self.map, start, range.len() * row_bytes);
+        self.stamp.check_unchanged(&self.file, &self.path)
     }
 
     /// The first problem of row `p`'s values: a non-finite value, or a value

@@ -93,21 +93,19 @@ fn zstd_raw_to(raw: &RawStore, level: i32, frame_bytes: usize, out: &mut dyn Wri
         let compressed: Vec<Vec<u8>> = group
             .par_iter()
             .map(|r| {
-                let values = raw.rows(r.clone());
-                let mut bytes = Vec::with_capacity(values.len() * 4);
-                for v in values {
-                    bytes.extend_from_slice(&v.to_le_bytes());
-                }
-                let frame = zstd::bulk::compress(&bytes, level)?;
-                raw.release_rows(r.clone());
-                Ok(frame)
+                // Positioned reads: a store truncated meanwhile is an error.
+                let mut values = Vec::new();
+                raw.read_rows(r.clone(), &mut values)?;
+                let bytes: Vec<u8> = values.iter().flat_map(|v| v.to_le_bytes()).collect();
+                Ok(zstd::bulk::compress(&bytes, level)?)
             })
-            .collect::<std::io::Result<_>>()?;
+            .collect::<Result<_>>()?;
         for frame in compressed {
             out.write_all(&frame)?;
             total += frame.len() as u64;
         }
     }
+    raw.check_unchanged()?;
     Ok(total)
 }
 
@@ -201,11 +199,9 @@ mod tests {
             block_bytes(d, 4),
         ))
         .unwrap();
-        let want: Vec<u8> = raw
-            .rows(0..d.pixels())
-            .iter()
-            .flat_map(|v| v.to_le_bytes())
-            .collect();
+        let mut rows = Vec::new();
+        raw.read_rows(0..d.pixels(), &mut rows).unwrap();
+        let want: Vec<u8> = rows.iter().flat_map(|v| v.to_le_bytes()).collect();
         // Frames of 3 rows: several frames, concatenated.
         for frame_bytes in [3 * d.row_len() * 4, ZSTD_FRAME_BYTES] {
             let mut out = Vec::new();

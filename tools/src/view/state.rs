@@ -127,12 +127,11 @@ fn file_name(p: &Path) -> String {
 
 impl ViewFile {
     fn open(path: &Path, limits: &Limits) -> Result<ViewFile> {
-        let relighter = ltm_relight::open(path, limits)
-            .with_context(|| format!("opening {}", path.display()))?;
+        // One read of the file, whose relighter is made last (it takes it).
         let file = LtmFile::open_with_limits(path, limits)
             .with_context(|| format!("opening {}", path.display()))?;
-        let meta = file.meta();
-        let (width, height) = relighter.size();
+        let meta = file.meta().clone();
+        let (width, height) = (meta.dims.width() as usize, meta.dims.height() as usize);
         let texture = meta.dims.rows.is_texture();
         let surface = match (texture, file.surface()) {
             (true, Some(s)) => Some(
@@ -147,9 +146,12 @@ impl ViewFile {
             ),
             _ => None,
         };
+        let bytes = file.file_bytes();
+        let relighter = ltm_relight::open_file(file, limits)
+            .with_context(|| format!("opening {}", path.display()))?;
         let info = FileInfo {
             name: file_name(path),
-            bytes: file.file_bytes(),
+            bytes,
             mode: meta.mode.name().into(),
             matrix_error: f64::from(meta.achieved_error),
             width,

@@ -166,6 +166,8 @@ pub(crate) struct Arena {
     /// The decoded columns' norms, once every column is decoded (for a file
     /// that does not store them).
     decoded_norms: OnceLock<Vec<f32>>,
+    /// Set once every norm the file stores was checked against its column.
+    norms_checked: OnceLock<()>,
 }
 
 impl Arena {
@@ -195,6 +197,7 @@ impl Arena {
             ),
             info: (0..dims.lights()).map(|_| OnceLock::new()).collect(),
             decoded_norms: OnceLock::new(),
+            norms_checked: OnceLock::new(),
         }
     }
 
@@ -276,10 +279,16 @@ impl Arena {
         })
     }
 
-    /// Every column's priority norm: the file's (chunk NORM), else those of
-    /// the decoded columns, which decodes every column the first time.
+    /// Every column's priority norm: the file's (chunk NORM), each checked
+    /// against its decoded column before the first use (so no light is
+    /// ranked by an unchecked norm), else those of the decoded columns;
+    /// either way every column is decoded the first time.
     pub fn norms<'a>(&'a self, file: &'a LtmFile, decoder: &ColumnDecoder) -> Result<&'a [f32]> {
         if let Some(n) = file.column_norms() {
+            if self.norms_checked.get().is_none() {
+                decoder.check_stored_norms(file)?;
+                let _ = self.norms_checked.set(());
+            }
             return Ok(n);
         }
         if let Some(n) = self.decoded_norms.get() {

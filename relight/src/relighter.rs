@@ -154,8 +154,6 @@ impl Relighter {
         let n = dims.face_res() as usize;
         file.check_column_crcs()?;
         let decoder = ColumnDecoder::for_file(&file, limits)?;
-        // No light is ever ranked by a stored norm that was not checked.
-        decoder.check_stored_norms(&file)?;
         let arena_charge = arena.join(index).join(maps).join(per_light);
         let arena = Arena::new(&file, &decoder);
         Ok(Relighter {

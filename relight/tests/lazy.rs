@@ -184,11 +184,12 @@ fn chunk(bytes: &[u8], tag: &[u8; 4]) -> (usize, usize) {
 }
 
 /// A NORM entry understated or overstated (checksums repaired) is refused
-/// at open, with the column, the stored and the decoded norm: an
-/// understated norm would push its light out of a transport-weighted top N,
-/// where no frame decodes (and so checks) its column.
+/// before the first transport-weighted frame ranks a light, with the
+/// column, the stored and the decoded norm: an understated norm would push
+/// its light out of a transport-weighted top N, where no frame decodes (and
+/// so checks) its column. Frames that do not read the norms still work.
 #[test]
-fn a_stored_norm_that_disagrees_with_its_column_is_refused_at_open() {
+fn a_stored_norm_that_disagrees_with_its_column_is_refused_before_ranking() {
     let dir = tempfile::tempdir().unwrap();
     let path = file(dir.path());
     let good = std::fs::read(&path).unwrap();
@@ -198,6 +199,7 @@ fn a_stored_norm_that_disagrees_with_its_column_is_refused_at_open() {
     let (at, _) = chunk(&good, b"NORM");
     let o = at + 4 * j;
     let norm = f32::from_le_bytes(good[o..o + 4].try_into().unwrap());
+    let request = |weighting| Request { terms: 1, weighting };
     for factor in [0.5f32, 2.0, 1.0 + f32::EPSILON] {
         let mut bytes = good.clone();
         let wrong = norm * factor;
@@ -205,27 +207,25 @@ fn a_stored_norm_that_disagrees_with_its_column_is_refused_at_open() {
         ltm_codec::container::repair_checksums(&mut bytes);
         // The container alone accepts it (a norm is a finite value ≥ 0) ...
         let file = LtmFile::from_bytes(bytes.clone(), &limits).unwrap();
-        // ... the relighter, through either door, does not.
-        let err = Relighter::new(file, &limits).err().unwrap().to_string();
+        let r = Relighter::new(file, &limits).unwrap();
+        let light = lighting(r.lights(), 1);
+        let mut f = r.frame().unwrap();
+        r.relight(&light, &request(Weighting::Unweighted), &mut f).unwrap();
+        // ... a transport-weighted frame does not rank by it.
+        let err = r.relight(&light, &request(Weighting::Transport), &mut f);
+        let err = err.err().unwrap().to_string();
         assert!(
-            err.contains(&format!("column {j}:"))
+            err.contains("NORM")
+                && err.contains(&format!("column {j}:"))
                 && err.contains(&format!("{wrong:e}"))
                 && err.contains(&format!("{norm:e}")),
             "{err}"
         );
-        let bad = dir.path().join("bad.ltm");
-        std::fs::write(&bad, &bytes).unwrap();
-        let err = ltm_relight::open(bad.as_path(), &limits)
-            .err()
-            .unwrap()
-            .to_string();
-        assert!(
-            err.contains("NORM") && err.contains(&format!("column {j}:")),
-            "{err}"
-        );
     }
-    // The file as written opens.
-    Relighter::new(LtmFile::from_bytes(good, &limits).unwrap(), &limits).unwrap();
+    // The file as written relights by transport.
+    let r = Relighter::new(LtmFile::from_bytes(good, &limits).unwrap(), &limits).unwrap();
+    let light = lighting(r.lights(), 1);
+    r.relight(&light, &request(Weighting::Transport), &mut r.frame().unwrap()).unwrap();
 }
 
 /// A payload byte flipped (its CRC not repaired) is refused at open, before

@@ -369,7 +369,6 @@ fn import_npy_inner(
     Ok(dims)
 }
 
-
 /// Decodes a whole `.ltm` file to the pixel lighting basis: `P × M × C`
 /// values, C order. The dense matrix must fit `limits`.
 pub fn decode_matrix(file: &LtmFile, limits: &Limits) -> Result<Vec<f32>> {

@@ -199,7 +199,10 @@ fn a_stored_norm_that_disagrees_with_its_column_is_refused_before_ranking() {
     let (at, _) = chunk(&good, b"NORM");
     let o = at + 4 * j;
     let norm = f32::from_le_bytes(good[o..o + 4].try_into().unwrap());
-    let request = |weighting| Request { terms: 1, weighting };
+    let request = |weighting| Request {
+        terms: 1,
+        weighting,
+    };
     for factor in [0.5f32, 2.0, 1.0 + f32::EPSILON] {
         let mut bytes = good.clone();
         let wrong = norm * factor;
@@ -210,7 +213,8 @@ fn a_stored_norm_that_disagrees_with_its_column_is_refused_before_ranking() {
         let r = Relighter::new(file, &limits).unwrap();
         let light = lighting(r.lights(), 1);
         let mut f = r.frame().unwrap();
-        r.relight(&light, &request(Weighting::Unweighted), &mut f).unwrap();
+        r.relight(&light, &request(Weighting::Unweighted), &mut f)
+            .unwrap();
         // ... a transport-weighted frame does not rank by it.
         let err = r.relight(&light, &request(Weighting::Transport), &mut f);
         let err = err.err().unwrap().to_string();
@@ -225,7 +229,12 @@ fn a_stored_norm_that_disagrees_with_its_column_is_refused_before_ranking() {
     // The file as written relights by transport.
     let r = Relighter::new(LtmFile::from_bytes(good, &limits).unwrap(), &limits).unwrap();
     let light = lighting(r.lights(), 1);
-    r.relight(&light, &request(Weighting::Transport), &mut r.frame().unwrap()).unwrap();
+    r.relight(
+        &light,
+        &request(Weighting::Transport),
+        &mut r.frame().unwrap(),
+    )
+    .unwrap();
 }
 
 /// A payload byte flipped (its CRC not repaired) is refused at open, before

@@ -5,10 +5,7 @@
 //! command that reads an `.ltm` file; and `ltm view` makes the first frame
 //! of a small pca file.
 
-use ltm_codec::column::{EncodedColumn, SparseColumn};
-use ltm_codec::compress::Mode;
-use ltm_codec::container::{LtmWriter, Meta};
-use ltm_codec::{compress_pca, Dims, Filter, PcaOptions, RawHeader, RawStore, RawWriter};
+use ltm_codec::{compress_pca, Dims, PcaOptions, RawHeader, RawStore, RawWriter};
 use std::io::{BufRead, BufReader, Read, Write};
 use std::net::TcpStream;
 use std::path::{Path, PathBuf};
@@ -33,43 +30,6 @@ fn ltm(limited: bool, args: &[&str]) -> Command {
     };
     c.arg("-c").arg(script).arg(bin).args(args);
     c
-}
-
-/// An 8192² grey image file of six lights (face resolution 1), one
-/// coefficient per column: a few hundred bytes.
-fn claims_8192(dir: &Path) -> PathBuf {
-    let dims = Dims::image(8192, 8192, 1, 1);
-    let meta = Meta {
-        dims,
-        mode: Mode::Adaptive,
-        row_filter: Filter::Haar,
-        col_filter: Filter::LeGall53,
-        bits: 12,
-        seed: 0,
-        target_error: 0.1,
-        achieved_error: 0.1,
-        terms: 0,
-        norm: 1.0,
-    };
-    let path = dir.join("claims-8192.ltm");
-    let mut writer = LtmWriter::create(&path, meta, None).unwrap();
-    let columns = (0..dims.lights())
-        .map(|j| {
-            let col = SparseColumn {
-                depth: 0,
-                // Scale 2^((32768 − 32768)/256) = 1.
-                scale_codes: vec![32768],
-                indices: vec![j as u32],
-                values: vec![100],
-            };
-            EncodedColumn::new(&col, 1, 3)
-        })
-        .collect();
-    writer.push_columns(0, columns).unwrap();
-    writer.finish(0.1).unwrap();
-    let len = std::fs::metadata(&path).unwrap().len();
-    assert!(len < 1024, "the crafted file has {len} bytes");
-    path
 }
 
 /// A small valid pca file (12×10 pixels, 6·2² lights, rank 4).
@@ -229,7 +189,7 @@ fn assert_view_clean(result: Result<(u16, String), Output>, what: &str, refused:
 /// or with the default settings.
 fn claims_8192_everywhere(limited: bool) {
     let dir = tempfile::tempdir().unwrap();
-    let file = claims_8192(dir.path());
+    let file = ltm_testkit::ltm_claiming_8192(dir.path());
     let out = dir.path().join("out");
     std::fs::create_dir(&out).unwrap();
     for (what, output) in run_commands(limited, &file, &out) {
@@ -298,7 +258,7 @@ fn max_memory_overrides_the_default_budget() {
     let args = ["export", f, "-o", "x.npy"];
     let ok = ltm(false, &args).current_dir(dir.path()).output().unwrap();
     assert_eq!(ok.status.code(), Some(0), "{ok:?}");
-    let big = claims_8192(dir.path());
+    let big = ltm_testkit::ltm_claiming_8192(dir.path());
     let args = [
         "--max-memory",
         "1M",

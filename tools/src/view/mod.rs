@@ -38,12 +38,14 @@
 
 mod http;
 pub mod params;
+mod server;
 mod state;
 
 use crate::common::{check_files, map_files, Ctx};
-use anyhow::{bail, Context, Result};
+use anyhow::{Context, Result};
 use clap::Args;
-use std::net::{IpAddr, Ipv4Addr, SocketAddr};
+use std::io::Write;
+use std::net::{IpAddr, Ipv4Addr, Ipv6Addr, SocketAddr, TcpListener};
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
 
@@ -116,30 +118,51 @@ pub fn run(a: ViewArgs, ctx: &Ctx) -> Result<()> {
         a.slots as usize,
         ctx.limits(),
     )?);
+    serve(&a, viewer)
+}
+
+/// The URL that reaches a server listening on `addr`: the address itself,
+/// or this machine's loopback address for an unspecified one (0.0.0.0,
+/// `::`, which take connections to every address of the machine).
+pub fn url_of(addr: SocketAddr) -> String {
+    let ip = match addr.ip() {
+        IpAddr::V4(v4) if v4.is_unspecified() => IpAddr::V4(Ipv4Addr::LOCALHOST),
+        IpAddr::V6(v6) if v6.is_unspecified() => IpAddr::V6(Ipv6Addr::LOCALHOST),
+        ip => ip,
+    };
+    format!("http://{}/", SocketAddr::new(ip, addr.port()))
+}
+
+/// Ignores SIGPIPE (which `main` sets to end the process): a closed
+/// standard output (`ltm view … | true`) or a client gone mid-answer must
+/// not end the server; writes fail with `EPIPE` instead.
+#[cfg(unix)]
+fn survive_closed_pipes() {
+    // SAFETY: sets the signal's disposition to "ignore"; no handler runs,
+    // and nothing else in the process changes SIGPIPE's disposition.
+    unsafe {
+        libc::signal(libc::SIGPIPE, libc::SIG_IGN);
+    }
+}
+
+/// Binds, says where (standard output and standard error) and serves.
+fn serve(a: &ViewArgs, viewer: Arc<state::Viewer>) -> Result<()> {
+    #[cfg(unix)]
+    survive_closed_pipes();
     let ip = a.bind.unwrap_or(IpAddr::V4(Ipv4Addr::LOCALHOST));
-    let loopback = ip.is_loopback();
-    if a.bind.is_some() && !loopback {
+    if a.bind.is_some() && !ip.is_loopback() {
         eprintln!("warning: serving on {ip}, reachable from other machines (--bind)");
     }
-    let server = tiny_http::Server::http(SocketAddr::new(ip, a.port))
-        .map_err(|e| anyhow::anyhow!("cannot listen on {ip}:{}: {e}", a.port))?;
-    let Some(addr) = server.server_addr().to_ip() else {
-        bail!("the server has no IP address");
+    let listener = TcpListener::bind(SocketAddr::new(ip, a.port))
+        .with_context(|| format!("cannot listen on {}", SocketAddr::new(ip, a.port)))?;
+    let addr = listener
+        .local_addr()
+        .context("reading the listening address")?;
+    let hosts = http::HostCheck::for_bind(ip);
+    let limits = server::Limits {
+        connections: server::connection_capacity(),
+        jobs: a.slots as usize + server::JOB_QUEUE,
     };
-    let server = Arc::new(server);
-    // Workers answer requests; frames beyond the slots get 503 at once, so
-    // a few more workers than slots keep the page and info responsive.
-    let workers = a.slots as usize + 4;
-    let mut handles = Vec::new();
-    for i in 0..workers {
-        let (s, v) = (server.clone(), viewer.clone());
-        handles.push(
-            std::thread::Builder::new()
-                .name(format!("view-{i}"))
-                .spawn(move || http::serve(&s, &v, loopback))
-                .context("starting a worker thread")?,
-        );
-    }
     // Wavelet files decode each column when a frame first needs it; the
     // rest are decoded here meanwhile, so that later frames only relight.
     let v = viewer.clone();
@@ -147,11 +170,12 @@ pub fn run(a: ViewArgs, ctx: &Ctx) -> Result<()> {
         .name("view-preload".into())
         .spawn(move || v.preload())
         .context("starting the preload thread")?;
-    println!("http://{addr}/");
-    use std::io::Write;
-    let _ = std::io::stdout().flush();
+    let url = url_of(addr);
+    // Standard output may be closed: the URL also goes to standard error.
+    let mut out = std::io::stdout();
+    let _ = writeln!(out, "{url}").and_then(|_| out.flush());
     eprintln!(
-        "ltm view: {} file(s), {} map(s){}; Ctrl-C to stop",
+        "ltm view: {url} ({} file(s), {} map(s){}); Ctrl-C to stop",
         viewer.files.len(),
         viewer.map_count(),
         if viewer.has_reference() {
@@ -160,8 +184,15 @@ pub fn run(a: ViewArgs, ctx: &Ctx) -> Result<()> {
             ""
         }
     );
-    for h in handles {
-        let _ = h.join();
-    }
-    Ok(())
+    eprintln!("ltm view: {}", hosts.describe());
+    eprintln!(
+        "ltm view: limits: {} connections, {} s to send a request head, {} KiB per head, \
+{} frames at once and {} waiting",
+        limits.connections,
+        server::HEADER_TIMEOUT.as_secs(),
+        server::MAX_HEAD / 1024,
+        a.slots,
+        server::JOB_QUEUE
+    );
+    server::serve(listener, viewer, hosts, limits)
 }

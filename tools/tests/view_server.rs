@@ -144,8 +144,16 @@ fn a_256_mib_header_is_cut_off() {
         }
     };
     let e = cut.expect("the server read a 256 MiB header");
-    assert_ne!(e.kind(), ErrorKind::WouldBlock, "the server stopped reading without closing");
-    assert_ne!(e.kind(), ErrorKind::TimedOut, "the server stopped reading without closing");
+    assert_ne!(
+        e.kind(),
+        ErrorKind::WouldBlock,
+        "the server stopped reading without closing"
+    );
+    assert_ne!(
+        e.kind(),
+        ErrorKind::TimedOut,
+        "the server stopped reading without closing"
+    );
     let mut answer = Vec::new();
     let _ = s.read_to_end(&mut answer);
     let answer = String::from_utf8_lossy(&answer);
@@ -156,7 +164,10 @@ fn a_256_mib_header_is_cut_off() {
     let peak = peak_rss(srv.pid());
     println!("cut after {sent} bytes; peak RSS {before} before, {peak} after");
     assert!(peak < 200 << 20, "peak RSS {peak} bytes");
-    assert!(peak < before + (64 << 20), "peak RSS {before} -> {peak} bytes");
+    assert!(
+        peak < before + (64 << 20),
+        "peak RSS {before} -> {peak} bytes"
+    );
     assert_answering(&mut srv);
 }
 
@@ -232,7 +243,12 @@ fn a_flood_of_frames_is_shed_and_nothing_hangs() {
     assert_eq!(ok + busy, statuses.len(), "{statuses:?}");
     assert!(ok > 0);
     assert_answering(&mut srv);
-    let (status, _) = get_within(&srv.addr, "localhost", "/api/frame?file=0&map=0&n=4", LIVENESS);
+    let (status, _) = get_within(
+        &srv.addr,
+        "localhost",
+        "/api/frame?file=0&map=0&n=4",
+        LIVENESS,
+    );
     assert_eq!(status, 200);
 }
 
@@ -305,7 +321,9 @@ fn connections_beyond_the_limit_get_503_and_the_server_recovers() {
     let (lines, addr) = srv.stderr_url();
     let limit_line = lines.last().unwrap();
     assert!(limit_line.contains("150 connections"), "{lines:?}");
-    let held: Vec<TcpStream> = (0..150).map(|_| TcpStream::connect(&addr).unwrap()).collect();
+    let held: Vec<TcpStream> = (0..150)
+        .map(|_| TcpStream::connect(&addr).unwrap())
+        .collect();
     // Wait until the server has taken them all: then the next is refused.
     let deadline = Instant::now() + Duration::from_secs(5);
     let refused = loop {
@@ -368,5 +386,8 @@ fn a_closed_standard_output_does_not_stop_the_server() {
     let (_, addr) = srv.stderr_url();
     let (status, _) = get_within(&addr, "localhost", "/", LIVENESS);
     assert_eq!(status, 200);
-    assert!(srv.alive(), "ltm view ended when its standard output was closed");
+    assert!(
+        srv.alive(),
+        "ltm view ended when its standard output was closed"
+    );
 }

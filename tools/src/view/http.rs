@@ -310,3 +310,37 @@ fn surface(viewer: &Viewer, f: usize) -> Reply {
     out.extend(s.iter().map(|(_, v)| u8::from(*v)));
     body(out, "application/octet-stream")
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn allows(check: &HostCheck, host: &str) -> bool {
+        check.allows(Some(&HeaderValue::from_str(host).unwrap()))
+    }
+
+    #[test]
+    fn host_check_allows_local_names_and_the_bound_address() {
+        let c = HostCheck::for_bind("127.0.0.2".parse().unwrap());
+        for h in [
+            "localhost",
+            "LOCALHOST:8080",
+            "127.0.0.1:1",
+            "[::1]:80",
+            "127.0.0.2:9",
+        ] {
+            assert!(allows(&c, h), "{h}");
+        }
+        for h in ["evil.example", "127.0.0.3:80", "localhost.evil:80", "[::2]"] {
+            assert!(!allows(&c, h), "{h}");
+        }
+        assert!(c.allows(None));
+        let v6 = HostCheck::for_bind("::1".parse().unwrap());
+        assert!(allows(&v6, "[::1]:8080") && !allows(&v6, "evil"));
+        assert!(v6
+            .describe()
+            .ends_with("Host is localhost, 127.0.0.1, [::1] (any port); other hosts get 403"));
+        let any = HostCheck::for_bind("0.0.0.0".parse().unwrap());
+        assert!(allows(&any, "evil.example"));
+    }
+}

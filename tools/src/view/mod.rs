@@ -61,7 +61,14 @@ the weighting, exposure and tone mapping, and readouts of the server's frame tim
 round trip, lights used and nonzeros touched. With two files they are shown side by side \
 (or under a split slider). With --reference, the exact image T·L can be shown and the \
 frame's error against it is read out. Texture-space files are drawn as their mesh in WebGL \
-with an orbit camera."
+with an orbit camera.
+
+Limits: at most 4096 connections at once (fewer where the open-file limit is lower: the \
+limit less 256; it is raised toward the hard limit first), one beyond gets 503; 5 s to send \
+a request's head (idle and half-open connections close then); 32 KiB per request head \
+(more gets 431); 10 s for a write that makes no progress; --slots frames at once (more get \
+503 at once). The URL is printed on standard output and standard error; a closed standard \
+output does not stop the server."
 )]
 pub struct ViewArgs {
     /// One or two compressed matrices (two are compared side by side).
@@ -78,10 +85,13 @@ pub struct ViewArgs {
     #[arg(long, default_value_t = 8080)]
     pub port: u16,
     /// Address to listen on. The default serves only this machine; any
-    /// other address must be given here explicitly.
+    /// other address must be given here explicitly. A loopback address
+    /// answers only requests whose Host is localhost, 127.0.0.1, [::1] or
+    /// itself; another answers any Host (0.0.0.0 prints the 127.0.0.1 URL).
     #[arg(long, value_name = "ADDR")]
     pub bind: Option<IpAddr>,
-    /// Frames computed at once (more concurrent frame requests get 503).
+    /// Frames computed at once (more concurrent frame requests get 503;
+    /// at most slots + 4 frame requests are handled at once).
     #[arg(long, default_value_t = 2, value_parser = clap::value_parser!(u16).range(1..=64))]
     pub slots: u16,
 }
@@ -187,12 +197,26 @@ fn serve(a: &ViewArgs, viewer: Arc<state::Viewer>) -> Result<()> {
     eprintln!("ltm view: {}", hosts.describe());
     eprintln!(
         "ltm view: limits: {} connections, {} s to send a request head, {} KiB per head, \
-{} frames at once and {} waiting",
+{} s for a stalled write, {} frames at once",
         limits.connections,
         server::HEADER_TIMEOUT.as_secs(),
         server::MAX_HEAD / 1024,
+        server::WRITE_STALL.as_secs(),
         a.slots,
-        server::JOB_QUEUE
     );
     server::serve(listener, viewer, hosts, limits)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::url_of;
+
+    #[test]
+    fn url_of_an_unspecified_address_is_loopback() {
+        let u = |s: &str| url_of(s.parse().unwrap());
+        assert_eq!(u("0.0.0.0:8080"), "http://127.0.0.1:8080/");
+        assert_eq!(u("[::]:80"), "http://[::1]:80/");
+        assert_eq!(u("127.0.0.2:9"), "http://127.0.0.2:9/");
+        assert_eq!(u("[::1]:9"), "http://[::1]:9/");
+    }
 }

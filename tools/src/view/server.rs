@@ -12,9 +12,10 @@
 //! - memory: a request head (request line and headers) of more than
 //!   [`MAX_HEAD`] bytes gets 431 and the connection is closed, so a client
 //!   costs at most that buffer;
-//! - work: frames and exact images run on a blocking pool of
-//!   [`Limits::jobs`] threads; a frame request beyond them gets 503 at once
-//!   (load shedding), never a place in an unbounded queue;
+//! - work: frames and exact images run on a blocking pool of at most
+//!   [`Limits::jobs`] threads (`--slots` + [`JOB_QUEUE`]); a frame request
+//!   beyond them gets 503 at once (load shedding), never a place in an
+//!   unbounded queue, and one beyond the `Viewer`'s slots gets 503 there;
 //! - failures: an `accept` that fails (out of file descriptors or memory)
 //!   is reported once per run of failures and retried after
 //!   [`ACCEPT_PAUSE`]; nothing here panics on I/O, and a panic while
@@ -54,7 +55,8 @@ pub const MAX_CONNECTIONS: usize = 4096;
 /// File descriptors kept for everything but connections (files, maps,
 /// threads, the listener, refusals).
 pub const FD_RESERVE: u64 = 256;
-/// Frame requests that may wait for a frame slot beyond those running.
+/// Frame requests handled at once beyond the frame slots (they are
+/// answered 204 or 503 by the `Viewer` without waiting).
 pub const JOB_QUEUE: usize = 4;
 /// Pause after a failed `accept` (out of file descriptors or memory).
 pub const ACCEPT_PAUSE: Duration = Duration::from_millis(100);
@@ -169,6 +171,9 @@ async fn accept_loop(listener: TcpListener, shared: Arc<Shared>, connections: us
     h1.timer(TokioTimer::new())
         .header_read_timeout(HEADER_TIMEOUT)
         .max_buf_size(MAX_HEAD)
+        // A client may shut its side down after sending its request and
+        // still be answered.
+        .half_close(true)
         .title_case_headers(true);
     let h1 = Arc::new(h1);
     let open = Arc::new(Semaphore::new(connections));
@@ -284,7 +289,11 @@ impl WriteStall {
 
     /// Passes a write's result on, starting the stall clock while it is
     /// pending and failing once the clock runs out.
-    fn watch<T>(&mut self, cx: &mut TaskContext<'_>, r: Poll<io::Result<T>>) -> Poll<io::Result<T>> {
+    fn watch<T>(
+        &mut self,
+        cx: &mut TaskContext<'_>,
+        r: Poll<io::Result<T>>,
+    ) -> Poll<io::Result<T>> {
         if r.is_ready() {
             self.stall = None;
             return r;
@@ -344,5 +353,24 @@ impl AsyncWrite for WriteStall {
     fn poll_shutdown(mut self: Pin<&mut Self>, cx: &mut TaskContext<'_>) -> Poll<io::Result<()>> {
         let r = Pin::new(&mut self.io).poll_shutdown(cx);
         self.watch(cx, r)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn refusal_is_well_formed() {
+        let text = std::str::from_utf8(REFUSAL).unwrap();
+        let (head, body) = text.split_once("\r\n\r\n").unwrap();
+        assert!(head.contains(&format!("Content-Length: {}", body.len())));
+        assert_eq!(body, "busy: too many connections; try again\n");
+    }
+
+    #[test]
+    fn capacity_is_bounded() {
+        let c = connection_capacity();
+        assert!((1..=MAX_CONNECTIONS).contains(&c), "{c}");
     }
 }

@@ -86,7 +86,7 @@ pub struct ViewArgs {
     pub port: u16,
     /// Address to listen on. The default serves only this machine; any
     /// other address must be given here explicitly. A loopback address
-    /// answers only requests whose Host is localhost, 127.0.0.1, [::1] or
+    /// answers only requests whose Host is localhost, 127.0.0.1, ::1 or
     /// itself; another answers any Host (0.0.0.0 prints the 127.0.0.1 URL).
     #[arg(long, value_name = "ADDR")]
     pub bind: Option<IpAddr>,

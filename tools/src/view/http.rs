@@ -1,13 +1,18 @@
-//! Routing and responses over tiny_http: every request is answered, bad
-//! ones with a 4xx status and a one-line message.
+//! Routing and responses: every request is answered, bad ones with a 4xx
+//! status and a one-line message. Routing is cheap and runs on the server's
+//! I/O threads; frames and exact images are returned as a [`Job`] that the
+//! server runs on its bounded blocking pool (`server.rs`).
 
 use super::params::{self, BadRequest, Bounds, FrameParams};
 use super::state::{FrameError, FrameOut, Viewer};
 use half::f16;
+use http_body_util::Full;
+use hyper::body::Bytes;
+use hyper::header::{HeaderName, HeaderValue};
+use hyper::{Method, Response, StatusCode};
 use ltm_relight::Image;
-use std::io::Cursor;
+use std::net::IpAddr;
 use std::time::Instant;
-use tiny_http::{Header, Method, Request, Response, Server, StatusCode};
 
 /// The page and its script, embedded so that the viewer works offline.
 const PAGE: &str = include_str!("page.html");
@@ -19,18 +24,37 @@ pub const FRAME_MAGIC: &[u8; 4] = b"LTMF";
 pub const FORMAT_RGB_F16: u32 = 1;
 /// Magic of a binary surface (geometry image).
 pub const SURFACE_MAGIC: &[u8; 4] = b"LTMS";
+/// The answer to a frame when every frame slot and queue place is taken.
+pub const BUSY: &str = "busy: every frame slot is taken; try again";
 
-type Reply = Response<Cursor<Vec<u8>>>;
+/// A complete response.
+pub type Reply = Response<Full<Bytes>>;
 
-fn header(name: &str, value: &str) -> Header {
-    // Names and values are ours (ASCII); a failure here is a bug.
-    Header::from_bytes(name.as_bytes(), value.as_bytes()).expect("ASCII header")
+/// Adds a header; names and values are ours (ASCII), so neither fails, and
+/// one that did would be left out rather than bring anything down.
+fn with_header(mut r: Reply, name: &str, value: &str) -> Reply {
+    if let (Ok(n), Ok(v)) = (
+        HeaderName::from_bytes(name.as_bytes()),
+        HeaderValue::from_str(value),
+    ) {
+        r.headers_mut().append(n, v);
+    }
+    r
 }
 
-fn text(status: u16, msg: &str) -> Reply {
-    Response::from_data(format!("{msg}\n").into_bytes())
-        .with_status_code(StatusCode(status))
-        .with_header(header("Content-Type", "text/plain; charset=utf-8"))
+fn with_status(data: Vec<u8>, status: u16) -> Reply {
+    let mut r = Response::new(Full::new(Bytes::from(data)));
+    *r.status_mut() = StatusCode::from_u16(status).unwrap_or(StatusCode::INTERNAL_SERVER_ERROR);
+    r
+}
+
+/// A status with a one-line text message.
+pub fn text(status: u16, msg: &str) -> Reply {
+    with_header(
+        with_status(format!("{msg}\n").into_bytes(), status),
+        "Content-Type",
+        "text/plain; charset=utf-8",
+    )
 }
 
 fn bad(e: BadRequest) -> Reply {
@@ -38,77 +62,138 @@ fn bad(e: BadRequest) -> Reply {
 }
 
 fn body(data: Vec<u8>, content_type: &str) -> Reply {
-    Response::from_data(data)
-        .with_header(header("Content-Type", content_type))
-        .with_header(header("Cache-Control", "no-store"))
+    let r = with_header(with_status(data, 200), "Content-Type", content_type);
+    with_header(r, "Cache-Control", "no-store")
 }
 
-/// Serves requests until the server is dropped; one call per worker
-/// thread, so that the worker count bounds the requests handled at once
-/// (tiny_http holds the others until a worker is free).
-pub fn serve(server: &Server, viewer: &Viewer, loopback: bool) {
-    loop {
-        let request = match server.recv() {
-            Ok(r) => r,
-            Err(_) => continue,
+/// The answer to a bug of ours (a panic while answering).
+pub fn internal() -> Reply {
+    text(500, "internal error")
+}
+
+/// Which `Host` headers are answered. A loopback server answers only names
+/// of this machine (which guards it against pages of other sites reaching
+/// it through DNS rebinding): `localhost`, `127.0.0.1`, `[::1]` and the
+/// bound address itself, with any port. A server bound to another address
+/// is reachable from other machines by their names for it: any Host.
+#[derive(Clone, Debug)]
+pub struct HostCheck(Option<Vec<String>>);
+
+impl HostCheck {
+    /// The check for a server bound to `ip`.
+    pub fn for_bind(ip: IpAddr) -> HostCheck {
+        if !ip.is_loopback() {
+            return HostCheck(None);
+        }
+        let mut names: Vec<String> = ["localhost", "127.0.0.1", "[::1]"].map(String::from).into();
+        let own = match ip {
+            IpAddr::V4(v4) => v4.to_string(),
+            IpAddr::V6(v6) => format!("[{v6}]"),
         };
-        // A bug must not take a worker down with it: it becomes a 500.
-        let reply = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| {
-            route(&request, viewer, loopback)
-        }))
-        .unwrap_or_else(|_| text(500, "internal error"));
-        // A client that went away is not an error of ours.
-        let _ = request.respond(reply);
+        if !names.contains(&own) {
+            names.push(own);
+        }
+        HostCheck(Some(names))
+    }
+
+    /// Whether a request with this Host header (none: HTTP/1.0) is answered.
+    pub fn allows(&self, host: Option<&HeaderValue>) -> bool {
+        let Some(names) = &self.0 else {
+            return true;
+        };
+        let Some(h) = host else {
+            return true;
+        };
+        let Ok(host) = h.to_str() else {
+            return false;
+        };
+        let name = match host.rfind(':') {
+            Some(i) if !host.ends_with(']') => &host[..i],
+            _ => host,
+        };
+        names.iter().any(|n| n.eq_ignore_ascii_case(name))
+    }
+
+    /// One line saying what the check allows.
+    pub fn describe(&self) -> String {
+        match &self.0 {
+            Some(names) => format!(
+                "answers requests whose Host is {} (any port); other hosts get 403",
+                names.join(", ")
+            ),
+            None => "answers requests for any Host (bound to an address other machines reach)"
+                .to_string(),
+        }
     }
 }
 
-/// Whether the Host header names this machine (guards a loopback server
-/// against pages of other sites reaching it through DNS rebinding).
-fn local_host(request: &Request) -> bool {
-    let Some(h) = request.headers().iter().find(|h| h.field.equiv("Host")) else {
-        return true;
-    };
-    let host = h.value.as_str();
-    let name = match host.rfind(':') {
-        Some(i) if !host.ends_with(']') => &host[..i],
-        _ => host,
-    };
-    matches!(name, "127.0.0.1" | "localhost" | "[::1]")
+/// A request's heavy part, run on the server's blocking pool.
+pub enum Job {
+    /// `/api/frame`.
+    Frame(FrameParams),
+    /// `/api/exact`.
+    Exact(FrameParams),
 }
 
-fn route(request: &Request, viewer: &Viewer, loopback: bool) -> Reply {
-    let url = request.url();
+impl Job {
+    /// Makes the frame (or exact image) and its reply.
+    pub fn run(&self, viewer: &Viewer) -> Reply {
+        match self {
+            Job::Frame(p) => frame(viewer, p),
+            Job::Exact(p) => exact(viewer, p),
+        }
+    }
+}
+
+/// What a request needs: an answer now, or a job.
+pub enum Routed {
+    /// Answered.
+    Reply(Reply),
+    /// To be run on the blocking pool.
+    Job(Job),
+}
+
+/// Routes a request (`url`: its target as sent, path and query) and
+/// answers what needs no relighting.
+pub fn route(
+    method: &Method,
+    url: &str,
+    host: Option<&HeaderValue>,
+    viewer: &Viewer,
+    hosts: &HostCheck,
+) -> Routed {
     if url.len() > params::MAX_URL {
-        return text(
+        return Routed::Reply(text(
             414,
             &format!(
                 "request target of {} bytes (valid: at most {})",
                 url.len(),
                 params::MAX_URL
             ),
-        );
+        ));
     }
-    if *request.method() != Method::Get {
-        return text(405, "only GET is served");
+    if *method != Method::GET {
+        return Routed::Reply(text(405, "only GET is served"));
     }
-    if loopback && !local_host(request) {
-        return text(403, "this server answers only requests to localhost");
+    if !hosts.allows(host) {
+        return Routed::Reply(text(403, "this server answers only requests to localhost"));
     }
     let (path, query) = url.split_once('?').unwrap_or((url, ""));
     let b = Bounds {
         files: viewer.files.len(),
         maps: viewer.map_count(),
     };
-    match path {
+    let terms = |f: usize| viewer.files[f].info.max_terms;
+    Routed::Reply(match path {
         "/" | "/index.html" => body(PAGE.as_bytes().to_vec(), "text/html; charset=utf-8"),
         "/view.js" => body(SCRIPT.as_bytes().to_vec(), "text/javascript; charset=utf-8"),
         "/api/info" => no_query(query).map_or_else(bad, |_| info(viewer)),
-        "/api/frame" => match params::frame(query, &b, &|f| viewer.files[f].info.max_terms) {
-            Ok(p) => frame(viewer, &p),
+        "/api/frame" => match params::frame(query, &b, &terms) {
+            Ok(p) => return Routed::Job(Job::Frame(p)),
             Err(e) => bad(e),
         },
-        "/api/exact" => match params::frame(query, &b, &|f| viewer.files[f].info.max_terms) {
-            Ok(p) => exact(viewer, &p),
+        "/api/exact" => match params::frame(query, &b, &terms) {
+            Ok(p) => return Routed::Job(Job::Exact(p)),
             Err(e) => bad(e),
         },
         "/api/surface" => match params::parse_query(query, &["file"])
@@ -118,7 +203,7 @@ fn route(request: &Request, viewer: &Viewer, loopback: bool) -> Reply {
             Err(e) => bad(e),
         },
         _ => text(404, "not found"),
-    }
+    })
 }
 
 fn no_query(q: &str) -> Result<(), BadRequest> {
@@ -154,8 +239,8 @@ pub fn encode_frame(image: &Image) -> Vec<u8> {
 
 fn frame_error(e: FrameError) -> Reply {
     match e {
-        FrameError::Stale => text(204, "").with_header(header("X-Stale", "1")),
-        FrameError::Busy => text(503, "busy: every frame slot is taken; try again"),
+        FrameError::Stale => with_header(text(204, ""), "X-Stale", "1"),
+        FrameError::Busy => text(503, BUSY),
         FrameError::Bad(m) => text(400, &m),
         FrameError::Internal(m) => text(500, &m),
     }
@@ -166,13 +251,13 @@ fn ms(d: std::time::Duration) -> String {
 }
 
 fn frame_reply(f: &FrameOut, image: &Image) -> Reply {
-    let mut r = body(encode_frame(image), "application/octet-stream")
-        .with_header(header("X-Frame-Ms", &ms(f.frame_time)))
-        .with_header(header("X-Resample-Ms", &ms(f.resample_time)))
-        .with_header(header("X-Lights", &f.stats.lights.to_string()))
-        .with_header(header("X-Nonzeros", &f.stats.nonzeros.to_string()));
+    let mut r = body(encode_frame(image), "application/octet-stream");
+    r = with_header(r, "X-Frame-Ms", &ms(f.frame_time));
+    r = with_header(r, "X-Resample-Ms", &ms(f.resample_time));
+    r = with_header(r, "X-Lights", &f.stats.lights.to_string());
+    r = with_header(r, "X-Nonzeros", &f.stats.nonzeros.to_string());
     if let Some(e) = f.error {
-        r = r.with_header(header("X-Error", &format!("{e:.9}")));
+        r = with_header(r, "X-Error", &format!("{e:.9}"));
     }
     r
 }
@@ -196,7 +281,7 @@ fn exact(viewer: &Viewer, p: &FrameParams) -> Reply {
         ..p.clone()
     };
     match viewer.frame(&p) {
-        Ok(f) => frame_reply(&f, &exact).with_header(header("X-Exact-Ms", &ms(took))),
+        Ok(f) => with_header(frame_reply(&f, &exact), "X-Exact-Ms", &ms(took)),
         Err(e) => frame_error(e),
     }
 }
@@ -224,4 +309,38 @@ fn surface(viewer: &Viewer, f: usize) -> Reply {
     }
     out.extend(s.iter().map(|(_, v)| u8::from(*v)));
     body(out, "application/octet-stream")
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn allows(check: &HostCheck, host: &str) -> bool {
+        check.allows(Some(&HeaderValue::from_str(host).unwrap()))
+    }
+
+    #[test]
+    fn host_check_allows_local_names_and_the_bound_address() {
+        let c = HostCheck::for_bind("127.0.0.2".parse().unwrap());
+        for h in [
+            "localhost",
+            "LOCALHOST:8080",
+            "127.0.0.1:1",
+            "[::1]:80",
+            "127.0.0.2:9",
+        ] {
+            assert!(allows(&c, h), "{h}");
+        }
+        for h in ["evil.example", "127.0.0.3:80", "localhost.evil:80", "[::2]"] {
+            assert!(!allows(&c, h), "{h}");
+        }
+        assert!(c.allows(None));
+        let v6 = HostCheck::for_bind("::1".parse().unwrap());
+        assert!(allows(&v6, "[::1]:8080") && !allows(&v6, "evil"));
+        assert!(v6
+            .describe()
+            .ends_with("Host is localhost, 127.0.0.1, [::1] (any port); other hosts get 403"));
+        let any = HostCheck::for_bind("0.0.0.0".parse().unwrap());
+        assert!(allows(&any, "evil.example"));
+    }
 }

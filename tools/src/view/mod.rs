@@ -38,12 +38,14 @@
 
 mod http;
 pub mod params;
+mod server;
 mod state;
 
 use crate::common::{claim_files, map_files, Ctx};
-use anyhow::{bail, Context, Result};
+use anyhow::{Context, Result};
 use clap::Args;
-use std::net::{IpAddr, Ipv4Addr, SocketAddr};
+use std::io::Write;
+use std::net::{IpAddr, Ipv4Addr, Ipv6Addr, SocketAddr, TcpListener};
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
 
@@ -59,7 +61,14 @@ the weighting, exposure and tone mapping, and readouts of the server's frame tim
 round trip, lights used and nonzeros touched. With two files they are shown side by side \
 (or under a split slider). With --reference, the exact image T·L can be shown and the \
 frame's error against it is read out. Texture-space files are drawn as their mesh in WebGL \
-with an orbit camera."
+with an orbit camera.
+
+Limits: at most 4096 connections at once (fewer where the open-file limit is lower: the \
+limit less 256; it is raised toward the hard limit first), one beyond gets 503; 5 s to send \
+a request's head (idle and half-open connections close then); 32 KiB per request head \
+(more gets 431); 10 s for a write that makes no progress; --slots frames at once (more get \
+503 at once). The URL is printed on standard output and standard error; a closed standard \
+output does not stop the server."
 )]
 pub struct ViewArgs {
     /// One or two compressed matrices (two are compared side by side).
@@ -76,10 +85,13 @@ pub struct ViewArgs {
     #[arg(long, default_value_t = 8080)]
     pub port: u16,
     /// Address to listen on. The default serves only this machine; any
-    /// other address must be given here explicitly.
+    /// other address must be given here explicitly. A loopback address
+    /// answers only requests whose Host is localhost, 127.0.0.1, ::1 or
+    /// itself; another answers any Host (0.0.0.0 prints the 127.0.0.1 URL).
     #[arg(long, value_name = "ADDR")]
     pub bind: Option<IpAddr>,
-    /// Frames computed at once (more concurrent frame requests get 503).
+    /// Frames computed at once (more concurrent frame requests get 503;
+    /// at most slots + 4 frame requests are handled at once).
     #[arg(long, default_value_t = 2, value_parser = clap::value_parser!(u16).range(1..=64))]
     pub slots: u16,
 }
@@ -116,30 +128,51 @@ pub fn run(a: ViewArgs, ctx: &Ctx) -> Result<()> {
         a.slots as usize,
         ctx.limits(),
     )?);
+    serve(&a, viewer)
+}
+
+/// The URL that reaches a server listening on `addr`: the address itself,
+/// or this machine's loopback address for an unspecified one (0.0.0.0,
+/// `::`, which take connections to every address of the machine).
+pub fn url_of(addr: SocketAddr) -> String {
+    let ip = match addr.ip() {
+        IpAddr::V4(v4) if v4.is_unspecified() => IpAddr::V4(Ipv4Addr::LOCALHOST),
+        IpAddr::V6(v6) if v6.is_unspecified() => IpAddr::V6(Ipv6Addr::LOCALHOST),
+        ip => ip,
+    };
+    format!("http://{}/", SocketAddr::new(ip, addr.port()))
+}
+
+/// Ignores SIGPIPE (which `main` sets to end the process): a closed
+/// standard output (`ltm view … | true`) or a client gone mid-answer must
+/// not end the server; writes fail with `EPIPE` instead.
+#[cfg(unix)]
+fn survive_closed_pipes() {
+    // SAFETY: sets the signal's disposition to "ignore"; no handler runs,
+    // and nothing else in the process changes SIGPIPE's disposition.
+    unsafe {
+        libc::signal(libc::SIGPIPE, libc::SIG_IGN);
+    }
+}
+
+/// Binds, says where (standard output and standard error) and serves.
+fn serve(a: &ViewArgs, viewer: Arc<state::Viewer>) -> Result<()> {
+    #[cfg(unix)]
+    survive_closed_pipes();
     let ip = a.bind.unwrap_or(IpAddr::V4(Ipv4Addr::LOCALHOST));
-    let loopback = ip.is_loopback();
-    if a.bind.is_some() && !loopback {
+    if a.bind.is_some() && !ip.is_loopback() {
         eprintln!("warning: serving on {ip}, reachable from other machines (--bind)");
     }
-    let server = tiny_http::Server::http(SocketAddr::new(ip, a.port))
-        .map_err(|e| anyhow::anyhow!("cannot listen on {ip}:{}: {e}", a.port))?;
-    let Some(addr) = server.server_addr().to_ip() else {
-        bail!("the server has no IP address");
+    let listener = TcpListener::bind(SocketAddr::new(ip, a.port))
+        .with_context(|| format!("cannot listen on {}", SocketAddr::new(ip, a.port)))?;
+    let addr = listener
+        .local_addr()
+        .context("reading the listening address")?;
+    let hosts = http::HostCheck::for_bind(ip);
+    let limits = server::Limits {
+        connections: server::connection_capacity(),
+        jobs: a.slots as usize + server::JOB_QUEUE,
     };
-    let server = Arc::new(server);
-    // Workers answer requests; frames beyond the slots get 503 at once, so
-    // a few more workers than slots keep the page and info responsive.
-    let workers = a.slots as usize + 4;
-    let mut handles = Vec::new();
-    for i in 0..workers {
-        let (s, v) = (server.clone(), viewer.clone());
-        handles.push(
-            std::thread::Builder::new()
-                .name(format!("view-{i}"))
-                .spawn(move || http::serve(&s, &v, loopback))
-                .context("starting a worker thread")?,
-        );
-    }
     // Wavelet files decode each column when a frame first needs it; the
     // rest are decoded here meanwhile, so that later frames only relight.
     let v = viewer.clone();
@@ -147,11 +180,12 @@ pub fn run(a: ViewArgs, ctx: &Ctx) -> Result<()> {
         .name("view-preload".into())
         .spawn(move || v.preload())
         .context("starting the preload thread")?;
-    println!("http://{addr}/");
-    use std::io::Write;
-    let _ = std::io::stdout().flush();
+    let url = url_of(addr);
+    // Standard output may be closed: the URL also goes to standard error.
+    let mut out = std::io::stdout();
+    let _ = writeln!(out, "{url}").and_then(|_| out.flush());
     eprintln!(
-        "ltm view: {} file(s), {} map(s){}; Ctrl-C to stop",
+        "ltm view: {url} ({} file(s), {} map(s){}); Ctrl-C to stop",
         viewer.files.len(),
         viewer.map_count(),
         if viewer.has_reference() {
@@ -160,8 +194,29 @@ pub fn run(a: ViewArgs, ctx: &Ctx) -> Result<()> {
             ""
         }
     );
-    for h in handles {
-        let _ = h.join();
+    eprintln!("ltm view: {}", hosts.describe());
+    eprintln!(
+        "ltm view: limits: {} connections, {} s to send a request head, {} KiB per head, \
+{} s for a stalled write, {} frames at once",
+        limits.connections,
+        server::HEADER_TIMEOUT.as_secs(),
+        server::MAX_HEAD / 1024,
+        server::WRITE_STALL.as_secs(),
+        a.slots,
+    );
+    server::serve(listener, viewer, hosts, limits)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::url_of;
+
+    #[test]
+    fn url_of_an_unspecified_address_is_loopback() {
+        let u = |s: &str| url_of(s.parse().unwrap());
+        assert_eq!(u("0.0.0.0:8080"), "http://127.0.0.1:8080/");
+        assert_eq!(u("[::]:80"), "http://[::1]:80/");
+        assert_eq!(u("127.0.0.2:9"), "http://127.0.0.2:9/");
+        assert_eq!(u("[::1]:9"), "http://[::1]:9/");
     }
-    Ok(())
 }

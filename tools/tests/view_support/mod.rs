@@ -142,6 +142,11 @@ impl Server {
         Response::parse(&self.raw(req.as_bytes()))
     }
 
+    /// The server's process id.
+    pub fn pid(&self) -> u32 {
+        self.child.id()
+    }
+
     pub fn is_alive(&mut self) -> bool {
         self.child.try_wait().unwrap().is_none()
     }

@@ -16,4 +16,4 @@ pub use cli::{run, run_ok, run_output, Run};
 pub use disk::{assert_disk_full_error, SmallDisk};
 pub use raw::{block_bytes, write_raw};
 pub use rng::Rng;
-pub use scene::{scene_toml, TEXTURE_SPHERE_16};
+pub use scene::{blob_obj, scene_toml, TEXTURE_SPHERE_16};

@@ -51,6 +51,10 @@ enum Outs {
     Folder,
 }
 
+/// The input a command reads during its run, and a copy of it with other
+/// contents.
+type Streamed = fn(&Corpus) -> (PathBuf, PathBuf);
+
 /// One command of the table: its arguments for given outputs, the inputs
 /// it names, and the input it reads during its run (if any).
 struct Cmd {
@@ -60,7 +64,7 @@ struct Cmd {
     inputs: fn(&Corpus) -> Vec<PathBuf>,
     /// The file read while the command works (for the changed-input
     /// classes), and a copy of it with other contents of the same length.
-    streamed: Option<fn(&Corpus) -> (PathBuf, PathBuf)>,
+    streamed: Option<Streamed>,
 }
 
 fn s(p: &Path) -> String {
@@ -757,7 +761,7 @@ fn raw_bomb(path: &Path) {
 fn npy_bomb(path: &Path) {
     let mut dict =
         "{'descr': '<f4', 'fortran_order': False, 'shape': (67108864, 98304), }".to_string();
-    while (10 + dict.len() + 1) % 64 != 0 {
+    while !(10 + dict.len() + 1).is_multiple_of(64) {
         dict.push(' ');
     }
     dict.push('\n');

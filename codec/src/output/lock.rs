@@ -84,7 +84,11 @@ fn canonical_lock(path: &Path) -> Result<PathBuf> {
         .file_name()
         .ok_or_else(|| Error::Invalid(format!("{}: not a file path", path.display())))?;
     let dir = super::parent_of(path);
-    let dir = dir.canonicalize().map_err(|e| Error::io(dir, e))?;
+    let dir = dir.canonicalize().map_err(|e| Error::Output {
+        role: "output".into(),
+        path: path.into(),
+        reason: format!("its folder {}: {e}", dir.display()),
+    })?;
     Ok(lock_path(&dir.join(name)))
 }
 

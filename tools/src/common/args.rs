@@ -33,7 +33,7 @@ pub struct ImageOutput {
 }
 
 impl ImageOutput {
-    /// The outputs as (role, path) pairs for [`super::check_files`].
+    /// The outputs as (role, path) pairs for [`super::claim_files`].
     pub fn roles(&self) -> Vec<(&'static str, &Path)> {
         let mut outputs = vec![("-o", self.output.as_path())];
         if let Some(png) = &self.png {

@@ -107,6 +107,9 @@ def main():
           f"({100 * (new / cli['frame_ms'] - 1):+.1f} %)")
     print(f"same lighting: CLI {cli['same_light_frame_ms']:.3f} ms, Python {same:.3f} ms "
           f"({100 * (same / cli['same_light_frame_ms'] - 1):+.1f} %)")
+    ratio = lambda k, i: mid(p[i] / c[k] for c, p in rounds)
+    print(f"median over rounds of Python / CLI (same round): new lighting "
+          f"{ratio('frame_ms', 0):.3f}, same lighting {ratio('same_light_frame_ms', 1):.3f}")
     print(f"Python with the map's path (resampled to the cubemap each frame): {by_path:.3f} ms")
 
 

@@ -212,6 +212,11 @@ pub fn compress<'py>(
     let report = |s| callback.report(s);
     let progress = Progress::new(&report);
     let raw = match matrix.extract::<PathBuf>() {
+        Ok(_) if albedo.is_some() || width.is_some() || height.is_some() => {
+            return Err(value(
+                "width, height and albedo describe an array; a raw store carries its own",
+            ))
+        }
         Ok(path) => path,
         Err(_) => store::write(py, matrix, albedo, (width, height), dir.path(), progress)?,
     };

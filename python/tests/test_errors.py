@@ -95,3 +95,8 @@ def test_huge_claimed_size_is_a_memory_error_before_allocating():
             np.ones((6, 3), np.float32))
     grown_kib = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss - before
     assert grown_kib < 300 * 1024
+
+
+def test_array_options_with_a_raw_store_are_value_errors(tmp_path):
+    with pytest.raises(ValueError, match="raw store carries its own"):
+        ltm.compress(tmp_path / "m.raw", width=16)

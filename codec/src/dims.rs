@@ -54,29 +54,38 @@ pub enum Parameterization {
     /// A spherical parameterization of a closed genus-0 mesh unfolded
     /// through the octahedron (a geometry image, Praun & Hoppe 2003), code 2.
     Sphere,
+    /// An automatic chart atlas of the receiving meshes (xatlas: charts
+    /// grown over the surface, flattened and packed with padding), code 3.
+    Atlas,
 }
 
 impl Parameterization {
-    /// The code stored in files: 1 = uv, 2 = sphere.
+    /// The code stored in files: 1 = uv, 2 = sphere, 3 = atlas.
     pub fn code(self) -> u32 {
         match self {
             Parameterization::Uv => 1,
             Parameterization::Sphere => 2,
+            Parameterization::Atlas => 3,
         }
     }
 
     /// The parameterization of a stored code, if known.
     pub fn from_code(c: u32) -> Option<Parameterization> {
-        [Parameterization::Uv, Parameterization::Sphere]
-            .into_iter()
-            .find(|p| p.code() == c)
+        [
+            Parameterization::Uv,
+            Parameterization::Sphere,
+            Parameterization::Atlas,
+        ]
+        .into_iter()
+        .find(|p| p.code() == c)
     }
 
-    /// Its name in scene files and reports: `uv` or `sphere`.
+    /// Its name in scene files and reports: `uv`, `sphere` or `atlas`.
     pub fn name(self) -> &'static str {
         match self {
             Parameterization::Uv => "uv",
             Parameterization::Sphere => "sphere",
+            Parameterization::Atlas => "atlas",
         }
     }
 }
@@ -87,8 +96,9 @@ impl std::str::FromStr for Parameterization {
         match s {
             "uv" => Ok(Parameterization::Uv),
             "sphere" => Ok(Parameterization::Sphere),
+            "atlas" => Ok(Parameterization::Atlas),
             _ => Err(format!(
-                "unknown parameterization '{s}' (expected uv or sphere)"
+                "unknown parameterization '{s}' (expected atlas, uv or sphere)"
             )),
         }
     }

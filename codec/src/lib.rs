@@ -25,6 +25,7 @@ pub mod entropy;
 mod error;
 mod fileio;
 mod limits;
+mod mesh;
 pub mod npy;
 pub mod output;
 pub mod pca;
@@ -54,6 +55,7 @@ pub use dims::{
 pub use empty::EmptyRows;
 pub use error::{Error, Result};
 pub use limits::{Charge, Limits};
+pub use mesh::{ReceiverMesh, MAX_MESH_ELEMENTS};
 pub use output::{AtomicFile, Claim, OutputLock, RunFiles};
 pub use pca::PcaModel;
 pub use progress::{Progress, Stage, Step};

@@ -98,12 +98,21 @@ pub(crate) fn scene_identity(desc: &SceneDesc, meshes: &[([u8; 32], &str)]) -> [
     if let Some(t) = &desc.texture {
         // Absent for image bakes, whose identities are unchanged.
         f.str("texture");
-        f.count(t.mesh);
+        match t.mesh {
+            crate::scene::Receivers::Mesh(m) => f.count(m),
+            _ => f.str("all"),
+        }
         f.u32(t.size);
         f.str(t.parameterization.name());
         f.u32(t.spp);
-        f.u32(t.dilate);
+        f.u32(t.dilate());
         f.bool(t.diffuse_only);
+        if t.parameterization == ltm_codec::Parameterization::Atlas {
+            // The atlas is xatlas's output: its version is an input.
+            f.str(ltm_xatlas::XATLAS_VERSION);
+            f.u32(t.padding);
+            f.f64s(&[t.texels_per_unit.unwrap_or(0.0)]);
+        }
     }
     f.0.finalize().into()
 }

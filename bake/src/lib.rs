@@ -22,6 +22,7 @@
 #![forbid(unsafe_code)]
 #![warn(missing_docs)]
 
+mod atlas;
 mod bake;
 mod bvh;
 mod error;
@@ -39,6 +40,7 @@ pub mod texture;
 pub mod transport;
 mod world;
 
+pub use atlas::AtlasQuality;
 pub use bake::{
     bake, raw_header, row_surface, BakeOptions, BakeReport, BlockBaker, DEFAULT_BLOCK_BYTES,
 };
@@ -46,7 +48,7 @@ pub use error::{BakeError, Result};
 pub use inside::INSIDE_LIMIT;
 pub use ltm_codec::raw::{RestartReason, ResumeState};
 pub use rows::{RowSample, RowSource};
-pub use scene::{Overrides, SceneDesc, DEFAULT_SCENE_TOML};
+pub use scene::{Overrides, Receivers, SceneDesc, DEFAULT_SCENE_TOML};
 pub use texture::{TexelMap, TexelStats};
 pub use transport::RowStats;
 pub use world::{Camera, Hit, MeshStats, Scene, SceneStats};

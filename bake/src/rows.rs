@@ -151,7 +151,7 @@ impl RowSource {
                     ng: h.ng,
                     ns: h.ns,
                     back: false,
-                    material: map.material(),
+                    material: h.material,
                 };
                 Some(RowSample { hit, wo: h.ns })
             }

@@ -38,12 +38,15 @@
 //! rotation = [0.0, 0.0, 0.0]  # optional, Euler angles in degrees
 //! material = "clay"
 //!
-//! [texture]                 # optional: bake texels of a mesh, not camera pixels
-//! mesh = 0                  # index into [[meshes]] of the receiver
+//! [texture]                 # optional: bake texels of surfaces, not camera pixels
+//! mesh = 0                  # index into [[meshes]] of the receiver, or "all" (atlas)
 //! size = 256                # texture side S, 1..=4096: S² rows
-//! parameterization = "uv"   # "uv" (the mesh's own texture coordinates) or "sphere"
+//! parameterization = "atlas"  # optional: "atlas" (automatic charts, the default),
+//!                           # "uv" (the mesh's own texture coordinates) or "sphere"
+//! texels_per_unit = 40.0    # optional (atlas): texel density; size then optional
+//! padding = 2               # optional (atlas): empty texels between charts, 0..=16
 //! spp = 4                   # optional, sub-samples per texel over its footprint, default 4
-//! dilate = 2                # optional, texels charts are grown by (uv), 0..=8, default 2
+//! dilate = 1                # optional, texels charts are grown by, 0..=8 (uv: 2, atlas: 1)
 //! diffuse_only = false      # optional: bake a glossy receiver's Lambertian base
 //! ```
 //!
@@ -126,32 +129,91 @@ struct SceneFile {
     texture: Option<TextureDesc>,
 }
 
-/// A texture-space bake: the rows are the texels of a texture over one
-/// mesh.
+/// A texture-space bake: the rows are the texels of a texture over the
+/// receiving surfaces.
 #[derive(Clone, Debug, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct TextureDesc {
-    /// Index of the receiving mesh in `[[meshes]]`.
-    pub mesh: usize,
-    /// Texture side S (1..=[`ltm_codec::MAX_TEXTURE_SIZE`]).
+    /// The receiving surfaces: one mesh of `[[meshes]]`, or `"all"`.
+    pub mesh: Receivers,
+    /// Texture side S (1..=[`ltm_codec::MAX_TEXTURE_SIZE`]); 0 or absent
+    /// with `texels_per_unit`: as large as the atlas needs.
+    #[serde(default)]
     pub size: u32,
-    /// How the mesh is laid out over the square: `"uv"` or `"sphere"`.
+    /// How the surfaces are laid out over the square: `"atlas"` (the
+    /// default), `"uv"` or `"sphere"`.
+    #[serde(default = "default_parameterization")]
     #[serde(deserialize_with = "parameterization")]
     pub parameterization: Parameterization,
+    /// Texels per world unit of length (`atlas` only): every part gets
+    /// texels in proportion to its area. Without it the atlas fills `size`.
+    #[serde(default)]
+    pub texels_per_unit: Option<f64>,
+    /// Empty texels between an atlas's charts (`atlas` only).
+    #[serde(default = "default_padding")]
+    pub padding: u32,
     /// Sub-samples per texel, spread over its footprint on the surface.
     #[serde(default = "default_texel_spp")]
     pub spp: u32,
-    /// Texels that charts are grown by (`uv` only), so that filtered
-    /// lookups near a chart's edge do not read empty texels.
-    #[serde(default = "default_dilate")]
-    pub dilate: u32,
+    /// Texels that charts are grown by (`uv` and `atlas`), so that filtered
+    /// lookups near a chart's edge do not read empty texels; default 2 for
+    /// `uv`, 1 for `atlas` (half its default padding).
+    #[serde(default)]
+    pub dilate: Option<u32>,
     /// Bake only the Lambertian base of a glossy receiver.
     #[serde(default)]
     pub diffuse_only: bool,
 }
 
+/// The receiving surfaces of a texture-space bake.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Deserialize)]
+#[serde(untagged)]
+#[non_exhaustive]
+pub enum Receivers {
+    /// One mesh: an index into `[[meshes]]`.
+    Mesh(usize),
+    /// Every mesh and quad of the scene (`mesh = "all"`, `atlas` only).
+    #[serde(deserialize_with = "all")]
+    All,
+}
+
+fn all<'de, D: Deserializer<'de>>(d: D) -> std::result::Result<(), D::Error> {
+    let s = String::deserialize(d)?;
+    if s == "all" {
+        Ok(())
+    } else {
+        Err(de::Error::custom(format!(
+            "texture.mesh \"{s}\" (valid: an index into [[meshes]], or \"all\")"
+        )))
+    }
+}
+
+impl Receivers {
+    /// True when mesh `i` of `[[meshes]]` receives.
+    pub fn has_mesh(self, i: usize) -> bool {
+        match self {
+            Receivers::Mesh(m) => m == i,
+            Receivers::All => true,
+        }
+    }
+}
+
+impl TextureDesc {
+    /// Texels that charts are grown by: `dilate`, or the layout's default.
+    pub fn dilate(&self) -> u32 {
+        self.dilate.unwrap_or(match self.parameterization {
+            Parameterization::Atlas => 1,
+            _ => 2,
+        })
+    }
+}
+
 /// Largest chart dilation in texels.
 pub const MAX_DILATE: u32 = 8;
+/// Largest atlas padding in texels.
+pub const MAX_PADDING: u32 = 16;
+/// Largest texel density, texels per world unit.
+pub const MAX_TEXELS_PER_UNIT: f64 = 1e6;
 
 fn parameterization<'de, D: Deserializer<'de>>(
     d: D,
@@ -160,11 +222,14 @@ fn parameterization<'de, D: Deserializer<'de>>(
     s.parse().map_err(de::Error::custom)
 }
 
+fn default_parameterization() -> Parameterization {
+    Parameterization::Atlas
+}
+fn default_padding() -> u32 {
+    2
+}
 fn default_texel_spp() -> u32 {
     4
-}
-fn default_dilate() -> u32 {
-    2
 }
 
 /// Pinhole camera. Pixel `(x, y)` (row `y` counted from the top) is row
@@ -334,6 +399,10 @@ pub struct Overrides {
     pub texel_samples: Option<u32>,
     /// `camera.spp` (`--spp`).
     pub spp: Option<u32>,
+    /// `texture.size` (`--texture-size`).
+    pub texture_size: Option<u32>,
+    /// `texture.texels_per_unit` (`--texels-per-unit`).
+    pub texels_per_unit: Option<f64>,
 }
 
 impl SceneDesc {
@@ -414,6 +483,26 @@ impl SceneDesc {
         let l = &mut self.lighting;
         l.face_res = o.face_res.unwrap_or(l.face_res);
         l.texel_samples = o.texel_samples.unwrap_or(l.texel_samples);
+        if o.texture_size.is_some() || o.texels_per_unit.is_some() {
+            let Some(t) = &mut self.texture else {
+                let flag = if o.texture_size.is_some() {
+                    "--texture-size"
+                } else {
+                    "--texels-per-unit"
+                };
+                return Err(BakeError::invalid(
+                    cl,
+                    flag,
+                    "the scene has no [texture] section (it bakes camera pixels)".to_string(),
+                ));
+            };
+            if let Some(d) = o.texels_per_unit {
+                t.texels_per_unit = Some(d);
+                // A density alone sizes the texture to the atlas.
+                t.size = o.texture_size.unwrap_or(0);
+            }
+            t.size = o.texture_size.unwrap_or(t.size);
+        }
         self.validate()
     }
 
@@ -560,49 +649,100 @@ impl SceneDesc {
             return Ok(());
         };
         let o = &self.origin;
-        if t.mesh >= self.meshes.len() {
-            return Err(BakeError::range(
-                o,
-                "texture.mesh",
-                t.mesh,
-                format!("an index into [[meshes]], 0..{}", self.meshes.len()),
-            ));
+        let atlas = t.parameterization == Parameterization::Atlas;
+        match t.mesh {
+            Receivers::Mesh(m) if m >= self.meshes.len() => {
+                return Err(BakeError::range(
+                    o,
+                    "texture.mesh",
+                    m,
+                    format!("an index into [[meshes]], 0..{}", self.meshes.len()),
+                ))
+            }
+            Receivers::All if !atlas => {
+                return Err(BakeError::invalid(
+                    o,
+                    "texture.mesh",
+                    format!("\"all\" needs parameterization = \"atlas\" (one layout over every mesh and quad), not \"{}\"", t.parameterization.name()),
+                ))
+            }
+            _ => {}
         }
-        if t.size == 0 || t.size > MAX_TEXTURE_SIZE {
+        self.validate_texture_size(t)?;
+        for (field, value, max) in [
+            ("texture.spp", t.spp, MAX_SPP),
+            ("texture.dilate", t.dilate(), MAX_DILATE),
+            ("texture.padding", t.padding, MAX_PADDING),
+        ] {
+            if value > max || (field == "texture.spp" && value == 0) {
+                let lo = u32::from(field == "texture.spp");
+                return Err(BakeError::range(o, field, value, format!("{lo}..={max}")));
+            }
+        }
+        self.validate_receiver_materials(t)
+    }
+
+    /// `size` and `texels_per_unit`: a size in range, or a density (atlas
+    /// only) with an optional size.
+    fn validate_texture_size(&self, t: &TextureDesc) -> Result<()> {
+        let o = &self.origin;
+        if let Some(d) = t.texels_per_unit {
+            if t.parameterization != Parameterization::Atlas {
+                return Err(BakeError::invalid(
+                    o,
+                    "texture.texels_per_unit",
+                    format!(
+                        "only an atlas takes a texel density, not parameterization = \"{}\"",
+                        t.parameterization.name()
+                    ),
+                ));
+            }
+            if !(d.is_finite() && d > 0.0 && d <= MAX_TEXELS_PER_UNIT) {
+                return Err(BakeError::range(
+                    o,
+                    "texture.texels_per_unit",
+                    d,
+                    format!("above 0, at most {MAX_TEXELS_PER_UNIT:e}"),
+                ));
+            }
+        }
+        let size_ok = t.size <= MAX_TEXTURE_SIZE && (t.size > 0 || t.texels_per_unit.is_some());
+        if !size_ok {
             return Err(BakeError::range(
                 o,
                 "texture.size",
                 t.size,
-                format!("1..={MAX_TEXTURE_SIZE}"),
+                format!("1..={MAX_TEXTURE_SIZE} (or absent with texels_per_unit)"),
             ));
         }
-        if t.spp == 0 || t.spp > MAX_SPP {
-            return Err(BakeError::range(
-                o,
-                "texture.spp",
-                t.spp,
-                format!("1..={MAX_SPP}"),
-            ));
-        }
-        if t.dilate > MAX_DILATE {
-            return Err(BakeError::range(
-                o,
-                "texture.dilate",
-                t.dilate,
-                format!("0..={MAX_DILATE}"),
-            ));
-        }
-        let material = &self.meshes[t.mesh].material;
-        if matches!(
-            self.materials.get(material),
-            Some(MaterialDesc::Glossy { .. })
-        ) && !t.diffuse_only
-        {
-            return Err(BakeError::invalid(
-                o,
-                "texture.mesh",
-                format!("the receiver's material \"{material}\" is glossy, but a texture is view-independent and holds only Lambertian reflection; use a lambert material, or set texture.diffuse_only = true to bake its Lambertian base"),
-            ));
+        Ok(())
+    }
+
+    /// Every receiving surface's material holds Lambertian reflection.
+    fn validate_receiver_materials(&self, t: &TextureDesc) -> Result<()> {
+        let meshes = self
+            .meshes
+            .iter()
+            .enumerate()
+            .filter(|(i, _)| t.mesh.has_mesh(*i))
+            .map(|(_, m)| &m.material);
+        let quads = self
+            .quads
+            .iter()
+            .filter(|_| t.mesh == Receivers::All)
+            .map(|q| &q.material);
+        for material in meshes.chain(quads) {
+            if matches!(
+                self.materials.get(material),
+                Some(MaterialDesc::Glossy { .. })
+            ) && !t.diffuse_only
+            {
+                return Err(BakeError::invalid(
+                    &self.origin,
+                    "texture.mesh",
+                    format!("the receiver's material \"{material}\" is glossy, but a texture is view-independent and holds only Lambertian reflection; use a lambert material, or set texture.diffuse_only = true to bake its Lambertian base"),
+                ));
+            }
         }
         Ok(())
     }
@@ -640,6 +780,7 @@ impl SceneDesc {
     /// any work.
     pub fn transport_bytes(&self) -> u64 {
         let rows = match &self.texture {
+            // An atlas sized by its texel density: known once it is made.
             Some(t) => t.size as u64 * t.size as u64,
             None => self.camera.width as u64 * self.camera.height as u64,
         };

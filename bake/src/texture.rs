@@ -39,8 +39,11 @@ pub(crate) struct SurfaceMesh {
     pub normals: Vec<DVec3>,
     pub triangles: Vec<[u32; 3]>,
     pub uvs: Option<Vec<DVec2>>,
-    /// Material index of the receiver.
-    pub material: usize,
+    /// Material index of each triangle.
+    pub materials: Vec<u32>,
+    /// Index of the scene part (mesh or quad of the receiver) each
+    /// triangle comes from.
+    pub parts: Vec<u32>,
     /// Triangles of zero area left out when the mesh was placed.
     pub degenerate: usize,
     /// Those triangles (they still join the surface's topology).
@@ -82,10 +85,41 @@ impl SurfaceMesh {
             normals: normals.into_iter().map(|n| n.normalize_or_zero()).collect(),
             triangles,
             uvs: None,
-            material: self.material,
+            materials: self
+                .materials
+                .iter()
+                .copied()
+                .chain(
+                    std::iter::repeat(self.materials.first().copied().unwrap_or(0))
+                        .take(self.degenerate_triangles.len()),
+                )
+                .collect(),
+            parts: vec![0; self.triangles.len() + self.degenerate_triangles.len()],
             degenerate: self.degenerate,
             degenerate_triangles: Vec::new(),
         }
+    }
+
+    /// Appends `other`, its vertex indices shifted past this mesh's.
+    pub fn append(&mut self, other: SurfaceMesh) {
+        let base = self.positions.len() as u32;
+        let shift = |t: [u32; 3]| t.map(|i| i + base);
+        self.uvs = match (self.uvs.take(), other.uvs) {
+            (Some(mut a), Some(b)) => {
+                a.extend(b);
+                Some(a)
+            }
+            _ => None,
+        };
+        self.positions.extend(other.positions);
+        self.normals.extend(other.normals);
+        self.triangles
+            .extend(other.triangles.into_iter().map(shift));
+        self.materials.extend(other.materials);
+        self.parts.extend(other.parts);
+        self.degenerate += other.degenerate;
+        self.degenerate_triangles
+            .extend(other.degenerate_triangles.into_iter().map(shift));
     }
 
     /// The unit face normal of triangle `t` (counter-clockwise front).
@@ -146,6 +180,8 @@ pub(crate) struct SurfaceSample {
     pub point: DVec3,
     pub ng: DVec3,
     pub ns: DVec3,
+    /// Material index of the surface there.
+    pub material: usize,
 }
 
 /// Quality figures of a parameterization, for reports.
@@ -169,11 +205,14 @@ pub struct TexelStats {
     pub flipped_triangles: usize,
     /// Seconds spent computing the parameterization.
     pub seconds: f64,
+    /// The atlas's figures (`atlas` layouts only).
+    pub atlas: Option<crate::atlas::AtlasQuality>,
 }
 
 /// Texture point → surface point, for one receiver and layout.
 pub struct TexelMap {
     size: u32,
+    layout: ltm_codec::Parameterization,
     mesh: SurfaceMesh,
     domain: Domain,
     valid: Vec<bool>,
@@ -220,6 +259,26 @@ impl TexelMap {
         TexelMap::finish(mesh, size, Domain::Charts(grid), valid, stats, start)
     }
 
+    /// An automatic chart atlas of the receiver (see [`crate::atlas`]),
+    /// its parts named by `parts` for the density figures.
+    pub(crate) fn from_atlas(
+        mesh: SurfaceMesh,
+        req: &crate::atlas::AtlasRequest,
+        parts: Vec<String>,
+    ) -> Result<TexelMap, String> {
+        let start = std::time::Instant::now();
+        let (laid, size, quality) = crate::atlas::lay_out(&mesh, req, parts)?;
+        let (mean, max, flipped) = crate::atlas::stretch(&laid, &quality.triangle_charts);
+        let mut map = TexelMap::from_uv(laid, size, req.dilate)?;
+        map.layout = ltm_codec::Parameterization::Atlas;
+        map.stats.stretch_mean = Some(mean);
+        map.stats.stretch_max = Some(max);
+        map.stats.flipped_triangles = flipped;
+        map.stats.atlas = Some(quality);
+        map.stats.seconds = start.elapsed().as_secs_f64();
+        Ok(map)
+    }
+
     /// The spherical parameterization of a closed genus-0 mesh over an
     /// `size²` geometry image (see [`crate::sphere`]).
     pub(crate) fn from_sphere(mesh: SurfaceMesh, size: u32) -> Result<TexelMap, String> {
@@ -255,8 +314,13 @@ impl TexelMap {
         }
         stats.texels_per_area = stats.valid_texels as f64 / mesh.area();
         stats.seconds = start.elapsed().as_secs_f64();
+        let layout = match domain {
+            Domain::Charts(_) => ltm_codec::Parameterization::Uv,
+            Domain::Sphere(_) => ltm_codec::Parameterization::Sphere,
+        };
         Ok(TexelMap {
             size,
+            layout,
             mesh,
             domain,
             valid,
@@ -271,10 +335,45 @@ impl TexelMap {
 
     /// The layout.
     pub fn parameterization(&self) -> ltm_codec::Parameterization {
-        match self.domain {
-            Domain::Charts(_) => ltm_codec::Parameterization::Uv,
-            Domain::Sphere(_) => ltm_codec::Parameterization::Sphere,
+        self.layout
+    }
+
+    /// The receiver as drawn: its triangles with texture coordinates in
+    /// texel units, for `uv` and `atlas` layouts (`None` for `sphere`,
+    /// whose geometry image is drawn as its grid of texels).
+    pub fn receiver_mesh(&self) -> Option<ltm_codec::ReceiverMesh> {
+        if !matches!(self.domain, Domain::Charts(_)) {
+            return None;
         }
+        let uvs = self.mesh.uvs.as_ref()?;
+        let s = self.size as f32;
+        let unit = |n: &DVec3| {
+            let n = n.normalize_or_zero();
+            if n.is_finite() {
+                n.as_vec3().to_array()
+            } else {
+                [0.0; 3]
+            }
+        };
+        Some(ltm_codec::ReceiverMesh {
+            positions: self
+                .mesh
+                .positions
+                .iter()
+                .map(|p| p.as_vec3().to_array())
+                .collect(),
+            normals: self.mesh.normals.iter().map(unit).collect(),
+            uvs: uvs
+                .iter()
+                .map(|uv| {
+                    [
+                        (uv.x as f32 * s).clamp(0.0, s),
+                        ((1.0 - uv.y as f32) * s).clamp(0.0, s),
+                    ]
+                })
+                .collect(),
+            triangles: self.mesh.triangles.clone(),
+        })
     }
 
     /// Quality figures.
@@ -287,11 +386,6 @@ impl TexelMap {
         self.valid[k]
     }
 
-    /// Material index of the receiver.
-    pub(crate) fn material(&self) -> usize {
-        self.mesh.material
-    }
-
     /// The surface point at texture point `q` (texel units) of a valid
     /// texel, or `None` outside the surface.
     pub(crate) fn locate(&self, q: DVec2) -> Option<SurfaceSample> {
@@ -300,7 +394,13 @@ impl TexelMap {
             Domain::Sphere(m) => m.locate(q, self.size)?,
         };
         let (point, ng, ns) = self.mesh.at(t, w);
-        Some(SurfaceSample { point, ng, ns })
+        let material = self.mesh.materials.get(t).map_or(0, |&m| m as usize);
+        Some(SurfaceSample {
+            point,
+            ng,
+            ns,
+            material,
+        })
     }
 }
 
@@ -505,7 +605,8 @@ mod tests {
                     .map(|v| DVec2::new(v[0], v[2]) * uv_scale)
                     .collect(),
             ),
-            material: 0,
+            materials: vec![0; 2],
+            parts: vec![0; 2],
             degenerate: 0,
             degenerate_triangles: Vec::new(),
         }

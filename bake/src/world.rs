@@ -32,7 +32,7 @@ use crate::intersect::{Tri, WtRay};
 use crate::material::Material;
 use crate::mesh::{self, RawMesh};
 use crate::rows::RowSource;
-use crate::scene::{CameraDesc, SceneDesc};
+use crate::scene::{CameraDesc, Receivers, SceneDesc};
 use crate::texture::{SurfaceMesh, TexelMap};
 use glam::{DMat3, DVec2, DVec3, Vec3A};
 use ltm_codec::Parameterization;
@@ -160,6 +160,8 @@ struct Geometry {
     files: Vec<([u8; 32], &'static str)>,
     /// The receiver of a texture-space bake, as placed.
     receiver: Option<SurfaceMesh>,
+    /// The names of the receiver's parts (mesh paths, `quads[i]`).
+    receiver_parts: Vec<String>,
 }
 
 /// A ray ready for the BVH: in trace space, starting where the world ray
@@ -240,10 +242,23 @@ impl Scene {
         stats.triangles = g.tris.len();
         let rows = match (&desc.texture, g.receiver) {
             (Some(t), Some(receiver)) => {
-                let path = desc.resolve(&desc.meshes[t.mesh].path);
+                let path = match t.mesh {
+                    Receivers::Mesh(m) => desc.resolve(&desc.meshes[m].path),
+                    _ => PathBuf::from(&desc.origin),
+                };
                 let map = match t.parameterization {
-                    Parameterization::Uv => TexelMap::from_uv(receiver, t.size, t.dilate),
+                    Parameterization::Uv => TexelMap::from_uv(receiver, t.size, t.dilate()),
                     Parameterization::Sphere => TexelMap::from_sphere(receiver, t.size),
+                    Parameterization::Atlas => TexelMap::from_atlas(
+                        receiver,
+                        &crate::atlas::AtlasRequest {
+                            size: t.size,
+                            texels_per_unit: t.texels_per_unit,
+                            padding: t.padding,
+                            dilate: t.dilate(),
+                        },
+                        g.receiver_parts,
+                    ),
                     p => Err(format!(
                         "the {} parameterization is not supported",
                         p.name()
@@ -456,8 +471,11 @@ fn load_geometry(desc: &SceneDesc) -> Result<Geometry> {
                     format: loaded.format,
                     message,
                 })?;
-        if desc.texture.as_ref().is_some_and(|t| t.mesh == i) {
-            g.receiver = Some(placed.surface_mesh(&loaded.mesh)?);
+        if desc.texture.as_ref().is_some_and(|t| t.mesh.has_mesh(i)) {
+            g.add_receiver(
+                placed.surface_mesh(&loaded.mesh)?,
+                path.display().to_string(),
+            );
         }
         g.files.push((loaded.digest, loaded.format));
         g.stats.meshes.push(MeshStats {
@@ -476,8 +494,33 @@ fn load_geometry(desc: &SceneDesc) -> Result<Geometry> {
         placed
             .add(&quad_mesh(q.size), &mut g)
             .map_err(|m| BakeError::invalid(&desc.origin, format!("quads[{i}]"), m))?;
+        if desc
+            .texture
+            .as_ref()
+            .is_some_and(|t| t.mesh == Receivers::All)
+        {
+            g.add_receiver(
+                placed.surface_mesh(&quad_mesh(q.size))?,
+                format!("quads[{i}]"),
+            );
+        }
     }
     Ok(g)
+}
+
+impl Geometry {
+    /// Joins one more receiving part (a mesh or a quad, named for reports)
+    /// to the receiver.
+    fn add_receiver(&mut self, part: SurfaceMesh, name: String) {
+        let index = self.receiver_parts.len() as u32;
+        self.receiver_parts.push(name);
+        let mut part = part;
+        part.parts.fill(index);
+        match &mut self.receiver {
+            Some(r) => r.append(part),
+            None => self.receiver = Some(part),
+        }
+    }
 }
 
 /// A `size[0] × size[1]` rectangle in the XZ plane, centred, facing +Y.
@@ -573,6 +616,7 @@ impl Placement {
             .filter(|t| face_normal(&world, t).is_some())
             .copied()
             .collect();
+        let kept_count = kept.len();
         let degenerate_triangles: Vec<[u32; 3]> = tris
             .iter()
             .filter(|t| face_normal(&world, t).is_none())
@@ -592,7 +636,8 @@ impl Placement {
                     .map(|t| DVec2::new(t[0] as f64, t[1] as f64))
                     .collect()
             }),
-            material: self.material as usize,
+            materials: vec![self.material; kept_count],
+            parts: vec![0; kept_count],
         })
     }
 

@@ -338,7 +338,7 @@ fn shipped_texture_scene_parses() {
     let path = common::assets().join("scenes/bunny_texture.toml");
     let desc = ltm_bake::SceneDesc::load(&path).unwrap();
     let t = desc.texture.as_ref().unwrap();
-    assert_eq!((t.mesh, t.size), (0, 256));
+    assert_eq!((t.mesh, t.size), (ltm_bake::Receivers::Mesh(0), 256));
     assert_eq!(t.parameterization, Parameterization::Sphere);
 }
 

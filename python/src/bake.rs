@@ -35,6 +35,7 @@ pub fn bake<'py>(
         face_res,
         texel_samples,
         spp,
+        ..Default::default()
     };
     let callback = Callback::new(progress);
     let report = |s| callback.report(s);

@@ -48,6 +48,14 @@ pub struct BakeArgs {
     /// Pixel sub-samples, averaged with a box filter (overrides camera.spp).
     #[arg(long, value_name = "K")]
     pub spp: Option<u32>,
+    /// Texture side S of a [texture] bake: S² rows (overrides texture.size).
+    #[arg(long, value_name = "S")]
+    pub texture_size: Option<u32>,
+    /// Texel density of an atlas, texels per world unit of length (overrides
+    /// texture.texels_per_unit); without --texture-size the texture is as
+    /// large as the atlas needs. Every part gets texels in proportion to its area.
+    #[arg(long, value_name = "D")]
+    pub texels_per_unit: Option<f64>,
 }
 
 /// What became of an existing `RAW.partial`, for the user; `None` when
@@ -80,24 +88,7 @@ fn describe(scene: &Scene, desc: &SceneDesc) {
         }
     }
     if let Some(map) = scene.texel_map() {
-        let st = map.stats();
-        let stretch = match (st.stretch_mean, st.stretch_max) {
-            (Some(m), Some(x)) => format!(
-                ", L2 stretch mean {m:.3} max {x:.3}, {} flipped triangles",
-                st.flipped_triangles
-            ),
-            _ => String::new(),
-        };
-        eprintln!(
-            "texture {}² ({}): {} valid texels ({:.1} %), {:.4e} texels per unit area, {} zero-area triangles skipped{stretch}; parameterized in {:.2} s",
-            st.size,
-            map.parameterization().name(),
-            st.valid_texels,
-            100.0 * st.valid_texels as f64 / (st.size as f64 * st.size as f64),
-            st.texels_per_area,
-            st.skipped_triangles,
-            st.seconds
-        );
+        describe_texture(map);
     }
     eprintln!(
         "baking {} × {} {} × {} lights ({}×{} faces) × {} channel{}{}: {:.2} GB, {} triangles, {} texel samples, {} samples per row",
@@ -117,6 +108,38 @@ fn describe(scene: &Scene, desc: &SceneDesc) {
     );
 }
 
+/// The texture's layout: texel use, stretch and, for an atlas, its charts
+/// and each part's texel density.
+fn describe_texture(map: &ltm_bake::TexelMap) {
+    let st = map.stats();
+    let stretch = match (st.stretch_mean, st.stretch_max) {
+        (Some(m), Some(x)) => format!(
+            ", L2 stretch mean {m:.3} max {x:.3}, {} flipped triangles",
+            st.flipped_triangles
+        ),
+        _ => String::new(),
+    };
+    eprintln!(
+        "texture {}² ({}): {} valid texels ({:.1} %), {:.4e} texels per unit area, {} zero-area triangles skipped{stretch}; parameterized in {:.2} s",
+        st.size,
+        map.parameterization().name(),
+        st.valid_texels,
+        100.0 * st.valid_texels as f64 / (st.size as f64 * st.size as f64),
+        st.texels_per_area,
+        st.skipped_triangles,
+        st.seconds
+    );
+    if let Some(a) = &st.atlas {
+        eprintln!(
+            "atlas: {} charts, {:.4} texels per unit length",
+            a.charts, a.texels_per_unit
+        );
+        for (part, density) in &a.part_density {
+            eprintln!("  {part}: {density:.4e} texels per unit area");
+        }
+    }
+}
+
 pub fn run(args: BakeArgs, _ctx: &Ctx) -> anyhow::Result<()> {
     let mut desc = SceneDesc::load(&args.scene)?;
     desc.apply(&Overrides {
@@ -125,6 +148,8 @@ pub fn run(args: BakeArgs, _ctx: &Ctx) -> anyhow::Result<()> {
         face_res: args.face_res,
         texel_samples: args.texel_samples,
         spp: args.spp,
+        texture_size: args.texture_size,
+        texels_per_unit: args.texels_per_unit,
     })?;
     let meshes: Vec<PathBuf> = desc.meshes.iter().map(|m| desc.resolve(&m.path)).collect();
     let mut inputs = vec![("SCENE", args.scene.as_path())];
@@ -133,6 +158,8 @@ pub fn run(args: BakeArgs, _ctx: &Ctx) -> anyhow::Result<()> {
     ltm_codec::output::check_space(&args.output, desc.transport_bytes())?;
     let scene = Scene::build(&desc)?;
     describe(&scene, &desc);
+    // An atlas sized by its density is known only now.
+    ltm_codec::output::check_space(&args.output, scene.dims().raw_bytes())?;
     let dims = scene.dims();
     let bar = progress::bar(dims.pixels() as u64, "bake");
     let options = BakeOptions::default();

@@ -21,6 +21,10 @@ mod ffi;
 
 use thiserror::Error;
 
+/// The vendored xatlas: the source release it was taken from, and the
+/// local patch (`vendor/README.md`).
+pub const XATLAS_VERSION: &str = "xatlas (PyPI xatlas 0.0.11 sources) + ltm patch 1";
+
 /// Largest vertex or triangle count given to xatlas.
 pub const MAX_ELEMENTS: usize = 1 << 24;
 

@@ -172,6 +172,16 @@ def check_faces(n):
 
 def scene_toml(mesh, scale, translation, cam, width, face_res, texel_samples, spp,
                ground, texture):
+    return scene_toml_objects([dict(path=mesh, scale=scale, translation=translation)], cam,
+                              width, face_res, texel_samples, spp, ground, texture)
+
+
+def scene_toml_objects(objects, cam, width, face_res, texel_samples, spp, ground, texture,
+                       ground_size=8.0):
+    """A scene TOML of several meshes (dicts of path, scale, translation),
+    all of the mesh albedo, on a ground quad of side `ground_size` (or
+    none). `texture` (or None for an image-space bake): size,
+    parameterization, spp and optionally mesh (an index or "all")."""
     s = f"""[camera]
 eye = {list(cam['eye'])}
 target = {list(cam['target'])}
@@ -191,25 +201,29 @@ albedo = {GROUND}
 [materials.clay]
 type = "lambert"
 albedo = {ALBEDO}
-
+"""
+    for o in objects:
+        s += f"""
 [[meshes]]
-path = "{mesh}"
+path = "{o['path']}"
 material = "clay"
 smooth = false
-scale = {scale}
-translation = {translation}
+scale = {o['scale']}
+translation = {list(o['translation'])}
 """
     if ground:
-        s += """
+        s += f"""
 [[quads]]
 center = [0.0, 0.0, 0.0]
-size = [8.0, 8.0]
+size = [{ground_size}, {ground_size}]
 material = "ground"
 """
     if texture:
+        mesh = texture.get("mesh", 0)
+        mesh = f'"{mesh}"' if isinstance(mesh, str) else mesh
         s += f"""
 [texture]
-mesh = 0
+mesh = {mesh}
 size = {texture['size']}
 parameterization = "{texture['parameterization']}"
 spp = {texture['spp']}
@@ -218,30 +232,66 @@ spp = {texture['spp']}
 
 
 def mitsuba_dict(mi, mesh, scale, translation, cam, width, env, spp, ground):
-    T = mi.ScalarTransform4f
+    return mitsuba_dict_objects(mi, [dict(path=mesh, scale=scale, translation=translation)],
+                                cam, width, env, spp, ground)
 
-    def bsdf(albedo):
-        return {"type": "twosided", "material": {
-            "type": "diffuse", "reflectance": {"type": "rgb", "value": albedo}}}
+
+def sensor_dict(mi, cam, width, spp, sampler="independent"):
+    return {"type": "perspective", "fov": cam["fov"], "fov_axis": "y",
+            "to_world": mi.ScalarTransform4f().look_at(origin=cam["eye"], target=cam["target"],
+                                                       up=[0, 1, 0]),
+            "film": {"type": "hdrfilm", "width": width, "height": width,
+                     "rfilter": {"type": "box"}, "pixel_format": "rgb"},
+            "sampler": {"type": sampler, "sample_count": spp}}
+
+
+def shape_dict(mi, o, albedo):
+    mesh = o["path"]
+    return {"type": os.path.splitext(mesh)[1][1:].lower(), "filename": mesh,
+            "to_world": mi.ScalarTransform4f().translate(list(o["translation"])).scale(o["scale"]),
+            "face_normals": True,
+            "bsdf": {"type": "twosided", "material": {
+                "type": "diffuse", "reflectance": {"type": "rgb", "value": albedo}}}}
+
+
+def ground_dict(mi, size=8.0):
+    return {"type": "rectangle", "bsdf": {"type": "twosided", "material": {
+        "type": "diffuse", "reflectance": {"type": "rgb", "value": GROUND}}},
+        "to_world": mi.ScalarTransform4f().rotate([1, 0, 0], -90).scale(
+            [size / 2, size / 2, 1])}
+
+
+def mitsuba_dict_objects(mi, objects, cam, width, env, spp, ground, ground_size=8.0):
+    """The Mitsuba scene of scene_toml_objects: `direct` integrator, the
+    lat-long map `env` as the only emitter."""
     d = {
         "type": "scene",
         "integrator": {"type": "direct", "hide_emitters": True},
-        "sensor": {
-            "type": "perspective", "fov": cam["fov"], "fov_axis": "y",
-            "to_world": T().look_at(origin=cam["eye"], target=cam["target"], up=[0, 1, 0]),
-            "film": {"type": "hdrfilm", "width": width, "height": width,
-                     "rfilter": {"type": "box"}, "pixel_format": "rgb"},
-            "sampler": {"type": "independent", "sample_count": spp},
-        },
+        "sensor": sensor_dict(mi, cam, width, spp),
         "env": {"type": "envmap", "bitmap": mi.Bitmap(env.astype(np.float32))},
-        "mesh": {"type": os.path.splitext(mesh)[1][1:].lower(), "filename": mesh,
-                 "to_world": T().translate(translation).scale(scale),
-                 "face_normals": True, "bsdf": bsdf(ALBEDO)},
     }
+    for i, o in enumerate(objects):
+        d[f"mesh{i}"] = shape_dict(mi, o, ALBEDO)
     if ground:
-        d["quad"] = {"type": "rectangle", "bsdf": bsdf(GROUND),
-                     "to_world": T().rotate([1, 0, 0], -90).scale([4, 4, 1])}
+        d["quad"] = ground_dict(mi, ground_size)
     return d
+
+
+def coverage_render(mi, objects, cam, width, q=4, ground_size=None):
+    """Fraction of each pixel covered by `objects` (and a ground quad of
+    side ground_size, if given), from q x q stratified samples: the objects
+    are black and a white sky is seen past them."""
+    d = {"type": "scene",
+         "integrator": {"type": "direct", "hide_emitters": False},
+         "sensor": sensor_dict(mi, cam, width, q * q, sampler="stratified"),
+         "env": {"type": "constant", "radiance": {"type": "rgb", "value": 1.0}}}
+    for i, o in enumerate(objects):
+        d[f"mesh{i}"] = shape_dict(mi, o, [0.0, 0.0, 0.0])
+    if ground_size:
+        d["quad"] = ground_dict(mi, ground_size)
+        d["quad"]["bsdf"]["material"]["reflectance"]["value"] = [0.0, 0.0, 0.0]
+    sky = np.array(mi.render(mi.load_dict(d), seed=7), dtype=np.float64)[..., 0]
+    return np.clip(1.0 - sky, 0.0, 1.0)
 
 
 def coverage(mi, mesh, scale, translation, cam, width, q=4):

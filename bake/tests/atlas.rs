@@ -324,3 +324,49 @@ fn atlas_settings_that_cannot_work_are_clear_errors() {
         assert!(e.contains(want), "{t}: {e}");
     }
 }
+
+/// Input a chart atlas must survive: three triangles on one edge (a fin),
+/// two cubes touching at a vertex (a bowtie), a duplicated face, a
+/// zero-area sliver and a face whose winding disagrees with its
+/// neighbours'. The atlas covers every non-degenerate triangle and each
+/// texel still lies on the mesh.
+#[test]
+fn non_manifold_and_degenerate_input_is_handled() {
+    let mut s = String::from(
+        "v 0 0 0\nv 1 0 0\nv 0.5 1 0\nv 0.5 0 1\nv 0.5 0 -1\nv 0.5 -1 0\n\
+         f 1 2 3\nf 2 1 4\nf 1 2 5\nf 1 2 6\nf 1 2 3\nv 2 0 0\nf 1 2 7\n",
+    );
+    // Two unit cubes touching at the point (1, 1, 1).
+    for (k, o) in [(8, 0.0), (16, 1.0)] {
+        for c in 0..8 {
+            let p = [c & 1, (c >> 1) & 1, (c >> 2) & 1].map(|b| o + 2.0 + b as f64);
+            writeln!(s, "v {} {} {}", p[0], p[1], p[2]).unwrap();
+        }
+        for q in [
+            [0, 1, 3, 2],
+            [4, 6, 7, 5],
+            [0, 4, 5, 1],
+            [2, 3, 7, 6],
+            [0, 2, 6, 4],
+            [1, 5, 7, 3],
+        ] {
+            let v = q.map(|i| i + k);
+            writeln!(
+                s,
+                "f {} {} {}\nf {} {} {}",
+                v[0], v[1], v[2], v[0], v[3], v[2]
+            )
+            .unwrap();
+        }
+    }
+    let toml = atlas_scene(&["bad.obj"], "mesh = 0\nsize = 64\nspp = 1\n", false);
+    let scene = built(&toml, &[("bad.obj", s)]);
+    let map = scene.texel_map().unwrap();
+    let mesh = map.receiver_mesh().unwrap();
+    mesh.validate(64).unwrap();
+    // The sliver (f 1 2 7) is left out as zero-area; every other face is drawn.
+    assert_eq!(mesh.triangles.len(), 5 + 24);
+    assert_eq!(map.stats().skipped_triangles, 1);
+    let surface = row_surface(&scene).unwrap();
+    assert!(surface.points().iter().filter(|p| p.valid).count() > 500);
+}

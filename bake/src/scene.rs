@@ -166,25 +166,44 @@ pub struct TextureDesc {
 }
 
 /// The receiving surfaces of a texture-space bake.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Deserialize)]
-#[serde(untagged)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
 #[non_exhaustive]
 pub enum Receivers {
     /// One mesh: an index into `[[meshes]]`.
     Mesh(usize),
     /// Every mesh and quad of the scene (`mesh = "all"`, `atlas` only).
-    #[serde(deserialize_with = "all")]
     All,
 }
 
-fn all<'de, D: Deserializer<'de>>(d: D) -> std::result::Result<(), D::Error> {
-    let s = String::deserialize(d)?;
-    if s == "all" {
-        Ok(())
-    } else {
-        Err(de::Error::custom(format!(
-            "texture.mesh \"{s}\" (valid: an index into [[meshes]], or \"all\")"
-        )))
+impl<'de> Deserialize<'de> for Receivers {
+    fn deserialize<D: Deserializer<'de>>(d: D) -> std::result::Result<Receivers, D::Error> {
+        struct V;
+        impl de::Visitor<'_> for V {
+            type Value = Receivers;
+            fn expecting(&self, f: &mut std::fmt::Formatter) -> std::fmt::Result {
+                f.write_str("an index into [[meshes]] (0, 1, …) or \"all\"")
+            }
+            fn visit_i64<E: de::Error>(self, v: i64) -> std::result::Result<Receivers, E> {
+                usize::try_from(v).map(Receivers::Mesh).map_err(|_| {
+                    E::custom(format!(
+                        "mesh index {v} (valid: an index into [[meshes]], 0 or more, or \"all\")"
+                    ))
+                })
+            }
+            fn visit_u64<E: de::Error>(self, v: u64) -> std::result::Result<Receivers, E> {
+                self.visit_i64(i64::try_from(v).unwrap_or(-1))
+            }
+            fn visit_str<E: de::Error>(self, v: &str) -> std::result::Result<Receivers, E> {
+                if v == "all" {
+                    Ok(Receivers::All)
+                } else {
+                    Err(E::custom(format!(
+                        "mesh \"{v}\" (valid: an index into [[meshes]], or \"all\")"
+                    )))
+                }
+            }
+        }
+        d.deserialize_any(V)
     }
 }
 

@@ -89,10 +89,10 @@ impl SurfaceMesh {
                 .materials
                 .iter()
                 .copied()
-                .chain(
-                    std::iter::repeat(self.materials.first().copied().unwrap_or(0))
-                        .take(self.degenerate_triangles.len()),
-                )
+                .chain(std::iter::repeat_n(
+                    self.materials.first().copied().unwrap_or(0),
+                    self.degenerate_triangles.len(),
+                ))
                 .collect(),
             parts: vec![0; self.triangles.len() + self.degenerate_triangles.len()],
             degenerate: self.degenerate,

@@ -106,6 +106,21 @@ fn describe(scene: &Scene, desc: &SceneDesc) {
         desc.lighting.texel_samples,
         scene.rows().samples_per_row(),
     );
+    // At most one shadow ray per light sample of each row's sub-samples;
+    // rows off the surface trace none. The progress line shows the rate.
+    let rows = scene
+        .texel_map()
+        .map_or(dims.pixels(), |m| m.stats().valid_texels) as f64;
+    let rays = rows
+        * scene.rows().samples_per_row() as f64
+        * dims.lights() as f64
+        * desc.lighting.texel_samples as f64;
+    eprintln!(
+        "estimate: {:.2} GB on disk, {} MiB of row blocks in memory (three in flight), at most {:.3e} shadow rays",
+        dims.raw_bytes() as f64 / 1e9,
+        3 * (ltm_bake::DEFAULT_BLOCK_BYTES >> 20),
+        rays
+    );
 }
 
 /// The texture's layout: texel use, stretch and, for an atlas, its charts

@@ -182,6 +182,13 @@ impl Handle {
         pack.padding = options.padding;
         pack.texels_per_unit = options.texels_per_unit;
         pack.resolution = options.resolution;
+        // Larger charts are scaled down: no single chart outgrows the
+        // texture (or the largest side packed).
+        pack.max_chart_size = if options.resolution > 0 {
+            options.resolution
+        } else {
+            crate::MAX_SIDE
+        };
         pack.bilinear = true;
         // SAFETY: a live atlas whose charts are computed; `pack` is fully
         // initialized. Packing again replaces the previous output.

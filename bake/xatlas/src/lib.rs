@@ -25,6 +25,11 @@ use thiserror::Error;
 /// local patch (`vendor/README.md`).
 pub const XATLAS_VERSION: &str = "xatlas (PyPI xatlas 0.0.11 sources) + ltm patch 1";
 
+/// Largest texture side packed: a density whose charts would need more
+/// is refused before xatlas runs (xatlas itself crashes on atlases of
+/// hundreds of thousands of texels a side).
+pub const MAX_SIDE: u32 = 8192;
+
 /// Largest vertex or triangle count given to xatlas.
 pub const MAX_ELEMENTS: usize = 1 << 24;
 
@@ -118,6 +123,7 @@ pub fn generate(mesh: MeshInput<'_>, options: &PackOptions) -> Result<Atlas, Atl
             options.resolution
         )));
     }
+    check_density(mesh, options)?;
     let mut handle = ffi::Handle::charts(mesh)?;
     if tpu > 0.0 {
         return pack_once(&mut handle, mesh, options);
@@ -142,12 +148,13 @@ fn pack_once(
     Ok(atlas)
 }
 
-/// Tries allowed when searching for the density that fills a texture.
-const FIT_TRIES: usize = 12;
+/// Packings tried when searching for the density that fills a texture.
+const FIT_TRIES: usize = 16;
 
-/// The densest packing that fits one `resolution`-sided texture: xatlas's
-/// estimate, scaled by how far its packing over- or undershot the side,
-/// then shrunk by 4 % until the charts fit one texture.
+/// The densest packing found that fits one `resolution`-sided texture:
+/// from xatlas's estimate (scaled by how far its packing over- or
+/// undershot the side), shrunk by a fifth until the charts fit, then
+/// bisected between the densest fit and the sparsest miss.
 fn fit(
     handle: &mut ffi::Handle,
     mesh: MeshInput<'_>,
@@ -160,22 +167,84 @@ fn fit(
     });
     let first = handle.read(mesh.triangles.len())?;
     let used = first.width.max(first.height).max(1) as f32;
-    let mut tpu = first.texels_per_unit * (side as f32 / used) * 0.98;
-    for _ in 0..FIT_TRIES {
+    let mut tpu = first.texels_per_unit * (side as f32 / used);
+    let mut try_at = |tpu: f32| {
         let opts = PackOptions {
             texels_per_unit: tpu,
             ..*options
         };
         match pack_once(handle, mesh, &opts) {
-            Err(AtlasError::DoesNotFit { .. }) => tpu *= 0.96,
-            other => return other,
+            Err(AtlasError::DoesNotFit { .. }) => Ok(None),
+            other => other.map(Some),
+        }
+    };
+    let (mut best, mut miss) = (None, None);
+    for _ in 0..FIT_TRIES {
+        match (try_at(tpu)?, &best, miss) {
+            (Some(a), _, _) => {
+                best = Some((tpu, a));
+                match miss {
+                    None => tpu *= 1.25,
+                    Some(m) => tpu = 0.5 * (tpu + m),
+                }
+            }
+            (None, Some((b, _)), _) => {
+                miss = Some(tpu);
+                tpu = 0.5 * (tpu + b);
+            }
+            (None, None, _) => {
+                miss = Some(tpu);
+                tpu *= 0.8;
+            }
+        }
+        if let (Some((b, _)), Some(m)) = (&best, miss) {
+            if m - b <= 0.01 * b {
+                break;
+            }
         }
     }
-    Err(AtlasError::DoesNotFit {
-        atlases: handle.atlas_count(),
+    best.map(|(_, a)| a).ok_or(AtlasError::DoesNotFit {
+        atlases: 2,
         side,
         texels_per_unit: tpu,
     })
+}
+
+/// Refuses a side above [`MAX_SIDE`], and a density at which the surface
+/// alone would cover more than a [`MAX_SIDE`]² texture.
+fn check_density(mesh: MeshInput<'_>, options: &PackOptions) -> Result<(), AtlasError> {
+    if options.resolution > MAX_SIDE {
+        return Err(AtlasError::Mesh(format!(
+            "texture side {} (valid: at most {MAX_SIDE})",
+            options.resolution
+        )));
+    }
+    let area: f64 = mesh
+        .triangles
+        .iter()
+        .map(|t| {
+            let [a, b, c] = t.map(|i| mesh.positions[i as usize].map(f64::from));
+            let (u, v) = (
+                [0, 1, 2].map(|k| b[k] - a[k]),
+                [0, 1, 2].map(|k| c[k] - a[k]),
+            );
+            let n = [
+                u[1] * v[2] - u[2] * v[1],
+                u[2] * v[0] - u[0] * v[2],
+                u[0] * v[1] - u[1] * v[0],
+            ];
+            0.5 * (n[0] * n[0] + n[1] * n[1] + n[2] * n[2]).sqrt()
+        })
+        .sum();
+    let texels = area * (options.texels_per_unit as f64).powi(2);
+    let limit = (MAX_SIDE as f64).powi(2);
+    if texels > limit {
+        return Err(AtlasError::Mesh(format!(
+            "at {} texels per unit the surface (area {area:.4e}) covers {texels:.3e} texels (valid: at most {MAX_SIDE}² = {limit:.3e}); lower the texel density",
+            options.texels_per_unit
+        )));
+    }
+    Ok(())
 }
 
 fn check(mesh: MeshInput<'_>) -> Result<(), AtlasError> {

@@ -164,7 +164,8 @@ fn bad_meshes_are_errors_not_crashes() {
         q[3][1] = f32::NAN;
         q
     };
-    let cases: Vec<(Vec<[f32; 3]>, Vec<[u32; 3]>, &str)> = vec![
+    type Case = (Vec<[f32; 3]>, Vec<[u32; 3]>, &'static str);
+    let cases: Vec<Case> = vec![
         (vec![], vec![], "at least one"),
         (p.clone(), vec![[0, 1, 99]], "below 32"),
         (nan, t.clone(), "non-finite"),
@@ -205,4 +206,48 @@ fn bad_meshes_are_errors_not_crashes() {
     if let Ok(a) = r {
         assert_eq!(a.triangles.len(), 1);
     }
+}
+
+/// Densities far beyond any texture are refused before xatlas runs, and
+/// one just inside the limit packs.
+#[test]
+fn huge_densities_are_refused_not_crashes() {
+    let (p, t) = torus(32, 12);
+    let input = MeshInput {
+        positions: &p,
+        triangles: &t,
+    };
+    for tpu in [900000.0, 1e30, f32::MAX] {
+        let e = generate(
+            input,
+            &PackOptions {
+                resolution: 0,
+                texels_per_unit: tpu,
+                padding: 2,
+            },
+        )
+        .unwrap_err();
+        assert!(e.to_string().contains("lower the texel density"), "{e}");
+    }
+    // Area about 11.8: 1500 texels per unit is about 5150² texels.
+    let a = generate(
+        input,
+        &PackOptions {
+            resolution: 0,
+            texels_per_unit: 1500.0,
+            padding: 2,
+        },
+    )
+    .unwrap();
+    assert!(a.width <= 2 * MAX_SIDE && a.height <= 2 * MAX_SIDE);
+    let e = generate(
+        input,
+        &PackOptions {
+            resolution: 16,
+            texels_per_unit: 500.0,
+            padding: 2,
+        },
+    )
+    .unwrap_err();
+    assert!(matches!(e, AtlasError::DoesNotFit { .. }), "{e}");
 }

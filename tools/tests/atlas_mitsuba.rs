@@ -11,7 +11,9 @@
 //! it near-losslessly, draws the camera with `ltm render --terms all` and
 //! checks the two measures of the script:
 //! - shading: relative L2 over the pixels more than 1 px from a silhouette,
-//!   Mitsuba's noise removed in quadrature, ≤ 3 %;
+//!   Mitsuba's noise removed in quadrature, ≤ 3 % (issue 30), or the
+//!   fixture's `shading_limit` where `meta.json` gives one with a
+//!   `shading_limit_note` saying why;
 //! - shape: pixels at least 2 px inside Mitsuba's object mask that ltm
 //!   leaves empty, and ltm's pixels at least 2 px inside its own mask that
 //!   Mitsuba's lacks, each ≤ 0.5 % of Mitsuba's eroded mask.
@@ -55,11 +57,14 @@ fn erode(mask: &[bool], w: usize, h: usize, r: usize) -> Vec<bool> {
         .collect()
 }
 
+fn meta(case: &Path) -> serde_json::Value {
+    serde_json::from_str(&std::fs::read_to_string(case.join("meta.json")).unwrap()).unwrap()
+}
+
 /// The figures of one fixture: (shading error with Mitsuba's noise
 /// removed, raw shading error, missing, extra, IoU).
 fn measure(case: &Path, out: &Path) -> (f64, f64, f64, f64, f64) {
-    let meta: serde_json::Value =
-        serde_json::from_str(&std::fs::read_to_string(case.join("meta.json")).unwrap()).unwrap();
+    let meta = meta(case);
     let p = |n: &str| out.join(n).to_str().unwrap().to_string();
     let scene = case.join("scene.toml");
     ltm(&["bake", scene.to_str().unwrap(), "-o", &p("t.raw")]);
@@ -168,9 +173,10 @@ fn atlas_bakes_match_mitsuba_in_shading_and_shape() {
             100.0 * missing,
             100.0 * extra
         );
-        if e0 > 0.03 || missing > 0.005 || extra > 0.005 {
+        let limit = meta(case)["shading_limit"].as_f64().unwrap_or(0.03);
+        if e0 > limit || missing > 0.005 || extra > 0.005 {
             failures.push(format!(
-                "{name}: shading {e0:.4}, missing {missing:.4}, extra {extra:.4}"
+                "{name}: shading {e0:.4} (limit {limit}), missing {missing:.4}, extra {extra:.4}"
             ));
         }
     }

@@ -153,7 +153,7 @@ def torus_knot_mesh(p=2, q=3, n=240, m=14, scale=0.17, tube=0.055):
         for j in range(m):
             a0, a1 = i * m + j, i * m + (j + 1) % m
             b0, b1 = ((i + 1) % n) * m + j, ((i + 1) % n) * m + (j + 1) % m
-            f += [[a0, b0, a1], [a1, b0, b1]]
+            f += [[a0, a1, b0], [a1, b1, b0]]  # outward
     return np.array(v), np.array(f)
 
 
@@ -374,7 +374,7 @@ def write_fixture(args, mi, dest, case, objects, ground, receiver, cam, ref, ref
     np.save(os.path.join(dest, "coverage.npy"), cov.astype(np.float32))
     meta = dict(case=case, camera=cam, width=args.width, mitsuba_spp=args.spp,
                 mitsuba_version=mi.__version__, variant=args.variant, face_res=n,
-                mitsuba_noise=noise)
+                mitsuba_noise=noise, shading_limit=args.shading_limit)
     with open(os.path.join(dest, "meta.json"), "w") as f:
         json.dump(meta, f, indent=2)
 

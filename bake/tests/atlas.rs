@@ -370,3 +370,13 @@ fn non_manifold_and_degenerate_input_is_handled() {
     let surface = row_surface(&scene).unwrap();
     assert!(surface.points().iter().filter(|p| p.valid).count() > 500);
 }
+
+#[test]
+fn shipped_atlas_scene_parses() {
+    let path = common::assets().join("scenes/atlas.toml");
+    let desc = ltm_bake::SceneDesc::load(&path).unwrap();
+    let t = desc.texture.as_ref().unwrap();
+    assert_eq!((t.mesh, t.size), (ltm_bake::Receivers::All, 256));
+    assert_eq!(t.parameterization, Parameterization::Atlas);
+    assert_eq!((t.padding, t.dilate()), (2, 1));
+}

@@ -324,21 +324,31 @@ fn mesh_view_matches_ltm_render(browser: &Browser, file: &std::path::Path, env: 
     set(&tab, "exposure", "0.5", "input");
     let q = eval(&tab, "query(0)");
     wait_shown(&tab, "view0", q.as_str().unwrap());
-    let before = eval(&tab, "document.getElementById('gl0').dataset.camera");
-    drag(&tab, "gl0", 70.0);
-    let after = eval(&tab, "document.getElementById('gl0').dataset.camera");
+    // Two orbits: a quarter turn and then half a turn further round
+    // (0.01 rad per pixel), so that both sides (the sphere layout's folds
+    // lie on one) are compared.
+    for dx in [70.0, 314.0] {
+        compare_mesh_view(&tab, file, env, dx);
+    }
+}
+
+/// Drags the WebGL view `dx` pixels and compares it with `ltm render`.
+fn compare_mesh_view(tab: &Tab, file: &std::path::Path, env: &std::path::Path, dx: f64) {
+    let before = eval(tab, "document.getElementById('gl0').dataset.camera");
+    drag(tab, "gl0", dx);
+    let after = eval(tab, "document.getElementById('gl0').dataset.camera");
     assert_ne!(after, before, "the drag orbits the camera");
     let camera: Value = serde_json::from_str(after.as_str().unwrap()).unwrap();
     let js = "Array.from(panels[0].gl.pixels()).join(',')";
-    let got: Vec<u8> = eval(&tab, js)
+    let got: Vec<u8> = eval(tab, js)
         .as_str()
         .unwrap()
         .split(',')
         .map(|v| v.parse().unwrap())
         .collect();
-    let n = eval(&tab, "terms(0)").as_u64().unwrap().to_string();
-    let weighting = eval(&tab, "document.getElementById('weighting').value");
-    let triangles = eval(&tab, "document.getElementById('gl0').dataset.triangles");
+    let n = eval(tab, "terms(0)").as_u64().unwrap().to_string();
+    let weighting = eval(tab, "document.getElementById('weighting').value");
+    let triangles = eval(tab, "document.getElementById('gl0').dataset.triangles");
     let v3 = |v: &Value| {
         let a: Vec<String> = v
             .as_array()
@@ -349,7 +359,7 @@ fn mesh_view_matches_ltm_render(browser: &Browser, file: &std::path::Path, env: 
         a.join(",")
     };
     let out = PathBuf::from(env!("CARGO_TARGET_TMPDIR")).join(format!(
-        "view-mesh-{}.exr",
+        "view-mesh-{}-{dx}.exr",
         file.file_stem().unwrap().to_string_lossy()
     ));
     let fov = camera["fov"].to_string();
@@ -430,7 +440,7 @@ fn mesh_view_matches_ltm_render(browser: &Browser, file: &std::path::Path, env: 
         "{at_edges} silhouette pixels differ of {object}"
     );
     eprintln!(
-        "{}: {object} object pixels, within {worst} levels; {at_edges} silhouette pixels differ",
+        "{} (drag {dx}): {object} object pixels, within {worst} levels; {at_edges} silhouette pixels differ",
         file.display()
     );
 }

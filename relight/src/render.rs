@@ -234,9 +234,8 @@ pub struct TexturedMesh {
 }
 
 /// A mesh stored in the file, if any.
-// Wired up when `LtmFile::mesh` lands: `file.mesh()`.
-fn stored_mesh(_file: &LtmFile) -> Option<&ReceiverMesh> {
-    None
+fn stored_mesh(file: &LtmFile) -> Option<&ReceiverMesh> {
+    file.mesh()
 }
 
 /// Bytes a grid mesh holds per texel: a vertex (position, normal, texture

@@ -73,11 +73,22 @@ pub struct BakeReport {
 }
 
 /// The raw store header for a scene: grey transport with an albedo image,
-/// or 3 channels, per-row surface data, and the scene's input identity.
+/// or 3 channels, per-row surface data, the receiver mesh of an `atlas` or
+/// `uv` texture, and the scene's input identity.
 pub fn raw_header(scene: &Scene, block_bytes: u64) -> RawHeader {
-    RawHeader::new(scene.dims(), scene.channels() == 1, block_bytes)
+    let header = RawHeader::new(scene.dims(), scene.channels() == 1, block_bytes)
         .with_input_id(scene.input_id())
-        .with_surface()
+        .with_surface();
+    match receiver_mesh(scene) {
+        Some(mesh) => header.with_mesh(&mesh),
+        None => header,
+    }
+}
+
+/// The receiver as drawn (triangles with texel-unit coordinates) of a
+/// texture-space scene laid out by `atlas` or `uv`; `None` otherwise.
+pub fn receiver_mesh(scene: &Scene) -> Option<ltm_codec::ReceiverMesh> {
+    scene.texel_map()?.receiver_mesh()
 }
 
 /// The surface data of every row of `scene` (see
@@ -178,7 +189,9 @@ pub fn bake(
     let start = Instant::now();
     let header = raw_header(scene, options.block_bytes);
     let baker = BlockBaker::new(scene, header)?;
-    let mut writer = RawWriter::create_with_surface(out, header, Some(&row_surface(scene)?))?;
+    let mesh = receiver_mesh(scene);
+    let mut writer =
+        RawWriter::create_with_geometry(out, header, Some(&row_surface(scene)?), mesh.as_ref())?;
     let resume = writer.resume_state();
     let pending = writer.pending_blocks();
     let blocks_total = header.block_count();

@@ -42,7 +42,8 @@ mod world;
 
 pub use atlas::AtlasQuality;
 pub use bake::{
-    bake, raw_header, row_surface, BakeOptions, BakeReport, BlockBaker, DEFAULT_BLOCK_BYTES,
+    bake, raw_header, receiver_mesh, row_surface, BakeOptions, BakeReport, BlockBaker,
+    DEFAULT_BLOCK_BYTES,
 };
 pub use error::{BakeError, Result};
 pub use inside::INSIDE_LIMIT;

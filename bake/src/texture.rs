@@ -122,6 +122,36 @@ impl SurfaceMesh {
             .extend(other.degenerate_triangles.into_iter().map(shift));
     }
 
+    /// The signed volume enclosed by the surface when it is closed (every
+    /// edge, once identical positions are welded, met by exactly one
+    /// triangle in each direction), `None` when it is open. Negative: the
+    /// faces point inwards.
+    pub fn closed_volume(&self) -> Option<f64> {
+        let w = self.welded();
+        let mut edges: std::collections::HashMap<(u32, u32), i32> = Default::default();
+        for t in &w.triangles {
+            for k in 0..3 {
+                let (a, b) = (t[k], t[(k + 1) % 3]);
+                if a == b {
+                    continue;
+                }
+                *edges.entry((a, b)).or_default() += 1;
+            }
+        }
+        let closed = edges
+            .iter()
+            .all(|(&(a, b), &n)| n == 1 && edges.get(&(b, a)) == Some(&1));
+        closed.then(|| {
+            w.triangles
+                .iter()
+                .map(|t| {
+                    let [a, b, c] = t.map(|i| w.positions[i as usize]);
+                    a.dot(b.cross(c)) / 6.0
+                })
+                .sum()
+        })
+    }
+
     /// The unit face normal of triangle `t` (counter-clockwise front).
     pub fn face_normal(&self, t: usize) -> DVec3 {
         let [a, b, c] = self.triangles[t].map(|i| self.positions[i as usize]);

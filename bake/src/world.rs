@@ -472,10 +472,15 @@ fn load_geometry(desc: &SceneDesc) -> Result<Geometry> {
                     message,
                 })?;
         if desc.texture.as_ref().is_some_and(|t| t.mesh.has_mesh(i)) {
-            g.add_receiver(
-                placed.surface_mesh(&loaded.mesh)?,
-                path.display().to_string(),
-            );
+            let surface = placed.surface_mesh(&loaded.mesh)?;
+            if let Some(v) = surface.closed_volume().filter(|&v| v < 0.0) {
+                return Err(BakeError::MalformedMesh {
+                    path,
+                    format: loaded.format,
+                    message: format!("its faces point inwards (a closed surface of signed volume {v:.4e}): its texels would see the inside of the surface and bake black; reverse the triangles' winding"),
+                });
+            }
+            g.add_receiver(surface, path.display().to_string());
         }
         g.files.push((loaded.digest, loaded.format));
         g.stats.meshes.push(MeshStats {

@@ -37,8 +37,8 @@ fn tube(spine: &[DVec3], r: f64, m: usize, closed_loop: bool) -> Mesh {
     for i in 0..rings {
         for j in 0..m {
             let id = |i: usize, j: usize| (i % n) * m + j % m;
-            f.push([id(i, j), id(i + 1, j), id(i + 1, j + 1)]);
-            f.push([id(i, j), id(i + 1, j + 1), id(i, j + 1)]);
+            f.push([id(i, j), id(i + 1, j + 1), id(i + 1, j)]);
+            f.push([id(i, j), id(i, j + 1), id(i + 1, j + 1)]);
         }
     }
     if !closed_loop {
@@ -148,6 +148,41 @@ fn half_pipe() -> Mesh {
         }
     }
     (v, f)
+}
+
+/// The signed volume of a closed mesh (every directed edge met once by
+/// its reverse), `None` when open.
+fn closed_volume((v, f): &Mesh) -> Option<f64> {
+    let mut edges = std::collections::HashMap::new();
+    for t in f {
+        for k in 0..3 {
+            *edges.entry((t[k], t[(k + 1) % 3])).or_insert(0) += 1;
+        }
+    }
+    let closed = edges
+        .iter()
+        .all(|(&(a, b), &n)| n == 1 && edges.get(&(b, a)) == Some(&1));
+    closed.then(|| {
+        f.iter()
+            .map(|t| {
+                let [a, b, c] = t.map(|i| DVec3::from(v[i]));
+                a.dot(b.cross(c)) / 6.0
+            })
+            .sum()
+    })
+}
+
+/// The corpus's closed parts are closed and wound outwards (else their
+/// texels would see their insides).
+#[test]
+fn the_corpus_is_wound_outwards() {
+    let p = DVec3::new;
+    let capped = tube(&line(p(0.0, 0.0, 0.0), p(0.0, 1.0, 0.0), 4), 0.2, 8, false);
+    for (name, m) in [("capped tube", capped), ("torus knot", torus_knot())] {
+        let v = closed_volume(&m).unwrap_or_else(|| panic!("{name} is not closed"));
+        assert!(v > 0.0, "{name}: volume {v}");
+    }
+    assert!(closed_volume(&half_pipe()).is_none());
 }
 
 fn obj((v, f): &Mesh) -> String {
@@ -369,4 +404,30 @@ fn non_manifold_and_degenerate_input_is_handled() {
     assert_eq!(map.stats().skipped_triangles, 1);
     let surface = row_surface(&scene).unwrap();
     assert!(surface.points().iter().filter(|p| p.valid).count() > 500);
+}
+
+#[test]
+fn shipped_atlas_scene_parses() {
+    let path = common::assets().join("scenes/atlas.toml");
+    let desc = ltm_bake::SceneDesc::load(&path).unwrap();
+    let t = desc.texture.as_ref().unwrap();
+    assert_eq!((t.mesh, t.size), (ltm_bake::Receivers::All, 256));
+    assert_eq!(t.parameterization, Parameterization::Atlas);
+    assert_eq!((t.padding, t.dilate()), (2, 1));
+}
+
+/// A closed receiver whose faces point inwards would bake black: it is an
+/// error naming the mesh and the fix; the same mesh wound outwards bakes.
+#[test]
+fn an_inside_out_receiver_is_an_error() {
+    let (v, f) = torus_knot();
+    let inward: Mesh = (v.clone(), f.iter().map(|t| [t[0], t[2], t[1]]).collect());
+    let toml = atlas_scene(&["knot.obj"], "mesh = 0\nsize = 32\n", false);
+    let (_, e) = err(build(&toml, &[("knot.obj", obj(&inward).as_bytes())]).1);
+    assert!(
+        e.contains("knot.obj") && e.contains("point inwards") && e.contains("winding"),
+        "{e}"
+    );
+    let (_, ok) = build(&toml, &[("knot.obj", obj(&(v, f)).as_bytes())]);
+    ok.unwrap();
 }

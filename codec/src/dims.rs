@@ -353,6 +353,10 @@ mod tests {
         let back = RowLayout::from_codes(d.rows.code(), 2, 8, 8).unwrap();
         assert_eq!(back, d.rows);
         assert_eq!(
+            RowLayout::from_codes(1, 3, 8, 8).unwrap(),
+            Dims::texture(8, Parameterization::Atlas, 4, 1).rows
+        );
+        assert_eq!(
             RowLayout::from_codes(0, 0, 5, 3).unwrap(),
             RowLayout::Image {
                 width: 5,
@@ -362,7 +366,7 @@ mod tests {
         for (l, p, w, h) in [
             (1, 2, 8, 4),
             (1, 0, 8, 8),
-            (1, 3, 8, 8),
+            (1, 4, 8, 8),
             (0, 1, 8, 8),
             (2, 0, 8, 8),
         ] {

@@ -55,7 +55,9 @@ pub use dims::{
 pub use empty::EmptyRows;
 pub use error::{Error, Result};
 pub use limits::{Charge, Limits};
-pub use mesh::{ReceiverMesh, MAX_MESH_ELEMENTS};
+pub use mesh::{
+    ReceiverMesh, MAX_MESH_ELEMENTS, MESH_HEADER_LEN, MESH_TRIANGLE_LEN, MESH_VERTEX_LEN,
+};
 pub use output::{AtomicFile, Claim, OutputLock, RunFiles};
 pub use pca::PcaModel;
 pub use progress::{Progress, Stage, Step};

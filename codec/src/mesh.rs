@@ -12,9 +12,18 @@
 //! shows the mesh's own shape, not a grid of texels.
 
 use crate::error::{Error, Result};
+use crate::limits::Limits;
 
 /// Largest vertex or triangle count of a stored mesh.
 pub const MAX_MESH_ELEMENTS: usize = 1 << 26;
+/// Bytes of a stored mesh's header: vertex count, triangle count and two
+/// reserved words, `u32` each.
+pub const MESH_HEADER_LEN: usize = 16;
+/// Stored bytes per vertex: position and normal (`f32` × 3 each) and
+/// texture coordinates (`f32` × 2).
+pub const MESH_VERTEX_LEN: usize = 32;
+/// Stored bytes per triangle: three `u32` vertex indices.
+pub const MESH_TRIANGLE_LEN: usize = 12;
 
 /// The receiving surface as an indexed triangle mesh with texture
 /// coordinates.
@@ -101,6 +110,119 @@ impl ReceiverMesh {
     }
 }
 
+impl ReceiverMesh {
+    /// Bytes of its stored encoding ([`ReceiverMesh::encode`]):
+    /// `16 + 32·vertices + 12·triangles`.
+    pub fn encoded_len(&self) -> usize {
+        encoded_len(self.positions.len() as u64, self.triangles.len() as u64) as usize
+    }
+
+    /// The stored encoding (docs/FORMAT.md, "Receiver mesh"), little-endian:
+    /// the vertex count `V`, the triangle count `T` and two reserved zero
+    /// words (`u32` each); then the `V` positions (`f32` × 3), the `V`
+    /// normals (`f32` × 3), the `V` texture coordinates (`f32` × 2) and the
+    /// `T` triangles (`u32` × 3), each array whole before the next.
+    /// Call [`ReceiverMesh::validate`] first: the lengths of the vertex
+    /// arrays must agree.
+    pub fn encode(&self) -> Vec<u8> {
+        let mut out = Vec::with_capacity(self.encoded_len());
+        for v in [
+            self.positions.len() as u32,
+            self.triangles.len() as u32,
+            0,
+            0,
+        ] {
+            out.extend_from_slice(&v.to_le_bytes());
+        }
+        let floats = self.positions.iter().flatten();
+        let floats = floats.chain(self.normals.iter().flatten());
+        for v in floats.chain(self.uvs.iter().flatten()) {
+            out.extend_from_slice(&v.to_le_bytes());
+        }
+        for i in self.triangles.iter().flatten() {
+            out.extend_from_slice(&i.to_le_bytes());
+        }
+        out
+    }
+
+    /// Decodes and validates a stored mesh for a texture of side `size`:
+    /// the header's counts (each at most [`MAX_MESH_ELEMENTS`]) and
+    /// reserved words (0), the exact byte length they imply, the arrays
+    /// charged to `limits` before they are allocated, then
+    /// [`ReceiverMesh::validate`].
+    pub fn decode(bytes: &[u8], size: u32, limits: &Limits) -> Result<ReceiverMesh> {
+        if bytes.len() < MESH_HEADER_LEN {
+            return Err(Error::corrupt(
+                "receiver mesh",
+                format!(
+                    "{} bytes, shorter than its {MESH_HEADER_LEN}-byte header",
+                    bytes.len()
+                ),
+            ));
+        }
+        let word = |i: usize| u32::from_le_bytes(bytes[4 * i..4 * i + 4].try_into().expect("4"));
+        let (v, t) = (word(0) as u64, word(1) as u64);
+        for (what, n) in [
+            ("receiver mesh vertex count", v),
+            ("receiver mesh triangle count", t),
+        ] {
+            if n > MAX_MESH_ELEMENTS as u64 {
+                return Err(Error::range(
+                    what,
+                    n,
+                    format!("at most {MAX_MESH_ELEMENTS}"),
+                ));
+            }
+        }
+        if let Some(r) = [word(2), word(3)].into_iter().find(|&r| r != 0) {
+            return Err(Error::range(
+                "receiver mesh reserved field",
+                format!("{r:#x}"),
+                "0",
+            ));
+        }
+        let need = encoded_len(v, t);
+        if bytes.len() as u64 != need {
+            return Err(Error::corrupt(
+                "receiver mesh",
+                format!(
+                    "{} bytes for {v} vertices and {t} triangles (needs exactly {need})",
+                    bytes.len()
+                ),
+            ));
+        }
+        let _held = limits
+            .check_alloc("receiver mesh vertices", v, MESH_VERTEX_LEN as u64)?
+            .join(limits.check_alloc("receiver mesh triangles", t, MESH_TRIANGLE_LEN as u64)?);
+        let (v, t) = (v as usize, t as usize);
+        let f = |at: usize| f32::from_le_bytes(bytes[at..at + 4].try_into().expect("4 bytes"));
+        let u = |at: usize| u32::from_le_bytes(bytes[at..at + 4].try_into().expect("4 bytes"));
+        let (pos, nrm) = (MESH_HEADER_LEN, MESH_HEADER_LEN + 12 * v);
+        let (uv, tri) = (nrm + 12 * v, nrm + 20 * v);
+        let mesh = ReceiverMesh {
+            positions: (0..v)
+                .map(|i| [0, 1, 2].map(|c| f(pos + 12 * i + 4 * c)))
+                .collect(),
+            normals: (0..v)
+                .map(|i| [0, 1, 2].map(|c| f(nrm + 12 * i + 4 * c)))
+                .collect(),
+            uvs: (0..v)
+                .map(|i| [0, 1].map(|c| f(uv + 8 * i + 4 * c)))
+                .collect(),
+            triangles: (0..t)
+                .map(|i| [0, 1, 2].map(|c| u(tri + 12 * i + 4 * c)))
+                .collect(),
+        };
+        mesh.validate(size)?;
+        Ok(mesh)
+    }
+}
+
+/// Bytes of a stored mesh of `v` vertices and `t` triangles.
+fn encoded_len(v: u64, t: u64) -> u64 {
+    MESH_HEADER_LEN as u64 + MESH_VERTEX_LEN as u64 * v + MESH_TRIANGLE_LEN as u64 * t
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -117,7 +239,8 @@ mod tests {
     #[test]
     fn a_valid_mesh_passes_and_each_defect_is_named() {
         quad().validate(4).unwrap();
-        let cases: Vec<(Box<dyn Fn(&mut ReceiverMesh)>, &str)> = vec![
+        type Break = Box<dyn Fn(&mut ReceiverMesh)>;
+        let cases: Vec<(Break, &str)> = vec![
             (
                 Box::new(|m| m.normals.pop().map(drop).unwrap_or(())),
                 "normals",
@@ -134,5 +257,65 @@ mod tests {
             let e = m.validate(4).unwrap_err().to_string();
             assert!(e.contains(want), "{e}");
         }
+    }
+
+    #[test]
+    fn encoding_round_trips_bit_for_bit() {
+        let mut m = quad();
+        m.positions[2] = [-0.0, 1e-30, f32::MAX];
+        m.normals[3] = [0.0; 3];
+        let bytes = m.encode();
+        assert_eq!(bytes.len(), m.encoded_len());
+        assert_eq!(bytes.len(), 16 + 4 * 32 + 2 * 12);
+        assert_eq!(&bytes[..8], &[4, 0, 0, 0, 2, 0, 0, 0]);
+        let back = ReceiverMesh::decode(&bytes, 4, &Limits::default()).unwrap();
+        assert_eq!(back.encode(), bytes);
+        assert_eq!(back.positions[2][0].to_bits(), (-0.0f32).to_bits());
+        assert_eq!(back, m);
+    }
+
+    #[test]
+    fn invalid_encodings_are_refused_with_the_value_and_range() {
+        let good = quad().encode();
+        let limits = Limits::default();
+        let patch = |at: usize, v: u32| {
+            let mut b = good.clone();
+            b[at..at + 4].copy_from_slice(&v.to_le_bytes());
+            b
+        };
+        let (nrm, uv, tri) = (16 + 48, 16 + 96, 16 + 128);
+        let cases: Vec<(Vec<u8>, &str)> = vec![
+            (good[..15].to_vec(), "shorter than its 16-byte header"),
+            (good[..good.len() - 1].to_vec(), "needs exactly 168"),
+            ([good.clone(), vec![0]].concat(), "needs exactly 168"),
+            (patch(0, 5), "5 vertices and 2 triangles"),
+            (patch(4, 1 << 27), "at most 67108864"),
+            (patch(0, u32::MAX), "at most 67108864"),
+            (patch(8, 1), "reserved"),
+            (patch(12, 7), "reserved"),
+            (patch(16 + 4, f32::NAN.to_bits()), "not finite"),
+            (patch(nrm, f32::NAN.to_bits()), "length"),
+            (patch(uv + 8, 4.5f32.to_bits()), "outside [0, 4]"),
+            (patch(uv, f32::NAN.to_bits()), "outside [0, 4]"),
+            (patch(uv + 4, (-1.0f32).to_bits()), "outside [0, 4]"),
+            (patch(tri + 20, 4), "below 4"),
+            (patch(tri + 4, u32::MAX), "below 4"),
+            ([patch(4, 0)[..16 + 128].to_vec()].concat(), "no triangles"),
+        ];
+        for (bytes, want) in cases {
+            let e = ReceiverMesh::decode(&bytes, 4, &limits)
+                .unwrap_err()
+                .to_string();
+            assert!(e.contains(want), "{want}: {e}");
+        }
+        let e = ReceiverMesh::decode(&good, 3, &limits).unwrap_err();
+        assert!(e.to_string().contains("outside [0, 3]"), "{e}");
+        let small = Limits::with_max_alloc(100);
+        let e = ReceiverMesh::decode(&good, 4, &small).unwrap_err();
+        assert!(
+            matches!(&e, Error::Limit { what, .. } if what.contains("receiver mesh")),
+            "{e}"
+        );
+        assert_eq!(small.used_bytes(), 0);
     }
 }

@@ -413,8 +413,11 @@ fn version_1_wavelet_files_still_open_and_pca_needs_version_2() {
     )
     .unwrap();
     let mut b = std::fs::read(&w).unwrap();
-    assert_eq!(u32::from_le_bytes(b[8..12].try_into().unwrap()), 5);
-    // A version-1 file is a version-5 wavelet file with version 1 when it
+    assert_eq!(
+        u32::from_le_bytes(b[8..12].try_into().unwrap()),
+        ltm_codec::container::VERSION
+    );
+    // A version-1 file is a version-6 wavelet file with version 1 when it
     // has no feature of a later version (an empty-row mask, surface data,
     // column norms) and no range-coded column (versions 3 and 4).
     let features = u32::from_le_bytes(b[12..16].try_into().unwrap());
@@ -465,7 +468,7 @@ fn version_1_wavelet_files_still_open_and_pca_needs_version_2() {
         .unwrap()
         .to_string();
     assert!(e.contains("encoding 4") && e.contains("version 3"), "{e}");
-    b[8..12].copy_from_slice(&6u32.to_le_bytes());
+    b[8..12].copy_from_slice(&(ltm_codec::container::VERSION + 1).to_le_bytes());
     fix_crcs(&mut b);
     assert!(LtmFile::from_bytes(b, &Limits::default())
         .err()

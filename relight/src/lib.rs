@@ -79,5 +79,7 @@ pub use pca::PcaRelighter;
 pub use point::{point_light_taps, Lookup, PointLight, SurfaceSample, Taps};
 pub use reference::{reference, reference_with_progress};
 pub use relighter::Relighter;
-pub use render::{TexturedMesh, ViewCamera, MAX_SUPERSAMPLE, MAX_VIEW_SIDE, SEAM_FACTOR};
+pub use render::{
+    TexturedMesh, ViewCamera, CHART_REACH, MAX_SUPERSAMPLE, MAX_VIEW_SIDE, SEAM_FACTOR,
+};
 pub use select::{luminance, magnitude, select, support_area, Weighting};

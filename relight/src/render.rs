@@ -2,38 +2,65 @@
 //! relighting, Cheslack-Postava et al. 2007 §4.1).
 //!
 //! A texture-space `.ltm` file carries its geometry image: each texel's
-//! surface point, normal and valid bit ([`ltm_codec::Surface`]). The grid
-//! of valid texels *is* the mesh drawn here ([`TexturedMesh`]): every grid
-//! cell whose four texels are valid becomes two triangles (split along the
-//! shorter diagonal in 3D), a cell with three valid texels one. A relit
-//! texture is view-independent for Lambertian surfaces, so one relight
-//! serves every view.
+//! surface point, normal and valid bit ([`ltm_codec::Surface`]), and, for
+//! the `atlas` and `uv` layouts, the receiving mesh itself
+//! ([`ltm_codec::ReceiverMesh`]: positions, normals, texture coordinates in
+//! texel units, counter-clockwise triangles). [`TexturedMesh`] is what is
+//! drawn, shared by `ltm render`, the report and `ltm view` (which draws
+//! the very same vertices, texture coordinates and triangles in WebGL):
+//!
+//! - **A stored mesh** ([`TexturedMesh::from_mesh`]) is drawn as its own
+//!   triangles.
+//! - **Without one** (the `sphere` layout; files without a mesh,
+//!   [`TexturedMesh::new`]) the grid of valid texels is the mesh: one
+//!   vertex per texel (its surface point, the texel's centre as texture
+//!   coordinate), every grid cell whose four texels are valid two
+//!   triangles (split along the shorter diagonal in 3D), a cell with three
+//!   valid texels one.
+//!
+//! A relit texture is view-independent for Lambertian surfaces, so one
+//! relight serves every view.
 //!
 //! [`TexturedMesh::render`] rasterizes the triangles in a pinhole camera
 //! ([`ViewCamera`], the bake's camera model) with a depth buffer and
 //! `ss × ss` regular samples per pixel (box-filtered: antialiased
 //! silhouettes); each sample takes the perspective-correct texture
-//! coordinate of its triangle and a bilinear lookup of the relit texture
-//! over the valid texels among the four nearest (weights renormalized,
-//! so empty texels never bleed in). Pixels that see no surface are black.
+//! coordinate and surface point of its triangle and a bilinear lookup of
+//! the relit texture that never mixes texels of two charts: of the four
+//! nearest texels it reads only the valid ones whose surface record lies
+//! within the triangle's reach ([`CHART_REACH`] texel footprints, the
+//! footprint being the square root of the triangle's 3D area over its
+//! texel area) of the shaded point, weights renormalized. With none
+//! readable it takes the valid texel of the 5 × 5 around whose record is
+//! nearest to the point (or, with none valid, the texel holding the
+//! coordinate). The grid is one chart per cell: its reach is unlimited
+//! (valid texels only). Pixels that see no surface are black.
 //!
-//! Cells of a `uv` layout that join two charts (neighbouring in the
+//! Grid cells of a `uv` layout that join two charts (neighbouring in the
 //! texture, far apart on the surface) must not be drawn: a triangle with
 //! an edge longer than [`SEAM_FACTOR`] times the median grid edge is left
 //! out. The `sphere` layout is one chart, so none of its cells is a seam
-//! (its long edges are stretched parts of the surface). The `sphere` layout's square is also joined along its border,
-//! where the octahedral unfolding folds it: texel `(x, 0)` meets
-//! `(S−1−x, 0)`, and likewise on the other three sides.
+//! (its long edges are stretched parts of the surface). The `sphere`
+//! layout's square is also joined along its border, where the octahedral
+//! unfolding folds it: texel `(x, 0)` meets `(S−1−x, 0)`, and likewise on
+//! the other three sides. Those fold triangles' texture coordinates are
+//! not contiguous, so they are shaded by blending their corners' texels
+//! (the texel holding each corner's coordinate) with the barycentrics.
 
 use crate::error::{RelightError, Result};
 use crate::image_io::Image;
 use glam::{DVec2, DVec3};
-use ltm_codec::{Charge, Limits, LtmFile, Parameterization, RowLayout, Surface};
+use ltm_codec::{Charge, Limits, LtmFile, Parameterization, ReceiverMesh, RowLayout, Surface};
 use rayon::prelude::*;
 
 /// Triangles with an edge longer than this times the median grid edge are
 /// seams between charts and are not drawn.
 pub const SEAM_FACTOR: f64 = 16.0;
+/// How far, in texel footprints of its triangle, a texel's surface record
+/// may lie from a shaded point of a stored mesh for the lookup to read the
+/// texel: farther texels belong to another chart (neighbours in the
+/// texture, apart on the surface) and are never mixed in.
+pub const CHART_REACH: f64 = 2.0;
 /// Largest side of a rendered view.
 pub const MAX_VIEW_SIDE: u32 = 16384;
 /// Largest supersampling factor per pixel side.
@@ -173,28 +200,58 @@ impl ViewCamera {
     }
 }
 
-/// The mesh of a geometry image, ready to draw.
+/// The mesh drawn for a texture-space file, ready to draw: vertices with a
+/// texture coordinate each, triangles, and the texels' surface records that
+/// the lookup checks samples against.
 #[derive(Clone, Debug)]
 pub struct TexturedMesh {
     size: usize,
+    /// Drawn vertices (world space).
     positions: Vec<DVec3>,
+    /// Their shading normals (zero: use the face normal).
     normals: Vec<DVec3>,
-    valid: Vec<bool>,
-    /// Triangles as texel indices.
+    /// Their texture coordinates, in texel units (`x` rightwards, `y`
+    /// downwards, texel `(x, y)` covering `[x, x+1] × [y, y+1]`).
+    uvs: Vec<DVec2>,
+    /// Triangles as vertex indices.
     triangles: Vec<[u32; 3]>,
+    /// Per triangle: how far (world units) a texel's surface record may lie
+    /// from the shaded point for the lookup to read the texel (the chart
+    /// rule); infinite for the grid of a geometry image (one chart).
+    reach: Vec<f64>,
     /// Per triangle: true when it joins texels across a fold of the
     /// octahedral square (its texture coordinates are not contiguous, so
     /// it is shaded by blending its corners' texels instead).
     folded: Vec<bool>,
+    /// Per texel: its surface record's position.
+    records: Vec<DVec3>,
+    /// Per texel: whether it lies on the surface.
+    valid: Vec<bool>,
     /// The budget the mesh and every view's buffers are charged to.
     limits: Limits,
     /// The mesh's bytes, charged to `limits`.
     _charge: Charge,
 }
 
+/// A mesh stored in the file, if any.
+fn stored_mesh(file: &LtmFile) -> Option<&ReceiverMesh> {
+    file.mesh()
+}
+
+/// Bytes a grid mesh holds per texel: a vertex (position, normal, texture
+/// coordinate), the texel's record and flag, and up to two triangles
+/// (indices, reach, fold flag).
+const GRID_BYTES_PER_TEXEL: u64 = 24 + 24 + 16 + 24 + 1 + 2 * (12 + 8 + 1);
+/// Bytes a stored mesh holds per vertex and per triangle, beside the texels'
+/// records (25 bytes each).
+const MESH_BYTES_PER_VERTEX: u64 = 24 + 24 + 16;
+const MESH_BYTES_PER_TRIANGLE: u64 = 12 + 8 + 1;
+
 impl TexturedMesh {
     /// The mesh of a texture-space file, charged (with the buffers of each
-    /// view it draws) to `limits`; an image-space file is an error.
+    /// view it draws) to `limits`: its stored receiver mesh when it has one
+    /// ([`TexturedMesh::from_mesh`]), else the grid of its geometry image
+    /// ([`TexturedMesh::new`]). An image-space file is an error.
     pub fn from_file(file: &LtmFile, limits: &Limits) -> Result<TexturedMesh> {
         let dims = file.meta().dims;
         let RowLayout::Texture {
@@ -209,19 +266,33 @@ impl TexturedMesh {
         let surface = file.surface().ok_or_else(|| {
             RelightError::Invalid("the texture-space file has no surface data".into())
         })?;
-        // Positions, normals and flags per texel, up to two triangles each.
-        let charge = limits.check_alloc("mesh of the geometry image", surface.len() as u64, 80)?;
-        let mut mesh = TexturedMesh::new(size, parameterization, surface)?;
+        let texels = surface.len() as u64;
+        let (charge, mut mesh) = match stored_mesh(file) {
+            Some(m) => {
+                let bytes = texels * 25
+                    + m.vertex_count() as u64 * MESH_BYTES_PER_VERTEX
+                    + m.triangles.len() as u64 * MESH_BYTES_PER_TRIANGLE;
+                let charge = limits.check_alloc("mesh of the receiver", bytes, 1)?;
+                (
+                    charge,
+                    TexturedMesh::from_mesh(size, parameterization, surface, m)?,
+                )
+            }
+            None => {
+                let charge = limits.check_alloc(
+                    "mesh of the geometry image",
+                    texels,
+                    GRID_BYTES_PER_TEXEL,
+                )?;
+                (charge, TexturedMesh::new(size, parameterization, surface)?)
+            }
+        };
         (mesh.limits, mesh._charge) = (limits.clone(), charge);
         Ok(mesh)
     }
 
-    /// The mesh of an `size × size` geometry image.
-    pub fn new(
-        size: u32,
-        parameterization: Parameterization,
-        surface: &Surface,
-    ) -> Result<TexturedMesh> {
+    /// An empty mesh over the records of an `size × size` surface.
+    fn over(size: u32, surface: &Surface) -> Result<TexturedMesh> {
         let s = size as usize;
         if surface.len() != s * s {
             return Err(RelightError::Invalid(format!(
@@ -230,32 +301,93 @@ impl TexturedMesh {
             )));
         }
         let p = surface.points();
-        let positions: Vec<DVec3> = p
-            .iter()
-            .map(|q| DVec3::from(q.position.map(f64::from)))
-            .collect();
-        let normals: Vec<DVec3> = p
+        Ok(TexturedMesh {
+            size: s,
+            positions: Vec::new(),
+            normals: Vec::new(),
+            uvs: Vec::new(),
+            triangles: Vec::new(),
+            reach: Vec::new(),
+            folded: Vec::new(),
+            records: p
+                .iter()
+                .map(|q| DVec3::from(q.position.map(f64::from)))
+                .collect(),
+            valid: p.iter().map(|q| q.valid).collect(),
+            limits: Limits::default(),
+            _charge: Charge::default(),
+        })
+    }
+
+    /// The grid mesh of an `size × size` geometry image: one vertex per
+    /// texel (at its surface point, with the texel's centre as texture
+    /// coordinate) and the cells of valid texels as triangles.
+    pub fn new(
+        size: u32,
+        parameterization: Parameterization,
+        surface: &Surface,
+    ) -> Result<TexturedMesh> {
+        let mut mesh = TexturedMesh::over(size, surface)?;
+        let s = mesh.size;
+        mesh.positions = mesh.records.clone();
+        mesh.normals = surface
+            .points()
             .iter()
             .map(|q| DVec3::from(q.normal.map(f64::from)))
             .collect();
-        let valid: Vec<bool> = p.iter().map(|q| q.valid).collect();
-        let mut mesh = TexturedMesh {
-            size: s,
-            positions,
-            normals,
-            valid,
-            triangles: Vec::new(),
-            folded: Vec::new(),
-            limits: Limits::default(),
-            _charge: Charge::default(),
-        };
+        mesh.uvs = (0..s * s)
+            .map(|k| DVec2::new((k % s) as f64 + 0.5, (k / s) as f64 + 0.5))
+            .collect();
         mesh.triangulate(parameterization == Parameterization::Sphere);
+        mesh.reach = vec![f64::INFINITY; mesh.triangles.len()];
         if mesh.triangles.is_empty() {
             return Err(RelightError::Invalid(
                 "the geometry image has no cell of valid texels to draw".into(),
             ));
         }
         Ok(mesh)
+    }
+
+    /// The receiver's own triangles over an `size × size` texture whose
+    /// texels' records are `surface`. Each triangle's reach (the chart rule
+    /// of the lookup) is [`CHART_REACH`] texel footprints: the square root
+    /// of its 3D area over its area in texels.
+    pub fn from_mesh(
+        size: u32,
+        parameterization: Parameterization,
+        surface: &Surface,
+        mesh: &ReceiverMesh,
+    ) -> Result<TexturedMesh> {
+        let _ = parameterization; // every layout draws its stored mesh alike
+        mesh.validate(size)?;
+        let mut out = TexturedMesh::over(size, surface)?;
+        let v3 = |p: &[f32; 3]| DVec3::from(p.map(f64::from));
+        out.positions = mesh.positions.iter().map(v3).collect();
+        out.normals = mesh.normals.iter().map(v3).collect();
+        out.uvs = mesh
+            .uvs
+            .iter()
+            .map(|t| DVec2::new(t[0] as f64, t[1] as f64))
+            .collect();
+        out.triangles = mesh.triangles.clone();
+        out.folded = vec![false; mesh.triangles.len()];
+        out.reach = out.triangles.iter().map(|t| out.reach_of(t)).collect();
+        Ok(out)
+    }
+
+    /// [`CHART_REACH`] texel footprints of triangle `t` (twice its longest
+    /// edge where its texture area is zero).
+    fn reach_of(&self, t: &[u32; 3]) -> f64 {
+        let [a, b, c] = t.map(|k| self.positions[k as usize]);
+        let [ta, tb, tc] = t.map(|k| self.uvs[k as usize]);
+        let area = (b - a).cross(c - a).length();
+        let uv_area = (tb - ta).perp_dot(tc - ta).abs();
+        let foot = (area / uv_area).sqrt();
+        if uv_area > 0.0 && foot.is_finite() {
+            CHART_REACH * foot
+        } else {
+            2.0 * (b - a).length().max((c - b).length()).max((a - c).length())
+        }
     }
 
     /// Texture side S.
@@ -268,12 +400,53 @@ impl TexturedMesh {
         self.triangles.len()
     }
 
-    /// The box around the valid texels' points (lowest and highest corner),
-    /// or `None` when no texel is valid.
+    /// The drawn vertices' positions.
+    pub fn positions(&self) -> &[DVec3] {
+        &self.positions
+    }
+
+    /// The drawn vertices' shading normals (zero: the face normal).
+    pub fn normals(&self) -> &[DVec3] {
+        &self.normals
+    }
+
+    /// The drawn vertices' texture coordinates in texel units.
+    pub fn uvs(&self) -> &[DVec2] {
+        &self.uvs
+    }
+
+    /// The drawn triangles, as vertex indices.
+    pub fn triangles(&self) -> &[[u32; 3]] {
+        &self.triangles
+    }
+
+    /// Per triangle: the chart rule's reach in world units (infinite: no
+    /// limit).
+    pub fn reach(&self) -> &[f64] {
+        &self.reach
+    }
+
+    /// Per triangle: shaded by blending its corners' texels (a fold of the
+    /// sphere layout's square) rather than by a lookup.
+    pub fn folded(&self) -> &[bool] {
+        &self.folded
+    }
+
+    /// Per texel: its surface record's position and whether it is valid.
+    pub fn records(&self) -> (&[DVec3], &[bool]) {
+        (&self.records, &self.valid)
+    }
+
+    /// The box around the drawn triangles' corners (lowest and highest
+    /// corner), or `None` when there are none.
     pub fn bounds(&self) -> Option<(DVec3, DVec3)> {
-        let mut valid = self.positions.iter().zip(&self.valid).filter(|(_, &v)| v);
-        let first = *valid.next()?.0;
-        Some(valid.fold((first, first), |(lo, hi), (&p, _)| (lo.min(p), hi.max(p))))
+        let mut corners = self
+            .triangles
+            .iter()
+            .flatten()
+            .map(|&k| self.positions[k as usize]);
+        let first = corners.next()?;
+        Some(corners.fold((first, first), |(lo, hi), p| (lo.min(p), hi.max(p))))
     }
 
     fn triangulate(&mut self, fold_border: bool) {
@@ -409,10 +582,13 @@ impl TexturedMesh {
             }
         }
         let (_, i) = best?;
-        let n: DVec3 = self.triangles[i]
-            .iter()
-            .map(|&k| self.normals[k as usize])
-            .sum();
+        let t = self.triangles[i];
+        let mut n: DVec3 = t.iter().map(|&k| self.normals[k as usize]).sum();
+        if n.length_squared() < 1e-12 {
+            // No shading normals: the counter-clockwise face's normal.
+            let [a, b, c] = t.map(|k| self.positions[k as usize]);
+            n = (b - a).cross(c - a);
+        }
         Some(n.dot(d) > 0.0)
     }
 
@@ -471,7 +647,7 @@ impl TexturedMesh {
                         for sx in 0..ssz {
                             let (t, b) = buf.hit[(y * ssz + sy) * sw + x * ssz + sx];
                             if t != u32::MAX {
-                                let c = self.shade(texture, &projected[t as usize], b);
+                                let c = self.shade(texture, projected[t as usize].tri as usize, b);
                                 for ch in 0..3 {
                                     acc[ch] += c[ch];
                                 }
@@ -497,8 +673,8 @@ impl TexturedMesh {
         };
         self.triangles
             .par_iter()
-            .zip(&self.folded)
-            .filter_map(|(t, &folded)| {
+            .enumerate()
+            .filter_map(|(i, t)| {
                 let v = t.map(vert);
                 if v.iter().any(|(_, z)| {
                     !matches!(z.partial_cmp(&near), Some(std::cmp::Ordering::Greater))
@@ -508,44 +684,58 @@ impl TexturedMesh {
                 Some(Projected {
                     p: v.map(|x| x.0),
                     inv_z: v.map(|x| 1.0 / x.1),
-                    texels: *t,
-                    folded,
+                    tri: i as u32,
                 })
             })
             .collect()
     }
 
     /// The colour of a sample of triangle `t` at perspective-correct
-    /// barycentrics `(b1, b2)`: a bilinear lookup at the interpolated
-    /// texture coordinate, or, across a fold of the square (where the
-    /// texture coordinates jump), the blend of the corners' texels.
-    fn shade(&self, tex: &Image, t: &Projected, b: [f32; 2]) -> [f32; 3] {
+    /// barycentrics `(b1, b2)`: a lookup at the interpolated texture
+    /// coordinate and surface point, or, across a fold of the square (where
+    /// the texture coordinates jump), the blend of the corners' texels.
+    fn shade(&self, tex: &Image, t: usize, b: [f32; 2]) -> [f32; 3] {
         let w = [1.0 - b[0] as f64 - b[1] as f64, b[0] as f64, b[1] as f64];
-        if t.folded {
+        let corners = self.triangles[t].map(|k| k as usize);
+        if self.folded[t] {
             let mut acc = [0.0f64; 3];
-            for (k, wk) in t.texels.iter().zip(w) {
-                let c = tex.data[*k as usize];
+            for (&k, wk) in corners.iter().zip(w) {
+                let c = tex.data[self.texel_at(self.uvs[k])];
                 for ch in 0..3 {
                     acc[ch] += wk * c[ch] as f64;
                 }
             }
             return acc.map(|v| v as f32);
         }
-        let s = self.size;
-        let q: DVec2 = t
-            .texels
+        let q: DVec2 = corners.iter().zip(w).map(|(&k, wk)| wk * self.uvs[k]).sum();
+        let p: DVec3 = corners
             .iter()
             .zip(w)
-            .map(|(&k, wk)| {
-                let k = k as usize;
-                wk * DVec2::new((k % s) as f64 + 0.5, (k / s) as f64 + 0.5)
-            })
+            .map(|(&k, wk)| wk * self.positions[k])
             .sum();
-        self.lookup(tex, q)
+        self.lookup(tex, q, p, self.reach[t])
     }
 
-    /// Bilinear lookup at texel coordinates `q` over the valid texels.
-    fn lookup(&self, tex: &Image, q: DVec2) -> [f32; 3] {
+    /// The texel holding texel coordinates `q` (clamped into the texture).
+    fn texel_at(&self, q: DVec2) -> usize {
+        let last = (self.size - 1) as f64;
+        let x = q.x.floor().clamp(0.0, last) as usize;
+        let y = q.y.floor().clamp(0.0, last) as usize;
+        y * self.size + x
+    }
+
+    /// Whether texel `k` may be read for surface point `p` under the chart
+    /// rule: valid, with its record within `reach` of `p`.
+    fn readable(&self, k: usize, p: DVec3, reach: f64) -> bool {
+        self.valid[k] && (reach.is_infinite() || self.records[k].distance(p) <= reach)
+    }
+
+    /// Bilinear lookup at texel coordinates `q` of surface point `p`, over
+    /// the four nearest texels that are readable (valid, and with their
+    /// record within `reach` of `p`: texels of another chart are never
+    /// mixed in), weights renormalized. With none readable: the valid texel
+    /// nearest to `p` among the 5 × 5 around `q` ([`TexturedMesh::fallback`]).
+    fn lookup(&self, tex: &Image, q: DVec2, p: DVec3, reach: f64) -> [f32; 3] {
         let s = self.size as isize;
         let g = q - DVec2::splat(0.5);
         let (x0, y0) = (g.x.floor() as isize, g.y.floor() as isize);
@@ -563,7 +753,7 @@ impl TexturedMesh {
                 (y0 + dy).clamp(0, s - 1) as usize,
             );
             let k = y * self.size + x;
-            if w > 0.0 && self.valid[k] {
+            if w > 0.0 && self.readable(k, p, reach) {
                 let c = tex.data[k];
                 for ch in 0..3 {
                     acc[ch] += w * c[ch] as f64;
@@ -572,11 +762,29 @@ impl TexturedMesh {
             }
         }
         if wsum <= 0.0 {
-            let k = (q.y.floor().clamp(0.0, (s - 1) as f64) as usize) * self.size
-                + q.x.floor().clamp(0.0, (s - 1) as f64) as usize;
-            return tex.data[k];
+            return tex.data[self.fallback(q, p)];
         }
         acc.map(|v| (v / wsum) as f32)
+    }
+
+    /// The valid texel whose record is nearest to `p` among the 5 × 5
+    /// texels around the one holding `q` (the first in row order on a tie),
+    /// or the texel holding `q` when none of them is valid.
+    fn fallback(&self, q: DVec2, p: DVec3) -> usize {
+        let centre = self.texel_at(q);
+        let (cx, cy) = ((centre % self.size) as isize, (centre / self.size) as isize);
+        let s = self.size as isize;
+        let mut best: Option<(f64, usize)> = None;
+        for y in (cy - 2).max(0)..=(cy + 2).min(s - 1) {
+            for x in (cx - 2).max(0)..=(cx + 2).min(s - 1) {
+                let k = (y * s + x) as usize;
+                let d = self.records[k].distance_squared(p);
+                if self.valid[k] && best.is_none_or(|(bd, _)| d < bd) {
+                    best = Some((d, k));
+                }
+            }
+        }
+        best.map_or(centre, |(_, k)| k)
     }
 }
 
@@ -587,10 +795,8 @@ const BAND: usize = 8;
 struct Projected {
     p: [DVec2; 3],
     inv_z: [f64; 3],
-    /// Its corners' texels.
-    texels: [u32; 3],
-    /// True across a fold of the octahedral square.
-    folded: bool,
+    /// Its index in the mesh.
+    tri: u32,
 }
 
 impl Projected {
@@ -907,5 +1113,258 @@ mod tests {
             .render(&tex, &camera(DVec3::new(0.0, 0.0, 3.0)), 1)
             .unwrap();
         assert!(img.data.iter().any(|p| p[0] > 0.0));
+    }
+
+    /// A cube `[-1, 1]³` as a stored mesh of six charts (one per face,
+    /// `n × n` quads each, counter-clockwise seen from outside), laid out in
+    /// a 3 × 2 grid of 16-texel cells with 2 texels of padding in a 48²
+    /// texture; the texels whose centres fall in a chart carry its surface
+    /// point, the rest are invalid. Returns the mesh and the records.
+    fn cube(n: usize) -> (ReceiverMesh, Surface) {
+        const S: usize = 48;
+        let mut m = ReceiverMesh::default();
+        let mut pts = vec![SurfacePoint::INVALID; S * S];
+        for face in 0..6 {
+            let (axis, sign) = (face / 2, if face % 2 == 0 { 1.0 } else { -1.0 });
+            // Face frame: normal, and u, v with u × v = normal.
+            let mut nrm = DVec3::ZERO;
+            nrm[axis] = sign;
+            let u = DVec3::from(match axis {
+                0 => [0.0, 0.0, -sign],
+                1 => [sign, 0.0, 0.0],
+                _ => [sign, 0.0, 0.0],
+            });
+            let v = nrm.cross(u);
+            let at = |a: f64, b: f64| nrm + u * a + v * b;
+            // The chart: a 12-texel square inside its cell; texture y runs
+            // down, so the face's +v is the chart's −y.
+            let (cx, cy) = ((face % 3 * 16 + 2) as f64, (face / 3 * 16 + 2) as f64);
+            let to_uv = |a: f64, b: f64| DVec2::new(cx + 6.0 * (a + 1.0), cy + 6.0 * (1.0 - b));
+            let base = m.positions.len() as u32;
+            for j in 0..=n {
+                for i in 0..=n {
+                    let (a, b) = (
+                        2.0 * i as f64 / n as f64 - 1.0,
+                        2.0 * j as f64 / n as f64 - 1.0,
+                    );
+                    m.positions.push(at(a, b).as_vec3().to_array());
+                    m.normals.push(nrm.as_vec3().to_array());
+                    m.uvs.push(to_uv(a, b).as_vec2().to_array());
+                }
+            }
+            let id = |i: usize, j: usize| base + (j * (n + 1) + i) as u32;
+            for j in 0..n {
+                for i in 0..n {
+                    let [a, b, c, d] = [id(i, j), id(i + 1, j), id(i + 1, j + 1), id(i, j + 1)];
+                    m.triangles.extend([[a, b, c], [a, c, d]]);
+                }
+            }
+            for y in 0..12 {
+                for x in 0..12 {
+                    let (a, b) = ((x as f64 + 0.5) / 6.0 - 1.0, 1.0 - (y as f64 + 0.5) / 6.0);
+                    let k = (cy as usize + y) * S + cx as usize + x;
+                    pts[k] =
+                        SurfacePoint::new(at(a, b).as_vec3().to_array(), nrm.as_vec3().to_array());
+                }
+            }
+        }
+        (m, Surface::new(pts).unwrap())
+    }
+
+    /// A texture holding `f` of each valid texel's record (black elsewhere).
+    fn texture_of(surface: &Surface, f: impl Fn(DVec3) -> [f32; 3]) -> Image {
+        let s = (surface.len() as f64).sqrt() as usize;
+        let mut tex = Image::new(s, s);
+        for (t, q) in tex.data.iter_mut().zip(surface.points()) {
+            if q.valid {
+                *t = f(DVec3::from(q.position.map(f64::from)));
+            }
+        }
+        tex
+    }
+
+    /// The world ray through the centre of pixel `(x, y)`.
+    fn pixel_ray(cam: &ViewCamera, x: usize, y: usize) -> DVec3 {
+        let f = cam.frame();
+        let (w, h) = (cam.width as f64, cam.height as f64);
+        let sx = 2.0 * (x as f64 + 0.5) / w - 1.0;
+        let sy = 1.0 - 2.0 * (y as f64 + 0.5) / h;
+        (f.forward + f.right * sx * f.tan_half * w / h + f.up * sy * f.tan_half).normalize()
+    }
+
+    /// Where a ray from `o` along `d` enters the box `[-r, r]³`.
+    fn box_hit(o: DVec3, d: DVec3, r: f64) -> Option<DVec3> {
+        let (mut t0, mut t1) = (0.0f64, f64::INFINITY);
+        for a in 0..3 {
+            let (lo, hi) = ((-r - o[a]) / d[a], (r - o[a]) / d[a]);
+            t0 = t0.max(lo.min(hi));
+            t1 = t1.min(lo.max(hi));
+        }
+        (t0 <= t1).then(|| o + t0 * d)
+    }
+
+    /// The stored mesh of a cube with six charts: every pixel whose ray
+    /// meets the cube inside its outline shows the texture's value at the
+    /// point seen, from cameras that look at edges and corners, where the
+    /// view crosses chart seams (neighbouring pixels read different charts,
+    /// whose borders are padding).
+    #[test]
+    fn views_of_a_charted_mesh_show_the_texture_at_the_point_seen() {
+        let (m, surface) = cube(3);
+        let mesh = TexturedMesh::from_mesh(48, Parameterization::Atlas, &surface, &m).unwrap();
+        assert_eq!(mesh.triangle_count(), 6 * 18);
+        let (lo, hi) = mesh.bounds().unwrap();
+        assert!((lo + DVec3::ONE).length() < 1e-6 && (hi - DVec3::ONE).length() < 1e-6);
+        let f = |p: DVec3| (p * 0.25 + DVec3::splat(0.5)).as_vec3().to_array();
+        let tex = texture_of(&surface, f);
+        for eye in [
+            DVec3::new(3.0, 2.5, 4.0),
+            DVec3::new(-4.0, -3.0, 2.0),
+            DVec3::new(0.5, 5.0, -3.0),
+            DVec3::new(0.0, 0.0, 5.0),
+        ] {
+            mesh.check_outside(eye).unwrap();
+            let cam = camera(eye);
+            let img = mesh.render(&tex, &cam, 1).unwrap();
+            let (mut checked, mut seams) = (0, 0);
+            for y in 0..cam.height as usize {
+                for x in 0..cam.width as usize {
+                    let d = pixel_ray(&cam, x, y);
+                    let got = img.data[y * cam.width as usize + x];
+                    let Some(p) = box_hit(eye, d, 1.0) else {
+                        assert_eq!(got, [0.0; 3], "eye {eye}: pixel ({x}, {y}) sees nothing");
+                        continue;
+                    };
+                    // Well inside the outline: a smaller cube is hit too.
+                    if box_hit(eye, d, 0.96).is_none() {
+                        continue;
+                    }
+                    let want = f(p);
+                    for c in 0..3 {
+                        assert!(
+                            (got[c] - want[c]).abs() < 0.03,
+                            "eye {eye}: pixel ({x}, {y}) at {p}: {got:?}, want {want:?}"
+                        );
+                    }
+                    checked += 1;
+                    // Within a texel of an edge of the cube: a chart seam.
+                    let near_edge = (0..3).filter(|&a| p[a].abs() > 1.0 - 1.0 / 6.0).count() >= 2;
+                    seams += usize::from(near_edge);
+                }
+            }
+            assert!(checked > 300, "eye {eye}: {checked}");
+            if eye.x != 0.0 {
+                assert!(seams > 20, "eye {eye}: {seams} pixels at seams");
+            }
+        }
+        assert!(mesh.check_outside(DVec3::new(0.2, 0.1, 0.0)).is_err());
+    }
+
+    /// Two charts that are neighbours in the texture (no padding between
+    /// them) but far apart on the surface: a view of one shows none of the
+    /// other's colour, even along the texture edge they share (where a
+    /// bilinear lookup without the chart rule would read the other's texels).
+    #[test]
+    fn charts_adjacent_in_the_texture_do_not_bleed() {
+        const S: usize = 16;
+        // Quad A at z = 0 takes texture columns 0..8, quad B (z = −20, far
+        // off to the side) columns 8..16; both 2 × 2 world units.
+        let quad = |x0: f32, z: f32, u0: f32| {
+            let p = [
+                [x0, -1.0, z],
+                [x0 + 2.0, -1.0, z],
+                [x0 + 2.0, 1.0, z],
+                [x0, 1.0, z],
+            ];
+            let t = [[u0, 16.0], [u0 + 8.0, 16.0], [u0 + 8.0, 0.0], [u0, 0.0]];
+            (p, t)
+        };
+        let mut m = ReceiverMesh::default();
+        for (i, (p, t)) in [quad(-1.0, 0.0, 0.0), quad(30.0, -20.0, 8.0)]
+            .into_iter()
+            .enumerate()
+        {
+            m.positions.extend(p);
+            m.uvs.extend(t);
+            m.normals.extend([[0.0, 0.0, 1.0]; 4]);
+            let b = 4 * i as u32;
+            m.triangles.extend([[b, b + 1, b + 2], [b, b + 2, b + 3]]);
+        }
+        let mut pts = Vec::new();
+        for y in 0..S {
+            for x in 0..S {
+                let (a, b) = ((x % 8) as f32 + 0.5, y as f32 + 0.5);
+                let (x0, z) = if x < 8 { (-1.0, 0.0) } else { (30.0, -20.0) };
+                let p = [x0 + a / 4.0, 1.0 - b / 8.0, z];
+                pts.push(SurfacePoint::new(p, [0.0, 0.0, 1.0]));
+            }
+        }
+        let surface = Surface::new(pts).unwrap();
+        let mesh = TexturedMesh::from_mesh(16, Parameterization::Uv, &surface, &m).unwrap();
+        let tex = texture_of(&surface, |p| {
+            if p.z == 0.0 {
+                [1.0, 0.0, 0.0]
+            } else {
+                [0.0, 0.0, 1.0]
+            }
+        });
+        let cam = camera(DVec3::new(0.0, 0.0, 3.0));
+        let img = mesh.render(&tex, &cam, 2).unwrap();
+        let covered = img.data.iter().filter(|p| p[0] > 0.0).count();
+        assert!(covered > 400, "{covered}");
+        for (i, p) in img.data.iter().enumerate() {
+            assert_eq!(p[2], 0.0, "pixel {i} mixes in the far chart: {p:?}");
+        }
+        // Interior pixels are fully red (nothing renormalized away).
+        assert_eq!(img.data[20 * 48 + 24], [1.0, 0.0, 0.0]);
+    }
+
+    /// The fallback: a sample whose four nearest texels are all invalid or
+    /// of another chart reads the nearest valid texel of its own chart, and
+    /// a mesh whose surface is all invalid draws finite colours.
+    #[test]
+    fn lookups_fall_back_to_the_nearest_valid_texel_and_never_give_nan() {
+        let (m, surface) = cube(2);
+        let mesh = TexturedMesh::from_mesh(48, Parameterization::Atlas, &surface, &m).unwrap();
+        let tex = texture_of(&surface, |p| p.as_vec3().to_array());
+        // Padding of chart 0 (texels 0..2): the nearest texel of the chart
+        // is (2, 2), whose record is the surface point nearest (1, 1, 1).
+        let p = DVec3::new(1.0, 1.0, 1.0);
+        let got = mesh.lookup(&tex, DVec2::new(1.0, 1.0), p, 0.01);
+        let want = tex.data[2 * 48 + 2];
+        assert_eq!(got, want);
+        // No valid texel at all: finite, and from the texel holding q.
+        let empty = Surface::new(vec![SurfacePoint::INVALID; 48 * 48]).unwrap();
+        let mesh = TexturedMesh::from_mesh(48, Parameterization::Atlas, &empty, &m).unwrap();
+        let img = mesh
+            .render(&Image::new(48, 48), &camera(DVec3::new(3.0, 2.0, 4.0)), 2)
+            .unwrap();
+        assert!(img.first_non_finite().is_none());
+        // A bad mesh or surface is an error.
+        let mut bad = m.clone();
+        bad.uvs[0] = [60.0, 0.0];
+        assert!(TexturedMesh::from_mesh(48, Parameterization::Atlas, &surface, &bad).is_err());
+        assert!(TexturedMesh::from_mesh(32, Parameterization::Atlas, &surface, &m).is_err());
+    }
+
+    /// What is drawn is exposed as it is drawn: the sphere grid's vertices
+    /// are its texels (texture coordinate at the centre), its folds flagged
+    /// and without a chart limit; a stored mesh's are its own.
+    #[test]
+    fn the_drawn_mesh_is_exposed() {
+        let (grid, _) = sphere(16);
+        assert_eq!(grid.positions().len(), 256);
+        assert_eq!(grid.uvs()[17], DVec2::new(1.5, 1.5));
+        assert!(grid.folded().iter().any(|&f| f) && grid.reach().iter().all(|r| r.is_infinite()));
+        assert_eq!(grid.triangles().len(), grid.folded().len());
+        let (m, surface) = cube(1);
+        let mesh = TexturedMesh::from_mesh(48, Parameterization::Atlas, &surface, &m).unwrap();
+        assert_eq!(mesh.positions().len(), m.positions.len());
+        assert_eq!(mesh.uvs()[0], DVec2::new(2.0, 14.0));
+        // A face is 2 × 2 world units over 12 × 12 texels.
+        for r in mesh.reach() {
+            assert!((r - CHART_REACH / 6.0).abs() < 1e-6, "{r}");
+        }
+        assert_eq!(mesh.records().0.len(), 48 * 48);
     }
 }

@@ -152,9 +152,11 @@ fn bad_parameters_get_400_with_a_message() {
             assert!(r.text().contains(needle), "{q}: {}", r.text());
         }
     }
-    let r = srv.get("/api/surface?file=0");
-    assert_eq!(r.status, 400);
-    assert!(r.text().contains("image-space"), "{}", r.text());
+    for endpoint in ["surface", "mesh"] {
+        let r = srv.get(&format!("/api/{endpoint}?file=0"));
+        assert_eq!(r.status, 400);
+        assert!(r.text().contains("image-space"), "{}", r.text());
+    }
     assert_eq!(srv.get("/api/info?x=1").status, 400);
     assert_eq!(srv.get("/etc/passwd").status, 404);
     assert_eq!(srv.get("/../Cargo.toml").status, 404);
@@ -322,6 +324,30 @@ fn texture_files_serve_their_surface_and_relit_texture() {
         .map(|c| f32::from_le_bytes(c.try_into().unwrap()))
         .collect();
     assert!(xyz.iter().all(|v| v.is_finite() && v.abs() < 10.0));
+    // What `ltm render` draws: the grid's vertices (one per texel, the
+    // texel's centre as texture coordinate), triangles, reaches and folds.
+    let r = srv.get("/api/mesh?file=0");
+    assert_eq!(r.status, 200, "{}", r.text());
+    let b = &r.body;
+    assert_eq!(&b[..4], b"LTMG");
+    let u = |o: usize| u32::from_le_bytes(b[o..o + 4].try_into().unwrap()) as usize;
+    let (v, t) = (u(4), u(8));
+    assert_eq!((v, u(12)), (256, 1));
+    assert!(t > 128, "{t} triangles");
+    assert_eq!(b.len(), 16 + v * 20 + t * 17);
+    let f = |o: usize| f32::from_le_bytes(b[o..o + 4].try_into().unwrap());
+    assert_eq!(
+        &b[16..16 + v * 12],
+        &srv.get("/api/surface?file=0").body[16..16 + v * 12]
+    );
+    let uv = 16 + v * 12;
+    assert_eq!((f(uv + 17 * 8), f(uv + 17 * 8 + 4)), (1.5, 1.5));
+    let tri = uv + v * 8;
+    assert!((0..3 * t).all(|k| u(tri + 4 * k) < v));
+    let reach = tri + t * 12;
+    assert!((0..t).all(|k| f(reach + 4 * k) == f32::INFINITY));
+    let folded = &b[reach + 4 * t..];
+    assert!(folded.iter().all(|&x| x <= 1) && folded.contains(&1));
     let got = srv.get("/api/frame?file=0&map=0&yaw=20&n=24");
     assert_eq!(got.status, 200, "{}", got.text());
     let (w, h, values) = got.frame();

@@ -275,6 +275,195 @@ fn page_controls_show_what_ltm_relight_computes() {
     eprintln!("screenshot: {}", out.display());
 }
 
+/// A texture-space file of the sphere layout (drawn as the grid of its
+/// geometry image, with the square's folds): a 32² texture over a closed
+/// procedural blob, baked with 6·2² lights.
+fn sphere_texture_file(dir: &std::path::Path) -> PathBuf {
+    std::fs::write(dir.join("blob.obj"), ltm_testkit::blob_obj(6)).unwrap();
+    let texture = ltm_testkit::TEXTURE_SPHERE_16.replace("size = 16", "size = 32");
+    let toml = dir.join("tex.toml");
+    std::fs::write(
+        &toml,
+        ltm_testkit::scene_toml("blob.obj", 8, 8, 2) + &texture,
+    )
+    .unwrap();
+    let (raw, tex) = (dir.join("tex.raw"), dir.join("tex.ltm"));
+    let p = |p: &std::path::Path| p.to_str().unwrap().to_string();
+    ltm(&[
+        "bake",
+        &p(&toml),
+        "-o",
+        &p(&raw),
+        "--face-res",
+        "2",
+        "--texel-samples",
+        "1",
+    ]);
+    ltm(&["compress", &p(&raw), "-o", &p(&tex), "--max-error", "0.05"]);
+    tex
+}
+
+/// The page's WebGL view of texture-space file `file` (lit by `env`),
+/// after a drag that orbits its camera, against `ltm render` of the same
+/// camera, relight and exposure: the same triangles, and every pixel within
+/// 3 levels (8-bit sRGB) except where an edge of the silhouette passes
+/// (the two rasterizers may disagree on a sample lying on an edge).
+fn mesh_view_matches_ltm_render(browser: &Browser, file: &std::path::Path, env: &std::path::Path) {
+    let srv = Server::start(&[file.to_str().unwrap(), "--env", env.to_str().unwrap()]);
+    let tab = browser.new_tab().expect("open a tab");
+    tab.set_default_timeout(TIMEOUT);
+    tab.navigate_to(&srv.url())
+        .unwrap()
+        .wait_until_navigated()
+        .unwrap();
+    tab.wait_for_element_with_custom_timeout("#gl0[data-camera]", TIMEOUT)
+        .unwrap_or_else(|e| {
+            let msg = eval(&tab, "document.getElementById('message').textContent");
+            panic!("no WebGL view ({e}); page says {msg}")
+        });
+    set(&tab, "exposure", "0.5", "input");
+    let q = eval(&tab, "query(0)");
+    wait_shown(&tab, "view0", q.as_str().unwrap());
+    // Two orbits: a quarter turn and then half a turn further round
+    // (0.01 rad per pixel), so that both sides (the sphere layout's folds
+    // lie on one) are compared.
+    for dx in [70.0, 314.0] {
+        compare_mesh_view(&tab, file, env, dx);
+    }
+}
+
+/// Drags the WebGL view `dx` pixels and compares it with `ltm render`.
+fn compare_mesh_view(tab: &Tab, file: &std::path::Path, env: &std::path::Path, dx: f64) {
+    let before = eval(tab, "document.getElementById('gl0').dataset.camera");
+    drag(tab, "gl0", dx);
+    let after = eval(tab, "document.getElementById('gl0').dataset.camera");
+    assert_ne!(after, before, "the drag orbits the camera");
+    let camera: Value = serde_json::from_str(after.as_str().unwrap()).unwrap();
+    let js = "Array.from(panels[0].gl.pixels()).join(',')";
+    let got: Vec<u8> = eval(tab, js)
+        .as_str()
+        .unwrap()
+        .split(',')
+        .map(|v| v.parse().unwrap())
+        .collect();
+    let n = eval(tab, "terms(0)").as_u64().unwrap().to_string();
+    let weighting = eval(tab, "document.getElementById('weighting').value");
+    let triangles = eval(tab, "document.getElementById('gl0').dataset.triangles");
+    let v3 = |v: &Value| {
+        let a: Vec<String> = v
+            .as_array()
+            .unwrap()
+            .iter()
+            .map(|c| c.to_string())
+            .collect();
+        a.join(",")
+    };
+    let out = PathBuf::from(env!("CARGO_TARGET_TMPDIR")).join(format!(
+        "view-mesh-{}-{dx}.exr",
+        file.file_stem().unwrap().to_string_lossy()
+    ));
+    let fov = camera["fov"].to_string();
+    let line = ltm(&[
+        "render",
+        file.to_str().unwrap(),
+        "--env",
+        env.to_str().unwrap(),
+        "--terms",
+        &n,
+        "--weighting",
+        weighting.as_str().unwrap(),
+        "--camera",
+        &v3(&camera["eye"]),
+        "--target",
+        &v3(&camera["target"]),
+        "--up",
+        "0,1,0",
+        "--fov",
+        &fov,
+        "--size",
+        "512x512",
+        "--supersample",
+        "1",
+        "-o",
+        out.to_str().unwrap(),
+        "--json",
+    ]);
+    let json: Value = serde_json::from_str(line.trim()).unwrap();
+    assert_eq!(
+        json["triangles"].to_string(),
+        triangles.as_str().unwrap(),
+        "the page draws ltm render's triangles"
+    );
+    let want: Vec<u8> = ltm_relight::Image::read_exr(&out)
+        .unwrap()
+        .data
+        .iter()
+        .flatten()
+        .map(|&v| srgb8(v, 0.5))
+        .collect();
+    assert_eq!(got.len(), want.len(), "512×512 RGB");
+    compare_pixels(
+        &format!("{} (drag {dx})", file.display()),
+        &camera,
+        &got,
+        &want,
+    );
+}
+
+/// Every pixel of `got` within 3 levels of `want`, but for a few on the
+/// silhouette (next to the background in either).
+fn compare_pixels(label: &str, camera: &Value, got: &[u8], want: &[u8]) {
+    let w = 512usize;
+    let black = |img: &[u8], x: usize, y: usize| img[3 * (y * w + x)..][..3] == [0, 0, 0];
+    // A pixel next to the background in either view: on the silhouette.
+    let edge = |x: usize, y: usize| {
+        (y.saturating_sub(1)..=(y + 1).min(w - 1)).any(|yy| {
+            (x.saturating_sub(1)..=(x + 1).min(w - 1))
+                .any(|xx| black(got, xx, yy) || black(want, xx, yy))
+        })
+    };
+    let (mut object, mut worst, mut at_edges) = (0, 0, 0);
+    for y in 0..w {
+        for x in 0..w {
+            let i = 3 * (y * w + x);
+            let d = (0..3)
+                .map(|c| got[i + c].abs_diff(want[i + c]))
+                .max()
+                .unwrap();
+            object += usize::from(!black(want, x, y));
+            if d > 3 {
+                assert!(
+                    edge(x, y),
+                    "{label}: pixel ({x}, {y}) shows {:?}, ltm render {:?} (camera {camera})",
+                    &got[i..i + 3],
+                    &want[i..i + 3]
+                );
+                at_edges += 1;
+            } else {
+                worst = worst.max(d);
+            }
+        }
+    }
+    assert!(object > w * w / 20, "the object covers {object} pixels");
+    assert!(
+        at_edges * 100 < object,
+        "{at_edges} silhouette pixels differ of {object}"
+    );
+    eprintln!(
+        "{label}: {object} object pixels, within {worst} levels; {at_edges} silhouette pixels differ"
+    );
+}
+
+/// The WebGL view of a texture-space file matches `ltm render`: the sphere
+/// layout's grid (its folds included).
+#[test]
+fn mesh_views_show_what_ltm_render_draws() {
+    let Some(browser) = browser() else { return };
+    let dir = tempfile::tempdir().unwrap();
+    let sphere = sphere_texture_file(dir.path());
+    mesh_view_matches_ltm_render(&browser, &sphere, &map("interior.exr"));
+}
+
 /// Interaction latency in the browser (`performance.now()` from a rotation
 /// input to the new frame on screen), the server's frame time and the
 /// resampling time, for the figures in docs/results/viewer.md. Not a test

@@ -5,12 +5,21 @@ This file was written only from the specification in docs/FORMAT.md (no Rust sou
 was consulted). It checks that the specification is complete: it decodes a `.ltm`
 file of mode 2d, 4d or adaptive to the dense transport matrix exactly as
 `ltm export` writes it (float32, shape (P, M, C), or (P, M) when C = 1).
-`pca` files (mode 3) are refused. Format versions 1 to 5 are read, with column
+`pca` files (mode 3) are refused. Format versions 1 to 6 are read, with column
 encodings 0 to 4; a version-5 file's column norms (chunk NORM) are checked against
-the decoded columns.
+the decoded columns; the row layout (chunk SURF) and a version-6 file's receiving
+mesh (chunk MESH) are decoded and checked. Given a raw transport store (magic
+LTMRAW) instead, it reads its header (versions 1 to 4), its surface records and its
+receiving mesh (version 4), and prints them; the matrix itself is not read.
 
 Usage:
     python3 tools/validate/ltm_reader.py FILE.ltm [--compare EXPORT.npy] [--out OUT.npy] [--f64]
+        [--mesh-json MESH.json]
+    python3 tools/validate/ltm_reader.py FILE.raw [--mesh-json MESH.json]
+
+--mesh-json writes the receiving mesh (or null) as JSON: "size" (the texture side S),
+"positions", "normals", "uvs" (the f32 values as their IEEE-754 bit patterns, u32)
+and "triangles".
 
 Prints the shape, the format version and the number of columns of each
 encoding; with --compare, the max abs difference and the relative L2
@@ -27,6 +36,9 @@ Stages (one function each):
   parse_meta          META chunk
   parse_empty_rows    EMPT chunk
   parse_norms         NORM chunk (checked against the decoded columns: column_norm)
+  parse_surf          SURF chunk (row layout and surface records)
+  parse_mesh          MESH chunk / the raw store's mesh region (receiver mesh)
+  read_raw_store      a raw store's header, surface records and mesh
   parse_column_table  COLS chunk
   decode_payload_plain / decode_payload_range / decode_payload_range4
                       column payload (encodings 1-2 / 3 / 4) -> sparse column
@@ -93,17 +105,19 @@ def read_container(buf):
     if len(buf) < 28 or buf[:8] != MAGIC:
         raise FormatError("not an .ltm file (bad magic)")
     version, features, k, reserved = struct.unpack_from("<4I", buf, 8)
-    if version not in (1, 2, 3, 4, 5):
+    if version not in (1, 2, 3, 4, 5, 6):
         raise FormatError(f"unsupported format version {version}")
     if reserved != 0:
         raise FormatError("reserved header field is not 0")
-    if features & ~15:
+    if features & ~31:
         raise FormatError(f"unknown feature bits {features:#x}")
     if version == 1 and features & ~1:
         raise FormatError("feature bits 1/2 in a version-1 file")
     if version < 5 and features & 8:
         raise FormatError(f"feature bit 3 in a version-{version} file")
-    if not 3 <= k <= (8 if version >= 5 else 7):
+    if version < 6 and features & 16:
+        raise FormatError(f"feature bit 4 in a version-{version} file")
+    if not 3 <= k <= {1: 4, 5: 8, 6: 9}.get(version, 7):
         raise FormatError(f"bad chunk count {k}")
     end = 24 + 32 * k
     if len(buf) < end + 4:
@@ -134,6 +148,8 @@ def read_container(buf):
         want.add(b"SURF")
     if features & 8:
         want.add(b"NORM")
+    if features & 16:
+        want.add(b"MESH")
     if b"PCAM" in chunks or b"PCAB" in chunks or b"PCAC" in chunks:
         raise FormatError("this is a pca file (mode 3): not supported by this reader")
     want |= {b"COLS", b"DATA"}
@@ -169,6 +185,118 @@ def parse_meta(meta):
     return dict(W=W, H=H, n=n, C=C, mode=mode, row_filter=row_filter,
                 col_filter=col_filter, bits=bits, seed=seed, target=target,
                 measured=measured, keep=keep, norm=norm)
+
+
+def parse_surf(surf, W, H):
+    """FORMAT.md "In the .ltm container": layout, parameterization, row count, reserved,
+    then 28-byte records. Returns (layout, parameterization); checks every record."""
+    if len(surf) < 16:
+        raise FormatError("SURF is shorter than its header")
+    layout, param, rows, reserved = struct.unpack_from("<4I", surf, 0)
+    if layout not in (0, 1) or reserved != 0 or rows != W * H:
+        raise FormatError(f"SURF header {layout, param, rows, reserved} is invalid")
+    if layout == 0 and param != 0 or layout == 1 and (param not in (1, 2, 3) or W != H):
+        raise FormatError(f"SURF layout {layout} with parameterization {param}, {W}x{H}")
+    if len(surf) != 16 + 28 * rows:
+        raise FormatError("SURF has the wrong length")
+    check_surface_records(surf[16:], rows)
+    return layout, param
+
+
+def check_surface_records(b, rows):
+    rec = np.frombuffer(b, "<f4", 7 * rows).reshape(rows, 7)
+    flags = np.frombuffer(b, "<u4", 7 * rows).reshape(rows, 7)[:, 6]
+    if (flags > 1).any():
+        raise FormatError("a surface record's flags are not 0 or 1")
+    valid = flags == 1
+    if rec[~valid, :6].any():
+        raise FormatError("an invalid surface record is not all zero")
+    v = rec[valid, :6].astype(np.float64)
+    if not np.isfinite(v).all() or (np.abs(np.linalg.norm(v[:, 3:], axis=1) - 1) > 1e-3).any():
+        raise FormatError("a valid surface record is not finite or its normal not unit")
+
+
+def parse_mesh(b, S):
+    """FORMAT.md "Receiver mesh": V, T, two reserved 0 (u32), then V positions
+    (f32 x3), V normals (f32 x3), V texture coordinates (f32 x2), T triangles (u32 x3)."""
+    if len(b) < 16:
+        raise FormatError("the mesh is shorter than its 16-byte header")
+    V, T, r0, r1 = struct.unpack_from("<4I", b, 0)
+    if V > 1 << 26 or T > 1 << 26 or r0 or r1:
+        raise FormatError(f"mesh header {V, T, r0, r1} is invalid")
+    if len(b) != 16 + 32 * V + 12 * T:
+        raise FormatError(f"mesh of {len(b)} bytes for {V} vertices and {T} triangles")
+    pos = np.frombuffer(b, "<f4", 3 * V, 16).reshape(V, 3)
+    nrm = np.frombuffer(b, "<f4", 3 * V, 16 + 12 * V).reshape(V, 3)
+    uv = np.frombuffer(b, "<f4", 2 * V, 16 + 24 * V).reshape(V, 2)
+    tri = np.frombuffer(b, "<u4", 3 * T, 16 + 32 * V).reshape(T, 3)
+    length = np.sqrt((nrm * nrm).sum(axis=1, dtype=np.float32))
+    if T == 0 or not np.isfinite(pos).all() or (tri >= V).any():
+        raise FormatError("mesh without triangles, with a non-finite position or a bad index")
+    if not ((length == 0) | (np.abs(length - 1) <= 1e-3)).all():
+        raise FormatError("a mesh normal is neither zero nor of unit length")
+    if not ((uv >= 0) & (uv <= S)).all():
+        raise FormatError(f"a mesh texture coordinate lies outside [0, {S}]")
+    return dict(size=S, positions=pos, normals=nrm, uvs=uv, triangles=tri)
+
+
+RAW_MAGIC = b"LTMRAW\0\x01"
+
+
+def read_raw_store(buf):
+    """FORMAT.md "Raw transport store": the header of any version (1 to 4), the
+    surface records (versions 3 and 4) and the receiving mesh (version 4). Returns a
+    dict of the header fields, with "mesh" (parse_mesh's dict, or None)."""
+    if buf[:8] != RAW_MAGIC or len(buf) < 64:
+        raise FormatError("not a raw store")
+    version, flags, W, H, n, C, block_rows, block_count = struct.unpack_from("<8I", buf, 8)
+    hlen = {1: 64, 2: 96, 3: 112, 4: 128}.get(version)
+    if hlen is None or len(buf) < hlen:
+        raise FormatError(f"raw store version {version} or truncated header")
+    if crc32(buf[:hlen - 4]) != struct.unpack_from("<I", buf, hlen - 4)[0]:
+        raise FormatError("raw store header CRC mismatch")
+    allowed = {1: 1, 2: 1, 3: 3, 4: 7}[version]
+    if flags & ~allowed or bool(flags & 2) != (version >= 3) or bool(flags & 4) != (version == 4):
+        raise FormatError(f"raw store flags {flags:#x} in version {version}")
+    data_offset, albedo_offset, reserved = struct.unpack_from("<QQI", buf, 40)
+    if reserved:
+        raise FormatError("raw store reserved field is not 0")
+    P = W * H
+    end = hlen + 8 * block_count + P  # flags_offset + P
+    if flags & 1:
+        end = -(-end // 64) * 64 + 12 * P
+    out = dict(version=version, W=W, H=H, n=n, C=C, data_offset=data_offset, mesh=None)
+    if version >= 3:
+        surface_offset, layout, param = struct.unpack_from("<QII", buf, 92)
+        if surface_offset != -(-end // 64) * 64 or layout not in (0, 1):
+            raise FormatError("raw store surface_offset or row layout is wrong")
+        recs = buf[surface_offset:surface_offset + 28 * P + 4]
+        if len(recs) != 28 * P + 4 or crc32(recs[:-4]) != struct.unpack("<I", recs[-4:])[0]:
+            raise FormatError("raw store surface records truncated or CRC mismatch")
+        check_surface_records(recs[:-4], P)
+        end = surface_offset + 28 * P + 4
+        out.update(layout=layout, parameterization=param)
+    if version == 4:
+        mesh_offset, mesh_len = struct.unpack_from("<QQ", buf, 108)
+        if layout != 1 or W != H or mesh_offset != -(-end // 64) * 64:
+            raise FormatError("raw store mesh_offset or a version-4 row layout is wrong")
+        region = buf[mesh_offset:mesh_offset + mesh_len + 4]
+        if len(region) != mesh_len + 4 or crc32(region[:-4]) != struct.unpack("<I", region[-4:])[0]:
+            raise FormatError("raw store mesh truncated or CRC mismatch")
+        out["mesh"] = parse_mesh(region[:-4], W)
+        end = mesh_offset + mesh_len + 4
+    if data_offset != -(-end // 4096) * 4096 or len(buf) != data_offset + 4 * P * 6 * n * n * C:
+        raise FormatError("raw store data_offset or file length is wrong")
+    return out
+
+
+def mesh_json(mesh):
+    if mesh is None:
+        return None
+    bits = lambda a: a.view("<u4").tolist()  # noqa: E731
+    return dict(size=mesh["size"], positions=bits(mesh["positions"]),
+                normals=bits(mesh["normals"]), uvs=bits(mesh["uvs"]),
+                triangles=mesh["triangles"].tolist())
 
 
 def parse_empty_rows(empt, P):
@@ -833,10 +961,16 @@ def decode_matrix(path, verbose=False, dt=np.float32, info=None):
     Q = (1 << (B - 1)) - 1
     empty = parse_empty_rows(chunks[b"EMPT"], P) if b"EMPT" in chunks else None
     norms = parse_norms(chunks[b"NORM"], M) if b"NORM" in chunks else None
+    layout = parse_surf(chunks[b"SURF"], W, H)[0] if b"SURF" in chunks else 0
+    mesh = None
+    if b"MESH" in chunks:
+        if layout != 1:
+            raise FormatError("a MESH chunk in an image-space file")
+        mesh = parse_mesh(chunks[b"MESH"], W)
     table = parse_column_table(chunks[b"COLS"], M, P, W, H, version)
     data = chunks[b"DATA"]
     if info is not None:
-        info.update(meta, version=version, features=features,
+        info.update(meta, version=version, features=features, mesh=mesh,
                     encodings={e: sum(1 for t in table if t["enc"] == e)
                                for e in sorted({t["enc"] for t in table})})
     if verbose:
@@ -913,9 +1047,27 @@ def main(argv=None):
     ap.add_argument("--out", help="write the decoded matrix as .npy")
     ap.add_argument("--f64", action="store_true",
                     help="compute in float64 (default: float32, as ltm does)")
+    ap.add_argument("--mesh-json", help="write the receiving mesh (or null) as JSON")
     ap.add_argument("-v", "--verbose", action="store_true")
     args = ap.parse_args(argv)
     info = {}
+    with open(args.file, "rb") as f:
+        raw = f.read(8) == RAW_MAGIC
+    if raw:
+        try:
+            info = read_raw_store(open(args.file, "rb").read())
+        except FormatError as e:
+            print(f"{args.file}: {e}", file=sys.stderr)
+            return 2
+        mesh = info["mesh"]
+        print(f"raw store version {info['version']}, W={info['W']} H={info['H']} "
+              f"n={info['n']} C={info['C']}, mesh: "
+              + (f"{len(mesh['positions'])} vertices, {len(mesh['triangles'])} triangles"
+                 if mesh else "none"))
+        if args.mesh_json:
+            import json
+            json.dump(mesh_json(mesh), open(args.mesh_json, "w"))
+        return 0
     try:
         T = decode_matrix(args.file, args.verbose, np.float64 if args.f64 else np.float32, info)
     except FormatError as e:
@@ -924,6 +1076,13 @@ def main(argv=None):
     print("shape", T.shape)
     print(f"format version {info['version']}, columns by encoding "
           + ", ".join(f"{e}: {c}" for e, c in info["encodings"].items()))
+    mesh = info["mesh"]
+    if mesh is not None:
+        print(f"receiver mesh: {len(mesh['positions'])} vertices, "
+              f"{len(mesh['triangles'])} triangles")
+    if args.mesh_json:
+        import json
+        json.dump(mesh_json(mesh), open(args.mesh_json, "w"))
     if args.out:
         np.save(args.out, T)
     if args.compare:

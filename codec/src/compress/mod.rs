@@ -492,6 +492,7 @@ fn write_columns(
         t.raw().albedo(),
         OptionalChunks {
             surface: t.raw().surface(),
+            mesh: t.raw().mesh(),
             empty_rows: Some(t.empty_rows()),
             column_norms: true,
         },

@@ -2,7 +2,7 @@
 //! ([`crate::pca`]), the choice of rank and bits, and the file.
 
 use super::Mode;
-use crate::container::{write_pca_file, Meta};
+use crate::container::{write_pca_file, Meta, OptionalChunks};
 use crate::dims::Dims;
 use crate::empty::EmptyRows;
 use crate::error::{Error, Result};
@@ -126,8 +126,12 @@ pub fn compress_pca(
                 out,
                 meta,
                 raw.albedo(),
-                raw.surface(),
-                model.empty_rows(),
+                OptionalChunks {
+                    surface: raw.surface(),
+                    mesh: raw.mesh(),
+                    empty_rows: model.empty_rows(),
+                    column_norms: false,
+                },
                 &model,
                 opts.zstd_level,
             )?;

@@ -7,13 +7,14 @@ use crate::error::{Error, Result};
 
 /// File magic: `\x89LTM\r\n\x1a\n`.
 pub const MAGIC: [u8; 8] = *b"\x89LTM\r\n\x1a\n";
-/// Format version this build writes. It reads versions 1 to 5; version 2
+/// Format version this build writes. It reads versions 1 to 6; version 2
 /// adds the empty-row mask ([`FEATURE_EMPTY_ROWS`]) and the row layout with
 /// per-row surface data ([`FEATURE_SURFACE`]). A version-1 file has neither.
 /// Version 3 adds column encoding 3 ([`Encoding::Ranged`](crate::column::Encoding::Ranged)), version 4 column
 /// encoding 4 ([`Encoding::Classed`](crate::column::Encoding::Classed)), version 5 the column norms
-/// ([`FEATURE_COLUMN_NORMS`]).
-pub const VERSION: u32 = 5;
+/// ([`FEATURE_COLUMN_NORMS`]), version 6 the receiver mesh
+/// ([`FEATURE_RECEIVER_MESH`]).
+pub const VERSION: u32 = 6;
 /// The oldest format version this build reads.
 pub const MIN_VERSION: u32 = 1;
 /// Feature flag: an RGB albedo image is stored (chunk ALBD).
@@ -30,6 +31,10 @@ pub const FEATURE_SURFACE: u32 = 4;
 ///
 /// [`ColumnDecoder::weighted_norm`]: crate::ColumnDecoder::weighted_norm
 pub const FEATURE_COLUMN_NORMS: u32 = 8;
+/// Feature flag (version 6): the receiving mesh of a texture-space file is
+/// stored (chunk MESH, [`ReceiverMesh`](crate::ReceiverMesh)); only with
+/// [`FEATURE_SURFACE`] and texture rows.
+pub const FEATURE_RECEIVER_MESH: u32 = 16;
 /// The feature flags a reader of each version knows, by version − 1.
 const KNOWN_FEATURES: [u32; VERSION as usize] = [
     FEATURE_ALBEDO,
@@ -37,7 +42,15 @@ const KNOWN_FEATURES: [u32; VERSION as usize] = [
     FEATURE_ALBEDO | FEATURE_EMPTY_ROWS | FEATURE_SURFACE,
     FEATURE_ALBEDO | FEATURE_EMPTY_ROWS | FEATURE_SURFACE,
     FEATURE_ALBEDO | FEATURE_EMPTY_ROWS | FEATURE_SURFACE | FEATURE_COLUMN_NORMS,
+    FEATURE_ALBEDO
+        | FEATURE_EMPTY_ROWS
+        | FEATURE_SURFACE
+        | FEATURE_COLUMN_NORMS
+        | FEATURE_RECEIVER_MESH,
 ];
+/// The most chunks a file of any version holds: 4 required (a `pca`
+/// file's) plus one per feature bit.
+pub const MAX_CHUNKS: usize = 4 + KNOWN_FEATURES[VERSION as usize - 1].count_ones() as usize;
 pub(super) const HEADER_LEN: usize = 24;
 pub(super) const DIR_ENTRY_LEN: usize = 32;
 
@@ -122,6 +135,7 @@ fn check_directory(dir: &[DirEntry], start: u64, file_len: usize) -> Result<()> 
                 | b"ALBD"
                 | b"EMPT"
                 | b"SURF"
+                | b"MESH"
                 | b"NORM"
                 | b"COLS"
                 | b"DATA"

@@ -3,14 +3,16 @@
 //!
 //! ```text
 //! header (24 bytes) | chunk directory (32 bytes × count) | directory CRC
-//! META | ALBD | EMPT | SURF | NORM (each optional) | COLS (column table) | DATA (column payloads)
+//! META | ALBD | EMPT | SURF | MESH | NORM (each optional) | COLS (column table) | DATA (column payloads)
 //! ```
 //!
 //! Version 2 adds feature 4 and chunk `SURF`: the row layout (image pixels
 //! or texture texels) and per-row surface data ([`Surface`](crate::Surface)). Version-1
 //! files (features 1 at most) are still read. Version 5 adds feature 8 and
 //! chunk `NORM`: each column's priority norm, so that a relighter can rank
-//! lights by transport without decoding every column first.
+//! lights by transport without decoding every column first. Version 6
+//! adds feature 16 and chunk `MESH`: the receiving mesh of a texture-space
+//! file ([`ReceiverMesh`](crate::ReceiverMesh)).
 //!
 //! Every chunk has a CRC-32 in the directory, except DATA whose columns
 //! each have their own CRC in the column table. The directory is validated
@@ -26,8 +28,8 @@ mod repair;
 mod write;
 
 pub use directory::{
-    FEATURE_ALBEDO, FEATURE_COLUMN_NORMS, FEATURE_EMPTY_ROWS, FEATURE_SURFACE, MAGIC, MIN_VERSION,
-    VERSION,
+    FEATURE_ALBEDO, FEATURE_COLUMN_NORMS, FEATURE_EMPTY_ROWS, FEATURE_RECEIVER_MESH,
+    FEATURE_SURFACE, MAGIC, MAX_CHUNKS, MIN_VERSION, VERSION,
 };
 pub use meta::Meta;
 pub use read::{validate_bytes, LtmFile, LtmIndex};

@@ -4,7 +4,7 @@
 
 use super::directory::{
     chunk, read_directory, DirEntry, FEATURE_ALBEDO, FEATURE_COLUMN_NORMS, FEATURE_EMPTY_ROWS,
-    FEATURE_SURFACE, MAGIC,
+    FEATURE_RECEIVER_MESH, FEATURE_SURFACE, MAGIC,
 };
 use super::Meta;
 use crate::bytes::Reader;
@@ -18,6 +18,7 @@ use crate::entropy::ColumnShape;
 use crate::error::{Error, Result};
 use crate::fileio::{check_regular, read_at, Stamp};
 use crate::limits::{Charge, Limits};
+use crate::mesh::ReceiverMesh;
 use crate::pca::PcaModel;
 use crate::surface::Surface;
 use std::fs::File;
@@ -59,6 +60,8 @@ pub struct LtmIndex {
     /// The per-row surface data (chunk SURF), if stored; its row layout is
     /// in `meta.dims.rows`.
     pub surface: Option<Surface>,
+    /// The receiving mesh of a texture-space file (chunk MESH), if stored.
+    pub mesh: Option<ReceiverMesh>,
     /// The mask of all-zero rows (chunk EMPT), if stored.
     pub empty_rows: Option<EmptyRows>,
     /// Every column's priority norm (chunk NORM), if stored.
@@ -76,13 +79,14 @@ pub struct LtmIndex {
 fn index_charge(
     limits: &Limits,
     albedo: &Option<Vec<f32>>,
-    surface: &Option<Surface>,
+    (surface, mesh): (&Option<Surface>, &Option<ReceiverMesh>),
     norms: &Option<Vec<f32>>,
     columns: &[ColumnEntry],
     pca: Option<&PcaModel>,
 ) -> Result<Charge> {
     let bytes = 4 * (albedo.as_ref().map_or(0, Vec::len) + norms.as_ref().map_or(0, Vec::len))
         + surface.as_ref().map_or(0, Surface::heap_bytes)
+        + mesh.as_ref().map_or(0, ReceiverMesh::heap_bytes)
         + std::mem::size_of_val(columns)
         + pca.map_or(0, PcaModel::heap_bytes);
     limits.check_alloc("decoded file index", bytes as u64, 1)
@@ -179,6 +183,12 @@ impl LtmFile {
                 ))
             }
         };
+        let mesh = read_mesh(
+            chunk(bytes, &dir, b"MESH")?,
+            features & FEATURE_RECEIVER_MESH != 0,
+            &meta.dims,
+            limits,
+        )?;
         let empty_rows = read_empty_rows(
             chunk(bytes, &dir, b"EMPT")?,
             features & FEATURE_EMPTY_ROWS != 0,
@@ -194,13 +204,21 @@ impl LtmFile {
         if meta.mode == Mode::Pca {
             let pca =
                 read_pca_chunks(bytes, &dir, &meta, limits)?.with_empty_rows(empty_rows.clone())?;
-            let charge = index_charge(limits, &albedo, &surface, &column_norms, &[], Some(&pca))?;
+            let charge = index_charge(
+                limits,
+                &albedo,
+                (&surface, &mesh),
+                &column_norms,
+                &[],
+                Some(&pca),
+            )?;
             return Ok(LtmIndex {
                 _charge: charge,
                 meta,
                 columns: Vec::new(),
                 albedo,
                 surface,
+                mesh,
                 empty_rows,
                 column_norms,
                 data: 0..0,
@@ -214,13 +232,21 @@ impl LtmFile {
             .ok_or_else(|| missing("DATA"))?;
         let data = data_dir.offset as usize..(data_dir.offset + data_dir.len) as usize;
         let columns = read_column_table(cols, &meta, version, data.len() as u64, limits)?;
-        let charge = index_charge(limits, &albedo, &surface, &column_norms, &columns, None)?;
+        let charge = index_charge(
+            limits,
+            &albedo,
+            (&surface, &mesh),
+            &column_norms,
+            &columns,
+            None,
+        )?;
         Ok(LtmIndex {
             _charge: charge,
             meta,
             columns,
             albedo,
             surface,
+            mesh,
             empty_rows,
             column_norms,
             data,
@@ -254,6 +280,13 @@ impl LtmFile {
     /// mask), for an image-space one each pixel's first hit.
     pub fn surface(&self) -> Option<&Surface> {
         self.index.surface.as_ref()
+    }
+
+    /// The receiving mesh of a texture-space file (chunk MESH, version 6),
+    /// if stored: the triangles a relit texture is drawn on, validated
+    /// against the texture at open.
+    pub fn mesh(&self) -> Option<&ReceiverMesh> {
+        self.index.mesh.as_ref()
     }
 
     /// The mask of all-zero rows, if stored (a version-1 file has none).
@@ -339,6 +372,31 @@ fn read_albedo(chunk: Option<&[u8]>, flagged: bool, dims: &Dims) -> Result<Optio
         _ => Err(Error::corrupt(
             "chunk directory",
             "ALBD chunk and albedo feature flag disagree",
+        )),
+    }
+}
+
+/// The MESH chunk's receiving mesh: present exactly when the feature flag
+/// says so, only in a texture-space file (whose SURF chunk gave the
+/// texture), decoded and validated for the texture's side.
+fn read_mesh(
+    chunk: Option<&[u8]>,
+    flagged: bool,
+    dims: &Dims,
+    limits: &Limits,
+) -> Result<Option<ReceiverMesh>> {
+    match (chunk, flagged, dims.rows) {
+        (Some(m), true, crate::RowLayout::Texture { size, .. }) => {
+            ReceiverMesh::decode(m, size, limits).map(Some)
+        }
+        (Some(_), true, _) => Err(Error::corrupt(
+            "MESH chunk",
+            "a receiver mesh in an image-space file (valid: only with texture rows in SURF)",
+        )),
+        (None, false, _) => Ok(None),
+        _ => Err(Error::corrupt(
+            "chunk directory",
+            "MESH chunk and receiver-mesh feature flag disagree",
         )),
     }
 }

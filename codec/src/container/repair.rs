@@ -22,7 +22,7 @@ pub fn repair_checksums(b: &mut [u8]) {
             .filter(|&e| e <= len as u64)
             .map(|e| offset as usize..e as usize)
     };
-    let Some(count) = u32_at(b, 16).map(|c| (c as usize).min(8)) else {
+    let Some(count) = u32_at(b, 16).map(|c| (c as usize).min(super::MAX_CHUNKS)) else {
         return;
     };
     let mut chunks = Vec::new();

@@ -3,13 +3,14 @@
 
 use super::directory::{
     encode_head, DirEntry, DIR_ENTRY_LEN, FEATURE_ALBEDO, FEATURE_COLUMN_NORMS, FEATURE_EMPTY_ROWS,
-    FEATURE_SURFACE, HEADER_LEN,
+    FEATURE_RECEIVER_MESH, FEATURE_SURFACE, HEADER_LEN,
 };
 use super::meta::{Meta, META_LEN};
 use crate::bytes::Writer;
 use crate::column::{ColumnEntry, EncodedColumn, COLUMN_ENTRY_LEN};
 use crate::empty::EmptyRows;
 use crate::error::{Error, Result};
+use crate::mesh::ReceiverMesh;
 use crate::output::AtomicFile;
 use crate::pca::PcaModel;
 use crate::surface::Surface;
@@ -21,6 +22,9 @@ use std::path::{Path, PathBuf};
 pub struct OptionalChunks<'a> {
     /// Per-row surface data (chunk SURF); required for a texture layout.
     pub surface: Option<&'a Surface>,
+    /// The receiving mesh (chunk MESH); only for a texture layout, with
+    /// `surface`. It must pass [`ReceiverMesh::validate`] for the texture.
+    pub mesh: Option<&'a ReceiverMesh>,
     /// The mask of all-zero rows (chunk EMPT); stored when it has any.
     pub empty_rows: Option<&'a EmptyRows>,
     /// Store every column's priority norm (chunk NORM): each pushed
@@ -36,6 +40,7 @@ pub struct LtmWriter {
     meta: Meta,
     albedo: Option<Vec<u8>>,
     surface: Option<Vec<u8>>,
+    mesh: Option<Vec<u8>>,
     empty_rows: Option<Vec<u8>>,
     entries: Vec<ColumnEntry>,
     /// The columns' norms, when the file stores them.
@@ -76,6 +81,7 @@ impl LtmWriter {
             ));
         }
         let surface = extra.surface.map(|s| s.encode_chunk(&meta.dims.rows));
+        let mesh = mesh_chunk(&extra, &meta)?;
         let empty_rows = match extra.empty_rows {
             Some(e) if e.rows() != meta.dims.pixels() => {
                 return Err(Error::BufferTooSmall {
@@ -106,6 +112,7 @@ impl LtmWriter {
             + albedo.is_some() as u64
             + empty_rows.is_some() as u64
             + surface.is_some() as u64
+            + mesh.is_some() as u64
             + extra.column_norms as u64;
         let head_len = HEADER_LEN as u64 + DIR_ENTRY_LEN as u64 * chunks + 4;
         let cols_len = (COLUMN_ENTRY_LEN * meta.dims.lights()) as u64;
@@ -116,6 +123,7 @@ impl LtmWriter {
             + optional(&albedo)
             + optional(&empty_rows)
             + optional(&surface)
+            + optional(&mesh)
             + norms_len
             + cols_len;
         let mut w = LtmWriter {
@@ -124,6 +132,7 @@ impl LtmWriter {
             meta,
             albedo,
             surface,
+            mesh,
             empty_rows,
             entries: Vec::new(),
             norms: extra.column_norms.then(Vec::new),
@@ -224,6 +233,10 @@ impl LtmWriter {
             chunks.push((b"SURF", s));
             features |= FEATURE_SURFACE;
         }
+        if let Some(m) = self.mesh.take() {
+            chunks.push((b"MESH", m));
+            features |= FEATURE_RECEIVER_MESH;
+        }
         if let Some(n) = self.norms.take() {
             chunks.push((b"NORM", bytemuck::cast_slice::<f32, u8>(&n).to_vec()));
             features |= FEATURE_COLUMN_NORMS;
@@ -264,18 +277,40 @@ impl LtmWriter {
     }
 }
 
-/// Writes a `pca` file (version 2): META, ALBD, EMPT (when it has a row),
-/// SURF (each when given), PCAM, PCAB, PCAC, atomically. Returns the file
-/// size.
+/// The MESH chunk of a file with `meta`, if `extra` has a mesh: only
+/// for texture rows with surface data, and valid for the texture's side.
+fn mesh_chunk(extra: &OptionalChunks<'_>, meta: &Meta) -> Result<Option<Vec<u8>>> {
+    let Some(mesh) = extra.mesh else {
+        return Ok(None);
+    };
+    match meta.dims.rows {
+        crate::RowLayout::Texture { size, .. } if extra.surface.is_some() => {
+            mesh.validate(size)
+                .map_err(|e| Error::Invalid(e.to_string()))?;
+            Ok(Some(mesh.encode()))
+        }
+        _ => Err(Error::Invalid(
+            "a receiver mesh is stored only in a texture-space .ltm file, with its surface data"
+                .into(),
+        )),
+    }
+}
+
+/// Writes a `pca` file: META, ALBD, EMPT (when it has a row), SURF, MESH
+/// (each when given), PCAM, PCAB, PCAC, atomically. `extra` may not ask
+/// for column norms. Returns the file size.
 pub(crate) fn write_pca_file(
     path: &Path,
     meta: Meta,
     albedo: Option<&[f32]>,
-    surface: Option<&Surface>,
-    empty_rows: Option<&EmptyRows>,
+    extra: OptionalChunks<'_>,
     model: &PcaModel,
     zstd_level: i32,
 ) -> Result<u64> {
+    let (surface, empty_rows) = (extra.surface, extra.empty_rows);
+    if extra.column_norms {
+        return Err(Error::Invalid("a pca file stores no column norms".into()));
+    }
     let mut chunks: Vec<([u8; 4], Vec<u8>)> = vec![(*b"META", meta.encode())];
     let mut features = 0;
     if let Some(a) = albedo {
@@ -301,6 +336,10 @@ pub(crate) fn write_pca_file(
         return Err(Error::Invalid(
             "a texture-space .ltm file needs its surface data".into(),
         ));
+    }
+    if let Some(m) = mesh_chunk(&extra, &meta)? {
+        chunks.push((*b"MESH", m));
+        features |= FEATURE_RECEIVER_MESH;
     }
     chunks.extend(crate::pca::write_chunks(model, zstd_level)?);
     let head_len = HEADER_LEN + DIR_ENTRY_LEN * chunks.len() + 4;

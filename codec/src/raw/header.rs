@@ -3,21 +3,26 @@
 use crate::bytes::{Reader, Writer};
 use crate::dims::Dims;
 use crate::error::{Error, Result};
+use crate::mesh::{
+    ReceiverMesh, MAX_MESH_ELEMENTS, MESH_HEADER_LEN, MESH_TRIANGLE_LEN, MESH_VERTEX_LEN,
+};
 use crate::surface::SURFACE_RECORD_LEN;
 use std::path::Path;
 
 pub(super) const MAGIC: [u8; 8] = *b"LTMRAW\0\x01";
-/// The newest version; version 1 (no input identity) is still read and
-/// written.
-pub(super) const VERSION: u32 = 3;
-/// Header bytes of versions 1, 2 and 3.
+/// The newest version; versions 1 to 3 are still read and written (the
+/// version of a header is the oldest that holds what it stores).
+pub(super) const VERSION: u32 = 4;
+/// Header bytes of versions 1, 2, 3 and 4.
 pub(super) const HEADER_LEN_V1: u64 = 64;
 pub(super) const HEADER_LEN_V2: u64 = 96;
 pub(super) const HEADER_LEN_V3: u64 = 112;
+pub(super) const HEADER_LEN_V4: u64 = 128;
 /// Bytes of an input identity.
 pub const INPUT_ID_LEN: usize = 32;
 pub(super) const FLAG_ALBEDO: u32 = 1;
 pub(super) const FLAG_SURFACE: u32 = 2;
+pub(super) const FLAG_MESH: u32 = 4;
 pub(super) const DATA_ALIGN: u64 = 4096;
 /// Bytes read at a time when a block's CRC is checked.
 pub(super) const CRC_CHUNK: u64 = 8 << 20;
@@ -42,6 +47,10 @@ pub struct RawHeader {
     /// Per-row surface data ([`Surface`](crate::Surface)) is stored (version 3). Texture
     /// rows ([`crate::RowLayout::Texture`]) always have it.
     pub has_surface: bool,
+    /// Bytes of the stored receiving mesh ([`ReceiverMesh::encoded_len`]),
+    /// when one is stored (version 4; texture rows only); see
+    /// [`RawHeader::with_mesh`].
+    pub mesh_len: Option<u64>,
 }
 
 #[derive(Clone, Copy)]
@@ -53,6 +62,8 @@ pub(super) struct Layout {
     pub(super) albedo_offset: u64,
     /// Start of the surface records (0 when absent).
     pub(super) surface_offset: u64,
+    /// Start of the receiving mesh (0 when absent).
+    pub(super) mesh_offset: u64,
     pub(super) data_offset: u64,
     pub(super) file_len: u64,
 }
@@ -68,6 +79,18 @@ impl RawHeader {
             has_albedo,
             input_id: None,
             has_surface: dims.rows.is_texture(),
+            mesh_len: None,
+        }
+    }
+
+    /// The same header with room for `mesh`, the receiving mesh of a
+    /// texture layout (written as version 4; the writer is then given this
+    /// mesh, [`RawWriter::create_with_geometry`](crate::RawWriter::create_with_geometry)).
+    pub fn with_mesh(self, mesh: &ReceiverMesh) -> RawHeader {
+        RawHeader {
+            has_surface: true,
+            mesh_len: Some(mesh.encoded_len() as u64),
+            ..self
         }
     }
 
@@ -87,10 +110,12 @@ impl RawHeader {
         }
     }
 
-    /// The format version this header is written as: 3 with surface data,
-    /// else 2 with an input identity, else 1.
+    /// The format version this header is written as: 4 with a receiving
+    /// mesh, else 3 with surface data, else 2 with an input identity, else 1.
     pub fn version(&self) -> u32 {
-        if self.has_surface {
+        if self.mesh_len.is_some() {
+            4
+        } else if self.has_surface {
             3
         } else if self.input_id.is_some() {
             2
@@ -101,6 +126,7 @@ impl RawHeader {
 
     pub(super) fn header_len(&self) -> u64 {
         match self.version() {
+            4 => HEADER_LEN_V4,
             3 => HEADER_LEN_V3,
             2 => HEADER_LEN_V2,
             _ => HEADER_LEN_V1,
@@ -121,6 +147,7 @@ impl RawHeader {
                 "a texture-space raw store must carry surface data".into(),
             ));
         }
+        let mesh_len = self.checked_mesh_len()?;
         let p = self.dims.pixels() as u64;
         if self.block_rows == 0 || self.block_rows as u64 > p {
             return Err(Error::range(
@@ -141,7 +168,9 @@ impl RawHeader {
             } else {
                 0
             };
-        let data_offset = surface_end.next_multiple_of(DATA_ALIGN);
+        let mesh_offset = surface_end.next_multiple_of(64);
+        let mesh_end = mesh_len.map_or(surface_end, |len| mesh_offset + len + 4);
+        let data_offset = mesh_end.next_multiple_of(DATA_ALIGN);
         let file_len = data_offset
             .checked_add(self.dims.raw_bytes())
             .ok_or_else(|| {
@@ -153,9 +182,33 @@ impl RawHeader {
             flags_offset,
             albedo_offset: if self.has_albedo { albedo_offset } else { 0 },
             surface_offset: if self.has_surface { surface_offset } else { 0 },
+            mesh_offset: if mesh_len.is_some() { mesh_offset } else { 0 },
             data_offset,
             file_len,
         })
+    }
+
+    /// The mesh length, checked: texture rows only, within the bytes of a
+    /// mesh of at most [`MAX_MESH_ELEMENTS`] vertices and triangles.
+    fn checked_mesh_len(&self) -> Result<Option<u64>> {
+        let Some(len) = self.mesh_len else {
+            return Ok(None);
+        };
+        if !self.dims.rows.is_texture() || !self.has_surface {
+            return Err(Error::Invalid(
+                "a receiver mesh is stored only in a texture-space raw store".into(),
+            ));
+        }
+        let most =
+            (MESH_HEADER_LEN + (MESH_VERTEX_LEN + MESH_TRIANGLE_LEN) * MAX_MESH_ELEMENTS) as u64;
+        if !(MESH_HEADER_LEN as u64..=most).contains(&len) {
+            return Err(Error::range(
+                "raw store mesh_len",
+                len,
+                format!("{MESH_HEADER_LEN}..={most}"),
+            ));
+        }
+        Ok(Some(len))
     }
 
     /// Number of blocks.
@@ -175,7 +228,12 @@ impl RawHeader {
         w.u32(self.version());
         w.u32(
             if self.has_albedo { FLAG_ALBEDO } else { 0 }
-                | if self.has_surface { FLAG_SURFACE } else { 0 },
+                | if self.has_surface { FLAG_SURFACE } else { 0 }
+                | if self.mesh_len.is_some() {
+                    FLAG_MESH
+                } else {
+                    0
+                },
         );
         for v in self.dims.to_fields() {
             w.u32(v);
@@ -200,13 +258,17 @@ impl RawHeader {
                 _ => 0,
             });
         }
+        if let Some(len) = self.mesh_len {
+            w.u64(layout.mesh_offset);
+            w.u64(len);
+        }
         let crc = crc32fast::hash(&w.bytes);
         w.u32(crc);
         w.bytes
     }
 
     /// Decodes and checks a header from the first bytes of a file of
-    /// `file_len` bytes (`bytes` holds `min(file_len, HEADER_LEN_V3)` of
+    /// `file_len` bytes (`bytes` holds `min(file_len, HEADER_LEN_V4)` of
     /// them).
     pub(super) fn decode(bytes: &[u8], file_len: u64, path: &Path) -> Result<(RawHeader, Layout)> {
         check_magic(bytes, file_len, path)?;
@@ -215,6 +277,7 @@ impl RawHeader {
             1 => HEADER_LEN_V1,
             2 => HEADER_LEN_V2,
             3 => HEADER_LEN_V3,
+            4 => HEADER_LEN_V4,
             _ => {
                 return Err(Error::Version {
                     what: "raw store",
@@ -238,7 +301,8 @@ impl RawHeader {
         check_fixed_fields(bytes, len, version, flags)?;
         let mut dims = Dims::read_fields(&mut r)?;
         let word = |at: usize| u32::from_le_bytes(bytes[at..at + 4].try_into().expect("4 bytes"));
-        if version == 3 {
+        let long = |at: usize| u64::from_le_bytes(bytes[at..at + 8].try_into().expect("8 bytes"));
+        if version >= 3 {
             dims.rows =
                 crate::RowLayout::from_codes(word(100), word(104), dims.width(), dims.height())?;
         }
@@ -254,23 +318,29 @@ impl RawHeader {
             dims,
             block_rows: r.u32()?,
             has_albedo: flags & FLAG_ALBEDO != 0,
-            input_id: (version == 2 || (version == 3 && id != [0; INPUT_ID_LEN])).then_some(id),
-            has_surface: version == 3,
+            input_id: (version == 2 || (version >= 3 && id != [0; INPUT_ID_LEN])).then_some(id),
+            has_surface: version >= 3,
+            mesh_len: (version == 4).then(|| long(116)),
         };
+        if version == 4 && !dims.rows.is_texture() {
+            return Err(Error::range(
+                "raw store row layout",
+                "0 (image) in a version-4 header",
+                "1 (texture): a receiver mesh belongs to texture rows",
+            ));
+        }
         let layout = header.layout()?;
         let offsets = (r.u32()?, r.u64()?, r.u64()?);
-        let surface_offset = if version == 3 {
-            u64::from_le_bytes(bytes[92..100].try_into().expect("8 bytes"))
-        } else {
-            0
-        };
-        check_offsets(&layout, offsets, surface_offset)?;
+        let surface_offset = if version >= 3 { long(92) } else { 0 };
+        let mesh_offset = if version == 4 { long(108) } else { 0 };
+        check_offsets(&layout, offsets, (surface_offset, mesh_offset))?;
         Ok((header, layout))
     }
 }
 
 /// The header's CRC (over its first `len − 4` bytes), its flags (bit 0,
-/// and bit 1 exactly in `version` 3) and its reserved field (0).
+/// bit 1 exactly in `version` 3 and 4, bit 2 exactly in version 4) and its
+/// reserved field (0).
 pub(super) fn check_fixed_fields(bytes: &[u8], len: usize, version: u32, flags: u32) -> Result<()> {
     let stored_crc = u32::from_le_bytes(bytes[len - 4..len].try_into().expect("4 bytes"));
     let crc = crc32fast::hash(&bytes[..len - 4]);
@@ -281,16 +351,15 @@ pub(super) fn check_fixed_fields(bytes: &[u8], len: usize, version: u32, flags: 
             computed: crc,
         });
     }
-    let allowed = if version == 3 {
-        FLAG_ALBEDO | FLAG_SURFACE
-    } else {
-        FLAG_ALBEDO
-    };
-    if flags & !allowed != 0 || (version == 3) != (flags & FLAG_SURFACE != 0) {
+    let allowed = FLAG_ALBEDO | FLAG_SURFACE | FLAG_MESH;
+    if flags & !allowed != 0
+        || (version >= 3) != (flags & FLAG_SURFACE != 0)
+        || (version == 4) != (flags & FLAG_MESH != 0)
+    {
         return Err(Error::range(
             "raw store flags",
             format!("{flags:#x} (version {version})"),
-            "bit 0, and bit 1 exactly in version 3",
+            "bit 0, bit 1 exactly in versions 3 and 4, bit 2 exactly in version 4",
         ));
     }
     let reserved = u32::from_le_bytes(bytes[56..60].try_into().expect("4 bytes"));
@@ -304,13 +373,22 @@ pub(super) fn check_fixed_fields(bytes: &[u8], len: usize, version: u32, flags: 
     Ok(())
 }
 
-/// The offsets a header stores (block count, data, albedo; surface) against
-/// the layout its dimensions imply.
+/// The offsets a header stores (block count, data, albedo; surface, mesh)
+/// against the layout its dimensions imply.
 pub(super) fn check_offsets(
     layout: &Layout,
     (block_count, data_offset, albedo_offset): (u32, u64, u64),
-    surface_offset: u64,
+    (surface_offset, mesh_offset): (u64, u64),
 ) -> Result<()> {
+    if mesh_offset != layout.mesh_offset {
+        return Err(Error::corrupt(
+            "raw store header",
+            format!(
+                "mesh_offset {mesh_offset} disagrees with the dimensions (expected {})",
+                layout.mesh_offset
+            ),
+        ));
+    }
     if surface_offset != layout.surface_offset {
         return Err(Error::corrupt(
             "raw store header",

@@ -3,27 +3,31 @@
 //!
 //! One little-endian file (layout in docs/FORMAT.md). Version 2 adds the
 //! input identity, version 3 the row layout and per-row surface data
-//! ([`Surface`](crate::Surface)); a header is `hlen` = 64 bytes in version 1, 96 in version
-//! 2 and 112 in version 3:
+//! ([`Surface`](crate::Surface)), version 4 the receiving mesh of a texture layout
+//! ([`ReceiverMesh`](crate::ReceiverMesh)); a header is `hlen` = 64 bytes in version 1, 96 in version
+//! 2, 112 in version 3 and 128 in version 4:
 //!
 //! | offset | size | field |
 //! |---|---|---|
 //! | 0 | 8 | magic `LTMRAW\0\x01` |
-//! | 8 | 4 | version (1, 2 or 3) |
-//! | 12 | 4 | flags: bit 0 = an albedo image is stored, bit 1 = surface data (exactly in version 3) |
+//! | 8 | 4 | version (1, 2, 3 or 4) |
+//! | 12 | 4 | flags: bit 0 = an albedo image is stored, bit 1 = surface data (exactly in versions 3 and 4), bit 2 = receiver mesh (exactly in version 4) |
 //! | 16 | 4·5 | width, height, face_res, channels, block_rows |
 //! | 36 | 4 | block_count = ceil(width·height / block_rows) |
 //! | 40 | 8 | data_offset (multiple of 4096) |
 //! | 48 | 8 | albedo_offset (0 when absent) |
 //! | 56 | 4 | reserved, 0 (a reader refuses any other value) |
-//! | 60 | 32 | version 2 and 3: input identity ([`RawHeader::input_id`]; all zero in version 3 = none) |
-//! | 92 | 8 | version 3: surface_offset |
-//! | 100 | 4·2 | version 3: row layout (0 image, 1 texture), parameterization (0 none, 1 uv, 2 sphere) |
+//! | 60 | 32 | versions 2 to 4: input identity ([`RawHeader::input_id`]; all zero in versions 3 and 4 = none) |
+//! | 92 | 8 | versions 3 and 4: surface_offset |
+//! | 100 | 4·2 | versions 3 and 4: row layout (0 image, 1 texture; 1 in version 4), parameterization (0 none, 1 uv, 2 sphere, 3 atlas) |
+//! | 108 | 8 | version 4: mesh_offset |
+//! | 116 | 8 | version 4: mesh_len, bytes of the encoded mesh |
 //! | hlen − 4 | 4 | CRC-32 of bytes 0..hlen−4 |
 //! | hlen | 8·block_count | block table: state (0 = pending, 1 = complete), CRC-32 of the block |
 //! | flags_offset | P | one byte per row: 1 = the row is all zero, else 0 |
 //! | albedo_offset | 12·P | RGB albedo per pixel, f32 (optional) |
-//! | surface_offset | 28·P + 4 | version 3: surface record per row, then the CRC-32 of the records |
+//! | surface_offset | 28·P + 4 | versions 3 and 4: surface record per row, then the CRC-32 of the records |
+//! | mesh_offset | mesh_len + 4 | version 4: the encoded mesh ([`ReceiverMesh::encode`](crate::ReceiverMesh::encode)), then its CRC-32 |
 //! | data_offset | 4·P·M·C | T\[p\]\[j\]\[c\], f32 |
 //!
 //! A block is `block_rows` consecutive rows (the last may be shorter); its

@@ -3,13 +3,14 @@
 #[cfg(target_endian = "big")]
 compile_error!("ltm's file formats are little-endian and are read into native values directly; big-endian targets are not supported");
 
-use super::header::{Layout, RawHeader, CRC_CHUNK, HEADER_LEN_V3};
+use super::header::{Layout, RawHeader, CRC_CHUNK, HEADER_LEN_V4};
 use super::verify::BlockVerifier;
 use super::writer::non_finite_albedo;
 use crate::dims::Dims;
 use crate::error::{Error, Result};
 use crate::fileio::{check_regular, read_at, Stamp};
 use crate::limits::{Charge, Limits};
+use crate::mesh::ReceiverMesh;
 use crate::surface::{Surface, SURFACE_RECORD_LEN};
 use std::fs::File;
 use std::ops::Range;
@@ -36,6 +37,7 @@ pub struct RawStore {
     pub(super) flags: Vec<u8>,
     pub(super) albedo: Option<Vec<f32>>,
     pub(super) surface: Option<Surface>,
+    pub(super) mesh: Option<ReceiverMesh>,
     pub(super) stamp: Stamp,
     /// The tables' bytes, charged to the limits it was opened with.
     pub(super) _charge: Charge,
@@ -56,7 +58,7 @@ impl RawStore {
         let file = File::open(path).map_err(|e| Error::io(path, e))?;
         check_regular(&file, path)?;
         let stamp = Stamp::of(&file, path)?;
-        let mut head = vec![0u8; stamp.len.min(HEADER_LEN_V3) as usize];
+        let mut head = vec![0u8; stamp.len.min(HEADER_LEN_V4) as usize];
         read_at(&file, path, &mut head, 0)?;
         let (header, layout) = RawHeader::decode(&head, stamp.len, path)?;
         check_length(stamp.len, layout.file_len, path)?;
@@ -64,10 +66,13 @@ impl RawStore {
         let flags = read_flags(&file, path, &header, &layout, limits)?;
         let albedo = read_albedo(&file, path, &header, &layout, limits)?;
         let surface = read_surface(&file, path, &header, &layout, limits)?;
+        let mesh = read_mesh(&file, path, &header, &layout, limits)?;
         // A file truncated or grown while its tables were read.
         stamp.check_unchanged(&file, path)?;
         let held = 4 * block_crcs.len() + flags.len() + 4 * albedo.as_ref().map_or(0, Vec::len);
-        let held = held + surface.as_ref().map_or(0, Surface::heap_bytes);
+        let held = held
+            + surface.as_ref().map_or(0, Surface::heap_bytes)
+            + mesh.as_ref().map_or(0, ReceiverMesh::heap_bytes);
         let charge = limits.check_alloc("raw store tables", held as u64, 1)?;
         Ok(RawStore {
             _charge: charge,
@@ -79,6 +84,7 @@ impl RawStore {
             flags,
             albedo,
             surface,
+            mesh,
             stamp,
         })
     }
@@ -153,6 +159,13 @@ impl RawStore {
     /// valid point (finite, unit normal) or all-zero record per row.
     pub fn surface(&self) -> Option<&Surface> {
         self.surface.as_ref()
+    }
+
+    /// The receiving mesh of a texture layout (version 4), if stored:
+    /// CRC-checked, decoded within the limits and validated for the
+    /// texture.
+    pub fn mesh(&self) -> Option<&ReceiverMesh> {
+        self.mesh.as_ref()
     }
 
     /// Checks block `b`: its CRC against the block table, that its values
@@ -313,6 +326,35 @@ pub(super) fn read_surface(
         });
     }
     Surface::decode_records(&bytes[..len], rows).map(Some)
+}
+
+/// The receiving mesh, if stored (version 4): its bytes charged to the
+/// limits before they are read, its CRC, then the mesh decoded and
+/// validated for the texture's side.
+pub(super) fn read_mesh(
+    file: &File,
+    path: &Path,
+    header: &RawHeader,
+    layout: &Layout,
+    limits: &Limits,
+) -> Result<Option<ReceiverMesh>> {
+    let (Some(len), crate::RowLayout::Texture { size, .. }) = (header.mesh_len, header.dims.rows)
+    else {
+        return Ok(None);
+    };
+    let len = usize::try_from(len).unwrap_or(usize::MAX - 4);
+    let (mut bytes, _held) = limits.vec("raw store receiver mesh", len + 4, 0u8)?;
+    read_at(file, path, &mut bytes, layout.mesh_offset)?;
+    let stored = u32::from_le_bytes(bytes[len..].try_into().expect("4 bytes"));
+    let computed = crc32fast::hash(&bytes[..len]);
+    if stored != computed {
+        return Err(Error::Crc {
+            chunk: "raw store receiver mesh".into(),
+            stored,
+            computed,
+        });
+    }
+    ReceiverMesh::decode(&bytes[..len], size, limits).map(Some)
 }
 
 /// The albedo image, if stored: every value finite.

@@ -1,8 +1,9 @@
 //! The raw store's writer: block by block, resumable from `PATH.partial`.
 
-use super::header::{Layout, RawHeader, CRC_CHUNK, HEADER_LEN_V3};
+use super::header::{Layout, RawHeader, CRC_CHUNK, HEADER_LEN_V4};
 use crate::error::{Error, Result};
 use crate::fileio::PositionedIo as _;
+use crate::mesh::ReceiverMesh;
 use crate::output::{partial_path, OutputLock};
 use crate::surface::Surface;
 use std::fs::{File, OpenOptions};
@@ -47,6 +48,9 @@ pub enum RestartReason {
     /// Same inputs, but its per-row surface data differs from this run's
     /// (a parameterization that changed): its rows belong to other texels.
     DifferentSurface,
+    /// Same inputs, but its receiving mesh differs from this run's (or one
+    /// of the two has none).
+    DifferentMesh,
 }
 
 impl std::fmt::Display for RestartReason {
@@ -65,6 +69,9 @@ impl std::fmt::Display for RestartReason {
             RestartReason::WrongLength => "its length does not match its header (truncated)",
             RestartReason::DifferentSurface => {
                 "its surface data (the point each row stands for) differs from this run's"
+            }
+            RestartReason::DifferentMesh => {
+                "its receiver mesh differs from this run's (or only one of the two has one)"
             }
         })
     }
@@ -85,20 +92,20 @@ impl std::fmt::Display for ResumeState {
 }
 
 /// `Ok` when the open partial file can be resumed by a writer of `header`
-/// with `surface`, else the state to report: no file, or why it is started
-/// over.
+/// with the stored `surface` and `mesh` regions, else the state to report:
+/// no file, or why it is started over.
 fn probe_partial(
     file: &File,
     header: &RawHeader,
     layout: &Layout,
-    surface: Option<&[u8]>,
+    (surface, mesh): (Option<&[u8]>, Option<&[u8]>),
 ) -> std::result::Result<(), ResumeState> {
     let restart = |why| Err(ResumeState::Restarted(why));
     let len = file.metadata().map(|m| m.len()).unwrap_or(0);
     if len == 0 {
         return Err(ResumeState::New);
     }
-    let mut bytes = vec![0u8; len.min(HEADER_LEN_V3) as usize];
+    let mut bytes = vec![0u8; len.min(HEADER_LEN_V4) as usize];
     if file.read_exact_at(&mut bytes, 0).is_err() {
         return restart(RestartReason::Unreadable);
     }
@@ -107,26 +114,45 @@ fn probe_partial(
     };
     match (old.input_id, header.input_id) {
         (Some(a), Some(b)) if a != b => restart(RestartReason::DifferentInputs),
-        (Some(_), Some(_)) if old != *header => restart(RestartReason::DifferentLayout),
+        (Some(_), Some(_)) if old.mesh_len.is_some() != header.mesh_len.is_some() => {
+            restart(RestartReason::DifferentMesh)
+        }
+        (Some(_), Some(_)) if !same_but_mesh(&old, header) => {
+            restart(RestartReason::DifferentLayout)
+        }
+        (Some(_), Some(_)) if old.mesh_len != header.mesh_len => {
+            restart(RestartReason::DifferentMesh)
+        }
         (Some(_), Some(_)) if len != layout.file_len || len != old_layout.file_len => {
             restart(RestartReason::WrongLength)
         }
-        (Some(_), Some(_)) if !same_surface(file, layout, surface) => {
+        (Some(_), Some(_)) if !same_region(file, layout.surface_offset, surface) => {
             restart(RestartReason::DifferentSurface)
+        }
+        (Some(_), Some(_)) if !same_region(file, layout.mesh_offset, mesh) => {
+            restart(RestartReason::DifferentMesh)
         }
         (Some(_), Some(_)) => Ok(()),
         _ => restart(RestartReason::NoIdentity),
     }
 }
 
-/// Whether the file's stored surface records equal `surface` (true when
-/// there are none).
-fn same_surface(file: &File, layout: &Layout, surface: Option<&[u8]>) -> bool {
-    let Some(want) = surface else {
+/// Whether two headers are equal but for their mesh length.
+fn same_but_mesh(old: &RawHeader, new: &RawHeader) -> bool {
+    RawHeader {
+        mesh_len: new.mesh_len,
+        ..*old
+    } == *new
+}
+
+/// Whether the file's bytes at `offset` equal `want` (true when there are
+/// none to compare: a region the header does not have).
+fn same_region(file: &File, offset: u64, want: Option<&[u8]>) -> bool {
+    let Some(want) = want else {
         return true;
     };
     let mut have = vec![0u8; want.len()];
-    file.read_exact_at(&mut have, layout.surface_offset).is_ok() && have == want
+    file.read_exact_at(&mut have, offset).is_ok() && have == want
 }
 
 /// Opens `PATH.partial` for reading and writing, creating it: never
@@ -179,7 +205,7 @@ impl RawWriter {
     /// same inputs as `header` (see the module docs), else starts it over.
     /// [`RawWriter::resume_state`] tells which, and why.
     pub fn create(path: &Path, header: RawHeader) -> Result<RawWriter> {
-        Self::create_with_surface(path, header, None)
+        Self::create_with_geometry(path, header, None, None)
     }
 
     /// [`RawWriter::create`] for a header with surface data: `surface`
@@ -191,7 +217,24 @@ impl RawWriter {
         header: RawHeader,
         surface: Option<&Surface>,
     ) -> Result<RawWriter> {
+        Self::create_with_geometry(path, header, surface, None)
+    }
+
+    /// [`RawWriter::create_with_surface`] with the receiving mesh of a
+    /// texture layout: `mesh` must be given exactly when
+    /// [`RawHeader::mesh_len`] is set, with that encoded length (make the
+    /// header with [`RawHeader::with_mesh`]), and valid for the texture
+    /// ([`ReceiverMesh::validate`]). It is written at once, like the
+    /// surface; a partial file is resumed only when its stored mesh is the
+    /// same, byte for byte ([`RestartReason::DifferentMesh`]).
+    pub fn create_with_geometry(
+        path: &Path,
+        header: RawHeader,
+        surface: Option<&Surface>,
+        mesh: Option<&ReceiverMesh>,
+    ) -> Result<RawWriter> {
         let layout = header.layout()?;
+        let mesh_bytes = check_mesh(&header, mesh)?;
         match surface {
             Some(s) => s.check_rows(&header.dims)?,
             None if header.has_surface => {
@@ -213,7 +256,12 @@ impl RawWriter {
         crate::output::check_space(path, layout.file_len)?;
         let file = open_partial(&partial)?;
         let records = surface.map(surface_bytes);
-        let probe = probe_partial(&file, &header, &layout, records.as_deref());
+        let probe = probe_partial(
+            &file,
+            &header,
+            &layout,
+            (records.as_deref(), mesh_bytes.as_deref()),
+        );
         let total = layout.block_count as usize;
         let mut writer = RawWriter {
             file,
@@ -247,6 +295,12 @@ impl RawWriter {
             writer
                 .file
                 .write_all_at(&bytes, layout.surface_offset)
+                .map_err(io)?;
+        }
+        if let Some(bytes) = mesh_bytes {
+            writer
+                .file
+                .write_all_at(&bytes, layout.mesh_offset)
                 .map_err(io)?;
         }
         Ok(writer)
@@ -402,7 +456,7 @@ impl RawWriter {
         t: &[f32],
         albedo: Option<&[f32]>,
     ) -> Result<PathBuf> {
-        Self::write_dense_with_surface(path, header, t, albedo, None)
+        Self::write_dense_with_geometry(path, header, t, albedo, None, None)
     }
 
     /// [`RawWriter::write_dense`] with per-row surface data (see
@@ -413,6 +467,19 @@ impl RawWriter {
         t: &[f32],
         albedo: Option<&[f32]>,
         surface: Option<&Surface>,
+    ) -> Result<PathBuf> {
+        Self::write_dense_with_geometry(path, header, t, albedo, surface, None)
+    }
+
+    /// [`RawWriter::write_dense`] with per-row surface data and the
+    /// receiving mesh (see [`RawWriter::create_with_geometry`]).
+    pub fn write_dense_with_geometry(
+        path: &Path,
+        header: RawHeader,
+        t: &[f32],
+        albedo: Option<&[f32]>,
+        surface: Option<&Surface>,
+        mesh: Option<&ReceiverMesh>,
     ) -> Result<PathBuf> {
         let (p, row) = (header.dims.pixels(), header.dims.row_len());
         if t.len() != p * row {
@@ -429,7 +496,7 @@ impl RawWriter {
                 need: if header.has_albedo { 3 * p } else { 0 },
             });
         }
-        let mut w = RawWriter::create_with_surface(path, header, surface)?;
+        let mut w = RawWriter::create_with_geometry(path, header, surface, mesh)?;
         for b in 0..header.block_count() {
             let r = header.block_range(b);
             let a = albedo.map(|a| &a[3 * r.start..3 * r.end]);
@@ -462,6 +529,41 @@ impl Drop for RawWriter {
             let _ = std::fs::remove_file(&self.partial);
         }
     }
+}
+
+/// The mesh region as stored — the encoded mesh, then its CRC-32 — when
+/// the header has one: `mesh` given exactly then, of the header's length
+/// and valid for the texture.
+fn check_mesh(header: &RawHeader, mesh: Option<&ReceiverMesh>) -> Result<Option<Vec<u8>>> {
+    let (len, mesh) =
+        match (header.mesh_len, mesh, header.dims.rows) {
+            (None, None, _) => return Ok(None),
+            (Some(len), Some(m), crate::RowLayout::Texture { size, .. }) => {
+                m.validate(size)
+                    .map_err(|e| Error::Invalid(e.to_string()))?;
+                (len, m)
+            }
+            (Some(_), None, _) => {
+                return Err(Error::Invalid(
+                    "the raw store header has a receiver mesh but none was given".into(),
+                ))
+            }
+            _ => return Err(Error::Invalid(
+                "receiver mesh given for a raw store header without one (see RawHeader::with_mesh)"
+                    .into(),
+            )),
+        };
+    let mut bytes = mesh.encode();
+    if bytes.len() as u64 != len {
+        return Err(Error::BufferTooSmall {
+            what: "receiver mesh",
+            len: bytes.len(),
+            need: len as usize,
+        });
+    }
+    let crc = crc32fast::hash(&bytes);
+    bytes.extend_from_slice(&crc.to_le_bytes());
+    Ok(Some(bytes))
 }
 
 /// The surface records as stored: the records, then their CRC-32.

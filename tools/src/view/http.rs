@@ -24,6 +24,8 @@ pub const FRAME_MAGIC: &[u8; 4] = b"LTMF";
 pub const FORMAT_RGB_F16: u32 = 1;
 /// Magic of a binary surface (geometry image).
 pub const SURFACE_MAGIC: &[u8; 4] = b"LTMS";
+/// Magic of a binary drawn mesh.
+pub const MESH_MAGIC: &[u8; 4] = b"LTMG";
 /// The answer to a frame when every frame slot and queue place is taken.
 pub const BUSY: &str = "busy: every frame slot is taken; try again";
 
@@ -202,6 +204,12 @@ pub fn route(
             Ok(f) => surface(viewer, f),
             Err(e) => bad(e),
         },
+        "/api/mesh" => match params::parse_query(query, &["file"])
+            .and_then(|q| params::index(&q, "file", b.files))
+        {
+            Ok(f) => mesh(viewer, f),
+            Err(e) => bad(e),
+        },
         _ => text(404, "not found"),
     })
 }
@@ -286,28 +294,63 @@ fn exact(viewer: &Viewer, p: &FrameParams) -> Reply {
     }
 }
 
+/// The 400 answer for an image-space file asked for its mesh or surface.
+fn no_mesh(f: usize) -> Reply {
+    text(
+        400,
+        &format!("file {f} is an image-space file; it has no surface"),
+    )
+}
+
 /// A texture-space file's geometry image: header (magic, side, side, 2),
-/// then x, y, z as little-endian f32 per texel, then one valid byte per
-/// texel. An image-space file gets 400.
+/// then x, y, z as little-endian f32 per texel (its surface record), then
+/// one valid byte per texel. An image-space file gets 400.
 fn surface(viewer: &Viewer, f: usize) -> Reply {
-    let Some(s) = &viewer.files[f].surface else {
-        return text(
-            400,
-            &format!("file {f} is an image-space file; it has no surface"),
-        );
+    let Some(m) = &viewer.files[f].mesh else {
+        return no_mesh(f);
     };
-    let side = viewer.files[f].info.width as u32;
-    let mut out = Vec::with_capacity(16 + s.len() * 13);
+    let side = m.size() as u32;
+    let (records, valid) = m.records();
+    let mut out = Vec::with_capacity(16 + records.len() * 13);
     out.extend_from_slice(SURFACE_MAGIC);
     for v in [side, side, 2] {
         out.extend_from_slice(&v.to_le_bytes());
     }
-    for (p, _) in s {
-        for c in p {
-            out.extend_from_slice(&c.to_le_bytes());
+    for p in records {
+        for c in p.to_array() {
+            out.extend_from_slice(&(c as f32).to_le_bytes());
         }
     }
-    out.extend(s.iter().map(|(_, v)| u8::from(*v)));
+    out.extend(valid.iter().map(|&v| u8::from(v)));
+    body(out, "application/octet-stream")
+}
+
+/// What `ltm render` draws for a texture-space file (see the module docs
+/// for the layout). An image-space file gets 400.
+fn mesh(viewer: &Viewer, f: usize) -> Reply {
+    let Some(m) = &viewer.files[f].mesh else {
+        return no_mesh(f);
+    };
+    let (v, t) = (m.positions().len(), m.triangles().len());
+    let mut out = Vec::with_capacity(16 + v * 20 + t * 17);
+    out.extend_from_slice(MESH_MAGIC);
+    for n in [v as u32, t as u32, 1] {
+        out.extend_from_slice(&n.to_le_bytes());
+    }
+    let mut f32s = |vals: &mut dyn Iterator<Item = f64>| {
+        for x in vals {
+            out.extend_from_slice(&(x as f32).to_le_bytes());
+        }
+    };
+    f32s(&mut m.positions().iter().flat_map(|p| p.to_array()));
+    f32s(&mut m.uvs().iter().flat_map(|q| q.to_array()));
+    for i in m.triangles().iter().flatten() {
+        out.extend_from_slice(&i.to_le_bytes());
+    }
+    for r in m.reach() {
+        out.extend_from_slice(&(*r as f32).to_le_bytes());
+    }
+    out.extend(m.folded().iter().map(|&x| u8::from(x)));
     body(out, "application/octet-stream")
 }
 

@@ -21,10 +21,25 @@
 //!   `--reference` store, computed on demand and cached per map and
 //!   rotation; `X-Error` gives the frame's relative L2 error against it.
 //!   Once cached, `/api/frame` answers also carry `X-Error`.
-//! - `/api/surface?file=F`: a texture-space file's geometry image: the
+//! - `/api/surface?file=F`: a texture-space file's texel records: the
 //!   16-byte header below with magic `LTMS` and format 2, then x, y, z as
-//!   little-endian f32 per texel (rows top to bottom), then one valid byte
-//!   per texel.
+//!   little-endian f32 per texel (its surface point; rows top to bottom),
+//!   then one valid byte per texel.
+//! - `/api/mesh?file=F`: what `ltm render` draws for a texture-space file
+//!   (`ltm_relight::TexturedMesh`: its stored receiver mesh, or the grid of
+//!   its geometry image), so that the page triangulates nothing itself.
+//!   A 16-byte header of four little-endian `u32`s: magic `LTMG` (bytes),
+//!   vertex count V, triangle count T, format 1; then, all little-endian:
+//!   V × (x, y, z) f32 vertex positions; V × (u, v) f32 texture coordinates
+//!   in texel units (u rightwards, v downwards, texel (x, y) covering
+//!   [x, x+1] × [y, y+1]); T × 3 u32 vertex indices (counter-clockwise);
+//!   T f32 reaches (the chart rule: a texel is read for a shaded point
+//!   only when its record lies within this distance; +infinity: no limit);
+//!   T bytes, 1 where the triangle crosses a fold of the sphere layout's
+//!   square and is shaded by blending its corners' texels (the texel
+//!   holding each corner's coordinate) with the barycentrics.
+//!   The page renders the relit texture with exactly `ltm render`'s lookup
+//!   (see `ltm_relight::TexturedMesh`) in its fragment shader.
 //!
 //! # Binary frame
 //!

@@ -6,7 +6,9 @@ use super::params::{Client, FrameParams, Lighting};
 use anyhow::{bail, Context, Result};
 use ltm_codec::container::LtmFile;
 use ltm_codec::{Limits, RawStore, RowLayout};
-use ltm_relight::{reference, relative_l2, EnvMap, Frame, FrameStats, Image, Relight, Request};
+use ltm_relight::{
+    reference, relative_l2, EnvMap, Frame, FrameStats, Image, Relight, Request, TexturedMesh,
+};
 use serde::Serialize;
 use std::collections::{HashMap, VecDeque};
 use std::path::{Path, PathBuf};
@@ -28,8 +30,9 @@ pub struct ViewFile {
     pub relighter: Box<dyn Relight + Send + Sync>,
     /// Facts shown on the page.
     pub info: FileInfo,
-    /// Geometry image of a texture-space file: position and valid flag per texel.
-    pub surface: Option<Vec<([f32; 3], bool)>>,
+    /// What `ltm render` draws for a texture-space file: its stored mesh
+    /// or the grid of its geometry image, and the texels' records.
+    pub mesh: Option<TexturedMesh>,
     /// Frames to reuse (each holds a relighter's scratch buffers).
     frames: Mutex<Vec<Frame>>,
 }
@@ -133,18 +136,12 @@ impl ViewFile {
         let meta = file.meta().clone();
         let (width, height) = (meta.dims.width() as usize, meta.dims.height() as usize);
         let texture = meta.dims.rows.is_texture();
-        let surface = match (texture, file.surface()) {
-            (true, Some(s)) => Some(
-                s.points()
-                    .iter()
-                    .map(|p| (p.position, p.valid))
-                    .collect::<Vec<_>>(),
+        let mesh = match texture {
+            true => Some(
+                TexturedMesh::from_file(&file, limits)
+                    .with_context(|| format!("opening {}", path.display()))?,
             ),
-            (true, None) => bail!(
-                "{}: a texture-space file without surface data",
-                path.display()
-            ),
-            _ => None,
+            false => None,
         };
         let bytes = file.file_bytes();
         let relighter = ltm_relight::open_file(file, limits)
@@ -170,7 +167,7 @@ impl ViewFile {
             path: path.to_path_buf(),
             relighter,
             info,
-            surface,
+            mesh,
             frames: Mutex::new(Vec::new()),
         })
     }

@@ -79,7 +79,7 @@ function message(text) { $("message").textContent = text || ""; }
 function draw(panel) {
   if (!panel.floats) return;
   const rgba = toRgba(panel.floats, panel.width, panel.height);
-  if (panel.gl) { panel.gl.setTexture(rgba, panel.width, panel.height); return; }
+  if (panel.gl) { panel.gl.setTexture(panel.floats, rgba, panel.width, panel.height); return; }
   const c = panel.canvas;
   if (c.width !== panel.width || c.height !== panel.height) { c.width = panel.width; c.height = panel.height; }
   c.getContext("2d").putImageData(new ImageData(rgba, panel.width, panel.height), 0, 0);
@@ -244,76 +244,170 @@ function addPanel(title, index) {
 }
 
 // --- texture-space files: the mesh in WebGL, with an orbit camera ------------
+//
+// The server sends what `ltm render` draws (`/api/mesh`: vertices, texture
+// coordinates in texel units, triangles, each triangle's reach and fold
+// flag) and the texels' surface records (`/api/surface`); the page
+// triangulates nothing. The fragment shader does render's lookup: bilinear
+// over the four nearest texels that are valid and whose record lies within
+// the triangle's reach of the shaded point (never two charts), weights
+// renormalized; with none, the valid texel of the 5 × 5 around whose record
+// is nearest; fold triangles blend their corners' texels. Exposure, tone
+// mapping and the sRGB encoding follow, as toRgba does for flat frames.
+
+async function fetchBinary(url, magic) {
+  const r = await fetch(url);
+  if (r.status !== 200) throw new Error(`${url}: ${r.status} ${await r.text()}`);
+  const buf = await r.arrayBuffer();
+  if (String.fromCharCode(...new Uint8Array(buf, 0, 4)) !== magic) throw new Error(`${url}: not ${magic}`);
+  const dv = new DataView(buf);
+  return { buf, a: dv.getUint32(4, true), b: dv.getUint32(8, true) };
+}
 
 async function meshPanel(p) {
-  const r = await fetch(`/api/surface?file=${p.index}`);
-  if (r.status !== 200) throw new Error(`surface: ${r.status} ${await r.text()}`);
-  const buf = await r.arrayBuffer();
-  const dv = new DataView(buf);
-  const side = dv.getUint32(4, true);
-  const pos = new Float32Array(buf.slice(16, 16 + side * side * 12));
-  const valid = new Uint8Array(buf, 16 + side * side * 12, side * side);
+  const m = await fetchBinary(`/api/mesh?file=${p.index}`, "LTMG");
+  const [nv, nt] = [m.a, m.b];
+  let o = 16;
+  const take = (Type, n) => { const a = new Type(m.buf.slice(o, o + n * Type.BYTES_PER_ELEMENT)); o += n * Type.BYTES_PER_ELEMENT; return a; };
+  const mesh = { pos: take(Float32Array, 3 * nv), uv: take(Float32Array, 2 * nv), tri: take(Uint32Array, 3 * nt), reach: take(Float32Array, nt), folded: take(Uint8Array, nt) };
+  const s = await fetchBinary(`/api/surface?file=${p.index}`, "LTMS");
+  const side = s.a;
+  const xyz = new Float32Array(s.buf.slice(16, 16 + side * side * 12));
+  const valid = new Uint8Array(s.buf, 16 + side * side * 12, side * side);
+  const records = new Float32Array(side * side * 4);
+  for (let i = 0; i < side * side; i++) { records.set(xyz.subarray(3 * i, 3 * i + 3), 4 * i); records[4 * i + 3] = valid[i]; }
   const gl_canvas = document.createElement("canvas");
   gl_canvas.className = "gl";
+  gl_canvas.id = `gl${p.index}`;
   gl_canvas.width = gl_canvas.height = 512;
   p.figure.insertBefore(gl_canvas, p.canvas);
   p.canvas.style.width = "128px";
-  p.gl = makeGl(gl_canvas, side, pos, valid, info.files[p.index].parameterization === "sphere");
+  p.gl = makeGl(gl_canvas, side, mesh, records);
 }
 
-function makeGl(canvas, side, pos, valid, fold) {
-  const gl = canvas.getContext("webgl");
-  if (!gl || !gl.getExtension("OES_element_index_uint")) throw new Error("WebGL with 32-bit indices is needed for texture-space files");
-  const uv = new Float32Array(side * side * 2);
-  const lo = [Infinity, Infinity, Infinity], hi = [-Infinity, -Infinity, -Infinity];
-  for (let y = 0; y < side; y++) for (let x = 0; x < side; x++) {
-    const i = y * side + x;
-    uv[2 * i] = (x + 0.5) / side; uv[2 * i + 1] = (y + 0.5) / side;
-    if (valid[i]) for (let c = 0; c < 3; c++) { lo[c] = Math.min(lo[c], pos[3 * i + c]); hi[c] = Math.max(hi[c], pos[3 * i + c]); }
+const MESH_VS = `#version 300 es
+in vec3 p; in vec2 t; in vec3 b; in vec2 a0; in vec2 a1; in vec2 a2; in float r; in float fo;
+uniform mat4 m;
+out vec3 vp; out vec2 vt; out vec3 vb;
+flat out vec2 c0; flat out vec2 c1; flat out vec2 c2; flat out float reach; flat out float folded;
+void main() { vp = p; vt = t; vb = b; c0 = a0; c1 = a1; c2 = a2; reach = r; folded = fo; gl_Position = m * vec4(p, 1.0); }`;
+
+const MESH_FS = `#version 300 es
+precision highp float; precision highp int; precision highp sampler2D;
+in vec3 vp; in vec2 vt; in vec3 vb;
+flat in vec2 c0; flat in vec2 c1; flat in vec2 c2; flat in float reach; flat in float folded;
+uniform sampler2D tex; uniform sampler2D rec; uniform int side; uniform float scale; uniform bool reinhard;
+out vec4 o;
+ivec2 texelAt(vec2 q) { return clamp(ivec2(floor(q)), ivec2(0), ivec2(side - 1)); }
+vec3 texel(ivec2 k) { return texelFetch(tex, k, 0).rgb; }
+bool readable(ivec2 k, vec3 p) {
+  vec4 r = texelFetch(rec, k, 0);
+  return r.w > 0.5 && (reach < 0.0 || distance(r.xyz, p) <= reach);
+}
+vec3 fallback(vec2 q, vec3 p) {
+  ivec2 c = texelAt(q), best = c;
+  float bd = -1.0;
+  for (int dy = -2; dy <= 2; dy++) for (int dx = -2; dx <= 2; dx++) {
+    ivec2 k = c + ivec2(dx, dy);
+    if (any(lessThan(k, ivec2(0))) || any(greaterThan(k, ivec2(side - 1)))) continue;
+    vec4 r = texelFetch(rec, k, 0);
+    vec3 d = r.xyz - p;
+    float dd = dot(d, d);
+    if (r.w > 0.5 && (bd < 0.0 || dd < bd)) { bd = dd; best = k; }
   }
-  // Cells of the geometry image (and, for the sphere parameterization, the
-  // border's fold onto itself), split along the shorter diagonal; a cell
-  // with three valid corners makes one triangle.
-  const quads = [];
-  const id = (x, y) => y * side + x;
-  for (let y = 0; y + 1 < side; y++) for (let x = 0; x + 1 < side; x++) quads.push([id(x, y), id(x + 1, y), id(x, y + 1), id(x + 1, y + 1)]);
-  if (fold && side >= 4) {
-    for (let x = 0; x < side / 2 - 1; x++) {
-      const [a, b, ma, mb] = [x, x + 1, side - 1 - x, side - 2 - x], e = side - 1;
-      quads.push([id(a, 0), id(b, 0), id(ma, 0), id(mb, 0)], [id(a, e), id(b, e), id(ma, e), id(mb, e)],
-        [id(0, a), id(0, b), id(0, ma), id(0, mb)], [id(e, a), id(e, b), id(e, ma), id(e, mb)]);
+  return texel(best);
+}
+vec3 lookup(vec2 q, vec3 p) {
+  vec2 g = q - 0.5, g0 = floor(g), f = g - g0;
+  ivec2 b = ivec2(g0);
+  vec3 acc = vec3(0.0);
+  float ws = 0.0;
+  for (int i = 0; i < 4; i++) {
+    ivec2 d = ivec2(i & 1, i >> 1);
+    float w = (d.x == 1 ? f.x : 1.0 - f.x) * (d.y == 1 ? f.y : 1.0 - f.y);
+    ivec2 k = clamp(b + d, ivec2(0), ivec2(side - 1));
+    if (w > 0.0 && readable(k, p)) { acc += w * texel(k); ws += w; }
+  }
+  return ws > 0.0 ? acc / ws : fallback(q, p);
+}
+void main() {
+  vec3 c = folded > 0.5 ? vb.x * texel(texelAt(c0)) + vb.y * texel(texelAt(c1)) + vb.z * texel(texelAt(c2)) : lookup(vt, vp);
+  c *= scale;
+  if (reinhard) c = c / (1.0 + c);
+  c = clamp(c, 0.0, 1.0);
+  o = vec4(mix(12.92 * c, 1.055 * pow(c, vec3(1.0 / 2.4)) - 0.055, step(vec3(0.0031308), c)), 1.0);
+}`;
+
+// Each triangle gets its own three vertices: the fold flag, the reach and
+// the corners' texture coordinates are per triangle.
+function triangleSoup(mesh) {
+  const nt = mesh.reach.length, n = 3 * nt;
+  const a = { p: new Float32Array(3 * n), t: new Float32Array(2 * n), b: new Float32Array(3 * n), a0: new Float32Array(2 * n),
+    a1: new Float32Array(2 * n), a2: new Float32Array(2 * n), r: new Float32Array(n), fo: new Float32Array(n) };
+  for (let i = 0; i < nt; i++) {
+    const c = [mesh.tri[3 * i], mesh.tri[3 * i + 1], mesh.tri[3 * i + 2]];
+    const reach = Number.isFinite(mesh.reach[i]) ? mesh.reach[i] : -1;
+    for (let j = 0; j < 3; j++) {
+      const v = 3 * i + j;
+      a.p.set(mesh.pos.subarray(3 * c[j], 3 * c[j] + 3), 3 * v);
+      a.t.set(mesh.uv.subarray(2 * c[j], 2 * c[j] + 2), 2 * v);
+      a.b[3 * v + j] = 1;
+      for (const [k, name] of ["a0", "a1", "a2"].entries()) a[name].set(mesh.uv.subarray(2 * c[k], 2 * c[k] + 2), 2 * v);
+      a.r[v] = reach;
+      a.fo[v] = mesh.folded[i];
     }
   }
-  const d2 = (i, j) => (pos[3 * i] - pos[3 * j]) ** 2 + (pos[3 * i + 1] - pos[3 * j + 1]) ** 2 + (pos[3 * i + 2] - pos[3 * j + 2]) ** 2;
-  const idx = [];
-  for (const [a, b, c, d] of quads) {
-    const v = [a, b, d, c].filter((i) => valid[i]);
-    if (v.length === 4) idx.push(...(d2(a, d) <= d2(b, c) ? [a, b, d, a, d, c] : [a, b, c, b, d, c]));
-    else if (v.length === 3) idx.push(...v);
-  }
+  return a;
+}
+
+function makeGl(canvas, side, mesh, records) {
+  // No multisampling: the pixels are render's (`--supersample 1`).
+  const gl = canvas.getContext("webgl2", { antialias: false });
+  if (!gl) throw new Error("WebGL 2 is needed for texture-space files");
+  const lo = [Infinity, Infinity, Infinity], hi = [-Infinity, -Infinity, -Infinity];
+  for (const k of mesh.tri) for (let c = 0; c < 3; c++) { lo[c] = Math.min(lo[c], mesh.pos[3 * k + c]); hi[c] = Math.max(hi[c], mesh.pos[3 * k + c]); }
   const center = lo.map((l, c) => (l + hi[c]) / 2);
   const radius = Math.hypot(hi[0] - lo[0], hi[1] - lo[1], hi[2] - lo[2]) / 2 || 1;
-  const prog = program(gl,
-    "attribute vec3 p; attribute vec2 t; uniform mat4 m; varying vec2 v; void main(){ v=t; gl_Position=m*vec4(p,1.0); }",
-    "precision mediump float; varying vec2 v; uniform sampler2D s; void main(){ gl_FragColor=texture2D(s,v); }");
-  const buffer = (target, data) => { const b = gl.createBuffer(); gl.bindBuffer(target, b); gl.bufferData(target, data, gl.STATIC_DRAW); return b; };
-  const pb = buffer(gl.ARRAY_BUFFER, pos), tb = buffer(gl.ARRAY_BUFFER, uv);
-  buffer(gl.ELEMENT_ARRAY_BUFFER, new Uint32Array(idx));
-  const attr = (name, b, n) => { const l = gl.getAttribLocation(prog, name); gl.bindBuffer(gl.ARRAY_BUFFER, b); gl.enableVertexAttribArray(l); gl.vertexAttribPointer(l, n, gl.FLOAT, false, 0, 0); };
-  attr("p", pb, 3); attr("t", tb, 2);
-  const tex = gl.createTexture();
-  gl.bindTexture(gl.TEXTURE_2D, tex);
-  for (const [k, v] of [[gl.TEXTURE_MIN_FILTER, gl.LINEAR], [gl.TEXTURE_MAG_FILTER, gl.LINEAR], [gl.TEXTURE_WRAP_S, gl.CLAMP_TO_EDGE], [gl.TEXTURE_WRAP_T, gl.CLAMP_TO_EDGE]]) gl.texParameteri(gl.TEXTURE_2D, k, v);
+  const prog = program(gl, MESH_VS, MESH_FS);
+  const soup = triangleSoup(mesh);
+  const sizes = { p: 3, t: 2, b: 3, a0: 2, a1: 2, a2: 2, r: 1, fo: 1 };
+  for (const [name, n] of Object.entries(sizes)) {
+    const b = gl.createBuffer();
+    gl.bindBuffer(gl.ARRAY_BUFFER, b);
+    gl.bufferData(gl.ARRAY_BUFFER, soup[name], gl.STATIC_DRAW);
+    const l = gl.getAttribLocation(prog, name);
+    gl.enableVertexAttribArray(l);
+    gl.vertexAttribPointer(l, n, gl.FLOAT, false, 0, 0);
+  }
+  // Binds texture unit `unit` to `t` (a new texture when null) and fills it.
+  const texture = (unit, t, w, h, data) => {
+    t = t || gl.createTexture();
+    gl.activeTexture(gl.TEXTURE0 + unit);
+    gl.bindTexture(gl.TEXTURE_2D, t);
+    for (const [k, v] of [[gl.TEXTURE_MIN_FILTER, gl.NEAREST], [gl.TEXTURE_MAG_FILTER, gl.NEAREST], [gl.TEXTURE_WRAP_S, gl.CLAMP_TO_EDGE], [gl.TEXTURE_WRAP_T, gl.CLAMP_TO_EDGE]]) gl.texParameteri(gl.TEXTURE_2D, k, v);
+    gl.texImage2D(gl.TEXTURE_2D, 0, gl.RGBA32F, w, h, 0, gl.RGBA, gl.FLOAT, data);
+    return t;
+  };
+  gl.pixelStorei(gl.UNPACK_ALIGNMENT, 1);
+  texture(1, null, side, side, records);
+  let tex = null;
+  const u = (name) => gl.getUniformLocation(prog, name);
+  gl.uniform1i(u("tex"), 0); gl.uniform1i(u("rec"), 1); gl.uniform1i(u("side"), side);
   gl.enable(gl.DEPTH_TEST);
-  canvas.dataset.triangles = idx.length / 3;
-  const cam = { az: 0.6, el: 0.3, dist: 3 * radius };
+  const count = soup.r.length;
+  canvas.dataset.triangles = count / 3;
+  const cam = { az: 0.6, el: 0.3, dist: 3 * radius, fovy: 0.6 };
+  const eyeOf = () => [center[0] + cam.dist * Math.cos(cam.el) * Math.sin(cam.az), center[1] + cam.dist * Math.sin(cam.el), center[2] + cam.dist * Math.cos(cam.el) * Math.cos(cam.az)];
   const render = () => {
-    const eye = [center[0] + cam.dist * Math.cos(cam.el) * Math.sin(cam.az), center[1] + cam.dist * Math.sin(cam.el), center[2] + cam.dist * Math.cos(cam.el) * Math.cos(cam.az)];
+    const eye = eyeOf();
+    // The camera, as `ltm render --camera --target --up 0,1,0 --fov` takes it.
+    canvas.dataset.camera = JSON.stringify({ eye, target: center, fov: cam.fovy * 180 / Math.PI });
     gl.viewport(0, 0, canvas.width, canvas.height);
     gl.clearColor(0, 0, 0, 1);
     gl.clear(gl.COLOR_BUFFER_BIT | gl.DEPTH_BUFFER_BIT);
-    gl.uniformMatrix4fv(gl.getUniformLocation(prog, "m"), false, mul(perspective(0.6, 1, radius * 0.05, cam.dist + 4 * radius), lookAt(eye, center)));
-    gl.drawElements(gl.TRIANGLES, idx.length, gl.UNSIGNED_INT, 0);
+    if (!tex) return;
+    gl.uniformMatrix4fv(u("m"), false, mul(perspective(cam.fovy, canvas.width / canvas.height, radius * 0.05, cam.dist + 4 * radius), lookAt(eye, center)));
+    gl.drawArrays(gl.TRIANGLES, 0, count);
   };
   let last = null;
   canvas.addEventListener("pointerdown", (e) => { last = [e.clientX, e.clientY]; canvas.setPointerCapture(e.pointerId); });
@@ -326,15 +420,29 @@ function makeGl(canvas, side, pos, valid, fold) {
   });
   canvas.addEventListener("pointerup", () => { last = null; });
   canvas.addEventListener("wheel", (e) => { e.preventDefault(); cam.dist *= Math.exp(e.deltaY * 0.001); render(); });
+  render();
   return {
-    setTexture(rgba, w, h) {
-      gl.bindTexture(gl.TEXTURE_2D, tex);
-      gl.texImage2D(gl.TEXTURE_2D, 0, gl.RGBA, w, h, 0, gl.RGBA, gl.UNSIGNED_BYTE, new Uint8Array(rgba.buffer));
+    // floats: the relit texture (linear RGB), rgba: its tone-mapped pixels.
+    setTexture(floats, rgba, w, h) {
+      const data = new Float32Array(w * h * 4);
+      for (let i = 0; i < w * h; i++) { data.set(floats.subarray(3 * i, 3 * i + 3), 4 * i); data[4 * i + 3] = 1; }
+      tex = texture(0, tex, w, h, data);
+      gl.uniform1f(u("scale"), Math.fround(Math.pow(2, Number($("exposure").value))));
+      gl.uniform1i(u("reinhard"), $("tonemap").value === "reinhard" ? 1 : 0);
       render();
       // Keep the flat texture too, small, beside the mesh.
       const c = canvas.nextSibling;
       if (c.width !== w) { c.width = w; c.height = h; }
       c.getContext("2d").putImageData(new ImageData(rgba, w, h), 0, 0);
+    },
+    // The drawn pixels, RGB, rows top to bottom (for tests).
+    pixels() {
+      render();
+      const w = canvas.width, h = canvas.height, px = new Uint8Array(w * h * 4);
+      gl.readPixels(0, 0, w, h, gl.RGBA, gl.UNSIGNED_BYTE, px);
+      const out = new Uint8Array(w * h * 3);
+      for (let y = 0; y < h; y++) for (let x = 0; x < w; x++) for (let c = 0; c < 3; c++) out[3 * (y * w + x) + c] = px[4 * ((h - 1 - y) * w + x) + c];
+      return out;
     },
   };
 }

@@ -28,9 +28,10 @@
 //! coordinate and surface point of its triangle and a bilinear lookup of
 //! the relit texture that never mixes texels of two charts: of the four
 //! nearest texels it reads only the valid ones whose surface record lies
-//! within the triangle's reach ([`CHART_REACH`] texel footprints, the
-//! footprint being the square root of the triangle's 3D area over its
-//! texel area) of the shaded point, weights renormalized. With none
+//! near the shaded point: full weight within the triangle's reach
+//! ([`CHART_REACH`] texel footprints, the footprint being the square root
+//! of the triangle's 3D area over its texel area), falling linearly to
+//! zero at twice the reach, weights renormalized. With none
 //! readable it takes the valid texel of the 5 × 5 around whose record is
 //! nearest to the point (or, with none valid, the texel holding the
 //! coordinate). The grid is one chart per cell: its reach is unlimited
@@ -724,10 +725,19 @@ impl TexturedMesh {
         y * self.size + x
     }
 
-    /// Whether texel `k` may be read for surface point `p` under the chart
-    /// rule: valid, with its record within `reach` of `p`.
-    fn readable(&self, k: usize, p: DVec3, reach: f64) -> bool {
-        self.valid[k] && (reach.is_infinite() || self.records[k].distance(p) <= reach)
+    /// The weight of texel `k` for surface point `p` under the chart rule:
+    /// 0 when invalid; 1 when its record lies within `reach` of `p`, falling
+    /// linearly to 0 at twice `reach` (continuous, so that renderers that
+    /// round differently agree near the limit; another chart's texels lie
+    /// much farther).
+    fn chart_weight(&self, k: usize, p: DVec3, reach: f64) -> f64 {
+        if !self.valid[k] {
+            return 0.0;
+        }
+        if reach.is_infinite() {
+            return 1.0;
+        }
+        ((2.0 * reach - self.records[k].distance(p)) / reach).clamp(0.0, 1.0)
     }
 
     /// Bilinear lookup at texel coordinates `q` of surface point `p`, over
@@ -753,7 +763,8 @@ impl TexturedMesh {
                 (y0 + dy).clamp(0, s - 1) as usize,
             );
             let k = y * self.size + x;
-            if w > 0.0 && self.readable(k, p, reach) {
+            let w = w * self.chart_weight(k, p, reach);
+            if w > 0.0 {
                 let c = tex.data[k];
                 for ch in 0..3 {
                     acc[ch] += w * c[ch] as f64;

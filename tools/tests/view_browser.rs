@@ -279,12 +279,24 @@ fn page_controls_show_what_ltm_relight_computes() {
 /// geometry image, with the square's folds): a 32² texture over a closed
 /// procedural blob, baked with 6·2² lights.
 fn sphere_texture_file(dir: &std::path::Path) -> PathBuf {
-    std::fs::write(dir.join("blob.obj"), ltm_testkit::blob_obj(6)).unwrap();
     let texture = ltm_testkit::TEXTURE_SPHERE_16.replace("size = 16", "size = 32");
+    texture_file(dir, &texture)
+}
+
+/// The blob and its ground as one 48² atlas: several charts, their seams
+/// across the view.
+fn atlas_texture_file(dir: &std::path::Path) -> PathBuf {
+    texture_file(dir, "\n[texture]\nmesh = \"all\"\nsize = 48\nspp = 1\n")
+}
+
+/// The blob of `ltm_testkit::blob_obj` baked with `texture` (a
+/// `[texture]` section) and compressed.
+fn texture_file(dir: &std::path::Path, texture: &str) -> PathBuf {
+    std::fs::write(dir.join("blob.obj"), ltm_testkit::blob_obj(6)).unwrap();
     let toml = dir.join("tex.toml");
     std::fs::write(
         &toml,
-        ltm_testkit::scene_toml("blob.obj", 8, 8, 2) + &texture,
+        ltm_testkit::scene_toml("blob.obj", 8, 8, 2) + texture,
     )
     .unwrap();
     let (raw, tex) = (dir.join("tex.raw"), dir.join("tex.ltm"));
@@ -410,19 +422,41 @@ fn compare_mesh_view(tab: &Tab, file: &std::path::Path, env: &std::path::Path, d
     );
 }
 
-/// Every pixel of `got` within 3 levels of `want`, but for a few on the
-/// silhouette (next to the background in either).
+/// Every pixel of `got` within 3 levels of `want`, but for a few on a
+/// silhouette: next to the background in either view, or where `want`
+/// jumps by more than 24 levels to a neighbour (an object's edge over
+/// another surface, where the two rasterizers may pick different
+/// triangles for a sample on the edge). Chart seams are not jumps in
+/// `want`: a seam drawn wrong by the page fails.
 fn compare_pixels(label: &str, camera: &Value, got: &[u8], want: &[u8]) {
     let w = 512usize;
-    let black = |img: &[u8], x: usize, y: usize| img[3 * (y * w + x)..][..3] == [0, 0, 0];
-    // A pixel next to the background in either view: on the silhouette.
+    if let Ok(dir) = std::env::var("LTM_VIEW_DUMP") {
+        // For a look at a failure: both views as binary PPM.
+        for (name, img) in [("page", got), ("render", want)] {
+            let mut ppm = format!("P6 {w} {w} 255\n").into_bytes();
+            ppm.extend_from_slice(img);
+            std::fs::write(format!("{dir}/{name}.ppm"), ppm).unwrap();
+        }
+    }
+    let px = |img: &[u8], x: usize, y: usize| -> [u8; 3] {
+        img[3 * (y * w + x)..][..3].try_into().unwrap()
+    };
+    let black = |img: &[u8], x: usize, y: usize| px(img, x, y) == [0, 0, 0];
+    let jump = |x: usize, y: usize, xx: usize, yy: usize| {
+        let (a, b) = (px(want, x, y), px(want, xx, yy));
+        (0..3).any(|c| a[c].abs_diff(b[c]) > 24)
+    };
     let edge = |x: usize, y: usize| {
         (y.saturating_sub(1)..=(y + 1).min(w - 1)).any(|yy| {
             (x.saturating_sub(1)..=(x + 1).min(w - 1))
-                .any(|xx| black(got, xx, yy) || black(want, xx, yy))
+                .any(|xx| black(got, xx, yy) || black(want, xx, yy) || jump(x, y, xx, yy))
         })
     };
     let (mut object, mut worst, mut at_edges) = (0, 0, 0);
+    // Interior pixels off by more than 3 levels: a few where single and
+    // double precision pick different texels (the nearest-texel fallback
+    // switches discontinuously), never more than 32 levels.
+    let mut stray = Vec::new();
     for y in 0..w {
         for x in 0..w {
             let i = 3 * (y * w + x);
@@ -431,16 +465,18 @@ fn compare_pixels(label: &str, camera: &Value, got: &[u8], want: &[u8]) {
                 .max()
                 .unwrap();
             object += usize::from(!black(want, x, y));
-            if d > 3 {
+            if d <= 3 {
+                worst = worst.max(d);
+            } else if edge(x, y) {
+                at_edges += 1;
+            } else {
                 assert!(
-                    edge(x, y),
+                    d <= 32,
                     "{label}: pixel ({x}, {y}) shows {:?}, ltm render {:?} (camera {camera})",
                     &got[i..i + 3],
                     &want[i..i + 3]
                 );
-                at_edges += 1;
-            } else {
-                worst = worst.max(d);
+                stray.push((x, y, d));
             }
         }
     }
@@ -449,19 +485,30 @@ fn compare_pixels(label: &str, camera: &Value, got: &[u8], want: &[u8]) {
         at_edges * 100 < object,
         "{at_edges} silhouette pixels differ of {object}"
     );
+    assert!(
+        stray.len() * 1000 <= object,
+        "{label}: {} interior pixels differ by more than 3 levels (of {object}): {:?}",
+        stray.len(),
+        &stray[..stray.len().min(8)]
+    );
     eprintln!(
-        "{label}: {object} object pixels, within {worst} levels; {at_edges} silhouette pixels differ"
+        "{label}: {object} object pixels, within {worst} levels; {at_edges} silhouette pixels and {} interior pixels (at most 32 levels) differ",
+        stray.len()
     );
 }
 
 /// The WebGL view of a texture-space file matches `ltm render`: the sphere
-/// layout's grid (its folds included).
+/// layout's grid (its folds included), and an atlas of a blob and its
+/// ground (the stored mesh, its chart seams across the view).
 #[test]
 fn mesh_views_show_what_ltm_render_draws() {
     let Some(browser) = browser() else { return };
     let dir = tempfile::tempdir().unwrap();
     let sphere = sphere_texture_file(dir.path());
     mesh_view_matches_ltm_render(&browser, &sphere, &map("interior.exr"));
+    let dir = tempfile::tempdir().unwrap();
+    let atlas = atlas_texture_file(dir.path());
+    mesh_view_matches_ltm_render(&browser, &atlas, &map("interior.exr"));
 }
 
 /// Interaction latency in the browser (`performance.now()` from a rotation

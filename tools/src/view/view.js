@@ -300,9 +300,11 @@ uniform sampler2D tex; uniform sampler2D rec; uniform int side; uniform float sc
 out vec4 o;
 ivec2 texelAt(vec2 q) { return clamp(ivec2(floor(q)), ivec2(0), ivec2(side - 1)); }
 vec3 texel(ivec2 k) { return texelFetch(tex, k, 0).rgb; }
-bool readable(ivec2 k, vec3 p) {
+float chartWeight(ivec2 k, vec3 p) {
   vec4 r = texelFetch(rec, k, 0);
-  return r.w > 0.5 && (reach < 0.0 || distance(r.xyz, p) <= reach);
+  if (r.w < 0.5) return 0.0;
+  if (reach < 0.0) return 1.0;
+  return clamp((2.0 * reach - distance(r.xyz, p)) / reach, 0.0, 1.0);
 }
 vec3 fallback(vec2 q, vec3 p) {
   ivec2 c = texelAt(q), best = c;
@@ -326,7 +328,8 @@ vec3 lookup(vec2 q, vec3 p) {
     ivec2 d = ivec2(i & 1, i >> 1);
     float w = (d.x == 1 ? f.x : 1.0 - f.x) * (d.y == 1 ? f.y : 1.0 - f.y);
     ivec2 k = clamp(b + d, ivec2(0), ivec2(side - 1));
-    if (w > 0.0 && readable(k, p)) { acc += w * texel(k); ws += w; }
+    w *= chartWeight(k, p);
+    if (w > 0.0) { acc += w * texel(k); ws += w; }
   }
   return ws > 0.0 ? acc / ws : fallback(q, p);
 }

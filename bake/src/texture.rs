@@ -122,6 +122,26 @@ impl SurfaceMesh {
             .extend(other.degenerate_triangles.into_iter().map(shift));
     }
 
+    /// The mesh with each triangle's back as a triangle of its own (new
+    /// vertices, reversed winding, negated normals; texture coordinates
+    /// dropped): an open surface's two sides, each with its own texels in
+    /// an atlas.
+    pub fn with_back_faces(mut self) -> SurfaceMesh {
+        let back = SurfaceMesh {
+            positions: self.positions.clone(),
+            normals: self.normals.iter().map(|n| -*n).collect(),
+            triangles: self.triangles.iter().map(|t| [t[0], t[2], t[1]]).collect(),
+            uvs: None,
+            materials: self.materials.clone(),
+            parts: self.parts.clone(),
+            degenerate: 0,
+            degenerate_triangles: Vec::new(),
+        };
+        self.uvs = None;
+        self.append(back);
+        self
+    }
+
     /// The signed volume enclosed by the surface when it is closed (every
     /// edge, once identical positions are welded, met by exactly one
     /// triangle in each direction), `None` when it is open. Negative: the

@@ -473,13 +473,25 @@ fn load_geometry(desc: &SceneDesc) -> Result<Geometry> {
                 })?;
         if desc.texture.as_ref().is_some_and(|t| t.mesh.has_mesh(i)) {
             let surface = placed.surface_mesh(&loaded.mesh)?;
-            if let Some(v) = surface.closed_volume().filter(|&v| v < 0.0) {
+            let volume = surface.closed_volume();
+            if let Some(v) = volume.filter(|&v| v < 0.0) {
                 return Err(BakeError::MalformedMesh {
                     path,
                     format: loaded.format,
                     message: format!("its faces point inwards (a closed surface of signed volume {v:.4e}): its texels would see the inside of the surface and bake black; reverse the triangles' winding"),
                 });
             }
+            // An open surface is seen from both sides: in an atlas each
+            // side gets texels of its own.
+            let atlas = desc
+                .texture
+                .as_ref()
+                .is_some_and(|t| t.parameterization == Parameterization::Atlas);
+            let surface = if atlas && volume.is_none() {
+                surface.with_back_faces()
+            } else {
+                surface
+            };
             g.add_receiver(surface, path.display().to_string());
         }
         g.files.push((loaded.digest, loaded.format));

@@ -360,6 +360,29 @@ fn atlas_settings_that_cannot_work_are_clear_errors() {
     }
 }
 
+/// An open surface is seen from both sides: each side of the half-pipe
+/// has texels of its own, whose normals face that side.
+#[test]
+fn an_open_surface_gets_texels_on_both_sides() {
+    let toml = atlas_scene(&["pipe.obj"], "mesh = 0\nsize = 64\nspp = 1\n", false);
+    let scene = built(&toml, &[("pipe.obj", obj(&half_pipe()))]);
+    assert_texels_on_mesh(&scene);
+    let surface = row_surface(&scene).unwrap();
+    // Texels on the pipe's bottom (|x| < 0.1): inner side faces up, outer down.
+    let bottom: Vec<f32> = surface
+        .points()
+        .iter()
+        .filter(|p| p.valid && p.position[0].abs() < 0.1)
+        .map(|p| p.normal[1])
+        .collect();
+    let up = bottom.iter().filter(|&&y| y > 0.9).count();
+    let down = bottom.iter().filter(|&&y| y < -0.9).count();
+    assert!(
+        up > 20 && down > 20 && (up as f64 / down as f64 - 1.0).abs() < 0.3,
+        "{up} up, {down} down"
+    );
+}
+
 /// Input a chart atlas must survive: three triangles on one edge (a fin),
 /// two cubes touching at a vertex (a bowtie), a duplicated face, a
 /// zero-area sliver and a face whose winding disagrees with its
@@ -399,8 +422,9 @@ fn non_manifold_and_degenerate_input_is_handled() {
     let map = scene.texel_map().unwrap();
     let mesh = map.receiver_mesh().unwrap();
     mesh.validate(64).unwrap();
-    // The sliver (f 1 2 7) is left out as zero-area; every other face is drawn.
-    assert_eq!(mesh.triangles.len(), 5 + 24);
+    // The sliver (f 1 2 7) is left out as zero-area; every other face is
+    // drawn, from both sides (the fin makes the surface open).
+    assert_eq!(mesh.triangles.len(), 2 * (5 + 24));
     assert_eq!(map.stats().skipped_triangles, 1);
     let surface = row_surface(&scene).unwrap();
     assert!(surface.points().iter().filter(|p| p.valid).count() > 500);

@@ -224,6 +224,11 @@ pub struct TexturedMesh {
     /// octahedral square (its texture coordinates are not contiguous, so
     /// it is shaded by blending its corners' texels instead).
     folded: Vec<bool>,
+    /// Triangles facing away from the camera are not drawn: true for a
+    /// stored mesh (counter-clockwise fronts; an open surface's two sides
+    /// are separate triangles with texels of their own), false for the
+    /// grid.
+    cull_back: bool,
     /// Per texel: its surface record's position.
     records: Vec<DVec3>,
     /// Per texel: whether it lies on the surface.
@@ -310,6 +315,7 @@ impl TexturedMesh {
             triangles: Vec::new(),
             reach: Vec::new(),
             folded: Vec::new(),
+            cull_back: false,
             records: p
                 .iter()
                 .map(|q| DVec3::from(q.position.map(f64::from)))
@@ -372,6 +378,7 @@ impl TexturedMesh {
             .collect();
         out.triangles = mesh.triangles.clone();
         out.folded = vec![false; mesh.triangles.len()];
+        out.cull_back = true;
         out.reach = out.triangles.iter().map(|t| out.reach_of(t)).collect();
         Ok(out)
     }
@@ -419,6 +426,11 @@ impl TexturedMesh {
     /// The drawn triangles, as vertex indices.
     pub fn triangles(&self) -> &[[u32; 3]] {
         &self.triangles
+    }
+
+    /// True when back faces are not drawn (a stored mesh).
+    pub fn culls_back_faces(&self) -> bool {
+        self.cull_back
     }
 
     /// Per triangle: the chart rule's reach in world units (infinite: no
@@ -662,7 +674,8 @@ impl TexturedMesh {
     }
 
     /// Triangles in supersampled screen space (`sw × sh`) with 1/z;
-    /// triangles not wholly in front of the camera are left out.
+    /// triangles not wholly in front of the camera, and back faces where
+    /// they are culled, are left out.
     fn project(&self, f: &Frame, sw: f64, sh: f64) -> Vec<Projected> {
         let near = 1e-9 * (1.0 + f.eye.abs().max_element());
         let vert = |k: u32| {
@@ -682,8 +695,14 @@ impl TexturedMesh {
                 }) {
                     return None;
                 }
+                let p = v.map(|x| x.0);
+                // Screen y points down: a front (counter-clockwise) face
+                // has a negative signed area.
+                if self.cull_back && (p[1] - p[0]).perp_dot(p[2] - p[0]) > 0.0 {
+                    return None;
+                }
                 Some(Projected {
-                    p: v.map(|x| x.0),
+                    p,
                     inv_z: v.map(|x| 1.0 / x.1),
                     tri: i as u32,
                 })

@@ -334,7 +334,9 @@ fn mesh(viewer: &Viewer, f: usize) -> Reply {
     let (v, t) = (m.positions().len(), m.triangles().len());
     let mut out = Vec::with_capacity(16 + v * 20 + t * 17);
     out.extend_from_slice(MESH_MAGIC);
-    for n in [v as u32, t as u32, 1] {
+    // Format 1: every triangle drawn; 2: back faces culled.
+    let format = if m.culls_back_faces() { 2 } else { 1 };
+    for n in [v as u32, t as u32, format] {
         out.extend_from_slice(&n.to_le_bytes());
     }
     let mut f32s = |vals: &mut dyn Iterator<Item = f64>| {

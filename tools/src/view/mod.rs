@@ -29,7 +29,10 @@
 //!   (`ltm_relight::TexturedMesh`: its stored receiver mesh, or the grid of
 //!   its geometry image), so that the page triangulates nothing itself.
 //!   A 16-byte header of four little-endian `u32`s: magic `LTMG` (bytes),
-//!   vertex count V, triangle count T, format 1; then, all little-endian:
+//!   vertex count V, triangle count T, format (1: draw every triangle; 2:
+//!   cull back faces, as `ltm render` does for a stored mesh, whose open
+//!   surfaces carry each side as triangles of their own); then, all
+//!   little-endian:
 //!   V × (x, y, z) f32 vertex positions; V × (u, v) f32 texture coordinates
 //!   in texel units (u rightwards, v downwards, texel (x, y) covering
 //!   [x, x+1] × [y, y+1]); T × 3 u32 vertex indices (counter-clockwise);

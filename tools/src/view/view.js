@@ -261,15 +261,15 @@ async function fetchBinary(url, magic) {
   const buf = await r.arrayBuffer();
   if (String.fromCharCode(...new Uint8Array(buf, 0, 4)) !== magic) throw new Error(`${url}: not ${magic}`);
   const dv = new DataView(buf);
-  return { buf, a: dv.getUint32(4, true), b: dv.getUint32(8, true) };
+  return { buf, a: dv.getUint32(4, true), b: dv.getUint32(8, true), c: dv.getUint32(12, true) };
 }
 
 async function meshPanel(p) {
   const m = await fetchBinary(`/api/mesh?file=${p.index}`, "LTMG");
-  const [nv, nt] = [m.a, m.b];
+  const [nv, nt, cull] = [m.a, m.b, m.c === 2];
   let o = 16;
   const take = (Type, n) => { const a = new Type(m.buf.slice(o, o + n * Type.BYTES_PER_ELEMENT)); o += n * Type.BYTES_PER_ELEMENT; return a; };
-  const mesh = { pos: take(Float32Array, 3 * nv), uv: take(Float32Array, 2 * nv), tri: take(Uint32Array, 3 * nt), reach: take(Float32Array, nt), folded: take(Uint8Array, nt) };
+  const mesh = { pos: take(Float32Array, 3 * nv), uv: take(Float32Array, 2 * nv), tri: take(Uint32Array, 3 * nt), reach: take(Float32Array, nt), folded: take(Uint8Array, nt), cull };
   const s = await fetchBinary(`/api/surface?file=${p.index}`, "LTMS");
   const side = s.a;
   const xyz = new Float32Array(s.buf.slice(16, 16 + side * side * 12));
@@ -397,6 +397,9 @@ function makeGl(canvas, side, mesh, records) {
   const u = (name) => gl.getUniformLocation(prog, name);
   gl.uniform1i(u("tex"), 0); gl.uniform1i(u("rec"), 1); gl.uniform1i(u("side"), side);
   gl.enable(gl.DEPTH_TEST);
+  // As ltm render: a stored mesh's back faces are not drawn (fronts are
+  // counter-clockwise, WebGL's default front face).
+  if (mesh.cull) { gl.enable(gl.CULL_FACE); gl.cullFace(gl.BACK); }
   const count = soup.r.length;
   canvas.dataset.triangles = count / 3;
   const cam = { az: 0.6, el: 0.3, dist: 3 * radius, fovy: 0.6 };

@@ -24,6 +24,7 @@ fn bake_default(dir: &Path) -> PathBuf {
         face_res: Some(8),
         texel_samples: Some(4),
         spp: Some(1),
+        ..Default::default()
     })
     .unwrap();
     let scene = Scene::build(&desc).unwrap();

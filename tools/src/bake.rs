@@ -48,7 +48,7 @@ pub struct BakeArgs {
     /// Pixel sub-samples, averaged with a box filter (overrides camera.spp).
     #[arg(long, value_name = "K")]
     pub spp: Option<u32>,
-    /// Texture side S of a [texture] bake: S² rows (overrides texture.size).
+    /// Texture side S of a `[texture]` bake: S² rows (overrides texture.size).
     #[arg(long, value_name = "S")]
     pub texture_size: Option<u32>,
     /// Texel density of an atlas, texels per world unit of length (overrides

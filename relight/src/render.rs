@@ -34,7 +34,9 @@
 //! zero at twice the reach, weights renormalized. With none
 //! readable it takes the valid texel of the 5 × 5 around whose record is
 //! nearest to the point (or, with none valid, the texel holding the
-//! coordinate). The grid is one chart per cell: its reach is unlimited
+//! coordinate). A stored mesh's back faces are culled (an open surface's
+//! two sides are separate triangles with texels of their own; a closed
+//! one's back faces are hidden anyway). The grid is one chart per cell: its reach is unlimited
 //! (valid texels only). Pixels that see no surface are black.
 //!
 //! Grid cells of a `uv` layout that join two charts (neighbouring in the
@@ -1347,6 +1349,75 @@ mod tests {
         }
         // Interior pixels are fully red (nothing renormalized away).
         assert_eq!(img.data[20 * 48 + 24], [1.0, 0.0, 0.0]);
+    }
+
+    /// An open surface's two sides (the front counter-clockwise from +z on
+    /// texture columns 0..8, its reversed copy on columns 8..16, at the
+    /// same points): each camera sees only the side facing it.
+    #[test]
+    fn each_side_of_a_two_sided_sheet_shows_its_own_texels() {
+        const S: usize = 16;
+        let p = [
+            [-1.0, -1.0, 0.0],
+            [1.0, -1.0, 0.0],
+            [1.0, 1.0, 0.0],
+            [-1.0, 1.0, 0.0],
+        ];
+        let mut m = ReceiverMesh::default();
+        for (side, u0) in [(1.0f32, 0.0f32), (-1.0, 8.0)] {
+            let b = m.positions.len() as u32;
+            m.positions.extend(p);
+            m.normals.extend([[0.0, 0.0, side]; 4]);
+            m.uvs
+                .extend([[u0, 16.0], [u0 + 8.0, 16.0], [u0 + 8.0, 0.0], [u0, 0.0]]);
+            m.triangles.extend(if side > 0.0 {
+                [[b, b + 1, b + 2], [b, b + 2, b + 3]]
+            } else {
+                [[b, b + 2, b + 1], [b, b + 3, b + 2]]
+            });
+        }
+        let mut pts = Vec::new();
+        for y in 0..S {
+            for x in 0..S {
+                let (a, b) = ((x % 8) as f32 + 0.5, y as f32 + 0.5);
+                let n = if x < 8 { 1.0 } else { -1.0 };
+                pts.push(SurfacePoint::new(
+                    [-1.0 + a / 4.0, 1.0 - b / 8.0, 0.0],
+                    [0.0, 0.0, n],
+                ));
+            }
+        }
+        let surface = Surface::new(pts).unwrap();
+        let mesh = TexturedMesh::from_mesh(16, Parameterization::Atlas, &surface, &m).unwrap();
+        assert!(mesh.culls_back_faces());
+        let tex = Image {
+            width: S,
+            height: S,
+            data: (0..S * S)
+                .map(|k| {
+                    if k % S < 8 {
+                        [1.0, 0.0, 0.0]
+                    } else {
+                        [0.0, 0.0, 1.0]
+                    }
+                })
+                .collect(),
+        };
+        for (z, want) in [(3.0, 0), (-3.0, 2)] {
+            let img = mesh
+                .render(&tex, &camera(DVec3::new(0.1, 0.2, z)), 1)
+                .unwrap();
+            let seen: Vec<_> = img
+                .data
+                .iter()
+                .filter(|p| p.iter().any(|&c| c > 0.0))
+                .collect();
+            assert!(seen.len() > 300, "{}", seen.len());
+            assert!(
+                seen.iter().all(|p| p[want] == 1.0 && p[2 - want] == 0.0),
+                "from z = {z}"
+            );
+        }
     }
 
     /// The fallback: a sample whose four nearest texels are all invalid or

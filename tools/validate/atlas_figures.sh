@@ -23,6 +23,8 @@ for scene in "$@"; do
     done
     "$ltm" relight "$work/adaptive.ltm" --env "$env_map" --terms 256 --frames 5 --json -o "$work/r.exr" \
         | python3 -c "import json,sys; j=json.loads(sys.stdin.readline()); print('relight N = 256: median frame', j.get('frame_ms'), 'ms')"
-    "$ltm" render "$work/adaptive.ltm" --env "$env_map" --terms all --size 512x512 --views 3 -o "$work/v.exr" 2>&1 \
-        | grep -E "drew"
+    # The scene's own camera: eye, target and field of view.
+    read -r eye target fov < <(python3 -c "import tomllib,sys; c=tomllib.load(open(sys.argv[1],'rb'))['camera']; print(','.join(map(str,c['eye'])), ','.join(map(str,c['target'])), c['fov'])" "$scene")
+    "$ltm" render "$work/adaptive.ltm" --env "$env_map" --terms all --camera "$eye" --target "$target" \
+        --fov "$fov" --size 512x512 --views 3 -o "$work/v.exr" 2>&1 | grep -E "drew"
 done

@@ -208,7 +208,8 @@ impl Handle {
 
     /// Copies the atlas of the one mesh out, checking it against the input
     /// triangle count.
-    pub(crate) fn read(&self, triangles: usize) -> Result<Atlas, AtlasError> {
+    pub(crate) fn read(&self, mesh: MeshInput<'_>) -> Result<Atlas, AtlasError> {
+        let triangles = mesh.triangles.len();
         let a = self.atlas();
         if a.mesh_count != 1 || a.meshes.is_null() {
             return Err(AtlasError::Output(format!("{} meshes", a.mesh_count)));
@@ -240,7 +241,7 @@ impl Handle {
             // SAFETY: `utilization` holds `atlas_count` (≥ 1) values.
             unsafe { *a.utilization }
         };
-        copy_out(a, verts, idx, utilization)
+        copy_out(a, verts, idx, utilization, mesh.positions.len())
     }
 }
 
@@ -249,10 +250,18 @@ fn copy_out(
     verts: &[XVertex],
     idx: &[u32],
     utilization: f32,
+    sources: usize,
 ) -> Result<Atlas, AtlasError> {
     let n = verts.len() as u32;
     if let Some(bad) = idx.iter().find(|&&i| i >= n) {
         return Err(AtlasError::Output(format!("index {bad} of {n} vertices")));
+    }
+    // Callers index the input vertices by `source`: never past them.
+    if let Some(v) = verts.iter().find(|v| v.xref as usize >= sources) {
+        return Err(AtlasError::Output(format!(
+            "output vertex from input vertex {} of {sources}",
+            v.xref
+        )));
     }
     let vertices = verts
         .iter()

@@ -137,7 +137,7 @@ fn pack_once(
     options: &PackOptions,
 ) -> Result<Atlas, AtlasError> {
     handle.pack(options);
-    let atlas = handle.read(mesh.triangles.len())?;
+    let atlas = handle.read(mesh)?;
     if handle.atlas_count() > 1 {
         return Err(AtlasError::DoesNotFit {
             atlases: handle.atlas_count(),
@@ -165,7 +165,7 @@ fn fit(
         resolution: 0,
         ..*options
     });
-    let first = handle.read(mesh.triangles.len())?;
+    let first = handle.read(mesh)?;
     let used = first.width.max(first.height).max(1) as f32;
     let mut tpu = first.texels_per_unit * (side as f32 / used);
     let mut try_at = |tpu: f32| {

@@ -43,8 +43,8 @@ pub mod wavelet;
 pub use baseline::{PcaBasis, ShProjection, MAX_SH_ORDER};
 pub use column::SparseColumn;
 pub use compress::{
-    compress, compress_pca, Analysis, CodeOptions, Coder, CompressOptions, CompressStats, Entropy,
-    Mode, PcaOptions, PcaStats, Plan, Target, TransposeOptions, Transposed,
+    compress, compress_pca, default_mem_budget, Analysis, CodeOptions, Coder, CompressOptions,
+    CompressStats, Entropy, Mode, PcaOptions, PcaStats, Plan, Target, TransposeOptions, Transposed,
 };
 pub use container::{LtmFile, LtmWriter, Meta, OptionalChunks};
 pub use decode::ColumnDecoder;

@@ -1218,3 +1218,16 @@ fn a_file_truncated_after_open_decodes_as_opened() {
         "{e}"
     );
 }
+
+/// The default transpose memory is a budget `TransposeOptions` accepts,
+/// within its documented bounds.
+#[test]
+fn the_default_transpose_budget_is_valid() {
+    let b = ltm_codec::default_mem_budget();
+    assert!(((1 << 20)..=(8 << 30)).contains(&b), "{b}");
+    let options = TransposeOptions {
+        mem_budget: b,
+        ..TransposeOptions::default()
+    };
+    assert!(options.validate().is_ok());
+}

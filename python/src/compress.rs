@@ -7,7 +7,7 @@ use ltm_codec::compress::{
     CodeOptions, CompressOptions, Target, TransposeOptions, DEFAULT_BITS, DEFAULT_MAX_ERROR,
     DEFAULT_MAX_RANK, DEFAULT_PCA_BITS,
 };
-use ltm_codec::{Dims, Entropy, Filter, Mode, PcaOptions, Progress, RawStore};
+use ltm_codec::{default_mem_budget, Dims, Entropy, Filter, Mode, PcaOptions, Progress, RawStore};
 use pyo3::prelude::*;
 use pyo3::types::{PyBytes, PyDict};
 use std::path::{Path, PathBuf};
@@ -35,20 +35,6 @@ where
     T::Err: std::fmt::Display,
 {
     s.parse().map_err(|e| value(format!("{what} '{s}': {e}")))
-}
-
-/// The transpose's default memory: a quarter of RAM, at most 8 GiB (as
-/// `ltm compress`).
-fn default_mem_budget() -> u64 {
-    let total = std::fs::read_to_string("/proc/meminfo")
-        .ok()
-        .and_then(|m| {
-            m.lines()
-                .find(|l| l.starts_with("MemTotal:"))
-                .and_then(|l| l.split_whitespace().nth(1)?.parse::<u64>().ok())
-        })
-        .map_or(4 << 30, |kb| kb * 1024);
-    (total / 4).min(8 << 30)
 }
 
 impl Settings {

@@ -1,6 +1,5 @@
 //! `ltm import`, `ltm compress`, `ltm inspect`, `ltm export`.
 
-use crate::common::size::default_mem_budget;
 use crate::common::{claim_files, progress, Ctx};
 use anyhow::{bail, Context, Result};
 use clap::Args;
@@ -10,6 +9,7 @@ use ltm_codec::compress::{
 };
 use ltm_codec::compress::{Entropy, Mode};
 use ltm_codec::container::LtmFile;
+use ltm_codec::default_mem_budget;
 use ltm_codec::npy::{export_npy, import_npy};
 use ltm_codec::wavelet::row_level;
 use ltm_codec::{compress_pca, Filter, PcaOptions, Progress, RawStore, Stage};

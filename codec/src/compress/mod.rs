@@ -110,6 +110,21 @@ impl Default for TransposeOptions {
     }
 }
 
+/// The transpose's memory when the caller names none (`ltm compress`,
+/// `ltm report`, Python's `ltm.compress`): a quarter of RAM as
+/// `/proc/meminfo` gives it, at most 8 GiB; 1 GiB where RAM cannot be read.
+pub fn default_mem_budget() -> u64 {
+    let total = std::fs::read_to_string("/proc/meminfo")
+        .ok()
+        .and_then(|m| {
+            m.lines()
+                .find(|l| l.starts_with("MemTotal:"))
+                .and_then(|l| l.split_whitespace().nth(1)?.parse::<u64>().ok())
+        })
+        .map_or(4 << 30, |kb| kb.saturating_mul(1024));
+    (total / 4).clamp(1 << 20, 8 << 30)
+}
+
 impl TransposeOptions {
     /// Checks every field against its valid range.
     pub fn validate(&self) -> Result<()> {

@@ -71,20 +71,6 @@ fn bytes(number: &str, shift: u32) -> Option<Option<u64>> {
     Some(u64::try_from(total).ok())
 }
 
-/// The memory the transpose of `ltm compress` and `ltm report` may use
-/// when `--mem-budget` is not given: a quarter of RAM, at most 8 GiB.
-pub fn default_mem_budget() -> u64 {
-    let total = std::fs::read_to_string("/proc/meminfo")
-        .ok()
-        .and_then(|m| {
-            m.lines()
-                .find(|l| l.starts_with("MemTotal:"))
-                .and_then(|l| l.split_whitespace().nth(1)?.parse::<u64>().ok())
-        })
-        .map_or(4 << 30, |kb| kb * 1024);
-    (total / 4).min(8 << 30)
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -145,11 +131,5 @@ mod tests {
         assert!(size("1.5Q")
             .unwrap_err()
             .contains("unknown size suffix 'Q'"));
-    }
-
-    #[test]
-    fn the_default_transpose_budget_is_a_valid_size() {
-        let b = default_mem_budget();
-        assert!((MIN_SIZE..=8 << 30).contains(&b), "{b}");
     }
 }

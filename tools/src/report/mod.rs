@@ -12,11 +12,11 @@ pub mod peers;
 pub mod plot;
 pub mod texture;
 
-use crate::common::size::default_mem_budget;
 use crate::common::{assets_dir, bake_cached, claim_folder, env_maps, load_maps, progress, Ctx};
 use anyhow::{bail, Context, Result};
 use clap::Args;
 use ltm_bake::{Overrides, SceneDesc};
+use ltm_codec::default_mem_budget;
 use ltm_codec::wavelet::row_level;
 use ltm_codec::{
     compress_pca, CodeOptions, Mode, PcaOptions, Progress, RawStore, Target, TransposeOptions,

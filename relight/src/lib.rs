@@ -66,6 +66,7 @@ mod point;
 mod reference;
 mod relighter;
 mod render;
+pub mod rotation;
 mod select;
 mod slots;
 

@@ -23,6 +23,7 @@
 //! and the threshold: switching BRDFs rebuilds no rotation.
 
 pub mod brdf;
+mod cache;
 pub mod haar;
 pub mod maps;
 mod matrix;
@@ -31,6 +32,7 @@ mod shade;
 mod tests;
 
 pub use brdf::{Brdf, BrdfSlices, SliceConfig};
+pub use cache::{MAGIC as CACHE_MAGIC, VERSION as CACHE_VERSION};
 pub use matrix::{Columns, RotationMatrix, QMAX};
 pub use shade::{resample_local, OctMap, Shader};
 
@@ -174,6 +176,18 @@ impl RotationSet {
             matrices,
             _charge: charge,
         })
+    }
+
+    pub(crate) fn from_parts(
+        cfg: RotationConfig,
+        matrices: Vec<RotationMatrix>,
+        charge: Charge,
+    ) -> RotationSet {
+        RotationSet {
+            cfg,
+            matrices,
+            _charge: charge,
+        }
     }
 
     /// The configuration it was built with.

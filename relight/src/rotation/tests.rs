@@ -415,7 +415,7 @@ fn albedo_brute_force(brdf: &Brdf, wo: DVec3) -> [f64; 3] {
 }
 
 #[test]
-fn ggx_under_a_white_map_reflects_its_directional_albedo() {
+fn glossy_brdfs_under_a_white_map_reflect_their_directional_albedo() {
     let cfg = RotationConfig {
         n: 32,
         normals: 4,
@@ -428,11 +428,26 @@ fn ggx_under_a_white_map_reflects_its_directional_albedo() {
         supersample: 8,
         keep: 0.05,
     };
-    for alpha in [0.3f32, 0.1] {
-        let brdf = Brdf::Ggx {
-            alpha,
+    let brdfs = [
+        Brdf::Ggx {
+            alpha: 0.3,
             f0: [0.95, 0.6, 0.3],
-        };
+        },
+        Brdf::Ggx {
+            alpha: 0.1,
+            f0: [0.95, 0.6, 0.3],
+        },
+        Brdf::Phong {
+            exponent: 30.0,
+            specular: [0.9, 0.5, 0.2],
+        },
+        Brdf::Plastic {
+            albedo: [0.7, 0.2, 0.1],
+            alpha: 0.2,
+            ior: 1.5,
+        },
+    ];
+    for brdf in brdfs {
         let mut sh = shader(cfg, brdf, slices);
         sh.light(&OctMap::from_fn(32, 1, |_| [1.0; 3]).unwrap(), None)
             .unwrap();
@@ -444,7 +459,8 @@ fn ggx_under_a_white_map_reflects_its_directional_albedo() {
             let e = albedo_brute_force(&brdf, wo);
             for c in 0..3 {
                 let rel = (f64::from(b[c]) - e[c]).abs() / e[c];
-                assert!(rel < 0.01, "alpha {alpha}, view {wo}: {b:?} against {e:?}");
+                assert!(rel < 0.01, "{brdf:?}, view {wo}: {b:?} against {e:?}");
+                assert!(e[c] < 1.0 + 1e-3, "{brdf:?} reflects {e:?} at {wo}");
             }
         }
     }
@@ -618,4 +634,52 @@ fn figures() {
         );
         accuracy_table(n, 8);
     }
+}
+
+#[test]
+fn the_cache_round_trips_and_refuses_bad_input() {
+    let limits = Limits::default();
+    let cfg = RotationConfig {
+        n: 8,
+        normals: 2,
+        supersample: 2,
+        threshold: 1,
+    };
+    let set = RotationSet::build(cfg, &limits).unwrap();
+    let bytes = set.to_bytes();
+    let back = RotationSet::from_bytes(&bytes, &limits).unwrap();
+    assert_eq!(back.config(), set.config());
+    assert_eq!(back.to_bytes(), bytes);
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("rot.ltmr");
+    set.write(&path).unwrap();
+    assert_eq!(RotationSet::read(&path, &limits).unwrap().to_bytes(), bytes);
+    // Every truncation, and every flipped byte, is an error.
+    for len in 0..bytes.len() {
+        assert!(
+            RotationSet::from_bytes(&bytes[..len], &limits).is_err(),
+            "length {len}"
+        );
+    }
+    for i in 0..bytes.len() {
+        let mut b = bytes.clone();
+        b[i] ^= 0x5a;
+        assert!(RotationSet::from_bytes(&b, &limits).is_err(), "byte {i}");
+    }
+    // With the CRC repaired, any byte changed parses or fails, never panics.
+    let mut rng = Rng(42);
+    for _ in 0..3000 {
+        let mut b = bytes.clone();
+        let i = (rng.f64() * (b.len() - 4) as f64) as usize;
+        b[i] = (rng.f64() * 256.0) as u8;
+        let end = b.len() - 4;
+        let crc = crc32fast::hash(&b[..end]).to_le_bytes();
+        b[end..].copy_from_slice(&crc);
+        let _ = RotationSet::from_bytes(&b, &limits);
+    }
+    // A header asking for more than the budget is refused before allocation.
+    let small = Limits::with_max_alloc(64);
+    assert!(RotationSet::from_bytes(&bytes, &small).is_err());
+    let err = RotationSet::read(&path, &small).unwrap_err().to_string();
+    assert!(err.contains("rotation cache"), "{err}");
 }

@@ -131,6 +131,8 @@ pub struct Shader {
     slices: Arc<BrdfSlices>,
     /// Per grid normal, its `m²` RGB local-lighting coefficients.
     local: Vec<[f32; 3]>,
+    /// Per grid normal, its frame.
+    frames: Vec<Frame>,
     _charge: Charge,
 }
 
@@ -146,11 +148,17 @@ impl Shader {
         let cfg = rotations.config();
         let count = cfg.normals * cfg.normals * cfg.m() * cfg.m();
         let (local, charge) = limits.vec("local lightings", count, [0.0f32; 3])?;
+        let normals = cfg.normals * cfg.normals;
+        let frames_charge = limits.check_alloc("normal frames", normals as u64, 72)?;
+        let frames = (0..normals)
+            .map(|i| Frame::new(cfg.grid_normal(i)))
+            .collect();
         Ok(Shader {
             rotations,
             slices,
             local,
-            _charge: charge,
+            frames,
+            _charge: charge.join(frames_charge),
         })
     }
 
@@ -196,7 +204,7 @@ impl Shader {
             if w == 0.0 {
                 continue;
             }
-            let wo = Frame::new(cfg.grid_normal(i)).to_local(view);
+            let wo = self.frames[i].to_local(view);
             let b = self.slices.dot(self.slices.view_index(wo), self.local(i));
             (0..3).for_each(|c| out[c] += w as f32 * b[c]);
         }

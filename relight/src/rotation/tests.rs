@@ -633,6 +633,86 @@ fn figures() {
             t0.elapsed().as_secs_f64() * 1e3
         );
         accuracy_table(n, 8);
+        if n == 64 {
+            render_accuracy(&mut sh, &limits);
+        }
+    }
+}
+
+/// `∫ L(R·ω) f_r(ω, ω_o) cos θ dω` by the midpoint rule in (θ, φ) over the
+/// local hemisphere, `L` the map's piecewise-constant texels.
+fn shade_brute_force(map: &OctMap, brdf: &Brdf, normal: DVec3, view: DVec3) -> [f64; 3] {
+    let frame = Frame::new(normal);
+    let wo = frame.to_local(view);
+    let (nt, np) = (256, 512);
+    let mut acc = [0.0; 3];
+    for i in 0..nt {
+        let theta = (i as f64 + 0.5) * 0.5 * PI / nt as f64;
+        let w = theta.sin() * theta.cos() * (0.5 * PI / nt as f64) * (2.0 * PI / np as f64);
+        for k in 0..np {
+            let phi = (k as f64 + 0.5) * 2.0 * PI / np as f64;
+            let wi = DVec3::new(
+                theta.sin() * phi.cos(),
+                theta.sin() * phi.sin(),
+                theta.cos(),
+            );
+            let f = brdf.eval(wi, wo);
+            let l = map.lookup(frame.to_global(wi));
+            (0..3).for_each(|c| acc[c] += f[c] * f64::from(l[c]) * w);
+        }
+    }
+    acc
+}
+
+/// Relative L2 of shaded radiance against [`shade_brute_force`] over
+/// random surface points, per GGX roughness and lighting terms (n = 64).
+fn render_accuracy(sh: &mut Shader, limits: &Limits) {
+    let mut rng = Rng(77);
+    let points: Vec<(DVec3, DVec3)> = (0..200)
+        .map(|_| {
+            let n = rng.dir();
+            let mut v = rng.dir();
+            if v.dot(n) < 0.0 {
+                v = -v;
+            }
+            (n, v)
+        })
+        .collect();
+    let maps = maps_for(64);
+    for alpha in [0.1f32, 0.2, 0.5] {
+        let brdf = Brdf::Ggx {
+            alpha,
+            f0: [0.9, 0.7, 0.5],
+        };
+        let sc = SliceConfig {
+            m: 32,
+            views: 64,
+            supersample: 4,
+            keep: 0.03,
+        };
+        sh.set_brdf(Arc::new(BrdfSlices::build(brdf, sc, limits).unwrap()))
+            .unwrap();
+        for (name, map) in [("sky+sun", &maps[0]), ("lobes", &maps[2])] {
+            let exact: Vec<[f64; 3]> = points
+                .par_iter()
+                .map(|&(n, v)| shade_brute_force(map, &brdf, n, v))
+                .collect();
+            let mut line = format!("GGX alpha {alpha} {name:8} rel. L2 of radiance:");
+            for terms in [Some(256), Some(2048), None] {
+                sh.light(map, terms).unwrap();
+                let (mut num, mut den) = (0.0, 0.0);
+                for (&(n, v), e) in points.iter().zip(&exact) {
+                    let b = sh.shade(n, v);
+                    for c in 0..3 {
+                        num += (f64::from(b[c]) - e[c]).powi(2);
+                        den += e[c] * e[c];
+                    }
+                }
+                let t = terms.map_or("all".to_string(), |t| t.to_string());
+                line += &format!("  {t}: {:.4}", (num / den).sqrt());
+            }
+            println!("{line}");
+        }
     }
 }
 
@@ -682,4 +762,90 @@ fn the_cache_round_trips_and_refuses_bad_input() {
     assert!(RotationSet::from_bytes(&bytes, &small).is_err());
     let err = RotationSet::read(&path, &small).unwrap_err().to_string();
     assert!(err.contains("rotation cache"), "{err}");
+}
+
+/// Relative L2 of radiance against BRDF terms and the normal grid:
+/// `cargo test -p ltm-relight --lib rotation::tests::error_sources -- --ignored --nocapture`.
+#[test]
+#[ignore]
+fn error_sources() {
+    let limits = Limits::default();
+    let mut rng = Rng(78);
+    let map = &maps_for(64)[2];
+    let brdf = Brdf::Ggx {
+        alpha: 0.2,
+        f0: [0.9, 0.7, 0.5],
+    };
+    for normals in [8usize, 32] {
+        let cfg = RotationConfig {
+            n: 64,
+            normals,
+            ..RotationConfig::default()
+        };
+        let set = Arc::new(RotationSet::build(cfg, &limits).unwrap());
+        // Points at grid normals and view-texel centres isolate the BRDF
+        // terms; random points add the normal and view interpolation.
+        let frames: Vec<(DVec3, DVec3)> = (0..100)
+            .map(|k| {
+                let i = (k * 7919) % (normals * normals);
+                let n = cfg.grid_normal(i);
+                let (u, v) = texel_center(64, (k * 104_729) % 4096);
+                (n, Frame::new(n).to_global(hemi_decode(u, v).0))
+            })
+            .collect();
+        let random: Vec<(DVec3, DVec3)> = (0..100)
+            .map(|_| {
+                let n = rng.dir();
+                let v = rng.dir();
+                (n, if v.dot(n) < 0.0 { -v } else { v })
+            })
+            .collect();
+        for keep in [0.03, 0.1, 1.0] {
+            let sc = SliceConfig {
+                m: 32,
+                views: 64,
+                supersample: 4,
+                keep,
+            };
+            let slices = Arc::new(BrdfSlices::build(brdf, sc, &limits).unwrap());
+            let mut sh = Shader::new(set.clone(), slices, &limits).unwrap();
+            sh.light(map, None).unwrap();
+            let mut line = format!("normals {normals}² keep {keep}:");
+            for (what, pts) in [("grid", &frames), ("random", &random)] {
+                let (mut num, mut den) = (0.0, 0.0);
+                for &(n, v) in pts.iter() {
+                    let e = shade_brute_force(map, &brdf, n, v);
+                    let b = sh.shade(n, v);
+                    for c in 0..3 {
+                        num += (f64::from(b[c]) - e[c]).powi(2);
+                        den += e[c] * e[c];
+                    }
+                }
+                line += &format!("  {what}: {:.4}", (num / den).sqrt());
+            }
+            println!("{line}");
+        }
+    }
+}
+
+/// Table 2's figures at n = 128 (about 1.2 GB):
+/// `cargo test -p ltm-relight --lib rotation::tests::figures_128 -- --ignored --nocapture`.
+#[test]
+#[ignore]
+fn figures_128() {
+    use std::time::Instant;
+    let cfg = RotationConfig {
+        n: 128,
+        ..RotationConfig::default()
+    };
+    let t0 = Instant::now();
+    let set = RotationSet::build(cfg, &Limits::default()).unwrap();
+    let s = set.stats();
+    println!(
+        "n=128 normals=32² precompute {:.1} s: {:.1} per row, density {:.2} %, {:.1} MB",
+        t0.elapsed().as_secs_f64(),
+        s.per_row,
+        100.0 * s.density,
+        s.bytes as f64 / 1e6
+    );
 }

@@ -377,6 +377,19 @@ fn lambert_under_a_constant_map_reflects_its_albedo() {
         keep: 0.05,
     };
     let mut sh = shader(cfg, Brdf::Lambert { albedo }, slices);
+    let wrong = OctMap::from_fn(32, 1, |_| [1.0; 3]).unwrap();
+    let err = sh.light(&wrong, None).unwrap_err().to_string();
+    assert!(err.contains("lighting map side = 32"), "{err}");
+    let other = SliceConfig { m: 16, ..slices };
+    let glossy = BrdfSlices::build(
+        Brdf::Ggx {
+            alpha: 0.2,
+            f0: [1.0; 3],
+        },
+        other,
+        &Limits::default(),
+    );
+    assert!(sh.set_brdf(Arc::new(glossy.unwrap())).is_err());
     sh.light(&OctMap::from_fn(16, 1, |_| [1.0; 3]).unwrap(), None)
         .unwrap();
     let mut rng = Rng(23);

@@ -43,6 +43,10 @@ pub enum RelightError {
         /// The valid range.
         valid: String,
     },
+    /// A rotation cache file that cannot be read: wrong magic, CRC,
+    /// truncated, or a field out of its range.
+    #[error("invalid rotation cache: {0}")]
+    InvalidRotationCache(String),
     /// Any other unusable input.
     #[error("invalid input: {0}")]
     Invalid(String),

@@ -11,6 +11,10 @@
 //! its relit texture, which [`TexturedMesh::render`] then draws on the mesh
 //! from any [`ViewCamera`], with no new relight per view.
 //!
+//! [`rotation`] shades glossy surfaces under live lighting, view and BRDF
+//! by wavelet rotation (Wang et al. 2006): precomputed sparse Haar rotation
+//! matrices per normal and view-dependent BRDF slices.
+//!
 //! Features (all on by default): `exr` (OpenEXR maps and images), `png`
 //! (PNG output), `hdr` (Radiance HDR maps). Without them the relighting core
 //! builds alone: [`EnvMap::from_fn`] and [`EnvMap::new`] take lighting from
@@ -66,6 +70,7 @@ mod point;
 mod reference;
 mod relighter;
 mod render;
+pub mod rotation;
 mod select;
 mod slots;
 

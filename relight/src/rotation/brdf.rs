@@ -1,0 +1,344 @@
+//! BRDFs and their view slices (Wang et al. 2006, §3, "Precomputing
+//! BRDFs"): for each view direction `ω_o` at the centre of a texel of a
+//! hemi-octahedral view grid, the target-resolution map of
+//! `∫_texel f_r(ω, ω_o) cos θ dω` (sub-sampled, exact Jacobian), Haar
+//! transformed, keeping its largest terms (by `|r| + |g| + |b|`).
+//!
+//! Local frames have the normal on `+z`; `ω` and `ω_o` point away from the
+//! surface.
+
+use super::maps::{hemi_decode, hemi_encode, subsample, texel_center, texel_of};
+use super::{check_pow2, haar};
+use crate::error::{RelightError, Result};
+use glam::DVec3;
+use ltm_codec::{Charge, Limits};
+use rayon::prelude::*;
+use std::f64::consts::PI;
+
+/// A reflectance model, isotropic, in the local frame.
+#[derive(Clone, Copy, Debug, PartialEq)]
+#[non_exhaustive]
+pub enum Brdf {
+    /// Lambertian: `albedo / π`.
+    Lambert {
+        /// Albedo per channel, in `[0, 1]`.
+        albedo: [f32; 3],
+    },
+    /// GGX microfacet conductor (Walter et al. 2007): GGX distribution of
+    /// roughness `alpha`, separable Smith masking `G1(ω)·G1(ω_o)`, Schlick
+    /// Fresnel from `f0` at the half vector.
+    Ggx {
+        /// GGX roughness α, in `[0.01, 1]`.
+        alpha: f32,
+        /// Reflectance at normal incidence per channel, in `[0, 1]`.
+        f0: [f32; 3],
+    },
+    /// Normalized modified Phong (Lafortune and Willems 1994):
+    /// `specular · (e + 2)/(2π) · max(0, ω·r)^e`, `r` the mirror of `ω_o`.
+    Phong {
+        /// Exponent `e`, in `[1, 100000]`.
+        exponent: f32,
+        /// Specular reflectance per channel, in `[0, 1]`.
+        specular: [f32; 3],
+    },
+    /// Plastic: a GGX dielectric coat (Schlick Fresnel from the index of
+    /// refraction) over a Lambertian base weighted by the coat's
+    /// transmission both ways, `(1 − F(ω))(1 − F(ω_o))·albedo/π`.
+    Plastic {
+        /// Base albedo per channel, in `[0, 1]`.
+        albedo: [f32; 3],
+        /// Coat roughness α, in `[0.01, 1]`.
+        alpha: f32,
+        /// Coat index of refraction, in `(1, 3]`.
+        ior: f32,
+    },
+}
+
+fn check_rgb(what: &'static str, c: [f32; 3]) -> Result<()> {
+    match c.iter().find(|v| !(0.0..=1.0).contains(*v)) {
+        Some(v) => Err(RelightError::range(what, v, "0..=1 per channel")),
+        None => Ok(()),
+    }
+}
+
+fn check_alpha(alpha: f32) -> Result<()> {
+    if !(0.01..=1.0).contains(&alpha) {
+        return Err(RelightError::range(
+            "GGX roughness alpha",
+            alpha,
+            "0.01..=1",
+        ));
+    }
+    Ok(())
+}
+
+fn schlick(f0: f64, cos: f64) -> f64 {
+    f0 + (1.0 - f0) * (1.0 - cos.clamp(0.0, 1.0)).powi(5)
+}
+
+/// GGX `D · G1(ω) · G1(ω_o) / (4 cos θ cos θ_o)` and `ω·h`.
+fn ggx_lobe(alpha: f64, wi: DVec3, wo: DVec3) -> (f64, f64) {
+    let h = (wi + wo).normalize();
+    let a2 = alpha * alpha;
+    let c = h.z * h.z;
+    let d = a2 / (PI * (c * (a2 - 1.0) + 1.0).powi(2));
+    let g1 = |cos: f64| 2.0 * cos / (cos + (a2 + (1.0 - a2) * cos * cos).sqrt());
+    (d * g1(wi.z) * g1(wo.z) / (4.0 * wi.z * wo.z), wi.dot(h))
+}
+
+impl Brdf {
+    /// Checks the parameters (errors name the value and its valid range).
+    pub fn validate(&self) -> Result<()> {
+        match *self {
+            Brdf::Lambert { albedo } => check_rgb("Lambert albedo", albedo),
+            Brdf::Ggx { alpha, f0 } => {
+                check_alpha(alpha)?;
+                check_rgb("GGX F0", f0)
+            }
+            Brdf::Phong { exponent, specular } => {
+                if !(1.0..=1e5).contains(&exponent) {
+                    return Err(RelightError::range(
+                        "Phong exponent",
+                        exponent,
+                        "1..=100000",
+                    ));
+                }
+                check_rgb("Phong specular", specular)
+            }
+            Brdf::Plastic { albedo, alpha, ior } => {
+                check_alpha(alpha)?;
+                if !(ior > 1.0 && ior <= 3.0) {
+                    return Err(RelightError::range("plastic ior", ior, "(1, 3]"));
+                }
+                check_rgb("plastic albedo", albedo)
+            }
+        }
+    }
+
+    /// `f_r(ω, ω_o)` per channel; zero where either direction is at or
+    /// below the horizon.
+    pub fn eval(&self, wi: DVec3, wo: DVec3) -> [f64; 3] {
+        if wi.z <= 0.0 || wo.z <= 0.0 {
+            return [0.0; 3];
+        }
+        match *self {
+            Brdf::Lambert { albedo } => albedo.map(|a| f64::from(a) / PI),
+            Brdf::Ggx { alpha, f0 } => {
+                let (lobe, cos_h) = ggx_lobe(f64::from(alpha), wi, wo);
+                f0.map(|f| lobe * schlick(f64::from(f), cos_h))
+            }
+            Brdf::Phong { exponent, specular } => {
+                let e = f64::from(exponent);
+                let r = DVec3::new(-wo.x, -wo.y, wo.z);
+                let lobe = (e + 2.0) / (2.0 * PI) * wi.dot(r).max(0.0).powf(e);
+                specular.map(|s| f64::from(s) * lobe)
+            }
+            Brdf::Plastic { albedo, alpha, ior } => {
+                let f0 = ((f64::from(ior) - 1.0) / (f64::from(ior) + 1.0)).powi(2);
+                let (lobe, cos_h) = ggx_lobe(f64::from(alpha), wi, wo);
+                let coat = lobe * schlick(f0, cos_h);
+                let base = (1.0 - schlick(f0, wi.z)) * (1.0 - schlick(f0, wo.z)) / PI;
+                albedo.map(|a| coat + base * f64::from(a))
+            }
+        }
+    }
+}
+
+/// How [`BrdfSlices`] are built.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct SliceConfig {
+    /// Target hemi-octahedral side `m` (a power of two, 2..=128): the
+    /// rotation set's `n/2`.
+    pub m: usize,
+    /// Side of the hemi-octahedral grid of view directions (1..=256).
+    pub views: usize,
+    /// Sub-samples per target texel and side (1..=16).
+    pub supersample: usize,
+    /// Fraction of the `m²` Haar terms kept per slice, in `(0, 1]`.
+    pub keep: f64,
+}
+
+impl Default for SliceConfig {
+    fn default() -> SliceConfig {
+        SliceConfig {
+            m: 32,
+            views: 64,
+            supersample: 4,
+            keep: 0.03,
+        }
+    }
+}
+
+impl SliceConfig {
+    /// Checks every field.
+    pub fn validate(&self) -> Result<()> {
+        check_pow2("BRDF slice side m", self.m, 2, 128)?;
+        if !(1..=256).contains(&self.views) {
+            return Err(RelightError::range("view grid side", self.views, "1..=256"));
+        }
+        if !(1..=16).contains(&self.supersample) {
+            return Err(RelightError::range(
+                "slice supersample",
+                self.supersample,
+                "1..=16",
+            ));
+        }
+        if !(self.keep > 0.0 && self.keep <= 1.0) {
+            return Err(RelightError::range(
+                "kept BRDF fraction",
+                self.keep,
+                "(0, 1]",
+            ));
+        }
+        Ok(())
+    }
+
+    /// Terms kept per slice: `ceil(keep · m²)`.
+    pub fn terms(&self) -> usize {
+        ((self.keep * (self.m * self.m) as f64).ceil() as usize).clamp(1, self.m * self.m)
+    }
+}
+
+/// One kept term of a slice: target coefficient and RGB value.
+type Term = (u32, [f32; 3]);
+
+/// One sparse Haar slice per view direction.
+#[derive(Debug)]
+pub struct BrdfSlices {
+    cfg: SliceConfig,
+    brdf: Brdf,
+    /// Per view `v`, its terms are `offsets[v]..offsets[v + 1]`.
+    offsets: Vec<u32>,
+    index: Vec<u32>,
+    value: Vec<[f32; 3]>,
+    _charge: Charge,
+}
+
+/// The spatial slice of view `wo`: per target texel, `∫ f cos dω`.
+pub(crate) fn spatial_slice(brdf: &Brdf, cfg: &SliceConfig, wo: DVec3) -> Vec<[f64; 3]> {
+    let (m, s) = (cfg.m, cfg.supersample);
+    let area = 1.0 / (m * m * s * s) as f64;
+    (0..m * m)
+        .map(|t| {
+            let mut acc = [0.0; 3];
+            for j in 0..s {
+                for i in 0..s {
+                    let (wi, jac) = hemi_decode_sub(m, t, s, i, j);
+                    let f = brdf.eval(wi, wo);
+                    for c in 0..3 {
+                        acc[c] += f[c] * wi.z * jac * area;
+                    }
+                }
+            }
+            acc
+        })
+        .collect()
+}
+
+fn hemi_decode_sub(m: usize, t: usize, s: usize, i: usize, j: usize) -> (DVec3, f64) {
+    let (u, v) = subsample(m, t, s, i, j);
+    hemi_decode(u, v)
+}
+
+/// Haar transform of a spatial slice, keeping its `terms` largest.
+fn sparse_slice(spatial: &[[f64; 3]], m: usize, terms: usize) -> Result<Vec<Term>> {
+    let mut planes = [0, 1, 2].map(|c| spatial.iter().map(|p| p[c] as f32).collect::<Vec<_>>());
+    for p in planes.iter_mut() {
+        haar::forward(p, m)?;
+    }
+    let mut order: Vec<u32> = (0..(m * m) as u32).collect();
+    let mag = |i: u32| planes.iter().map(|p| p[i as usize].abs()).sum::<f32>();
+    order.sort_unstable_by(|&a, &b| mag(b).total_cmp(&mag(a)).then(a.cmp(&b)));
+    let mut kept: Vec<u32> = order
+        .into_iter()
+        .take(terms)
+        .filter(|&i| mag(i) > 0.0)
+        .collect();
+    kept.sort_unstable();
+    Ok(kept
+        .into_iter()
+        .map(|i| (i, [0, 1, 2].map(|c| planes[c][i as usize])))
+        .collect())
+}
+
+impl BrdfSlices {
+    /// Builds every view's slice, in parallel over views; the terms are
+    /// charged to `limits` before they are stored.
+    pub fn build(brdf: Brdf, cfg: SliceConfig, limits: &Limits) -> Result<BrdfSlices> {
+        brdf.validate()?;
+        cfg.validate()?;
+        let views = cfg.views * cfg.views;
+        let terms = cfg.terms();
+        let charge = limits.check_alloc("BRDF slices", (views * terms) as u64, 16)?;
+        let slices: Vec<Result<Vec<Term>>> = (0..views)
+            .into_par_iter()
+            .map(|v| {
+                let (u, w) = texel_center(cfg.views, v);
+                let spatial = spatial_slice(&brdf, &cfg, hemi_decode(u, w).0);
+                sparse_slice(&spatial, cfg.m, terms)
+            })
+            .collect();
+        let mut offsets = Vec::with_capacity(views + 1);
+        let (mut index, mut value) = (Vec::new(), Vec::new());
+        offsets.push(0u32);
+        for s in slices {
+            for (i, v) in s? {
+                index.push(i);
+                value.push(v);
+            }
+            offsets.push(index.len() as u32);
+        }
+        Ok(BrdfSlices {
+            cfg,
+            brdf,
+            offsets,
+            index,
+            value,
+            _charge: charge,
+        })
+    }
+
+    /// The configuration.
+    pub fn config(&self) -> &SliceConfig {
+        &self.cfg
+    }
+
+    /// The BRDF.
+    pub fn brdf(&self) -> &Brdf {
+        &self.brdf
+    }
+
+    /// The view texel nearest local view direction `wo` (moved onto the
+    /// horizon if below it).
+    pub fn view_index(&self, wo: DVec3) -> usize {
+        let (u, v) = hemi_encode(wo);
+        texel_of(self.cfg.views, u, v)
+    }
+
+    /// The terms of view `v`: `(target coefficient, RGB value)`.
+    pub fn slice(&self, v: usize) -> impl Iterator<Item = (usize, [f32; 3])> + '_ {
+        let range = self.offsets[v] as usize..self.offsets[v + 1] as usize;
+        self.index[range.clone()]
+            .iter()
+            .map(|&i| i as usize)
+            .zip(self.value[range].iter().copied())
+    }
+
+    /// Slice of view `v` dotted with a local lighting (`m²` RGB Haar
+    /// coefficients), per channel.
+    pub fn dot(&self, v: usize, local: &[[f32; 3]]) -> [f32; 3] {
+        let mut acc = [0.0f32; 3];
+        for (i, f) in self.slice(v) {
+            let l = local[i];
+            for c in 0..3 {
+                acc[c] += f[c] * l[c];
+            }
+        }
+        acc
+    }
+
+    /// Bytes of the stored terms.
+    pub fn bytes(&self) -> usize {
+        4 * self.offsets.len() + 16 * self.index.len()
+    }
+}

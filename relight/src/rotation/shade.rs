@@ -1,0 +1,226 @@
+//! The two rendering steps of Wang et al. 2006 (§3, "Environment Map
+//! Rendering"), and the spatial-domain rotation they are checked against.
+
+use super::maps::{hemi_decode, oct_bilinear, oct_decode, oct_encode, subsample, texel_of, Frame};
+use super::{check_pow2, haar, BrdfSlices, RotationSet, MAX_SOURCE_SIDE};
+use crate::error::{RelightError, Result};
+use glam::DVec3;
+use ltm_codec::{Charge, Limits};
+use rayon::prelude::*;
+use std::sync::Arc;
+
+/// Global lighting: an `n × n` octahedral map of RGB radiance, texel
+/// `y·n + x` (see [`super::maps`]).
+#[derive(Clone, Debug, PartialEq)]
+pub struct OctMap {
+    n: usize,
+    texels: Vec<[f32; 3]>,
+}
+
+impl OctMap {
+    /// A map from its texels (`n` a power of two, 4..=256; `n²` finite
+    /// texels).
+    pub fn new(n: usize, texels: Vec<[f32; 3]>) -> Result<OctMap> {
+        check_pow2("octahedral map side", n, 4, MAX_SOURCE_SIDE)?;
+        if texels.len() != n * n {
+            let valid = format!("{} (n = {n})", n * n);
+            return Err(RelightError::range(
+                "octahedral map texels",
+                texels.len(),
+                valid,
+            ));
+        }
+        if texels.iter().flatten().any(|v| !v.is_finite()) {
+            return Err(RelightError::InvalidEnvMap(
+                "a texel is NaN or infinite".into(),
+            ));
+        }
+        Ok(OctMap { n, texels })
+    }
+
+    /// A map with each texel the mean of `radiance` over `s × s` sub-samples
+    /// of it (unweighted; `s` is clamped to 1..=16).
+    pub fn from_fn(n: usize, s: usize, radiance: impl Fn(DVec3) -> [f32; 3]) -> Result<OctMap> {
+        check_pow2("octahedral map side", n, 4, MAX_SOURCE_SIDE)?;
+        let s = s.clamp(1, 16);
+        let texels = (0..n * n)
+            .map(|t| {
+                let mut acc = [0.0f64; 3];
+                for j in 0..s {
+                    for i in 0..s {
+                        let (u, v) = subsample(n, t, s, i, j);
+                        let r = radiance(oct_decode(u, v).0);
+                        (0..3).for_each(|c| acc[c] += f64::from(r[c]));
+                    }
+                }
+                acc.map(|a| (a / (s * s) as f64) as f32)
+            })
+            .collect();
+        OctMap::new(n, texels)
+    }
+
+    /// Side `n`.
+    pub fn side(&self) -> usize {
+        self.n
+    }
+
+    /// Texels.
+    pub fn texels(&self) -> &[[f32; 3]] {
+        &self.texels
+    }
+
+    /// Radiance of the texel containing direction `d`.
+    pub fn lookup(&self, d: DVec3) -> [f32; 3] {
+        let (u, v) = oct_encode(d);
+        self.texels[texel_of(self.n, u, v)]
+    }
+
+    /// The RGB Haar coefficients (`n²`), optionally only the `terms`
+    /// largest by `|r| + |g| + |b|` (the rest zero).
+    pub fn haar(&self, terms: Option<usize>) -> Result<Vec<[f32; 3]>> {
+        let n = self.n;
+        let mut planes = [0, 1, 2].map(|c| self.texels.iter().map(|t| t[c]).collect::<Vec<_>>());
+        for p in planes.iter_mut() {
+            haar::forward(p, n)?;
+        }
+        let mut coef: Vec<[f32; 3]> = (0..n * n)
+            .map(|i| [planes[0][i], planes[1][i], planes[2][i]])
+            .collect();
+        if let Some(k) = terms.filter(|&k| k < n * n) {
+            let mag = |c: &[f32; 3]| c[0].abs() + c[1].abs() + c[2].abs();
+            let mut order: Vec<usize> = (0..n * n).collect();
+            order.select_nth_unstable_by(k, |&a, &b| mag(&coef[b]).total_cmp(&mag(&coef[a])));
+            for &i in &order[k..] {
+                coef[i] = [0.0; 3];
+            }
+        }
+        Ok(coef)
+    }
+}
+
+/// The spatial-domain rotation: the local hemi-octahedral map (`n/2`
+/// side) of `normal`'s frame, each texel the solid-angle-weighted mean of
+/// `map` over `s × s` sub-samples. `R(normal)·haar(map)` approximates its
+/// Haar transform to quantization error when built with the same `s`.
+pub fn resample_local(map: &OctMap, normal: DVec3, s: usize) -> Vec<[f32; 3]> {
+    let (m, s) = (map.n / 2, s.clamp(1, 16));
+    let frame = Frame::new(normal.normalize());
+    (0..m * m)
+        .map(|t| {
+            let (mut acc, mut total) = ([0.0f64; 3], 0.0);
+            for j in 0..s {
+                for i in 0..s {
+                    let (u, v) = subsample(m, t, s, i, j);
+                    let (d, jac) = hemi_decode(u, v);
+                    let r = map.lookup(frame.to_global(d));
+                    (0..3).for_each(|c| acc[c] += jac * f64::from(r[c]));
+                    total += jac;
+                }
+            }
+            acc.map(|a| (a / total) as f32)
+        })
+        .collect()
+}
+
+/// Renders with a [`RotationSet`] and one BRDF's [`BrdfSlices`]: step 1
+/// ([`Shader::light`]) on a lighting change, step 2 ([`Shader::shade`])
+/// per surface point and view.
+#[derive(Debug)]
+pub struct Shader {
+    rotations: Arc<RotationSet>,
+    slices: Arc<BrdfSlices>,
+    /// Per grid normal, its `m²` RGB local-lighting coefficients.
+    local: Vec<[f32; 3]>,
+    /// Per grid normal, its frame.
+    frames: Vec<Frame>,
+    _charge: Charge,
+}
+
+impl Shader {
+    /// A shader with no lighting yet (black until [`Shader::light`]); the
+    /// local-lighting buffer is charged to `limits`.
+    pub fn new(
+        rotations: Arc<RotationSet>,
+        slices: Arc<BrdfSlices>,
+        limits: &Limits,
+    ) -> Result<Shader> {
+        check_slices(&rotations, &slices)?;
+        let cfg = rotations.config();
+        let count = cfg.normals * cfg.normals * cfg.m() * cfg.m();
+        let (local, charge) = limits.vec("local lightings", count, [0.0f32; 3])?;
+        let normals = cfg.normals * cfg.normals;
+        let frames_charge = limits.check_alloc("normal frames", normals as u64, 72)?;
+        let frames = (0..normals)
+            .map(|i| Frame::new(cfg.grid_normal(i)))
+            .collect();
+        Ok(Shader {
+            rotations,
+            slices,
+            local,
+            frames,
+            _charge: charge.join(frames_charge),
+        })
+    }
+
+    /// Switches the BRDF: no rotation or lighting is recomputed.
+    pub fn set_brdf(&mut self, slices: Arc<BrdfSlices>) -> Result<()> {
+        check_slices(&self.rotations, &slices)?;
+        self.slices = slices;
+        Ok(())
+    }
+
+    /// Step 1: `R(n)·L` for every grid normal, `L` the map's Haar
+    /// coefficients, optionally only its `terms` largest.
+    pub fn light(&mut self, map: &OctMap, terms: Option<usize>) -> Result<()> {
+        let cfg = *self.rotations.config();
+        if map.side() != cfg.n {
+            let valid = format!("{} (the rotation set's n)", cfg.n);
+            return Err(RelightError::range("lighting map side", map.side(), valid));
+        }
+        let light = map.haar(terms)?;
+        let m2 = cfg.m() * cfg.m();
+        self.local
+            .par_chunks_mut(m2)
+            .zip(self.rotations.matrices().par_iter())
+            .for_each(|(out, mat)| mat.apply(&light, out));
+        Ok(())
+    }
+
+    /// The local lighting of grid normal `i` (`m²` RGB Haar coefficients).
+    pub fn local(&self, i: usize) -> &[[f32; 3]] {
+        let m2 = self.rotations.config().m().pow(2);
+        &self.local[i * m2..(i + 1) * m2]
+    }
+
+    /// Step 2: outgoing radiance at a surface point of unit `normal` seen
+    /// from unit direction `view` (towards the viewer), both global: for
+    /// each of the four grid normals around `normal`, the slice of `view`
+    /// in that normal's frame dotted with its local lighting, blended
+    /// bilinearly.
+    pub fn shade(&self, normal: DVec3, view: DVec3) -> [f32; 3] {
+        let cfg = self.rotations.config();
+        let mut out = [0.0f32; 3];
+        for (i, w) in oct_bilinear(cfg.normals, normal) {
+            if w == 0.0 {
+                continue;
+            }
+            let wo = self.frames[i].to_local(view);
+            let b = self.slices.dot(self.slices.view_index(wo), self.local(i));
+            (0..3).for_each(|c| out[c] += w as f32 * b[c]);
+        }
+        out
+    }
+}
+
+fn check_slices(rotations: &RotationSet, slices: &BrdfSlices) -> Result<()> {
+    let m = rotations.config().m();
+    if slices.config().m != m {
+        let valid = format!("{m} (the rotation set's n/2)");
+        return Err(RelightError::range(
+            "BRDF slice side m",
+            slices.config().m,
+            valid,
+        ));
+    }
+    Ok(())
+}

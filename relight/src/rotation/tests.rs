@@ -1,0 +1,864 @@
+//! Tests of the wavelet rotation (Wang et al. 2006).
+
+use super::maps::*;
+use super::matrix::{exact_rows, resampling, Bases, RotationMatrix};
+use super::*;
+use std::f64::consts::PI;
+use std::sync::Arc;
+
+/// A small deterministic generator (xorshift64*).
+struct Rng(u64);
+
+impl Rng {
+    fn f64(&mut self) -> f64 {
+        self.0 ^= self.0 >> 12;
+        self.0 ^= self.0 << 25;
+        self.0 ^= self.0 >> 27;
+        (self.0.wrapping_mul(0x2545_F491_4F6C_DD1D) >> 11) as f64 / (1u64 << 53) as f64
+    }
+
+    fn dir(&mut self) -> DVec3 {
+        let z = 2.0 * self.f64() - 1.0;
+        let phi = 2.0 * PI * self.f64();
+        let r = (1.0 - z * z).max(0.0).sqrt();
+        DVec3::new(r * phi.cos(), r * phi.sin(), z)
+    }
+}
+
+/// Three procedural maps: a sky gradient with a sun, a checker of bands,
+/// and a sum of lobes.
+fn maps_for(n: usize) -> Vec<OctMap> {
+    let sun = DVec3::new(0.3, 0.5, 0.8).normalize();
+    let sky = move |d: DVec3| {
+        let s = if d.dot(sun) > 0.98 { 50.0 } else { 0.0 };
+        let base = (0.5 + 0.5 * d.z) as f32;
+        [base + s, base * 0.8 + s, 0.3 + s]
+    };
+    let bands = |d: DVec3| {
+        let k = ((d.x * 5.0).floor() + (d.y * 3.0).floor() + (d.z * 4.0).floor()) as i64;
+        let v = if k.rem_euclid(2) == 0 { 1.0 } else { 0.1 };
+        [v, 0.5 * v, 0.2]
+    };
+    let lobes = |d: DVec3| {
+        let a = d.dot(DVec3::new(1.0, 0.0, 0.0)).max(0.0).powi(20) as f32;
+        let b = d.dot(DVec3::new(0.0, -0.6, -0.8)).max(0.0).powi(5) as f32;
+        [3.0 * a + b, a + 2.0 * b, 0.1 + b]
+    };
+    vec![
+        OctMap::from_fn(n, 2, sky).unwrap(),
+        OctMap::from_fn(n, 2, bands).unwrap(),
+        OctMap::from_fn(n, 2, lobes).unwrap(),
+    ]
+}
+
+fn flatten(v: &[[f32; 3]]) -> Vec<f64> {
+    v.iter().flatten().map(|&x| f64::from(x)).collect()
+}
+
+fn rel_rms(a: &[[f32; 3]], b: &[[f32; 3]]) -> f64 {
+    let (a, b) = (flatten(a), flatten(b));
+    let num: f64 = a.iter().zip(&b).map(|(x, y)| (x - y).powi(2)).sum();
+    let den: f64 = b.iter().map(|y| y * y).sum();
+    (num / den).sqrt()
+}
+
+fn haar_rgb(texels: &[[f32; 3]], m: usize) -> Vec<[f32; 3]> {
+    let map = OctMap::new(m, texels.to_vec()).unwrap();
+    map.haar(None).unwrap()
+}
+
+#[test]
+fn octahedral_maps_round_trip() {
+    let mut rng = Rng(7);
+    for _ in 0..2000 {
+        let d = rng.dir();
+        let (u, v) = oct_encode(d);
+        assert!(oct_decode(u, v).0.distance(d) < 1e-12, "{d}");
+        let h = DVec3::new(d.x, d.y, d.z.abs());
+        let (u, v) = hemi_encode(h);
+        assert!(hemi_decode(u, v).0.distance(h) < 1e-12, "{h}");
+    }
+}
+
+#[test]
+fn solid_angles_cover_the_sphere_and_hemisphere() {
+    let oct: f64 = solid_angles(32, 8, |u, v| oct_decode(u, v).1).iter().sum();
+    let hemi: f64 = solid_angles(16, 8, |u, v| hemi_decode(u, v).1).iter().sum();
+    assert!(
+        (oct - 4.0 * PI).abs() < 1e-3 * 4.0 * PI,
+        "octahedral map covers {oct}"
+    );
+    assert!(
+        (hemi - 2.0 * PI).abs() < 1e-3 * 2.0 * PI,
+        "hemi-octahedral map covers {hemi}"
+    );
+}
+
+#[test]
+fn frames_are_orthonormal_and_right_handed() {
+    let mut rng = Rng(11);
+    for _ in 0..1000 {
+        let n = rng.dir();
+        let f = Frame::new(n);
+        assert!((f.s.length() - 1.0).abs() < 1e-12 && (f.t.length() - 1.0).abs() < 1e-12);
+        assert!(f.s.dot(f.t).abs() < 1e-12 && f.s.dot(n).abs() < 1e-12);
+        assert!(f.s.cross(f.t).distance(n) < 1e-12);
+        let d = rng.dir();
+        assert!(f.to_local(f.to_global(d)).distance(d) < 1e-12);
+    }
+}
+
+#[test]
+fn bilinear_weights_sum_to_one_and_hit_grid_normals() {
+    let mut rng = Rng(5);
+    for _ in 0..1000 {
+        let w: f64 = oct_bilinear(8, rng.dir()).iter().map(|p| p.1).sum();
+        assert!((w - 1.0).abs() < 1e-12);
+    }
+    let cfg = RotationConfig {
+        normals: 8,
+        ..RotationConfig::default()
+    };
+    for i in 0..64 {
+        let taps = oct_bilinear(8, cfg.grid_normal(i));
+        let at: f64 = taps.iter().filter(|p| p.0 == i).map(|p| p.1).sum();
+        assert!(at > 1.0 - 1e-9, "grid normal {i} weighs {at} on itself");
+    }
+}
+
+#[test]
+fn haar_impulses_match_the_codec_transform() {
+    let n = 8;
+    for t in 0..n * n {
+        let mut img = vec![0.0f32; n * n];
+        img[t] = 1.0;
+        haar::forward(&mut img, n).unwrap();
+        let mut sparse = vec![0.0f64; n * n];
+        for (i, v) in haar::delta(n, t) {
+            sparse[i as usize] += v;
+        }
+        for i in 0..n * n {
+            assert!(
+                (f64::from(img[i]) - sparse[i]).abs() < 1e-6,
+                "texel {t} coefficient {i}"
+            );
+        }
+    }
+}
+
+#[test]
+fn haar_is_orthonormal_and_inverts() {
+    let n = 32;
+    let mut rng = Rng(3);
+    let img: Vec<f32> = (0..n * n).map(|_| rng.f64() as f32 - 0.5).collect();
+    let mut c = img.clone();
+    haar::forward(&mut c, n).unwrap();
+    let e0: f64 = img.iter().map(|&x| f64::from(x).powi(2)).sum();
+    let e1: f64 = c.iter().map(|&x| f64::from(x).powi(2)).sum();
+    assert!((e0 - e1).abs() < 1e-5 * e0, "energy {e0} became {e1}");
+    haar::inverse(&mut c, n).unwrap();
+    assert!(img.iter().zip(&c).all(|(a, b)| (a - b).abs() < 1e-5));
+}
+
+/// The bound of `|(R_q − R)·L|` per row: half a step per entry of the exact
+/// row (every dropped or rounded entry moves by at most half a step with
+/// threshold 1), plus f32 accumulation.
+fn row_bounds(rows: &[Vec<(u32, f64)>], scale: f64, light: &[[f32; 3]]) -> Vec<f64> {
+    rows.iter()
+        .map(|row| {
+            let l1: f64 = row
+                .iter()
+                .map(|&(j, _)| {
+                    light[j as usize]
+                        .iter()
+                        .map(|v| f64::from(v.abs()))
+                        .fold(0.0, f64::max)
+                })
+                .sum();
+            0.5 * scale * l1 + 1e-5 * (1.0 + l1)
+        })
+        .collect()
+}
+
+#[test]
+fn rotation_equals_the_haar_of_the_spatially_rotated_map() {
+    let cfg = RotationConfig {
+        n: 16,
+        normals: 4,
+        supersample: 3,
+        threshold: 1,
+    };
+    let bases = Bases::new(cfg.n);
+    let mut rng = Rng(19);
+    for map in maps_for(cfg.n) {
+        for _ in 0..4 {
+            let normal = rng.dir();
+            let rows = exact_rows(&cfg, &bases, normal);
+            let mat = RotationMatrix::quantize(&rows, 1, false);
+            let light = map.haar(None).unwrap();
+            let mut out = vec![[0.0f32; 3]; cfg.m() * cfg.m()];
+            mat.apply(&light, &mut out);
+            let reference = haar_rgb(&resample_local(&map, normal, cfg.supersample), cfg.m());
+            let bounds = row_bounds(&rows, f64::from(mat.scale()), &light);
+            for (r, (o, e)) in out.iter().zip(&reference).enumerate() {
+                for c in 0..3 {
+                    let err = f64::from((o[c] - e[c]).abs());
+                    assert!(
+                        err <= bounds[r],
+                        "normal {normal} row {r}: {err} > {}",
+                        bounds[r]
+                    );
+                }
+            }
+            assert!(rel_rms(&out, &reference) < 1e-3);
+        }
+    }
+}
+
+/// `H` of a side-`n` map as a dense matrix (column `t` = transform of an
+/// impulse at `t`), from the codec's dense transform.
+fn dense_haar(n: usize) -> Vec<Vec<f64>> {
+    let mut h = vec![vec![0.0; n * n]; n * n];
+    for t in 0..n * n {
+        let mut img = vec![0.0f32; n * n];
+        img[t] = 1.0;
+        haar::forward(&mut img, n).unwrap();
+        for (r, &v) in img.iter().enumerate() {
+            h[r][t] = f64::from(v);
+        }
+    }
+    h
+}
+
+#[test]
+fn quantized_sparse_product_matches_a_dense_f64_reference() {
+    let cfg = RotationConfig {
+        n: 16,
+        normals: 4,
+        supersample: 2,
+        threshold: 4,
+    };
+    let (n2, m2) = (cfg.n * cfg.n, cfg.m() * cfg.m());
+    let (hn, hm) = (dense_haar(cfg.n), dense_haar(cfg.m()));
+    let normal = DVec3::new(0.4, -0.7, 0.2).normalize();
+    // Dense W·Hₙᵀ, then Hₘ·(W·Hₙᵀ).
+    let w = resampling(&cfg, normal);
+    let mut wh = vec![vec![0.0; n2]; m2];
+    for (t, taps) in w.iter().enumerate() {
+        for &(k, wk) in taps {
+            for j in 0..n2 {
+                wh[t][j] += wk * hn[j][k as usize];
+            }
+        }
+    }
+    let mut dense = vec![vec![0.0; n2]; m2];
+    for r in 0..m2 {
+        for t in 0..m2 {
+            if hm[r][t] != 0.0 {
+                for j in 0..n2 {
+                    dense[r][j] += hm[r][t] * wh[t][j];
+                }
+            }
+        }
+    }
+    let mat = RotationMatrix::build(&cfg, normal).unwrap();
+    let step = f64::from(mat.scale());
+    let mut stored = vec![vec![None; n2]; m2];
+    for (r, row) in stored.iter_mut().enumerate() {
+        for (j, q) in mat.row(r) {
+            row[j] = Some(f64::from(q) * step);
+        }
+    }
+    for r in 0..m2 {
+        for j in 0..n2 {
+            let bound = match stored[r][j] {
+                Some(_) => 0.5 * step,
+                None => (f64::from(cfg.threshold) - 0.5) * step,
+            };
+            let err = (stored[r][j].unwrap_or(0.0) - dense[r][j]).abs();
+            assert!(err <= bound + 1e-7, "entry ({r}, {j}): {err} > {bound}");
+        }
+    }
+    // The product, in both index widths, against the dense one.
+    let light = maps_for(cfg.n)[2].haar(None).unwrap();
+    let rows = exact_rows(&cfg, &Bases::new(cfg.n), normal);
+    let wide = RotationMatrix::quantize(&rows, cfg.threshold, true);
+    let (mut a, mut b) = (vec![[0.0f32; 3]; m2], vec![[0.0f32; 3]; m2]);
+    mat.apply(&light, &mut a);
+    wide.apply(&light, &mut b);
+    assert_eq!(a, b);
+    for r in 0..m2 {
+        let l1: f64 = (0..n2).map(|j| f64::from(light[j][0].abs())).sum();
+        let exact: f64 = (0..n2).map(|j| dense[r][j] * f64::from(light[j][0])).sum();
+        let bound = (f64::from(cfg.threshold) - 0.5) * step * l1 + 1e-4;
+        assert!((f64::from(a[r][0]) - exact).abs() <= bound, "row {r}");
+    }
+}
+
+#[test]
+fn sizes_and_parameters_are_validated() {
+    let limits = Limits::default();
+    for bad in [
+        RotationConfig {
+            n: 48,
+            ..RotationConfig::default()
+        },
+        RotationConfig {
+            n: 512,
+            ..RotationConfig::default()
+        },
+        RotationConfig {
+            normals: 0,
+            ..RotationConfig::default()
+        },
+        RotationConfig {
+            supersample: 17,
+            ..RotationConfig::default()
+        },
+        RotationConfig {
+            threshold: 40000,
+            ..RotationConfig::default()
+        },
+    ] {
+        let err = RotationSet::build(bad, &limits).unwrap_err().to_string();
+        assert!(err.contains("valid"), "{err}");
+    }
+    assert!(OctMap::new(12, vec![[0.0; 3]; 144]).is_err());
+    assert!(OctMap::new(8, vec![[0.0; 3]; 63]).is_err());
+    assert!(OctMap::new(4, vec![[f32::NAN; 3]; 16]).is_err());
+    assert!(Brdf::Ggx {
+        alpha: 0.0,
+        f0: [1.0; 3]
+    }
+    .validate()
+    .is_err());
+    assert!(Brdf::Lambert {
+        albedo: [1.5, 0.0, 0.0]
+    }
+    .validate()
+    .is_err());
+    assert!(SliceConfig {
+        keep: 0.0,
+        ..SliceConfig::default()
+    }
+    .validate()
+    .is_err());
+    // A budget too small for the set is an error, not an abort.
+    let small = Limits::with_max_alloc(1000);
+    let cfg = RotationConfig {
+        n: 16,
+        normals: 4,
+        ..RotationConfig::default()
+    };
+    assert!(RotationSet::build(cfg, &small).is_err());
+}
+
+fn shader(cfg: RotationConfig, brdf: Brdf, slices: SliceConfig) -> Shader {
+    let limits = Limits::default();
+    let set = Arc::new(RotationSet::build(cfg, &limits).unwrap());
+    let slices = Arc::new(BrdfSlices::build(brdf, slices, &limits).unwrap());
+    Shader::new(set, slices, &limits).unwrap()
+}
+
+#[test]
+fn lambert_under_a_constant_map_reflects_its_albedo() {
+    // B = ∫ (ρ/π)·1·cos θ dω = ρ.
+    let cfg = RotationConfig {
+        n: 16,
+        normals: 4,
+        supersample: 2,
+        threshold: 1,
+    };
+    let albedo = [0.8, 0.5, 0.2];
+    let slices = SliceConfig {
+        m: 8,
+        views: 8,
+        supersample: 8,
+        keep: 0.05,
+    };
+    let mut sh = shader(cfg, Brdf::Lambert { albedo }, slices);
+    let wrong = OctMap::from_fn(32, 1, |_| [1.0; 3]).unwrap();
+    let err = sh.light(&wrong, None).unwrap_err().to_string();
+    assert!(err.contains("lighting map side = 32"), "{err}");
+    let other = SliceConfig { m: 16, ..slices };
+    let glossy = BrdfSlices::build(
+        Brdf::Ggx {
+            alpha: 0.2,
+            f0: [1.0; 3],
+        },
+        other,
+        &Limits::default(),
+    );
+    assert!(sh.set_brdf(Arc::new(glossy.unwrap())).is_err());
+    sh.light(&OctMap::from_fn(16, 1, |_| [1.0; 3]).unwrap(), None)
+        .unwrap();
+    let mut rng = Rng(23);
+    for _ in 0..200 {
+        let normal = rng.dir();
+        let mut view = rng.dir();
+        if view.dot(normal) < 0.0 {
+            view = -view;
+        }
+        let b = sh.shade(normal, view);
+        for c in 0..3 {
+            assert!((b[c] - albedo[c]).abs() < 2e-3, "{b:?} against {albedo:?}");
+        }
+    }
+}
+
+/// `∫ f_r(ω, ω_o) cos θ dω` by the midpoint rule in (θ, φ).
+fn albedo_brute_force(brdf: &Brdf, wo: DVec3) -> [f64; 3] {
+    let (nt, np) = (1024, 2048);
+    let mut acc = [0.0; 3];
+    for i in 0..nt {
+        let theta = (i as f64 + 0.5) * 0.5 * PI / nt as f64;
+        let w = theta.sin() * theta.cos() * (0.5 * PI / nt as f64) * (2.0 * PI / np as f64);
+        for k in 0..np {
+            let phi = (k as f64 + 0.5) * 2.0 * PI / np as f64;
+            let wi = DVec3::new(
+                theta.sin() * phi.cos(),
+                theta.sin() * phi.sin(),
+                theta.cos(),
+            );
+            let f = brdf.eval(wi, wo);
+            (0..3).for_each(|c| acc[c] += f[c] * w);
+        }
+    }
+    acc
+}
+
+#[test]
+fn glossy_brdfs_under_a_white_map_reflect_their_directional_albedo() {
+    let cfg = RotationConfig {
+        n: 32,
+        normals: 4,
+        supersample: 2,
+        threshold: 1,
+    };
+    let slices = SliceConfig {
+        m: 16,
+        views: 16,
+        supersample: 8,
+        keep: 0.05,
+    };
+    let brdfs = [
+        Brdf::Ggx {
+            alpha: 0.3,
+            f0: [0.95, 0.6, 0.3],
+        },
+        Brdf::Ggx {
+            alpha: 0.1,
+            f0: [0.95, 0.6, 0.3],
+        },
+        Brdf::Phong {
+            exponent: 30.0,
+            specular: [0.9, 0.5, 0.2],
+        },
+        Brdf::Plastic {
+            albedo: [0.7, 0.2, 0.1],
+            alpha: 0.2,
+            ior: 1.5,
+        },
+    ];
+    for brdf in brdfs {
+        let mut sh = shader(cfg, brdf, slices);
+        sh.light(&OctMap::from_fn(32, 1, |_| [1.0; 3]).unwrap(), None)
+            .unwrap();
+        let frame = Frame::new(cfg.grid_normal(5));
+        for view in [3usize, 40, 77, 120, 136] {
+            let (u, v) = texel_center(16, view);
+            let wo = hemi_decode(u, v).0;
+            let b = sh.shade(cfg.grid_normal(5), frame.to_global(wo));
+            let e = albedo_brute_force(&brdf, wo);
+            for c in 0..3 {
+                let rel = (f64::from(b[c]) - e[c]).abs() / e[c];
+                assert!(rel < 0.01, "{brdf:?}, view {wo}: {b:?} against {e:?}");
+                assert!(e[c] < 1.0 + 1e-3, "{brdf:?} reflects {e:?} at {wo}");
+            }
+        }
+    }
+}
+
+#[test]
+fn a_small_bright_source_highlights_the_mirror_direction() {
+    let cfg = RotationConfig {
+        n: 64,
+        normals: 4,
+        supersample: 2,
+        threshold: 1,
+    };
+    let slices = SliceConfig {
+        m: 32,
+        views: 32,
+        supersample: 2,
+        keep: 0.03,
+    };
+    let brdf = Brdf::Ggx {
+        alpha: 0.1,
+        f0: [1.0; 3],
+    };
+    let mut sh = shader(cfg, brdf, slices);
+    let normal = cfg.grid_normal(6);
+    let frame = Frame::new(normal);
+    let light_local = DVec3::new(0.55, -0.3, 0.78).normalize();
+    let light = frame.to_global(light_local);
+    let map = OctMap::from_fn(64, 4, |d| {
+        if d.dot(light) > 0.997 {
+            [100.0; 3]
+        } else {
+            [0.0; 3]
+        }
+    });
+    sh.light(&map.unwrap(), Some(256)).unwrap();
+    let mirror = 2.0 * normal.dot(light) * normal - light;
+    let (mut best, mut best_dir) = (0.0f32, DVec3::ZERO);
+    for v in 0..64 * 64 {
+        let (u, w) = texel_center(64, v);
+        let view = frame.to_global(hemi_decode(u, w).0);
+        let b = sh.shade(normal, view)[0];
+        if b > best {
+            (best, best_dir) = (b, view);
+        }
+    }
+    let angle = best_dir.dot(mirror).clamp(-1.0, 1.0).acos().to_degrees();
+    assert!(
+        angle < 6.0,
+        "brightest view is {angle}° from the mirror direction"
+    );
+    let away = frame.to_global(DVec3::new(0.5, 0.3, 0.81).normalize());
+    println!("highlight {angle:.2}° from the mirror direction");
+    assert!(sh.shade(normal, away)[0] < 0.05 * best);
+}
+
+/// Relative RMS of rotated lighting against the Haar of the spatially
+/// rotated map, per number of lighting terms (Fig. 7 of the paper).
+fn accuracy_table(n: usize, normals: usize) {
+    let cfg = RotationConfig {
+        n,
+        normals: 1,
+        supersample: 4,
+        threshold: 1,
+    };
+    let bases = Bases::new(n);
+    let mut rng = Rng(99);
+    let dirs: Vec<DVec3> = (0..normals).map(|_| rng.dir()).collect();
+    let mats: Vec<RotationMatrix> = dirs
+        .iter()
+        .map(|&d| RotationMatrix::quantize(&exact_rows(&cfg, &bases, d), 1, false))
+        .collect();
+    for (name, map) in ["sky+sun", "bands", "lobes"].iter().zip(maps_for(n)) {
+        let mut line = format!("n={n} {name:8}");
+        for terms in [Some(128), Some(256), Some(2048), None] {
+            let light = map.haar(terms).unwrap();
+            let mut err = 0.0;
+            for (d, mat) in dirs.iter().zip(&mats) {
+                let mut out = vec![[0.0f32; 3]; cfg.m() * cfg.m()];
+                mat.apply(&light, &mut out);
+                let reference = haar_rgb(&resample_local(&map, *d, 4), cfg.m());
+                err += rel_rms(&out, &reference) / dirs.len() as f64;
+            }
+            let t = terms.map_or("all".to_string(), |t| t.to_string());
+            line += &format!("  {t}: {err:.4}");
+        }
+        println!("{line}");
+    }
+}
+
+#[test]
+fn accuracy_against_lighting_terms_is_printed() {
+    accuracy_table(32, 4);
+}
+
+/// Figures for the report: `cargo test -p ltm-relight --lib rotation::tests::figures
+/// -- --ignored --nocapture`.
+#[test]
+#[ignore]
+fn figures() {
+    use std::time::Instant;
+    let limits = Limits::default();
+    for n in [32usize, 64] {
+        let cfg = RotationConfig {
+            n,
+            ..RotationConfig::default()
+        };
+        let t0 = Instant::now();
+        let set = Arc::new(RotationSet::build(cfg, &limits).unwrap());
+        let build = t0.elapsed().as_secs_f64();
+        let s = set.stats();
+        println!(
+            "n={n} normals=32² precompute {build:.1} s: {} nonzeros, {:.1} per row, density {:.2} %, {:.1} MB",
+            s.nonzeros, s.per_row, 100.0 * s.density, s.bytes as f64 / 1e6
+        );
+        for threshold in [8u16, 32, 128] {
+            let c = RotationConfig {
+                normals: 8,
+                threshold,
+                ..cfg
+            };
+            let st = RotationSet::build(c, &limits).unwrap().stats();
+            println!(
+                "  threshold {threshold} (8² normals): {:.1} per row",
+                st.per_row
+            );
+        }
+        let sc = SliceConfig {
+            m: n / 2,
+            views: 64,
+            supersample: 4,
+            keep: 0.03,
+        };
+        let t0 = Instant::now();
+        let slices = Arc::new(
+            BrdfSlices::build(
+                Brdf::Ggx {
+                    alpha: 0.2,
+                    f0: [0.9; 3],
+                },
+                sc,
+                &limits,
+            )
+            .unwrap(),
+        );
+        println!(
+            "  GGX slices (64² views, {} terms each): {:.1} s, {:.1} MB",
+            sc.terms(),
+            t0.elapsed().as_secs_f64(),
+            slices.bytes() as f64 / 1e6
+        );
+        let mut sh = Shader::new(set, slices, &limits).unwrap();
+        let map = &maps_for(n)[0];
+        for terms in [Some(256), None] {
+            let t0 = Instant::now();
+            for _ in 0..5 {
+                sh.light(map, terms).unwrap();
+            }
+            println!(
+                "  step 1 (terms {terms:?}): {:.1} ms",
+                t0.elapsed().as_secs_f64() * 200.0
+            );
+        }
+        let mut rng = Rng(1);
+        let points: Vec<(DVec3, DVec3)> = (0..256 * 256).map(|_| (rng.dir(), rng.dir())).collect();
+        let t0 = Instant::now();
+        let sum: f32 = points.par_iter().map(|&(a, b)| sh.shade(a, b)[0]).sum();
+        println!(
+            "  step 2, 256² points: {:.1} ms ({sum:.1})",
+            t0.elapsed().as_secs_f64() * 1e3
+        );
+        accuracy_table(n, 8);
+        if n == 64 {
+            render_accuracy(&mut sh, &limits);
+        }
+    }
+}
+
+/// `∫ L(R·ω) f_r(ω, ω_o) cos θ dω` by the midpoint rule in (θ, φ) over the
+/// local hemisphere, `L` the map's piecewise-constant texels.
+fn shade_brute_force(map: &OctMap, brdf: &Brdf, normal: DVec3, view: DVec3) -> [f64; 3] {
+    let frame = Frame::new(normal);
+    let wo = frame.to_local(view);
+    let (nt, np) = (256, 512);
+    let mut acc = [0.0; 3];
+    for i in 0..nt {
+        let theta = (i as f64 + 0.5) * 0.5 * PI / nt as f64;
+        let w = theta.sin() * theta.cos() * (0.5 * PI / nt as f64) * (2.0 * PI / np as f64);
+        for k in 0..np {
+            let phi = (k as f64 + 0.5) * 2.0 * PI / np as f64;
+            let wi = DVec3::new(
+                theta.sin() * phi.cos(),
+                theta.sin() * phi.sin(),
+                theta.cos(),
+            );
+            let f = brdf.eval(wi, wo);
+            let l = map.lookup(frame.to_global(wi));
+            (0..3).for_each(|c| acc[c] += f[c] * f64::from(l[c]) * w);
+        }
+    }
+    acc
+}
+
+/// Relative L2 of shaded radiance against [`shade_brute_force`] over
+/// random surface points, per GGX roughness and lighting terms (n = 64).
+fn render_accuracy(sh: &mut Shader, limits: &Limits) {
+    let mut rng = Rng(77);
+    let points: Vec<(DVec3, DVec3)> = (0..200)
+        .map(|_| {
+            let n = rng.dir();
+            let mut v = rng.dir();
+            if v.dot(n) < 0.0 {
+                v = -v;
+            }
+            (n, v)
+        })
+        .collect();
+    let maps = maps_for(64);
+    for alpha in [0.1f32, 0.2, 0.5] {
+        let brdf = Brdf::Ggx {
+            alpha,
+            f0: [0.9, 0.7, 0.5],
+        };
+        let sc = SliceConfig {
+            m: 32,
+            views: 64,
+            supersample: 4,
+            keep: 0.03,
+        };
+        sh.set_brdf(Arc::new(BrdfSlices::build(brdf, sc, limits).unwrap()))
+            .unwrap();
+        for (name, map) in [("sky+sun", &maps[0]), ("lobes", &maps[2])] {
+            let exact: Vec<[f64; 3]> = points
+                .par_iter()
+                .map(|&(n, v)| shade_brute_force(map, &brdf, n, v))
+                .collect();
+            let mut line = format!("GGX alpha {alpha} {name:8} rel. L2 of radiance:");
+            for terms in [Some(256), Some(2048), None] {
+                sh.light(map, terms).unwrap();
+                let (mut num, mut den) = (0.0, 0.0);
+                for (&(n, v), e) in points.iter().zip(&exact) {
+                    let b = sh.shade(n, v);
+                    for c in 0..3 {
+                        num += (f64::from(b[c]) - e[c]).powi(2);
+                        den += e[c] * e[c];
+                    }
+                }
+                let t = terms.map_or("all".to_string(), |t| t.to_string());
+                line += &format!("  {t}: {:.4}", (num / den).sqrt());
+            }
+            println!("{line}");
+        }
+    }
+}
+
+#[test]
+fn the_cache_round_trips_and_refuses_bad_input() {
+    let limits = Limits::default();
+    let cfg = RotationConfig {
+        n: 8,
+        normals: 2,
+        supersample: 2,
+        threshold: 1,
+    };
+    let set = RotationSet::build(cfg, &limits).unwrap();
+    let bytes = set.to_bytes();
+    let back = RotationSet::from_bytes(&bytes, &limits).unwrap();
+    assert_eq!(back.config(), set.config());
+    assert_eq!(back.to_bytes(), bytes);
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("rot.ltmr");
+    set.write(&path).unwrap();
+    assert_eq!(RotationSet::read(&path, &limits).unwrap().to_bytes(), bytes);
+    // Every truncation, and every flipped byte, is an error.
+    for len in 0..bytes.len() {
+        assert!(
+            RotationSet::from_bytes(&bytes[..len], &limits).is_err(),
+            "length {len}"
+        );
+    }
+    for i in 0..bytes.len() {
+        let mut b = bytes.clone();
+        b[i] ^= 0x5a;
+        assert!(RotationSet::from_bytes(&b, &limits).is_err(), "byte {i}");
+    }
+    // With the CRC repaired, any byte changed parses or fails, never panics.
+    let mut rng = Rng(42);
+    for _ in 0..3000 {
+        let mut b = bytes.clone();
+        let i = (rng.f64() * (b.len() - 4) as f64) as usize;
+        b[i] = (rng.f64() * 256.0) as u8;
+        let end = b.len() - 4;
+        let crc = crc32fast::hash(&b[..end]).to_le_bytes();
+        b[end..].copy_from_slice(&crc);
+        let _ = RotationSet::from_bytes(&b, &limits);
+    }
+    // A header asking for more than the budget is refused before allocation.
+    let small = Limits::with_max_alloc(64);
+    assert!(RotationSet::from_bytes(&bytes, &small).is_err());
+    let err = RotationSet::read(&path, &small).unwrap_err().to_string();
+    assert!(err.contains("rotation cache"), "{err}");
+}
+
+/// Relative L2 of radiance against BRDF terms and the normal grid:
+/// `cargo test -p ltm-relight --lib rotation::tests::error_sources -- --ignored --nocapture`.
+#[test]
+#[ignore]
+fn error_sources() {
+    let limits = Limits::default();
+    let mut rng = Rng(78);
+    let map = &maps_for(64)[2];
+    let brdf = Brdf::Ggx {
+        alpha: 0.2,
+        f0: [0.9, 0.7, 0.5],
+    };
+    for normals in [8usize, 32] {
+        let cfg = RotationConfig {
+            n: 64,
+            normals,
+            ..RotationConfig::default()
+        };
+        let set = Arc::new(RotationSet::build(cfg, &limits).unwrap());
+        // Points at grid normals and view-texel centres isolate the BRDF
+        // terms; random points add the normal and view interpolation.
+        let frames: Vec<(DVec3, DVec3)> = (0..100)
+            .map(|k| {
+                let i = (k * 7919) % (normals * normals);
+                let n = cfg.grid_normal(i);
+                let (u, v) = texel_center(64, (k * 104_729) % 4096);
+                (n, Frame::new(n).to_global(hemi_decode(u, v).0))
+            })
+            .collect();
+        let random: Vec<(DVec3, DVec3)> = (0..100)
+            .map(|_| {
+                let n = rng.dir();
+                let v = rng.dir();
+                (n, if v.dot(n) < 0.0 { -v } else { v })
+            })
+            .collect();
+        for keep in [0.03, 0.1, 1.0] {
+            let sc = SliceConfig {
+                m: 32,
+                views: 64,
+                supersample: 4,
+                keep,
+            };
+            let slices = Arc::new(BrdfSlices::build(brdf, sc, &limits).unwrap());
+            let mut sh = Shader::new(set.clone(), slices, &limits).unwrap();
+            sh.light(map, None).unwrap();
+            let mut line = format!("normals {normals}² keep {keep}:");
+            for (what, pts) in [("grid", &frames), ("random", &random)] {
+                let (mut num, mut den) = (0.0, 0.0);
+                for &(n, v) in pts.iter() {
+                    let e = shade_brute_force(map, &brdf, n, v);
+                    let b = sh.shade(n, v);
+                    for c in 0..3 {
+                        num += (f64::from(b[c]) - e[c]).powi(2);
+                        den += e[c] * e[c];
+                    }
+                }
+                line += &format!("  {what}: {:.4}", (num / den).sqrt());
+            }
+            println!("{line}");
+        }
+    }
+}
+
+/// Table 2's figures at n = 128 (about 1.2 GB):
+/// `cargo test -p ltm-relight --lib rotation::tests::figures_128 -- --ignored --nocapture`.
+#[test]
+#[ignore]
+fn figures_128() {
+    use std::time::Instant;
+    let cfg = RotationConfig {
+        n: 128,
+        ..RotationConfig::default()
+    };
+    let t0 = Instant::now();
+    let set = RotationSet::build(cfg, &Limits::default()).unwrap();
+    let s = set.stats();
+    println!(
+        "n=128 normals=32² precompute {:.1} s: {:.1} per row, density {:.2} %, {:.1} MB",
+        t0.elapsed().as_secs_f64(),
+        s.per_row,
+        100.0 * s.density,
+        s.bytes as f64 / 1e6
+    );
+}

@@ -358,3 +358,56 @@ fn texture_files_serve_their_surface_and_relit_texture() {
     }
     assert!(want.iter().any(|&v| v > 0.0));
 }
+
+/// `/api/map`: the map's preview (256 × 128), box-filtered (its mean is the
+/// map's), and rotated as the frames' lighting is: a yaw of 180 degrees
+/// moves every pixel by half the width, 360 degrees is the identity; bad
+/// parameters get 400.
+#[test]
+fn map_previews_are_the_maps_rotated() {
+    let srv = server();
+    let env = ltm_relight::EnvMap::load(&map("sunset.exr")).unwrap();
+    let get = |q: &str| {
+        let r = srv.get(&format!("/api/map?{q}"));
+        assert_eq!(r.status, 200, "{q}: {}", r.text());
+        r.frame()
+    };
+    let (w, h, still) = get("map=1");
+    assert_eq!((w, h), (256, 128));
+    let mean = |v: &[f32]| v.iter().map(|x| f64::from(*x)).sum::<f64>() / v.len() as f64;
+    let want = env
+        .data()
+        .iter()
+        .flatten()
+        .map(|x| f64::from(*x))
+        .sum::<f64>()
+        / (3 * env.data().len()) as f64;
+    let got = mean(&still);
+    assert!(
+        (got - want).abs() <= 2e-3 * want,
+        "preview mean {got}, map mean {want}"
+    );
+    assert_eq!(get("map=1&yaw=360").2, still);
+    let (_, _, half) = get("map=1&yaw=180");
+    for y in [10, 64, 100] {
+        for x in [0, 37, 200] {
+            let shifted = (x + w / 2) % w;
+            for c in 0..3 {
+                assert_eq!(
+                    half[3 * (y * w + x) + c],
+                    still[3 * (y * w + shifted) + c],
+                    "pixel ({x}, {y})"
+                );
+            }
+        }
+    }
+    for (q, needle) in [
+        ("map=2", "map '2' is out of range"),
+        ("map=0&yaw=nan", "yaw 'nan'"),
+        ("map=0&n=3", "unknown parameter 'n'"),
+    ] {
+        let r = srv.get(&format!("/api/map?{q}"));
+        assert_eq!(r.status, 400, "{q}");
+        assert!(r.text().contains(needle), "{q}: {}", r.text());
+    }
+}

@@ -1,8 +1,9 @@
 //! `ltm view` in a real browser: headless Chromium is driven through the
-//! page's own controls (map, rotation fields, a drag on the image, the N
-//! slider, exposure, the exact view), and the pixels it displays are
-//! checked against `ltm relight` at the same settings, the error readout
-//! against `ltm relight --reference`.
+//! page's own controls (map, rotation fields, drags on the image and on the
+//! map preview, the N slider and field, exposure, the split view, the
+//! heatmap, the probe, reset), and what it displays is checked against
+//! `ltm relight` at the same settings, each file's error readout against
+//! `ltm relight --reference`; a stopped server shows as offline.
 //!
 //! Chromium is found as `$LTM_CHROMIUM`, else `chromium`,
 //! `chromium-browser` or `google-chrome` on the PATH. Without it the test
@@ -126,13 +127,21 @@ fn srgb8(v: f32, exposure: f32) -> u8 {
     (e * 255.0 + 0.5) as u8
 }
 
+/// Settings of a frame, as the page's controls set them.
+struct Settings<'a> {
+    map: &'a str,
+    rotate: &'a str,
+    n: usize,
+    weighting: &'a str,
+}
+
 /// The displayed pixels against `ltm relight` at the same settings: within
 /// one level (the frame travels as half floats, which can move a value
 /// across a rounding boundary of the 8-bit encoding).
-fn check_pixels(tab: &Tab, file: usize, rotate: &str, n: usize, exposure: f32) {
+fn check_pixels(tab: &Tab, file: usize, at: &Settings, exposure: f32) {
     let s = scene();
     let path = [&s.ltm, &s.ltm2][file];
-    let (want, _) = relight(path, &map("sunset.exr"), rotate, n, "unweighted", None);
+    let (want, _) = relight(path, &map(at.map), at.rotate, at.n, at.weighting, None);
     let got = pixels(tab, &format!("view{file}"));
     assert_eq!(got.len(), want.len(), "displayed pixels");
     let mut lit = 0;
@@ -140,7 +149,9 @@ fn check_pixels(tab: &Tab, file: usize, rotate: &str, n: usize, exposure: f32) {
         let w8 = srgb8(*w, exposure);
         assert!(
             g.abs_diff(w8) <= 1,
-            "file {file}, value {i} at rotate {rotate}, N {n}, exposure {exposure}: shown {g}, ltm relight {w8}"
+            "file {file}, value {i} at rotate {}, N {}, exposure {exposure}: shown {g}, ltm relight {w8}",
+            at.rotate,
+            at.n
         );
         lit += usize::from(w8 > 0);
     }
@@ -181,6 +192,40 @@ fn drag(tab: &Tab, id: &str, dx: f64) {
         .unwrap();
 }
 
+/// Waits until the page's expression `js` is true.
+fn wait_until(tab: &Tab, js: &str, what: &str) {
+    let t = Instant::now();
+    while eval(tab, js) != json!(true) {
+        let msg = eval(tab, "document.getElementById('message').textContent");
+        assert!(
+            t.elapsed() < TIMEOUT,
+            "{what} within {TIMEOUT:?}; page says {msg}"
+        );
+        std::thread::sleep(Duration::from_millis(50));
+    }
+}
+
+fn text(tab: &Tab, js: &str) -> String {
+    eval(tab, js).as_str().unwrap_or_default().to_string()
+}
+
+/// The exposure `ltm demo` chooses: the 99th percentile of the positive
+/// luminances shows at 0.8.
+fn auto_ev(rgb: &[f32]) -> f64 {
+    let mut lum: Vec<f64> = rgb
+        .chunks_exact(3)
+        .map(|p| 0.2126 * f64::from(p[0]) + 0.7152 * f64::from(p[1]) + 0.0722 * f64::from(p[2]))
+        .filter(|v| *v > 0.0)
+        .collect();
+    lum.sort_by(f64::total_cmp);
+    let k = (lum.len() * 99 / 100).min(lum.len() - 1);
+    (0.8 / lum[k]).log2()
+}
+
+fn lum(p: &[f32]) -> f64 {
+    0.2126 * f64::from(p[0]) + 0.7152 * f64::from(p[1]) + 0.0722 * f64::from(p[2])
+}
+
 #[test]
 fn page_controls_show_what_ltm_relight_computes() {
     let Some(browser) = browser() else { return };
@@ -203,76 +248,291 @@ fn page_controls_show_what_ltm_relight_computes() {
         .unwrap();
     tab.wait_for_element_with_custom_timeout("#view0[data-shown]", TIMEOUT)
         .expect("the first frame");
-
-    // Map, rotation fields, N slider and exposure, through the controls.
-    set(&tab, "map", "1", "change");
-    set(&tab, "yaw", "30", "change");
-    set(&tab, "pitch", "-15", "change");
-    set(&tab, "n", "700", "input");
-    set(&tab, "exposure", "1", "input");
-    // Both files have 96 lights: one N for both ("N / N").
-    let n_text = eval(&tab, "document.getElementById('n-value').textContent");
-    let n: usize = n_text
-        .as_str()
-        .and_then(|t| t.split(" / ").next())
-        .unwrap()
-        .parse()
-        .unwrap();
-    assert!(
-        (1..96).contains(&n),
-        "N = {n} from slider position 700 of 1..96"
-    );
-    let q = format!("file=0&map=1&yaw=30&pitch=-15&roll=0&n={n}&weighting=unweighted");
-    wait_shown(&tab, "view0", &q);
-    wait_shown(&tab, "view1", &q.replace("file=0", "file=1"));
-    check_pixels(&tab, 0, "30,-15,0", n, 1.0);
-    check_pixels(&tab, 1, "30,-15,0", n, 1.0);
-
-    // Exposure is applied in the page: no new frame.
-    let frames = eval(&tab, "window.ltmView.frames");
-    set(&tab, "exposure", "-1.5", "input");
-    check_pixels(&tab, 0, "30,-15,0", n, -1.5);
-    assert_eq!(eval(&tab, "window.ltmView.frames"), frames);
-
-    // A drag of 40 px to the right turns the yaw by 20 degrees.
-    drag(&tab, "view0", 40.0);
-    let yaw = eval(&tab, "document.getElementById('yaw').value");
-    assert_eq!(yaw, json!("50"), "yaw after the drag");
-    let q = format!("file=0&map=1&yaw=50&pitch=-15&roll=0&n={n}&weighting=unweighted");
-    wait_shown(&tab, "view0", &q);
-    check_pixels(&tab, 0, "50,-15,0", n, -1.5);
-
-    // The exact view and its error readout.
-    tab.find_element("#show-exact").unwrap().click().unwrap();
-    wait_shown(&tab, "exact", &q);
-    let text = eval(&tab, "document.getElementById('error').textContent");
-    let shown: f64 = text
-        .as_str()
-        .and_then(|t| t.strip_prefix("relative L2 error "))
-        .unwrap_or_else(|| panic!("error readout {text}"))
-        .parse()
-        .unwrap();
-    let exr = reference(&map("sunset.exr"), "50,-15,0");
-    let (_, json) = relight(
-        &s.ltm,
-        &map("sunset.exr"),
-        "50,-15,0",
+    opens_at_the_readme_settings(&tab);
+    let n = controls_relight_as_ltm_relight(&tab);
+    let at = Settings {
+        map: "sunset.exr",
+        rotate: "50,-15,0",
         n,
-        "unweighted",
-        Some(&exr),
-    );
-    let want = json["relative_error"].as_f64().unwrap();
-    assert!(
-        (shown - want).abs() <= 1e-4 * want,
-        "error readout {shown}, ltm relight --reference {want}"
-    );
-
+        weighting: "unweighted",
+    };
+    error_readouts_match_ltm_relight_reference(&tab, &at);
+    probe_and_heatmap_show_the_error(&tab, &at);
+    split_preview_and_reset(&tab);
     let png = tab
         .capture_screenshot(Page::CaptureScreenshotFormatOption::Png, None, None, true)
         .unwrap();
     let out = PathBuf::from(env!("CARGO_TARGET_TMPDIR")).join("view-browser.png");
     std::fs::write(&out, png).unwrap();
     eprintln!("screenshot: {}", out.display());
+    // A stopped server: the panels say so.
+    drop(srv);
+    set(&tab, "yaw", "10", "change");
+    wait_until(
+        &tab,
+        "document.getElementById('state0').textContent.includes('offline')",
+        "the offline state",
+    );
+    assert!(text(&tab, "document.getElementById('message').textContent").contains("still running"));
+}
+
+/// Transport weighting, N = min(200, lights), auto exposure (the pixels at
+/// the exposure ltm demo would choose) and the exact view, untouched.
+fn opens_at_the_readme_settings(tab: &Tab) {
+    let q = "file=0&map=0&yaw=0&pitch=0&roll=0&n=96&weighting=transport";
+    wait_shown(tab, "view0", q);
+    let groups = "document.querySelectorAll('#n-controls input[type=number]').length";
+    assert_eq!(
+        eval(tab, groups),
+        json!(1),
+        "both files have 96 lights: one N"
+    );
+    let at = Settings {
+        map: "interior.exr",
+        rotate: "0,0,0",
+        n: 96,
+        weighting: "transport",
+    };
+    let (want, _) = relight(
+        &scene().ltm,
+        &map(at.map),
+        at.rotate,
+        at.n,
+        at.weighting,
+        None,
+    );
+    let ev: f64 = text(tab, "document.getElementById('exposure-value').dataset.ev")
+        .parse()
+        .unwrap();
+    let want_ev = auto_ev(&want);
+    assert!(
+        (ev - want_ev).abs() < 0.02,
+        "auto exposure {ev} EV, from ltm relight's image {want_ev} EV"
+    );
+    check_pixels(tab, 0, &at, ev as f32);
+    wait_shown(tab, "exact", q);
+}
+
+/// Map, weighting, rotation fields, the N slider and field, exposure and a
+/// drag, through the controls; returns N.
+fn controls_relight_as_ltm_relight(tab: &Tab) -> usize {
+    set(tab, "map", "1", "change");
+    set(tab, "weighting", "unweighted", "change");
+    set(tab, "yaw", "30", "change");
+    set(tab, "pitch", "-15", "change");
+    set(tab, "n", "700", "input");
+    set(tab, "exposure", "1", "input");
+    assert_eq!(
+        eval(tab, "document.getElementById('auto-exposure').checked"),
+        json!(false),
+        "moving the exposure turns auto off"
+    );
+    let n_field = "document.getElementById('n-number').value";
+    assert_eq!(text(tab, n_field), "24", "slider 700 of 1..96: 96^0.7");
+    let mut at = Settings {
+        map: "sunset.exr",
+        rotate: "30,-15,0",
+        n: 24,
+        weighting: "unweighted",
+    };
+    let q = "file=0&map=1&yaw=30&pitch=-15&roll=0&n=24&weighting=unweighted";
+    wait_shown(tab, "view0", q);
+    wait_shown(tab, "view1", &q.replace("file=0", "file=1"));
+    check_pixels(tab, 0, &at, 1.0);
+    check_pixels(tab, 1, &at, 1.0);
+
+    // Exposure is applied in the page: no new frame.
+    let frames = eval(tab, "window.ltmView.frames");
+    set(tab, "exposure", "-1.5", "input");
+    check_pixels(tab, 0, &at, -1.5);
+    assert_eq!(eval(tab, "window.ltmView.frames"), frames);
+
+    // A drag of 40 px to the right turns the yaw by 20 degrees; N typed.
+    drag(tab, "view0", 40.0);
+    assert_eq!(
+        eval(tab, "document.getElementById('yaw').value"),
+        json!("50")
+    );
+    set(tab, "n-number", "37", "change");
+    assert_eq!(
+        text(tab, "document.getElementById('n').value"),
+        "791",
+        "1000 · ln 37 / ln 96"
+    );
+    at.rotate = "50,-15,0";
+    at.n = 37;
+    wait_shown(
+        tab,
+        "view0",
+        "file=0&map=1&yaw=50&pitch=-15&roll=0&n=37&weighting=unweighted",
+    );
+    check_pixels(tab, 0, &at, -1.5);
+    37
+}
+
+/// Each file's error readout (in %) against `ltm relight --reference`.
+fn error_readouts_match_ltm_relight_reference(tab: &Tab, at: &Settings) {
+    let s = scene();
+    let exr = reference(&map(at.map), at.rotate);
+    for (i, path) in [&s.ltm, &s.ltm2].into_iter().enumerate() {
+        wait_until(
+            tab,
+            &format!("panels[{i}].shown === query({i}) && !!panels[{i}].readout.error"),
+            "an error readout",
+        );
+        let shown = text(
+            tab,
+            &format!("document.getElementById('error{i}').textContent"),
+        );
+        let pct: f64 = shown
+            .strip_prefix("error against exact T·L: ")
+            .and_then(|t| t.strip_suffix(" %"))
+            .unwrap_or_else(|| panic!("error readout {shown}"))
+            .parse()
+            .unwrap();
+        let (_, json) = relight(
+            path,
+            &map(at.map),
+            at.rotate,
+            at.n,
+            at.weighting,
+            Some(&exr),
+        );
+        let want = 100.0 * json["relative_error"].as_f64().unwrap();
+        assert!(
+            (pct - want).abs() <= 5e-4 + 1e-4 * want,
+            "file {i}: readout {pct} %, ltm relight --reference {want} %"
+        );
+    }
+}
+
+/// Moves the pointer (no button) over the middle of element `id`.
+fn hover(tab: &Tab, id: &str) {
+    let p = tab
+        .find_element(&format!("#{id}"))
+        .unwrap()
+        .get_midpoint()
+        .unwrap();
+    tab.move_mouse_to_point(p).unwrap();
+}
+
+/// The probe shows file 0's values under the pointer (those of `ltm
+/// relight`, to the 4 digits shown); the heatmap is darkest where relit and
+/// exact agree and brighter where they differ most.
+fn probe_and_heatmap_show_the_error(tab: &Tab, at: &Settings) {
+    let s = scene();
+    let (relit, _) = relight(&s.ltm, &map(at.map), at.rotate, at.n, at.weighting, None);
+    let exact = ltm_relight::Image::read_exr(&reference(&map(at.map), at.rotate)).unwrap();
+    let exact: Vec<f32> = exact.data.iter().flatten().copied().collect();
+    hover(tab, "view0");
+    let x: usize = text(tab, "document.getElementById('probe').dataset.x")
+        .parse()
+        .unwrap();
+    let y: usize = text(tab, "document.getElementById('probe').dataset.y")
+        .parse()
+        .unwrap();
+    let probe = text(tab, "document.getElementById('probe').textContent");
+    let line = probe
+        .lines()
+        .find_map(|l| l.strip_prefix("t.ltm: "))
+        .unwrap_or_else(|| panic!("probe {probe}"));
+    let width = 24;
+    for (c, v) in line.split(' ').take(3).enumerate() {
+        let got: f32 = v.parse().unwrap();
+        let want = relit[3 * (y * width + x) + c];
+        assert!(
+            (got - want).abs() <= 1.5e-3 * want.abs() + 1e-7,
+            "probe at ({x}, {y}) channel {c}: {got}, ltm relight {want}"
+        );
+    }
+
+    set(tab, "display", "heat", "change");
+    wait_until(
+        tab,
+        "document.getElementById('view0').dataset.display === 'heat'",
+        "the heatmap",
+    );
+    assert_eq!(
+        eval(tab, "document.getElementById('legend').hidden"),
+        json!(false)
+    );
+    let shown = pixels(tab, "view0");
+    let mut order: Vec<(f64, u32)> = relit
+        .chunks_exact(3)
+        .zip(exact.chunks_exact(3))
+        .zip(shown.chunks_exact(3))
+        .map(|((r, e), px)| {
+            let d = [
+                (r[0] - e[0]).abs(),
+                (r[1] - e[1]).abs(),
+                (r[2] - e[2]).abs(),
+            ];
+            (lum(&d), px.iter().map(|&v| u32::from(v)).sum())
+        })
+        .collect();
+    order.sort_by(|a, b| a.0.total_cmp(&b.0));
+    let tenth = order.len() / 10;
+    let mean = |v: &[(f64, u32)]| v.iter().map(|p| f64::from(p.1)).sum::<f64>() / v.len() as f64;
+    let (low, high) = (mean(&order[..tenth]), mean(&order[order.len() - tenth..]));
+    assert!(
+        high > low + 60.0,
+        "heatmap: the tenth of pixels that differ most average {high}, the tenth that differ least {low}"
+    );
+    set(tab, "display", "image", "change");
+}
+
+/// The split view (divider, labels), the map preview (drawn rotated, dragged
+/// to turn the yaw), the rotation fields' ranges and reset.
+fn split_preview_and_reset(tab: &Tab) {
+    set(tab, "layout", "split", "change");
+    let wrap = "getComputedStyle(document.getElementById('split-wrap')).display";
+    assert_eq!(eval(tab, wrap), json!("block"));
+    assert_eq!(eval(tab, "panels[0].figure.hidden"), json!(true));
+    set(tab, "split", "0.25", "input");
+    assert_eq!(
+        eval(tab, "document.getElementById('split-divider').style.left"),
+        json!("25%")
+    );
+    assert!(text(tab, "document.getElementById('view1').style.clipPath").contains("25%"));
+    assert!(text(tab, "document.getElementById('split-left').textContent").contains("t.ltm"));
+    set(tab, "layout", "side", "change");
+    assert_eq!(eval(tab, "panels[0].figure.hidden"), json!(false));
+
+    wait_until(
+        tab,
+        "document.getElementById('map-preview').dataset.shown === rotationQuery()",
+        "the map preview",
+    );
+    // 30 px of the 300 px preview: 36 degrees, the map following the pointer.
+    drag(tab, "map-preview", 30.0);
+    assert_eq!(
+        eval(tab, "document.getElementById('yaw').value"),
+        json!("14")
+    );
+    set(tab, "yaw", "99999", "change");
+    assert_eq!(
+        eval(tab, "document.getElementById('yaw').value"),
+        json!("-81")
+    );
+    set(tab, "pitch", "-100", "change");
+    assert_eq!(
+        eval(tab, "document.getElementById('pitch').value"),
+        json!("-90")
+    );
+
+    tab.find_element("#reset").unwrap().click().unwrap();
+    for (js, want) in [
+        ("document.getElementById('yaw').value", "0"),
+        ("document.getElementById('pitch').value", "0"),
+        ("document.getElementById('weighting').value", "transport"),
+        ("document.getElementById('n-number').value", "96"),
+        (
+            "String(document.getElementById('auto-exposure').checked)",
+            "true",
+        ),
+    ] {
+        assert_eq!(text(tab, js), want, "{js} after reset");
+    }
 }
 
 /// A texture-space file of the sphere layout (drawn as the grid of its
@@ -545,7 +805,7 @@ fn measure_latency() {
         for target in [50.0f64, 200.0, 1000.0] {
             let pos = (target.ln() / max.ln() * 1000.0).round().min(1000.0);
             set(&tab, "n", &pos.to_string(), "input");
-            let n = eval(&tab, "document.getElementById('n-value').textContent");
+            let n = eval(&tab, "document.getElementById('n-number').value");
             let n = n.as_str().unwrap().to_string();
             let settled = eval(&tab, "query(0)");
             wait_shown(&tab, "view0", settled.as_str().unwrap());
@@ -556,8 +816,8 @@ fn measure_latency() {
             for k in 0..rotations {
                 let yaw = format!("{}", (k as f64 + 1.0) * 7.25);
                 set(&tab, "yaw", &yaw, "input");
-                let q = format!("file=0&map=0&yaw={yaw}&pitch=0&roll=0&n={n}&weighting=unweighted");
-                wait_shown(&tab, "view0", &q);
+                let q = eval(&tab, "query(0)");
+                wait_shown(&tab, "view0", q.as_str().unwrap());
             }
             let samples = eval(
                 &tab,
@@ -619,8 +879,11 @@ fn screenshot_for_readme() {
     let q = eval(&tab, "query(0)");
     wait_shown(&tab, "view0", q.as_str().unwrap());
     if eval(&tab, "!!info.reference") == json!(true) {
-        tab.find_element("#show-exact").unwrap().click().unwrap();
-        wait_shown(&tab, "exact", q.as_str().unwrap());
+        wait_until(
+            &tab,
+            "lightingOf(document.getElementById('exact').dataset.shown || '') === lightingOf(query(0))",
+            "the exact view",
+        );
     }
     let png = tab
         .capture_screenshot(Page::CaptureScreenshotFormatOption::Png, None, None, true)

@@ -198,6 +198,15 @@ pub fn route(
             Ok(p) => return Routed::Job(Job::Exact(p)),
             Err(e) => bad(e),
         },
+        "/api/map" => match params::parse_query(query, &["map", "yaw", "pitch", "roll"])
+            .and_then(|q| params::lighting(&q, &b))
+        {
+            Ok(l) => body(
+                encode_frame(&viewer.map_preview(&l)),
+                "application/octet-stream",
+            ),
+            Err(e) => bad(e),
+        },
         "/api/surface" => match params::parse_query(query, &["file"])
             .and_then(|q| params::index(&q, "file", b.files))
         {

@@ -21,6 +21,10 @@
 //!   `--reference` store, computed on demand and cached per map and
 //!   rotation; `X-Error` gives the frame's relative L2 error against it.
 //!   Once cached, `/api/frame` answers also carry `X-Error`.
+//! - `/api/map?map=M&yaw=Y&pitch=P&roll=R`: the map's preview, at most
+//!   256 × 128 (box-filtered once at start), rotated as the frames' lighting
+//!   is (pixel ω shows the map's light from `R⁻¹·ω`, nearest pixel), as a
+//!   binary frame (below).
 //! - `/api/surface?file=F`: a texture-space file's texel records: the
 //!   16-byte header below with magic `LTMS` and format 2, then x, y, z as
 //!   little-endian f32 per texel (its surface point; rows top to bottom),
@@ -56,6 +60,7 @@
 
 mod http;
 pub mod params;
+mod preview;
 mod server;
 mod state;
 

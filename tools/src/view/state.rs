@@ -3,6 +3,7 @@
 //! and each client's latest sequence number.
 
 use super::params::{Client, FrameParams, Lighting};
+use super::preview::Preview;
 use anyhow::{bail, Context, Result};
 use ltm_codec::container::LtmFile;
 use ltm_codec::{Limits, RawStore, RowLayout};
@@ -110,6 +111,7 @@ pub struct Viewer {
     /// Files, in command-line order.
     pub files: Vec<ViewFile>,
     maps: Vec<(MapInfo, EnvMap)>,
+    previews: Vec<Preview>,
     raw: Option<(PathBuf, RawStore)>,
     lights: Mutex<VecDeque<(LightKey, Light)>>,
     exact: Mutex<VecDeque<(ExactKey, Arc<Image>)>>,
@@ -221,9 +223,11 @@ impl Viewer {
             Some(p) => Some((p.to_path_buf(), open_raw(p, &files, limits)?)),
             None => None,
         };
+        let previews = maps.iter().map(|(_, env)| Preview::new(env)).collect();
         Ok(Viewer {
             files,
             maps,
+            previews,
             raw,
             lights: Mutex::new(VecDeque::new()),
             exact: Mutex::new(VecDeque::new()),
@@ -240,6 +244,11 @@ impl Viewer {
     /// Number of maps.
     pub fn map_count(&self) -> usize {
         self.maps.len()
+    }
+
+    /// The preview of the lighting's map, rotated (`/api/map`).
+    pub fn map_preview(&self, l: &Lighting) -> Image {
+        self.previews[l.map].rotated(&l.rotation)
     }
 
     /// Whether `--reference` was given.

@@ -10,8 +10,12 @@ let seq = 0;
 let info = null;
 const panels = []; // one per file: { canvas, floats, width, height, inFlight, pending, ... }
 let exactPanel = null;
+const nGroups = []; // N controls: one for all files, or one per file when their light counts differ
 const stats = { latencies: [], frames: 0 };
 window.ltmView = stats;
+const DEFAULT_N = 200;
+let autoEv = null; // the auto exposure, once a first image has come
+let offline = false;
 
 // Half float → float, through a table of all 65536 values.
 const HALF = new Float32Array(65536);
@@ -40,8 +44,30 @@ function srgb8(v) {
   return Math.floor(e * 255 + 0.5);
 }
 
+const lum = (f, i) => 0.2126 * f[i] + 0.7152 * f[i + 1] + 0.0722 * f[i + 2];
+
+// The auto exposure of `ltm demo` (and `--exposure auto`): the 99th
+// percentile of the positive luminances shows at 0.8.
+function autoExposure(floats) {
+  const l = [];
+  for (let i = 0; i < floats.length; i += 3) { const v = lum(floats, i); if (v > 0) l.push(v); }
+  if (!l.length) return 0;
+  l.sort((a, b) => a - b);
+  const v = l[Math.min(Math.floor(l.length * 99 / 100), l.length - 1)];
+  return Math.min(30, Math.max(-30, Math.log2(0.8 / v)));
+}
+
+function ev() { return $("auto-exposure").checked && autoEv !== null ? autoEv : Number($("exposure").value); }
+
+function showEv() {
+  const e = ev();
+  $("exposure-value").textContent = e.toFixed(1);
+  $("exposure-value").dataset.ev = e;
+  if ($("auto-exposure").checked) $("exposure").value = e;
+}
+
 function toRgba(floats, w, h) {
-  const scale = Math.pow(2, Number($("exposure").value));
+  const scale = Math.pow(2, ev());
   const reinhard = $("tonemap").value === "reinhard";
   const out = new Uint8ClampedArray(w * h * 4);
   for (let p = 0; p < w * h; p++) {
@@ -56,10 +82,80 @@ function toRgba(floats, w, h) {
   return out;
 }
 
+// --- error heatmap ---------------------------------------------------------
+
+// A perceptually ordered dark-to-bright scale (black, purple, red, orange,
+// pale yellow), linear between its stops.
+const HEAT = [[0, 0, 4], [87, 16, 110], [188, 55, 84], [249, 142, 9], [252, 255, 164]];
+function heatColor(t) {
+  t = Math.min(Math.max(t, 0), 1) * (HEAT.length - 1);
+  const i = Math.min(Math.floor(t), HEAT.length - 2), f = t - i;
+  return HEAT[i].map((a, c) => Math.round(a + f * (HEAT[i + 1][c] - a)));
+}
+
+function meanLum(floats) {
+  let s = 0;
+  for (let i = 0; i < floats.length; i += 3) s += lum(floats, i);
+  return s / Math.max(1, floats.length / 3);
+}
+
+// |relit − exact| per pixel (the luminance of the absolute difference), as a
+// share of the exact image's mean luminance, over the chosen scale.
+function heatRgba(floats, exact, w, h) {
+  const mean = meanLum(exact) || 1, scale = Number($("heat-scale").value);
+  const out = new Uint8ClampedArray(w * h * 4), d = [0, 0, 0];
+  for (let p = 0; p < w * h; p++) {
+    for (let c = 0; c < 3; c++) d[c] = Math.abs(floats[3 * p + c] - exact[3 * p + c]);
+    const col = heatColor(lum(d, 0) / mean / scale);
+    out.set(col, 4 * p);
+    out[4 * p + 3] = 255;
+  }
+  return out;
+}
+
+function drawLegend(show) {
+  $("legend").hidden = !show;
+  $("legend-text").textContent = show
+    ? `0 ${" ".repeat(26)}≥ ${(100 * Number($("heat-scale").value)).toFixed(0)} %\n|relit − exact| luminance, as a share\nof the exact image's mean luminance`
+    : "";
+  if (!show) return;
+  const c = $("legend"), g = c.getContext("2d");
+  for (let x = 0; x < c.width; x++) { g.fillStyle = `rgb(${heatColor(x / (c.width - 1)).join(",")})`; g.fillRect(x, 0, 1, c.height); }
+}
+
+// The exact image for a panel's lighting, when it has come.
+function exactFor(p) {
+  if (!exactPanel || !exactPanel.floats || !p.shown) return null;
+  if (lightingOf(p.shown) !== lightingOf(exactPanel.shownQuery || "")) return null;
+  return exactPanel.width === p.width && exactPanel.height === p.height ? exactPanel.floats : null;
+}
+
+// --- N, rotation, queries ----------------------------------------------------
+
+function groupOf(fileIndex) { return nGroups.find((g) => g.files.includes(fileIndex)); }
+
 function terms(fileIndex) {
-  const max = info.files[fileIndex].max_terms;
-  const t = Number($("n").value) / 1000;
-  return Math.min(max, Math.max(1, Math.round(Math.exp(t * Math.log(max)))));
+  const g = groupOf(fileIndex), v = Math.round(Number(g.number.value));
+  return Math.min(g.max, Math.max(1, Number.isFinite(v) ? v : g.max));
+}
+
+// Slider positions 0..1000 run logarithmically over 1..max.
+const sliderOf = (n, max) => (max > 1 ? Math.round(1000 * Math.log(n) / Math.log(max)) : 1000);
+const termsOf = (t, max) => Math.min(max, Math.max(1, Math.round(Math.exp(t / 1000 * Math.log(max)))));
+
+function addNGroup(files, label) {
+  const max = info.files[files[0]].max_terms, k = nGroups.length, suffix = k ? `-${k}` : "";
+  const el = document.createElement("label");
+  el.title = `terms per pixel: 1..${max}`;
+  el.innerHTML = `${label} <input id="n${suffix}" type="range" min="0" max="1000"> ` +
+    `<input id="n-number${suffix}" type="number" min="1" max="${max}" step="1"> <span class="num">of ${max}</span>`;
+  $("n-controls").append(el);
+  const g = { files, max, slider: el.querySelector(`#n${suffix}`), number: el.querySelector(`#n-number${suffix}`) };
+  g.reset = () => { g.number.value = Math.min(DEFAULT_N, max); g.slider.value = sliderOf(Number(g.number.value), max); };
+  g.slider.addEventListener("input", () => { g.number.value = termsOf(Number(g.slider.value), max); readouts(); requestFrames(); });
+  g.number.addEventListener("change", () => { g.number.value = terms(files[0]); g.slider.value = sliderOf(terms(files[0]), max); readouts(); requestFrames(); });
+  g.reset();
+  nGroups.push(g);
 }
 
 function angle(id) {
@@ -67,10 +163,23 @@ function angle(id) {
   return Number.isFinite(v) ? v : 0;
 }
 
-function query(fileIndex) {
-  return `file=${fileIndex}&map=${$("map").value}&yaw=${angle("yaw")}&pitch=${angle("pitch")}` +
-    `&roll=${angle("roll")}&n=${terms(fileIndex)}&weighting=${$("weighting").value}`;
+// Keeps the rotation fields in range: yaw and roll wrap into -180..180,
+// pitch stays in -90..90.
+function normalizeAngles() {
+  const wrap = (a) => { const r = ((a + 180) % 360 + 360) % 360 - 180; return r === -180 ? 180 : r; };
+  for (const id of ["yaw", "roll"]) { const a = angle(id), w = +wrap(a).toFixed(4); if (w !== a || $(id).value === "") $(id).value = w; }
+  const p = angle("pitch"), c = Math.min(90, Math.max(-90, p));
+  if (c !== p || $("pitch").value === "") $("pitch").value = c;
 }
+
+function rotationQuery() { return `map=${$("map").value}&yaw=${angle("yaw")}&pitch=${angle("pitch")}&roll=${angle("roll")}`; }
+
+function query(fileIndex) {
+  return `file=${fileIndex}&${rotationQuery()}&n=${terms(fileIndex)}&weighting=${$("weighting").value}`;
+}
+
+// The lighting part of a query (map and rotation): what the exact image depends on.
+function lightingOf(q) { return q.split("&").filter((kv) => /^(map|yaw|pitch|roll)=/.test(kv)).join("&"); }
 
 function message(text) { $("message").textContent = text || ""; }
 
@@ -78,24 +187,54 @@ function message(text) { $("message").textContent = text || ""; }
 
 function draw(panel) {
   if (!panel.floats) return;
-  const rgba = toRgba(panel.floats, panel.width, panel.height);
+  const exact = panel !== exactPanel && $("display").value === "heat" ? exactFor(panel) : null;
+  const rgba = exact ? heatRgba(panel.floats, exact, panel.width, panel.height) : toRgba(panel.floats, panel.width, panel.height);
   if (panel.gl) { panel.gl.setTexture(panel.floats, rgba, panel.width, panel.height); return; }
   const c = panel.canvas;
   if (c.width !== panel.width || c.height !== panel.height) { c.width = panel.width; c.height = panel.height; }
   c.getContext("2d").putImageData(new ImageData(rgba, panel.width, panel.height), 0, 0);
+  c.dataset.display = exact ? "heat" : "image";
   layoutSplit();
 }
 
-function drawAll() { panels.forEach(draw); if (exactPanel) draw(exactPanel); }
+function drawAll() {
+  showEv();
+  panels.forEach(draw);
+  if (exactPanel) draw(exactPanel);
+  drawLegend($("display").value === "heat");
+  drawPreview();
+}
+
+// What each panel shows against what was asked: "updating" while a newer
+// frame is on its way, "offline" while the server cannot be reached.
+function showStates() {
+  for (const p of [...panels, exactPanel].filter(Boolean)) {
+    const s = p.state;
+    const want = p === exactPanel ? lightingOf(query(0)) : query(p.index);
+    const have = p === exactPanel ? lightingOf(p.shownQuery || "") : p.shown;
+    s.className = offline ? "state offline" : "state";
+    s.textContent = offline ? "offline: the server does not answer; this is the last frame"
+      : p.floats && have !== want && (p.inFlight || p.pending) ? "updating…" : "";
+  }
+}
 
 // --- requests --------------------------------------------------------------
 
 function requestFrames() {
+  normalizeAngles();
   const now = performance.now();
   for (const p of panels) {
     p.pending = { query: query(p.index), input: p.pending ? p.pending.input : now };
     if (!p.inFlight) send(p);
   }
+  requestPreview();
+  showStates();
+}
+
+function goneOffline(what, e) {
+  if (!offline) { offline = true; setTimeout(() => { offline = false; requestFrames(); }, 2000); }
+  message(`${what}: ${e} (is ltm view still running?)`);
+  showStates();
 }
 
 async function send(p) {
@@ -107,9 +246,9 @@ async function send(p) {
     // Each panel is its own stream for latest-request-wins.
     const r = await fetch(`/api/frame?${job.query}&client=${client}${p.index}&seq=${++seq}`);
     if (r.status === 200) {
-      const frame = decodeFrame(await r.arrayBuffer());
-      Object.assign(p, frame);
-      draw(p);
+      Object.assign(p, decodeFrame(await r.arrayBuffer()));
+      p.shown = job.query;
+      if (p.index === 0 && (autoEv === null || Math.abs(autoExposure(p.floats) - autoEv) > 0.25)) autoEv = autoExposure(p.floats);
       p.readout = {
         serverMs: Number(r.headers.get("X-Frame-Ms")),
         resampleMs: Number(r.headers.get("X-Resample-Ms")),
@@ -117,6 +256,8 @@ async function send(p) {
         nonzeros: r.headers.get("X-Nonzeros"),
         error: r.headers.get("X-Error"),
       };
+      if (p.index === 0) drawAll(); else draw(p);
+      if (wantsError(p)) askError(p);
       await new Promise((res) => requestAnimationFrame(res));
       const shown = performance.now();
       p.readout.latencyMs = shown - job.input;
@@ -132,69 +273,197 @@ async function send(p) {
       message(`frame: ${r.status} ${await r.text()}`);
     }
   } catch (e) {
-    message(`frame: ${e}`);
+    goneOffline("frame", e);
   }
   p.inFlight = false;
-  if (p.pending) send(p);
+  if (p.pending && !offline) send(p);
   else if (p.index === 0) requestExact();
   readouts();
+  showStates();
 }
 
 async function requestExact() {
   if (!info.reference || !$("show-exact").checked) return;
   const q = query(0);
-  if (exactPanel.shownQuery === q || exactPanel.inFlight) return;
+  // The exact image depends on the lighting only (N's errors come with the frames).
+  if (exactPanel.inFlight || lightingOf(exactPanel.shownQuery || "") === lightingOf(q)) return;
   exactPanel.inFlight = true;
   $("error").textContent = "computing…";
   try {
     const r = await fetch(`/api/exact?${q}`);
     if (r.status === 200) {
       Object.assign(exactPanel, decodeFrame(await r.arrayBuffer()));
-      draw(exactPanel);
-      const e = Number(r.headers.get("X-Error"));
-      $("error").textContent = `relative L2 error ${e.toPrecision(5)}`;
-      $("error").dataset.value = r.headers.get("X-Error");
       exactPanel.shownQuery = q;
       exactPanel.canvas.dataset.shown = q;
       exactPanel.exactMs = r.headers.get("X-Exact-Ms");
+      $("error").textContent = `computed in ${Number(exactPanel.exactMs).toFixed(1)} ms (0 when cached)`;
+      // File 0's frame at this query: its error came with the exact image.
+      if (panels[0].shown === q) panels[0].readout.error = r.headers.get("X-Error");
+      drawAll();
+      for (const p of panels) if (wantsError(p)) askError(p);
     } else if (r.status !== 503) {
       message(`exact: ${r.status} ${await r.text()}`);
     }
   } catch (e) {
-    message(`exact: ${e}`);
+    goneOffline("exact", e);
   }
   exactPanel.inFlight = false;
-  if (query(0) !== exactPanel.shownQuery && !panels[0].inFlight) requestExact();
+  if (lightingOf(query(0)) !== lightingOf(exactPanel.shownQuery || "") && !panels[0].inFlight && !offline) requestExact();
   readouts();
+  showStates();
 }
+
+// A frame that came without an error while the exact image of its lighting
+// is shown (it was made before the exact image was cached): asked for once
+// more, now with its error.
+function wantsError(p) {
+  return !!info.reference && !!p.readout && !p.readout.error && p.shown === query(p.index) && p.retried !== p.shown &&
+    !!exactPanel.shownQuery && lightingOf(exactPanel.shownQuery) === lightingOf(p.shown);
+}
+
+function askError(p) {
+  p.retried = p.shown;
+  if (!p.pending) p.pending = { query: p.shown, input: performance.now() };
+  if (!p.inFlight) send(p);
+}
+
+// --- map preview -------------------------------------------------------------
+
+let preview = { inFlight: false, want: null, shown: null, floats: null };
+
+async function requestPreview() {
+  preview.want = rotationQuery();
+  if (preview.inFlight || preview.want === preview.shown) return;
+  preview.inFlight = true;
+  const q = preview.want;
+  try {
+    const r = await fetch(`/api/map?${q}`);
+    if (r.status === 200) { Object.assign(preview, decodeFrame(await r.arrayBuffer())); preview.shown = q; preview.ev = autoExposure(preview.floats); drawPreview(); }
+  } catch (e) {
+    goneOffline("map preview", e);
+  }
+  preview.inFlight = false;
+  if (preview.want !== preview.shown && !offline) requestPreview();
+}
+
+// The rotation as ltm_relight::Rotation::matrix builds it (Rz·Rx·Ry,
+// degrees), applied to a direction.
+function rotate(d) {
+  const rad = (a) => (angle(a) * Math.PI) / 180;
+  const [y, p, r] = [rad("yaw"), rad("pitch"), rad("roll")];
+  let [x0, y0, z0] = d;
+  [x0, z0] = [Math.cos(y) * x0 + Math.sin(y) * z0, -Math.sin(y) * x0 + Math.cos(y) * z0];
+  [y0, z0] = [Math.cos(p) * y0 - Math.sin(p) * z0, Math.sin(p) * y0 + Math.cos(p) * z0];
+  [x0, y0] = [Math.cos(r) * x0 - Math.sin(r) * y0, Math.sin(r) * x0 + Math.cos(r) * y0];
+  return [x0, y0, z0];
+}
+
+// The rotated map (as the frames are lit), with a cross where the map's
+// centre (u = v = 0.5, straight ahead at no rotation) now lies.
+function drawPreview() {
+  if (!preview.floats) return;
+  const c = $("map-preview"), w = preview.width, h = preview.height;
+  if (c.width !== w || c.height !== h) { c.width = w; c.height = h; }
+  const scale = Math.pow(2, preview.ev), out = new Uint8ClampedArray(w * h * 4);
+  for (let p = 0; p < w * h; p++) { for (let k = 0; k < 3; k++) out[4 * p + k] = srgb8(preview.floats[3 * p + k] * scale); out[4 * p + 3] = 255; }
+  const g = c.getContext("2d");
+  g.putImageData(new ImageData(out, w, h), 0, 0);
+  const [dx, dy, dz] = rotate([0, 0, -1]);
+  const u = ((Math.atan2(dx, -dz) / (2 * Math.PI)) % 1 + 1) % 1, v = Math.acos(Math.max(-1, Math.min(1, dy))) / Math.PI;
+  const x = u * w, y = v * h;
+  g.strokeStyle = "#fd8"; g.lineWidth = 1.5;
+  g.beginPath(); g.moveTo(x - 8, y); g.lineTo(x + 8, y); g.moveTo(x, y - 8); g.lineTo(x, y + 8); g.stroke();
+  c.dataset.shown = preview.shown;
+  $("preview-caption").textContent = `${info.maps[Number($("map").value)].name}, yaw ${angle("yaw")}°, pitch ${angle("pitch")}°, roll ${angle("roll")}° (+: the map's centre)`;
+}
+
+function previewDrags() {
+  const c = $("map-preview");
+  let last = null;
+  c.addEventListener("pointerdown", (e) => { last = e.clientX; c.setPointerCapture(e.pointerId); });
+  c.addEventListener("pointermove", (e) => {
+    if (last === null) return;
+    // The content follows the pointer: a positive yaw moves it left.
+    const dx = e.clientX - last;
+    last = e.clientX;
+    $("yaw").value = +(angle("yaw") - (dx / c.getBoundingClientRect().width) * 360).toFixed(2);
+    requestFrames();
+  });
+  c.addEventListener("pointerup", () => { last = null; });
+}
+
+// --- readouts and probe ----------------------------------------------------------
 
 function fmt(bytes) {
   return bytes > 1e6 ? `${(bytes / 1e6).toFixed(2)} MB` : `${(bytes / 1e3).toFixed(1)} kB`;
 }
 
+function pct(e) { return e === null || e === undefined || e === "" ? null : `${(100 * Number(e)).toFixed(3)} %`; }
+
 function readouts() {
   const lines = panels.map((p) => {
     const f = info.files[p.index], r = p.readout || {};
-    return `${f.name}: ${fmt(f.bytes)} ${f.mode}, matrix error ${(100 * f.matrix_error).toFixed(3)} %, N = ${terms(p.index)}` +
+    const err = pct(r.error);
+    if (p.errorEl) p.errorEl.textContent = info.reference ? `error against exact T·L: ${err ?? "–"}` : "";
+    if (p.errorEl) p.errorEl.dataset.value = r.error ?? "";
+    return `${f.name}: ${fmt(f.bytes)} ${f.mode}, matrix error ${(100 * f.matrix_error).toFixed(3)} %, N = ${terms(p.index)} of ${f.max_terms}` +
+      (err ? `, image error ${err}` : "") +
       `\n  server ${r.serverMs?.toFixed(2) ?? "-"} ms (+ resample ${r.resampleMs?.toFixed(2) ?? "-"} ms), ` +
       `round trip ${r.roundTripMs?.toFixed(1) ?? "-"} ms, input→screen ${r.latencyMs?.toFixed(1) ?? "-"} ms, ` +
       `lights ${r.lights ?? "-"}, nonzeros ${r.nonzeros ?? "-"}`;
   });
-  if (exactPanel && exactPanel.exactMs) lines.push(`exact T·L: ${Number(exactPanel.exactMs).toFixed(1)} ms (0 when cached)`);
   $("readouts").textContent = lines.join("\n");
-  panels.forEach((p) => { $(`n-value`).textContent = panels.map((q) => terms(q.index)).join(" / "); });
+  layoutSplit();
+}
+
+// Values under the pointer: every file's, the exact image's and the error.
+function probe(canvas, e) {
+  const rect = canvas.getBoundingClientRect();
+  const x = Math.floor(((e.clientX - rect.left) / rect.width) * canvas.width), y = Math.floor(((e.clientY - rect.top) / rect.height) * canvas.height);
+  if (x < 0 || y < 0 || x >= canvas.width || y >= canvas.height) return;
+  const at = (p) => (p && p.floats && x < p.width && y < p.height ? Array.from(p.floats.subarray(3 * (y * p.width + x), 3 * (y * p.width + x) + 3)) : null);
+  const rgb = (v) => v.map((c) => c.toPrecision(4)).join(" ");
+  const ex = at(exactPanel);
+  const lines = [`pixel (${x}, ${y})`];
+  for (const p of panels) {
+    const v = at(p);
+    if (!v) continue;
+    const err = ex ? ` |Δ| ${Math.abs(lum(v, 0) - lum(ex, 0)).toPrecision(3)}` : "";
+    lines.push(`${info.files[p.index].name}: ${rgb(v)}${err}`);
+  }
+  if (ex) lines.push(`exact: ${rgb(ex)}`);
+  $("probe").textContent = lines.join("\n");
+  $("probe").dataset.x = x; $("probe").dataset.y = y;
 }
 
 // --- controls ---------------------------------------------------------------
 
+function resetAll() {
+  for (const id of ["yaw", "pitch", "roll"]) $(id).value = 0;
+  nGroups.forEach((g) => g.reset());
+  $("auto-exposure").checked = true;
+  $("tonemap").value = "clamp";
+  $("display").value = "image";
+  $("heat-label").hidden = true;
+  if (info.weightings.includes("transport")) $("weighting").value = "transport";
+  drawAll();
+  requestFrames();
+}
+
 function wireControls() {
   for (const id of ["map", "weighting", "yaw", "pitch", "roll", "show-exact"]) $(id).addEventListener("change", requestFrames);
   for (const id of ["yaw", "pitch", "roll"]) $(id).addEventListener("input", requestFrames);
-  $("n").addEventListener("input", () => { readouts(); requestFrames(); });
-  $("exposure").addEventListener("input", () => { $("exposure-value").textContent = Number($("exposure").value).toFixed(1); drawAll(); });
+  $("exposure").addEventListener("input", () => { $("auto-exposure").checked = false; drawAll(); });
+  $("auto-exposure").addEventListener("change", drawAll);
   $("tonemap").addEventListener("change", drawAll);
+  $("display").addEventListener("change", () => { $("heat-label").hidden = $("display").value !== "heat"; drawAll(); });
+  $("heat-scale").addEventListener("change", drawAll);
+  $("pixels").addEventListener("change", () => document.body.classList.toggle("exact-pixels", $("pixels").value === "exact"));
+  $("show-exact").addEventListener("change", () => { exactPanel.figure.hidden = !$("show-exact").checked; });
   $("layout").addEventListener("change", layoutSplit);
   $("split").addEventListener("input", layoutSplit);
+  $("reset").addEventListener("click", resetAll);
+  previewDrags();
 }
 
 // Drag on an image rotates the lighting: x → yaw, y → pitch (0.5° a pixel).
@@ -202,6 +471,7 @@ function dragRotates(el) {
   let last = null;
   el.addEventListener("pointerdown", (e) => { if (!e.shiftKey) { last = [e.clientX, e.clientY]; el.setPointerCapture(e.pointerId); } });
   el.addEventListener("pointermove", (e) => {
+    probe(el, e);
     if (!last) return;
     const dx = e.clientX - last[0], dy = e.clientY - last[1];
     last = [e.clientX, e.clientY];
@@ -212,21 +482,49 @@ function dragRotates(el) {
   el.addEventListener("pointerup", () => { last = null; });
 }
 
+// Split view: both files in one frame, file 0 left of the divider and file 1
+// right of it; drag the divider (or use the slider) to move it.
 function layoutSplit() {
-  if (panels.length < 2) return;
+  if (panels.length < 2 || !$("split-wrap")) return;
   const split = $("layout").value === "split";
   const wrap = $("split-wrap");
   wrap.style.display = split ? "block" : "none";
-  for (const p of panels) (split ? wrap : p.figure).insertBefore(p.canvas, split ? null : p.figure.firstChild);
   $("split").hidden = !split;
-  if (split) {
-    const [a, b] = panels;
-    wrap.style.width = a.canvas.style.width || "512px";
-    wrap.style.height = `${a.canvas.getBoundingClientRect().height}px`;
-    b.canvas.style.clipPath = `inset(0 0 0 ${100 * Number($("split").value)}%)`;
-  } else {
-    panels.forEach((p) => { p.canvas.style.clipPath = ""; });
+  for (const p of panels.slice(0, 2)) {
+    const home = p.gl ? p.figure.querySelector("canvas.gl") : p.canvas;
+    if (split && home.parentNode !== wrap) wrap.append(home);
+    if (!split && home.parentNode === wrap) p.figure.insertBefore(home, p.figure.firstChild);
+    p.figure.hidden = split;
   }
+  if (!split) { panels.forEach((p) => { (p.gl ? p.figure.querySelector("canvas.gl") : p.canvas).style.clipPath = ""; }); return; }
+  const [a, b] = panels.slice(0, 2).map((p) => (p.gl ? p.figure.querySelector("canvas.gl") : p.canvas));
+  const r = a.getBoundingClientRect();
+  wrap.style.width = `${r.width}px`;
+  wrap.style.height = `${r.height}px`;
+  const s = Number($("split").value);
+  b.style.clipPath = `inset(0 0 0 ${100 * s}%)`;
+  $("split-divider").style.left = `${100 * s}%`;
+  const label = (p) => `${info.files[p.index].name} (${info.files[p.index].mode})${pct(p.readout?.error) ? `: ${pct(p.readout.error)}` : ""}`;
+  $("split-left").textContent = `◀ ${label(panels[0])}`;
+  $("split-right").textContent = `${label(panels[1])} ▶`;
+}
+
+function makeSplit() {
+  const wrap = document.createElement("div");
+  wrap.id = "split-wrap";
+  wrap.innerHTML = `<div id="split-divider" title="drag to move the split"></div><span id="split-left" class="split-label"></span><span id="split-right" class="split-label"></span>`;
+  $("panels").prepend(wrap);
+  $("split").hidden = true;
+  const d = $("split-divider");
+  let dragging = false;
+  d.addEventListener("pointerdown", (e) => { dragging = true; d.setPointerCapture(e.pointerId); e.stopPropagation(); });
+  d.addEventListener("pointermove", (e) => {
+    if (!dragging) return;
+    const r = wrap.getBoundingClientRect();
+    $("split").value = Math.min(1, Math.max(0, (e.clientX - r.left) / r.width));
+    layoutSplit();
+  });
+  d.addEventListener("pointerup", () => { dragging = false; });
 }
 
 function addPanel(title, index) {
@@ -234,13 +532,19 @@ function addPanel(title, index) {
   const canvas = document.createElement("canvas");
   canvas.className = "view";
   canvas.id = index === "exact" ? "exact" : `view${index}`;
+  const state = document.createElement("div");
+  state.className = "state";
+  state.id = index === "exact" ? "state-exact" : `state${index}`;
   const cap = document.createElement("figcaption");
   cap.textContent = title;
-  if (index === "exact") { const e = document.createElement("div"); e.id = "error"; cap.append(document.createElement("br"), e); }
-  fig.append(canvas, cap);
+  const e = document.createElement("div");
+  e.id = index === "exact" ? "error" : `error${index}`;
+  e.className = "errval";
+  cap.append(document.createElement("br"), e);
+  fig.append(canvas, state, cap);
   $("panels").append(fig);
   dragRotates(canvas);
-  return { index, canvas, figure: fig, inFlight: false, pending: null };
+  return { index, canvas, state, figure: fig, errorEl: index === "exact" ? null : e, inFlight: false, pending: null };
 }
 
 // --- texture-space files: the mesh in WebGL, with an orbit camera ------------
@@ -433,7 +737,7 @@ function makeGl(canvas, side, mesh, records) {
       const data = new Float32Array(w * h * 4);
       for (let i = 0; i < w * h; i++) { data.set(floats.subarray(3 * i, 3 * i + 3), 4 * i); data[4 * i + 3] = 1; }
       tex = texture(0, tex, w, h, data);
-      gl.uniform1f(u("scale"), Math.fround(Math.pow(2, Number($("exposure").value))));
+      gl.uniform1f(u("scale"), Math.fround(Math.pow(2, ev())));
       gl.uniform1i(u("reinhard"), $("tonemap").value === "reinhard" ? 1 : 0);
       render();
       // Keep the flat texture too, small, beside the mesh.
@@ -491,20 +795,23 @@ async function start() {
   info = await (await fetch("/api/info")).json();
   info.maps.forEach((m, i) => $("map").add(new Option(`${m.name} (${m.width}×${m.height})`, i)));
   info.weightings.forEach((w) => $("weighting").add(new Option(w, w)));
+  // Transport weighting by default: half the error of unweighted at the same N.
+  if (info.weightings.includes("transport")) $("weighting").value = "transport";
+  const maxes = new Set(info.files.map((f) => f.max_terms));
+  if (maxes.size === 1) addNGroup(info.files.map((_, i) => i), "N");
+  else info.files.forEach((f, i) => addNGroup([i], `N (${f.name})`));
   for (const [i, f] of info.files.entries()) {
     const p = addPanel(`${f.name}: ${f.mode}, ${fmt(f.bytes)}, matrix error ${(100 * f.matrix_error).toFixed(3)} %, ${f.width}×${f.height} ${f.layout}`, i);
     panels.push(p);
     if (f.layout === "texture") await meshPanel(p).catch((e) => message(String(e)));
   }
-  if (panels.length === 2) {
+  if (panels.length >= 2) {
     $("layout-label").hidden = false;
-    const wrap = document.createElement("div");
-    wrap.id = "split-wrap";
-    $("panels").prepend(wrap);
-    $("split").hidden = true;
+    makeSplit();
   }
   if (info.reference) {
     $("exact-label").hidden = false;
+    $("display-label").hidden = false;
     exactPanel = addPanel(`exact T·L from ${info.reference}`, "exact");
   }
   wireControls();

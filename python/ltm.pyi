@@ -167,7 +167,9 @@ def compress(
     progress: Optional[Progress] = None,
 ) -> Union[bytes, dict]:
     """Compresses a matrix as ``ltm compress`` does (same options and
-    defaults: max_error 0.01, bits 10 raised while the target is missed).
+    defaults: max_error 0.01, bits 10 raised while the target is missed;
+    for pca without ``max_rank``, the fit's rank doubled from 256 up to the
+    full rank while the target is missed).
 
     ``matrix``: a raw store path (from ``bake``), or a float32/float64 array
     of shape ``(P, M)`` or ``(P, M, C)``: P = width·height pixels

@@ -207,6 +207,20 @@ impl<'de> Deserialize<'de> for Receivers {
     }
 }
 
+impl std::str::FromStr for Receivers {
+    type Err = String;
+    /// A mesh index (`0`, `1`, …) or `all`, as `texture.mesh` and
+    /// `--texture` take it.
+    fn from_str(s: &str) -> std::result::Result<Receivers, String> {
+        match s.trim() {
+            "all" => Ok(Receivers::All),
+            t => t.parse().map(Receivers::Mesh).map_err(|_| {
+                format!("mesh '{s}' (valid: an index into [[meshes]], 0 or more, or all)")
+            }),
+        }
+    }
+}
+
 impl Receivers {
     /// True when mesh `i` of `[[meshes]]` receives.
     pub fn has_mesh(self, i: usize) -> bool {
@@ -218,6 +232,21 @@ impl Receivers {
 }
 
 impl TextureDesc {
+    /// A `[texture]` section with only its receivers given: size 0 (to be
+    /// set, or sized by a density) and every other key at its default.
+    pub fn new(mesh: Receivers) -> TextureDesc {
+        TextureDesc {
+            mesh,
+            size: 0,
+            parameterization: default_parameterization(),
+            texels_per_unit: None,
+            padding: default_padding(),
+            spp: default_texel_spp(),
+            dilate: None,
+            diffuse_only: false,
+        }
+    }
+
     /// Texels that charts are grown by: `dilate`, or the layout's default.
     pub fn dilate(&self) -> u32 {
         self.dilate.unwrap_or(match self.parameterization {
@@ -422,6 +451,11 @@ pub struct Overrides {
     pub texture_size: Option<u32>,
     /// `texture.texels_per_unit` (`--texels-per-unit`).
     pub texels_per_unit: Option<f64>,
+    /// `texture.mesh` (`--texture`): a scene without a `[texture]` section
+    /// gets one, its other keys at their defaults.
+    pub texture: Option<Receivers>,
+    /// `texture.parameterization` (`--parameterization`).
+    pub parameterization: Option<Parameterization>,
 }
 
 impl SceneDesc {
@@ -502,27 +536,50 @@ impl SceneDesc {
         let l = &mut self.lighting;
         l.face_res = o.face_res.unwrap_or(l.face_res);
         l.texel_samples = o.texel_samples.unwrap_or(l.texel_samples);
-        if o.texture_size.is_some() || o.texels_per_unit.is_some() {
-            let Some(t) = &mut self.texture else {
-                let flag = if o.texture_size.is_some() {
-                    "--texture-size"
-                } else {
-                    "--texels-per-unit"
-                };
-                return Err(BakeError::invalid(
-                    cl,
-                    flag,
-                    "the scene has no [texture] section (it bakes camera pixels)".to_string(),
-                ));
-            };
-            if let Some(d) = o.texels_per_unit {
-                t.texels_per_unit = Some(d);
-                // A density alone sizes the texture to the atlas.
-                t.size = o.texture_size.unwrap_or(0);
-            }
-            t.size = o.texture_size.unwrap_or(t.size);
-        }
+        self.apply_texture(o)?;
         self.validate()
+    }
+
+    /// The texture flags of [`SceneDesc::apply`]: `--texture` adds or
+    /// retargets the `[texture]` section; the others need one.
+    fn apply_texture(&mut self, o: &Overrides) -> Result<()> {
+        let cl = "command line";
+        if let Some(mesh) = o.texture {
+            match &mut self.texture {
+                Some(t) => t.mesh = mesh,
+                None if o.texture_size.is_none() && o.texels_per_unit.is_none() => {
+                    return Err(BakeError::invalid(
+                        cl,
+                        "--texture",
+                        "the scene has no [texture] section: give the texture's side with --texture-size S (or a density with --texels-per-unit D)".to_string(),
+                    ))
+                }
+                None => self.texture = Some(TextureDesc::new(mesh)),
+            }
+        }
+        let flags = [
+            ("--texture-size", o.texture_size.is_some()),
+            ("--texels-per-unit", o.texels_per_unit.is_some()),
+            ("--parameterization", o.parameterization.is_some()),
+        ];
+        let Some((flag, _)) = flags.iter().find(|(_, given)| *given) else {
+            return Ok(());
+        };
+        let Some(t) = &mut self.texture else {
+            return Err(BakeError::invalid(
+                cl,
+                flag,
+                "the scene has no [texture] section (it bakes camera pixels); add --texture MESH (an index into [[meshes]], or all)".to_string(),
+            ));
+        };
+        if let Some(d) = o.texels_per_unit {
+            t.texels_per_unit = Some(d);
+            // A density alone sizes the texture to the atlas.
+            t.size = o.texture_size.unwrap_or(0);
+        }
+        t.size = o.texture_size.unwrap_or(t.size);
+        t.parameterization = o.parameterization.unwrap_or(t.parameterization);
+        Ok(())
     }
 
     /// Checks every field against its valid range and cross-references

@@ -47,6 +47,19 @@ pub enum Error {
         /// Its first bytes.
         found: Vec<u8>,
     },
+    /// A file of the other kind: a raw store where an `.ltm` file is
+    /// wanted, or an `.ltm` file where a raw store is wanted.
+    #[error("{path}: {is}, not {wanted}: {hint}")]
+    WrongKind {
+        /// The file.
+        path: PathBuf,
+        /// What the file is.
+        is: &'static str,
+        /// The kind of file expected.
+        wanted: &'static str,
+        /// What to do instead.
+        hint: String,
+    },
     /// The file was written by a newer format version.
     #[error("{what} format version {found} is not supported (this build reads up to {supported})")]
     Version {
@@ -187,6 +200,33 @@ impl Error {
         Error::Corrupt {
             what,
             detail: detail.to_string(),
+        }
+    }
+
+    /// A raw store given where an `.ltm` file is wanted: names the
+    /// command that compresses it.
+    pub(crate) fn raw_not_ltm(path: &std::path::Path) -> Error {
+        Error::WrongKind {
+            path: path.into(),
+            is: "a raw transport store (from `ltm bake` or `ltm import`)",
+            wanted: "an .ltm file",
+            hint: format!(
+                "compress it first: `ltm compress {} -o {}`",
+                path.display(),
+                path.with_extension("ltm").display()
+            ),
+        }
+    }
+
+    /// An `.ltm` file given where a raw store is wanted.
+    pub(crate) fn ltm_not_raw(path: &std::path::Path) -> Error {
+        Error::WrongKind {
+            path: path.into(),
+            is: "an .ltm file (already compressed)",
+            wanted: "an ltm raw transport store",
+            hint: "this command reads the raw store from `ltm bake` or `ltm import`; \
+                   relight, render, view, inspect and export take .ltm files"
+                .into(),
         }
     }
 

@@ -95,6 +95,7 @@ impl Settings {
             max_rank: self
                 .max_rank
                 .unwrap_or_else(|| DEFAULT_MAX_RANK.min(dims.pixels().min(dims.row_len()))),
+            raise_rank: self.max_rank.is_none(),
             bits: self.bits.unwrap_or(DEFAULT_PCA_BITS),
             raise_bits: self.bits.is_none(),
             seed: self.seed,

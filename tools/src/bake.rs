@@ -33,6 +33,11 @@ pub struct BakeArgs {
     /// Output raw store.
     #[arg(short, long, value_name = "RAW")]
     pub output: PathBuf,
+    /// Image size in pixels: WxH, or N for N×N (overrides camera.width and
+    /// camera.height; the same grammar as `ltm demo --size` and `ltm
+    /// render --size`).
+    #[arg(long, value_name = "WxH", conflicts_with_all = ["width", "height"], value_parser = bake_size)]
+    pub size: Option<(u32, u32)>,
     /// Image width in pixels (overrides camera.width).
     #[arg(long, value_name = "W")]
     pub width: Option<u32>,
@@ -56,6 +61,22 @@ pub struct BakeArgs {
     /// large as the atlas needs. Every part gets texels in proportion to its area.
     #[arg(long, value_name = "D")]
     pub texels_per_unit: Option<f64>,
+    /// Bake a texture over these surfaces instead of camera pixels: a mesh
+    /// index into the scene's [[meshes]] (0, 1, ...) or `all` (every mesh
+    /// and quad, atlas only). Adds a [texture] section to a scene without
+    /// one (then --texture-size or --texels-per-unit is needed; its other
+    /// keys take their defaults), or overrides texture.mesh.
+    #[arg(long, value_name = "MESH")]
+    pub texture: Option<ltm_bake::Receivers>,
+    /// The texture's layout: atlas, uv or sphere (overrides
+    /// texture.parameterization; default atlas).
+    #[arg(long, value_name = "P")]
+    pub parameterization: Option<ltm_codec::Parameterization>,
+}
+
+/// `--size`: WxH or N, sides 1..=[`ltm_codec::MAX_SIDE`].
+fn bake_size(s: &str) -> std::result::Result<(u32, u32), String> {
+    crate::common::ranges::image_size(s, ltm_codec::MAX_SIDE)
 }
 
 /// What became of an existing `RAW.partial`, for the user; `None` when
@@ -158,13 +179,15 @@ fn describe_texture(map: &ltm_bake::TexelMap) {
 pub fn run(args: BakeArgs, _ctx: &Ctx) -> anyhow::Result<()> {
     let mut desc = SceneDesc::load(&args.scene)?;
     desc.apply(&Overrides {
-        width: args.width,
-        height: args.height,
+        width: args.width.or(args.size.map(|s| s.0)),
+        height: args.height.or(args.size.map(|s| s.1)),
         face_res: args.face_res,
         texel_samples: args.texel_samples,
         spp: args.spp,
         texture_size: args.texture_size,
         texels_per_unit: args.texels_per_unit,
+        texture: args.texture,
+        parameterization: args.parameterization,
     })?;
     let meshes: Vec<PathBuf> = desc.meshes.iter().map(|m| desc.resolve(&m.path)).collect();
     let mut inputs = vec![("SCENE", args.scene.as_path())];
@@ -176,7 +199,7 @@ pub fn run(args: BakeArgs, _ctx: &Ctx) -> anyhow::Result<()> {
     // An atlas sized by its density is known only now.
     ltm_codec::output::check_space(&args.output, scene.dims().raw_bytes())?;
     let dims = scene.dims();
-    let bar = progress::bar(dims.pixels() as u64, "bake");
+    let bar = progress::bar(dims.pixels() as u64, "bake", progress::Unit::rows(dims));
     let options = BakeOptions::default();
     let partial = format!("{}.partial", args.output.display());
     let start = Instant::now();

@@ -15,7 +15,6 @@ use ltm_codec::wavelet::row_level;
 use ltm_codec::{compress_pca, Filter, PcaOptions, Progress, RawStore, Stage};
 use serde::Serialize;
 use std::path::PathBuf;
-use std::sync::Mutex;
 
 /// Arguments of `ltm import`.
 #[derive(Args)]
@@ -37,7 +36,7 @@ pub struct ImportArgs {
 
 pub fn import(a: ImportArgs, _ctx: &Ctx) -> Result<()> {
     let _claim = claim_files(&[("input", &a.npy)], &[("-o", &a.output)])?;
-    let bar = progress::bar(0, "import");
+    let bar = progress::bar(0, "import", progress::Unit::BLOCKS);
     let dims = import_npy(
         &a.npy,
         a.width,
@@ -79,9 +78,11 @@ pub struct CompressArgs {
     /// pca: store exactly K eigen-transports (1..=min(pixels, lights·channels)).
     #[arg(long, value_name = "K", conflicts_with_all = ["max_error", "keep"])]
     pub rank: Option<usize>,
-    /// pca: the largest rank --max-error may choose (the fit's sketch size)
-    /// [default: 256, or the matrix's full rank min(pixels, lights·channels)
-    /// when smaller]
+    /// pca: the largest rank --max-error may choose (the fit's sketch size).
+    /// Without it the fit starts at rank 256 (or the matrix's full rank
+    /// min(pixels, lights·channels) when smaller) and is redone at twice the
+    /// rank, up to the full rank, while no rank meets --max-error (as --bits
+    /// is raised); given, it is a hard limit.
     #[arg(long, value_name = "K")]
     pub max_rank: Option<usize>,
     /// Row filter over each cube face: haar, d4, d6 or d8.
@@ -173,28 +174,20 @@ pub fn compress_cmd(a: CompressArgs, ctx: &Ctx) -> Result<()> {
             ..Default::default()
         },
     };
-    let bar = Mutex::new((progress::bar(0, "rows"), None::<Stage>));
+    let dims = raw.dims();
+    let bar = progress::bar(0, "transpose", progress::Unit::of(Stage::Rows, dims));
     let start = std::time::Instant::now();
     let stats = compress(
         &raw,
         &a.output,
         &opts,
-        Progress::new(&|s| {
-            let mut g = bar.lock().expect("progress lock");
-            if g.1 != Some(s.stage) {
-                g.0.reset();
-                g.0.set_message(format!("{:?}", s.stage).to_lowercase());
-                g.1 = Some(s.stage);
-            }
-            g.0.set_length(s.total);
-            g.0.set_position(s.done);
-        }),
+        Progress::new(&|s| progress::show(&bar, s, dims)),
     )
     .with_context(|| format!("compressing {}", a.raw.display()))?;
-    bar.lock().expect("progress lock").0.finish_and_clear();
+    bar.finish_and_clear();
     let secs = start.elapsed().as_secs_f64();
     eprintln!(
-        "wrote {}: {} bytes ({:.1}x smaller than {} raw), {} bits, {} nonzeros, relative L2 error {:.5}, {} coding{}, {:.1} s ({:.1} MB/s of raw matrix){}",
+        "wrote {}: {} bytes ({:.1}x smaller than {} raw), {} bits, {} nonzeros, relative L2 error {:.5}, {} coding pass{}, {:.1} s ({:.1} MB/s of raw matrix){}",
         a.output.display(),
         stats.file_bytes,
         stats.raw_bytes as f64 / stats.file_bytes as f64,
@@ -203,11 +196,19 @@ pub fn compress_cmd(a: CompressArgs, ctx: &Ctx) -> Result<()> {
         stats.nonzeros,
         stats.achieved_error,
         stats.codings,
-        if stats.codings == 1 { "" } else { "s" },
+        if stats.codings == 1 { "" } else { "es" },
         secs,
         stats.raw_bytes as f64 / 1e6 / secs,
         if stats.out_of_core { ", out of core" } else { "" }
     );
+    if stats.codings > 1 {
+        if let Target::MaxError(e) = opts.code.target {
+            eprintln!(
+                "(a coding pass quantizes and entropy-codes every column at one threshold; the first missed the window [{:.5}, {e}] around the target, so the columns were coded again at a threshold calibrated from its error; see docs/GLOSSARY.md)",
+                ltm_codec::compress::TARGET_LOW * e
+            );
+        }
+    }
     if opts.code.raise_bits && stats.bits > opts.code.bits {
         eprintln!(
             "coded at {} bits: {} miss the target (too coarse a quantization)",
@@ -245,22 +246,21 @@ fn compress_pca_cmd(a: &CompressArgs, raw: &RawStore) -> Result<()> {
             let d = raw.dims();
             ltm_codec::compress::DEFAULT_MAX_RANK.min(d.pixels().min(d.row_len()))
         }),
+        raise_rank: a.max_rank.is_none(),
         bits: a.bits.unwrap_or(ltm_codec::compress::DEFAULT_PCA_BITS),
         raise_bits: a.bits.is_none(),
         seed: a.seed,
         mem_budget,
         ..PcaOptions::default()
     };
-    let bar = progress::bar(0, "passes");
+    let dims = raw.dims();
+    let bar = progress::bar(0, "pca fit", progress::Unit::of(Stage::Fit, dims));
     let start = std::time::Instant::now();
     let stats = compress_pca(
         raw,
         &a.output,
         &opts,
-        Progress::new(&|s| {
-            bar.set_length(s.total);
-            bar.set_position(s.done);
-        }),
+        Progress::new(&|s| progress::show(&bar, s, dims)),
     )
     .with_context(|| format!("compressing {}", a.raw.display()))?;
     bar.finish_and_clear();
@@ -437,7 +437,10 @@ pub fn inspect_cmd(a: InspectArgs, ctx: &Ctx) -> Result<()> {
     if i.pca_rank > 0 {
         return Ok(());
     }
-    println!("  columns by depth {:?}", i.depth_histogram);
+    println!(
+        "  columns by depth {:?} (columns whose image is transformed to column-wavelet depth 0, 1, ...; 2d keeps every column at 0)",
+        i.depth_histogram
+    );
     let avg: Vec<String> = i
         .average_depth_by_row_level
         .iter()

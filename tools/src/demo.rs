@@ -4,14 +4,14 @@
 //! summary with sizes, errors against the exact `T·L` and frame rates.
 
 use crate::common::{
-    assets_dir, auto_exposure, bake_cached, claim_folder, env_maps, load_maps, progress,
-    write_atomic, Ctx,
+    assets_dir, bake_cached, claim_folder, env_maps, load_maps, progress, write_atomic, Ctx,
+    Exposure,
 };
 use anyhow::{Context, Result};
 use clap::Args;
 use ltm_bake::{Overrides, SceneDesc};
 use ltm_codec::compress::{compress, CodeOptions, CompressStats, Mode, Target};
-use ltm_codec::{Dims, Progress, RawStore};
+use ltm_codec::{Dims, Progress, RawStore, Stage};
 use ltm_relight::{
     reference, relative_l2, EnvMap, Image, Relight, Relighter, Request, Rotation, Weighting,
 };
@@ -29,9 +29,10 @@ pub struct DemoArgs {
     /// this binary was built from].
     #[arg(long)]
     pub assets: Option<PathBuf>,
-    /// Image side in pixels.
-    #[arg(long, default_value_t = 128)]
-    pub size: u32,
+    /// Image size in pixels: N for N×N, or WxH (as `ltm bake --size` and
+    /// `ltm render --size`).
+    #[arg(long, default_value = "128", value_parser = demo_size)]
+    pub size: (u32, u32),
     /// Cubemap face resolution n (6·n² lights).
     #[arg(long, default_value_t = 16)]
     pub face_res: u32,
@@ -41,6 +42,21 @@ pub struct DemoArgs {
     /// Quantization bits.
     #[arg(long, default_value_t = 12)]
     pub bits: u32,
+    /// Exposure of the PNGs and the contact sheet: `auto` (per map, the
+    /// 99th-percentile luminance of the exact image to 0.8; every image of
+    /// a map shares it) or a number of stops EV in -64..=64.
+    #[arg(
+        long,
+        value_name = "auto|EV",
+        default_value = "auto",
+        allow_hyphen_values = true
+    )]
+    pub exposure: Exposure,
+}
+
+/// `--size`: N or WxH, sides 1..=[`ltm_codec::MAX_SIDE`].
+fn demo_size(s: &str) -> std::result::Result<(u32, u32), String> {
+    crate::common::ranges::image_size(s, ltm_codec::MAX_SIDE)
 }
 
 /// Compresses `raw` in 2d mode to about `bytes` bytes (within 3 %) by a
@@ -95,15 +111,18 @@ pub fn run(a: DemoArgs, ctx: &Ctx) -> Result<()> {
     // 1. Bake (cached: a complete raw store of the same settings is reused).
     let mut desc = SceneDesc::default_scene(&assets)?;
     desc.apply(&Overrides {
-        width: Some(a.size),
-        height: Some(a.size),
+        width: Some(a.size.0),
+        height: Some(a.size.1),
         face_res: Some(a.face_res),
         ..Default::default()
     })?;
     let raw_path = bake_cached(
         &desc,
         &a.output,
-        &format!("scene-{}px-n{}", a.size, a.face_res),
+        &match a.size {
+            (w, h) if w == h => format!("scene-{w}px-n{}", a.face_res),
+            (w, h) => format!("scene-{w}x{h}px-n{}", a.face_res),
+        },
     )?;
     let raw = RawStore::open_with_limits(&raw_path, ctx.limits())?;
 
@@ -120,7 +139,7 @@ pub fn run(a: DemoArgs, ctx: &Ctx) -> Result<()> {
     for (_, r) in &relighters {
         r.decode_all()?;
     }
-    let table = relight_maps(&raw, &maps, &relighters, &a.output)?;
+    let table = relight_maps(&raw, &maps, &relighters, &a.output, a.exposure)?;
 
     // 4. Summary.
     let md = summary(&a, raw.dims(), &files, &table, start)?;
@@ -140,17 +159,14 @@ struct Files {
 /// Compresses the adaptive file at the target error and the 2d file at
 /// the same size.
 fn compress_pair(raw: &RawStore, a: &DemoArgs, opts: CodeOptions) -> Result<Files> {
-    let bar = progress::bar(0, "compress");
+    let bar = progress::bar(0, "compress", progress::Unit::of(Stage::Rows, raw.dims()));
     let t = Instant::now();
     let adaptive_path = a.output.join("scene-adaptive.ltm");
     let adaptive = compress(
         raw,
         &adaptive_path,
         &opts.into(),
-        Progress::new(&|s| {
-            bar.set_length(s.total);
-            bar.set_position(s.done);
-        }),
+        Progress::new(&|s| progress::show(&bar, s, raw.dims())),
     )?;
     bar.finish_and_clear();
     let compress_s = t.elapsed().as_secs_f64();
@@ -176,6 +192,7 @@ fn relight_maps(
     maps: &[(String, EnvMap)],
     relighters: &[(&str, Relighter)],
     dir: &Path,
+    exposure: Exposure,
 ) -> Result<String> {
     let out = |name: &str| dir.join(name);
     let dims = raw.dims();
@@ -185,7 +202,7 @@ fn relight_maps(
     for (row, (name, map)) in maps.iter().enumerate() {
         let light = map.to_cubemap(dims.face_res() as usize, &Rotation::IDENTITY);
         let exact = reference(raw, &light)?;
-        let ev = auto_exposure(&exact);
+        let ev = exposure.resolve(&exact);
         exact.write_exr(&out(&format!("{name}-reference.exr")))?;
         exact.write_png(&out(&format!("{name}-reference.png")), ev)?;
         let mut tiles = vec![exact];
@@ -220,7 +237,7 @@ fn relight_maps(
                 }
             }
         }
-        eprintln!("relit under {name}");
+        eprintln!("relit under {name}: PNGs at {}", exposure.describe(ev));
     }
     sheet.write_png(&out("contact-sheet.png"), 0.0)?;
     Ok(table)

@@ -53,7 +53,11 @@ pub fn run(args: ReferenceArgs, ctx: &Ctx) -> anyhow::Result<()> {
     let n = dims.face_res() as usize;
     let light = env.to_cubemap(n, &args.rotate);
 
-    let bar = progress::bar(dims.pixels() as u64, "reference");
+    let bar = progress::bar(
+        dims.pixels() as u64,
+        "reference",
+        progress::Unit::rows(dims),
+    );
     let image = reference_with_progress(&raw, &light, Progress::new(&|s| bar.set_position(s.done)))
         .with_context(|| format!("computing T·L from {}", args.raw.display()))?;
     bar.finish_and_clear();

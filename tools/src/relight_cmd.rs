@@ -1,6 +1,6 @@
 //! `ltm relight`.
 
-use crate::common::{claim_files, Ctx, ImageOutput, TermsArgs};
+use crate::common::{claim_files, describe_terms, Ctx, ImageOutput, TermsArgs};
 use anyhow::{bail, Context, Result};
 use clap::Args;
 use ltm_codec::LtmFile;
@@ -329,11 +329,15 @@ fn report(
     if let Some(e) = error {
         eprintln!("relative L2 error against the reference: {e:.6}");
     }
+    let points = match scene.points.len() {
+        0 => String::new(),
+        1 => " and 1 point light".into(),
+        n => format!(" and {n} point lights"),
+    };
     eprintln!(
-        "wrote {}: {} point light(s), {} lights, {} nonzeros, frame {:.3} ms (median of {}; light transform {:.3}, selection {:.3}, multiply {:.3}, inverse {:.3} ms)",
+        "wrote {}: {}{points}, {} nonzeros, frame {:.3} ms (median of {}; light transform {:.3}, selection {:.3}, multiply {:.3}, inverse {:.3} ms)",
         a.out.output.display(),
-        scene.points.len(),
-        stats.lights,
+        describe_terms(relighter, stats.lights),
         stats.nonzeros,
         ms(timing.median),
         a.frames,

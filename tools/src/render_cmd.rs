@@ -1,7 +1,7 @@
 //! `ltm render`: relight a texture-space file once and draw the relit mesh
 //! from one camera or an orbit of cameras.
 
-use crate::common::{claim_files, commit_all, Ctx, ImageOutput, TermsArgs};
+use crate::common::{claim_files, commit_all, describe_terms, Ctx, ImageOutput, TermsArgs};
 use anyhow::{bail, Context, Result};
 use clap::Args;
 use glam::DVec3;
@@ -39,14 +39,18 @@ pub struct RenderArgs {
     /// Vertical field of view in degrees, in (0, 180).
     #[arg(long, default_value_t = 35.0)]
     pub fov: f64,
-    /// View size WxH in pixels.
+    /// View size in pixels: WxH, or N for N×N.
     #[arg(long, default_value = "512x512", value_parser = size)]
     pub size: (u32, u32),
     /// Samples per pixel side (antialiased edges): 1 to 8.
     #[arg(long, default_value_t = 3)]
     pub supersample: u32,
     /// Draw an orbit of this many views about the target (around the up
-    /// axis) from one relight; outputs are numbered VIEW-000.exr, ...
+    /// axis) from one relight. One view is written to the names -o and
+    /// --png give; K > 1 views are numbered, the same way for both:
+    /// `-o view.exr --png view.png --views 3` writes view-000.exr,
+    /// view-001.exr, view-002.exr and view-000.png, view-001.png,
+    /// view-002.png.
     #[arg(long, default_value_t = 1, value_parser = views)]
     pub views: usize,
     #[command(flatten)]
@@ -73,22 +77,9 @@ fn vec3(s: &str) -> std::result::Result<DVec3, String> {
     }
 }
 
-/// Parses `WxH`.
+/// `--size`: WxH or N, sides 1..=[`ltm_relight::MAX_VIEW_SIDE`].
 fn size(s: &str) -> std::result::Result<(u32, u32), String> {
-    let (w, h) = s
-        .split_once(['x', 'X'])
-        .ok_or_else(|| format!("'{s}' is not WxH"))?;
-    let p = |t: &str| {
-        t.trim()
-            .parse::<u32>()
-            .map_err(|_| format!("'{s}' is not WxH"))
-    };
-    let (w, h) = (p(w)?, p(h)?);
-    let max = ltm_relight::MAX_VIEW_SIDE;
-    if !(1..=max).contains(&w) || !(1..=max).contains(&h) {
-        return Err(format!("'{s}' is out of range (valid: sides 1..={max})"));
-    }
-    Ok((w, h))
+    crate::common::ranges::image_size(s, ltm_relight::MAX_VIEW_SIDE)
 }
 
 fn views(s: &str) -> std::result::Result<usize, String> {
@@ -98,7 +89,8 @@ fn views(s: &str) -> std::result::Result<usize, String> {
     }
 }
 
-/// `PATH` for one view, `PATH` with `-NNN` before the extension for orbits.
+/// The name of view `k` of `count`: `PATH` for one view, `PATH` with
+/// `-NNN` before the extension for several (the rule for -o and --png).
 fn numbered(path: &Path, k: usize, count: usize) -> PathBuf {
     if count == 1 {
         return path.to_path_buf();
@@ -137,14 +129,14 @@ pub fn run(a: RenderArgs, ctx: &Ctx) -> Result<()> {
         height: a.size.1,
     };
     camera.validate()?;
-    let mut names: Vec<PathBuf> = (0..a.views)
-        .map(|k| numbered(&a.out.output, k, a.views))
+    let mut names: Vec<(&str, PathBuf)> = (0..a.views)
+        .map(|k| ("-o", numbered(&a.out.output, k, a.views)))
         .collect();
     if let Some(png) = &a.out.png {
-        names.extend((0..a.views).map(|k| numbered(png, k, a.views)));
+        names.extend((0..a.views).map(|k| ("--png", numbered(png, k, a.views))));
     }
-    names.extend(a.texture.clone());
-    let outputs: Vec<(&str, &Path)> = names.iter().map(|p| ("output", p.as_path())).collect();
+    names.extend(a.texture.clone().map(|t| ("--texture", t)));
+    let outputs: Vec<(&str, &Path)> = names.iter().map(|(r, p)| (*r, p.as_path())).collect();
     let _claim = claim_files(
         &[("input", a.file.as_path()), ("--env", a.env.as_path())],
         &outputs,
@@ -164,17 +156,7 @@ pub fn run(a: RenderArgs, ctx: &Ctx) -> Result<()> {
         let file = frame.image.stage_exr(t);
         staged.push(file.with_context(|| format!("writing {}", t.display()))?);
     }
-    let mut render_ms = Vec::with_capacity(a.views);
-    for k in 0..a.views {
-        let view = camera.orbit(k, a.views);
-        mesh.check_outside(view.eye)?;
-        let start = Instant::now();
-        let image = mesh.render(&frame.image, &view, a.supersample)?;
-        render_ms.push(start.elapsed().as_secs_f64() * 1e3);
-        let exr = numbered(&a.out.output, k, a.views);
-        let png = a.out.png.as_ref().map(|p| numbered(p, k, a.views));
-        staged.extend(a.out.stage(&image, &exr, png.as_deref())?);
-    }
+    let (ev, mut render_ms) = draw_views(&a, &mesh, &frame.image, &camera, &mut staged)?;
     commit_all(staged)?;
     render_ms.sort_by(f64::total_cmp);
     let median = render_ms[render_ms.len() / 2];
@@ -193,14 +175,57 @@ pub fn run(a: RenderArgs, ctx: &Ctx) -> Result<()> {
         println!("{line}");
     }
     eprintln!(
-        "relit the {}² texture in {relight_ms:.3} ms ({} lights); drew {} view(s) of {} triangles, {median:.3} ms each (median); wrote {}",
+        "relit the {}² texture in {relight_ms:.3} ms ({}); drew {} view(s) of {} triangles, {median:.3} ms each (median); wrote {}",
         mesh.size(),
-        stats.lights,
+        describe_terms(relighter.as_ref(), stats.lights),
         a.views,
         mesh.triangle_count(),
-        numbered(&a.out.output, 0, a.views).display()
+        written(&a.out.output, a.views),
     );
+    if let Some(png) = &a.out.png {
+        eprintln!("wrote {}", written(png, a.views));
+    }
+    a.out.print_exposure(ev);
     Ok(())
+}
+
+/// Draws every view of the orbit of the relit `texture` and stages its
+/// files in `staged`: the PNGs' exposure (one for the orbit, the first
+/// view's) and each view's drawing time in ms.
+fn draw_views(
+    a: &RenderArgs,
+    mesh: &TexturedMesh,
+    texture: &ltm_relight::Image,
+    camera: &ViewCamera,
+    staged: &mut Vec<ltm_codec::AtomicFile>,
+) -> Result<(f32, Vec<f64>)> {
+    let mut render_ms = Vec::with_capacity(a.views);
+    let mut ev = None;
+    for k in 0..a.views {
+        let view = camera.orbit(k, a.views);
+        mesh.check_outside(view.eye)?;
+        let start = Instant::now();
+        let image = mesh.render(texture, &view, a.supersample)?;
+        render_ms.push(start.elapsed().as_secs_f64() * 1e3);
+        let view_ev = *ev.get_or_insert_with(|| a.out.ev(&image));
+        let exr = numbered(&a.out.output, k, a.views);
+        let png = a.out.png.as_ref().map(|p| numbered(p, k, a.views));
+        staged.extend(a.out.stage(&image, &exr, png.as_deref(), view_ev)?);
+    }
+    Ok((ev.unwrap_or(0.0), render_ms))
+}
+
+/// The files [`numbered`] names for `count` views: `PATH`, or the first
+/// and last numbered ones.
+fn written(path: &Path, count: usize) -> String {
+    match count {
+        1 => path.display().to_string(),
+        _ => format!(
+            "{} ... {}",
+            numbered(path, 0, count).display(),
+            numbered(path, count - 1, count).display()
+        ),
+    }
 }
 
 #[cfg(test)]
@@ -214,7 +239,8 @@ mod tests {
             assert!(vec3(bad).is_err(), "{bad}");
         }
         assert_eq!(size("640x480"), Ok((640, 480)));
-        for bad in ["0x10", "10", "10x", "99999x2"] {
+        assert_eq!(size("64"), Ok((64, 64)));
+        for bad in ["0x10", "10x", "99999x2"] {
             assert!(size(bad).is_err(), "{bad}");
         }
         assert_eq!(

@@ -324,3 +324,136 @@ fn report_on_a_texture_space_matrix_shows_the_texture_and_two_views() {
     }
     assert!(out.join(t["file"].as_str().unwrap()).is_file());
 }
+
+/// `ltm render` names its views one way for -o and --png: the names given
+/// for one view, numbered NAME-000, NAME-001, ... for several (never a
+/// mix); the PNGs of an orbit share one exposure, which is printed.
+#[test]
+fn render_names_every_view_alike_for_exr_and_png() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let p = |n: &str| d.join(n).to_str().unwrap().to_string();
+    std::fs::write(d.join("sphere.obj"), sphere_obj(2, "")).unwrap();
+    let scene = write_scene(d, "tex.toml", "sphere.obj", TEXTURE);
+    assert!(ltm(&["bake", &scene, "-o", &p("tex.raw")]).0);
+    assert!(ltm(&["compress", &p("tex.raw"), "-o", &p("tex.ltm")]).0);
+    let env = env_map();
+    let render = |views: &str, out: &str| {
+        let (exr, png) = (p(&format!("{out}.exr")), p(&format!("{out}.png")));
+        let (tex, views) = (p("tex.ltm"), views.to_string());
+        let a = [
+            "render", &tex, "--env", &env, "--camera", "0,1,3", "--target", "0,0.6,0", "--size",
+            "24x16", "--views", &views, "-o", &exr, "--png", &png,
+        ];
+        let (ok, stderr) = ltm(&a);
+        assert!(ok, "{stderr}");
+        stderr
+    };
+    let stderr = render("3", "orbit");
+    let mut names: Vec<String> = std::fs::read_dir(d)
+        .unwrap()
+        .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+        .filter(|n| n.starts_with("orbit"))
+        .collect();
+    names.sort();
+    let want = [
+        "orbit-000.exr",
+        "orbit-000.png",
+        "orbit-001.exr",
+        "orbit-001.png",
+        "orbit-002.exr",
+        "orbit-002.png",
+    ];
+    assert_eq!(names, want);
+    assert!(
+        stderr.contains("orbit-000.png ... ") && stderr.contains("orbit-002.png"),
+        "{stderr}"
+    );
+    assert!(stderr.contains("EV "), "{stderr}");
+    render("1", "one");
+    assert!(d.join("one.exr").is_file() && d.join("one.png").is_file());
+    assert!(!d.join("one-000.png").exists());
+}
+
+/// `ltm bake SCENE --texture MESH --texture-size S` bakes a texture from a
+/// scene file without a [texture] section (the same matrix size and rows
+/// as the section would), and bad texture flags are refused with the flag
+/// and what to give instead.
+#[test]
+fn texture_bakes_from_flags_without_editing_the_scene() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let p = |n: &str| d.join(n).to_str().unwrap().to_string();
+    std::fs::write(d.join("sphere.obj"), sphere_obj(1, "")).unwrap();
+    let img = write_scene(d, "img.toml", "sphere.obj", "");
+    let flags = ["--texture", "0", "--texture-size", "16"];
+    let mut args = vec!["bake", img.as_str(), "-o"];
+    let out = p("flags.raw");
+    args.push(&out);
+    args.extend(flags);
+    args.extend(["--parameterization", "sphere"]);
+    let (ok, stderr) = ltm(&args);
+    assert!(ok, "{stderr}");
+    assert!(stderr.contains("texture 16² (sphere)"), "{stderr}");
+    assert!(stderr.contains("baking 16 × 16 texels"), "{stderr}");
+    // The file is a texture-space store: relit, it is a 16×16 texture.
+    let (ok, stderr) = ltm(&["compress", &out, "-o", &p("flags.ltm")]);
+    assert!(ok, "{stderr}");
+    let relit = p("t.exr");
+    let (ok, stderr) = ltm(&[
+        "relight",
+        &p("flags.ltm"),
+        "--env",
+        &env_map(),
+        "-o",
+        &relit,
+    ]);
+    assert!(ok, "{stderr}");
+    let (ok, stderr) = ltm(&[
+        "render",
+        &p("flags.ltm"),
+        "--env",
+        &env_map(),
+        "--camera",
+        "0,1,3",
+        "--target",
+        "0,0.5,0",
+        "--size",
+        "8x8",
+        "-o",
+        &p("v.exr"),
+    ]);
+    assert!(ok, "{stderr}");
+    let bad = p("bad.raw");
+    for (extra, expect) in [
+        (
+            &["--texture", "0"][..],
+            &["--texture", "--texture-size S"][..],
+        ),
+        (
+            &["--texture-size", "16"],
+            &["--texture-size", "--texture MESH"],
+        ),
+        (
+            &["--parameterization", "uv"],
+            &["--parameterization", "--texture MESH"],
+        ),
+        (
+            &["--texture", "3", "--texture-size", "16"],
+            &["texture.mesh = 3"],
+        ),
+        (
+            &["--texture", "first", "--texture-size", "16"],
+            &["'first'", "all"],
+        ),
+        (
+            &["--texture", "0", "--texture-size", "0"],
+            &["texture.size = 0", "1..=4096"],
+        ),
+    ] {
+        let mut args = vec!["bake", img.as_str(), "-o", bad.as_str()];
+        args.extend_from_slice(extra);
+        fails(&args, expect);
+        assert!(!Path::new(&bad).exists());
+    }
+}

@@ -26,8 +26,13 @@ pub struct PcaOptions {
     pub rank: Option<usize>,
     /// Target relative L2 error of the decoded matrix (without `rank`).
     pub max_error: f64,
-    /// The largest rank a `max_error` target may choose.
+    /// The largest rank a `max_error` target may choose (the rank of the
+    /// first fit; see `raise_rank`).
     pub max_rank: usize,
+    /// While no rank up to the fitted one meets `max_error`, fit again at
+    /// twice the rank, up to the matrix's full rank `min(P, N)` (as
+    /// `raise_bits` raises the bits). Off: `max_rank` is a hard limit.
+    pub raise_rank: bool,
     /// Quantization bits of basis and coefficients (2..=16).
     pub bits: u32,
     /// Raise `bits` by 2 (up to 16) while quantization misses the target.
@@ -46,6 +51,7 @@ impl Default for PcaOptions {
             rank: None,
             max_error: 0.01,
             max_rank: DEFAULT_MAX_RANK,
+            raise_rank: false,
             bits: DEFAULT_PCA_BITS,
             raise_bits: true,
             seed: 0x6c74_6d00,
@@ -85,32 +91,15 @@ pub fn compress_pca(
     progress: Progress<'_>,
 ) -> Result<PcaStats> {
     let dims = raw.dims();
-    let fitted = fitted_rank(opts, dims)?;
-    let limits = Limits::with_max_alloc(opts.mem_budget);
     let block_values = ((opts.mem_budget / 64) as usize).clamp(dims.row_len(), 1 << 23);
-    let f = fit::fit(raw, fitted, opts.seed, block_values, &limits, progress)?;
-    let rel = |e2: f64| {
-        if f.norm2 > 0.0 {
-            (e2.max(0.0) / f.norm2).sqrt()
-        } else {
-            0.0
-        }
-    };
-    let rank_errors: Vec<f64> = f.err2.iter().map(|&e| rel(e)).collect();
-    let (mut k, mut bits) = match opts.rank {
-        Some(k) => (k, opts.bits),
-        None => {
-            let goal = 0.95 * opts.max_error;
-            let Some(k) = (1..=fitted).find(|&k| rank_errors[k] <= goal) else {
-                return Err(Error::range(
-                    "PCA target error",
-                    opts.max_error,
-                    format!("at least {:.4e}: rank {fitted} (--max-rank) leaves {:.4e}; raise --max-rank or the target", rank_errors[fitted] / 0.95, rank_errors[fitted]),
-                ));
-            };
-            (k, opts.bits)
-        }
-    };
+    let Fitted {
+        fit: f,
+        rank_errors,
+        rank: mut k,
+        fitted,
+    } = fit_for_target(raw, opts, block_values, progress)?;
+    let mut bits = opts.bits;
+    let rel = |e2: f64| relative(e2, f.norm2);
     // Rows the store flags all zero (checked by the fit's verified pass).
     let empty = EmptyRows::from_fn(dims.pixels(), |r| raw.is_zero_row(r));
     let mut tries = 0;
@@ -154,6 +143,83 @@ pub fn compress_pca(
         } else {
             k = (k + (k / 8).max(1)).min(fitted);
         }
+    }
+}
+
+/// `sqrt(e2 / norm2)`, 0 for a zero matrix.
+fn relative(e2: f64, norm2: f64) -> f64 {
+    if norm2 > 0.0 {
+        (e2.max(0.0) / norm2).sqrt()
+    } else {
+        0.0
+    }
+}
+
+/// A fit and the rank it starts from.
+struct Fitted {
+    fit: fit::CentredFit,
+    /// The fit's relative L2 error at every rank `0..=fitted`.
+    rank_errors: Vec<f64>,
+    /// The fixed rank, or the smallest whose error is 0.95 of the target.
+    rank: usize,
+    /// The rank of the fit.
+    fitted: usize,
+}
+
+/// Fits `raw` at the fixed rank, or for a target at `max_rank`, doubled
+/// (up to the full rank) while no rank meets the target and
+/// `opts.raise_rank` is set. A target no rank meets is refused with the
+/// setting that limited the rank: `--max-rank`, the memory of the fit
+/// (`--mem-budget`), or the matrix's full rank.
+fn fit_for_target(
+    raw: &RawStore,
+    opts: &PcaOptions,
+    block_values: usize,
+    progress: Progress<'_>,
+) -> Result<Fitted> {
+    let dims = raw.dims();
+    let full = dims.pixels().min(dims.row_len());
+    let mut fitted = fitted_rank(opts, dims)?;
+    let limits = Limits::with_max_alloc(opts.mem_budget);
+    let goal = 0.95 * opts.max_error;
+    loop {
+        let f = match fit::fit(raw, fitted, opts.seed, block_values, &limits, progress) {
+            Err(e @ Error::Limit { .. }) if fitted > opts.max_rank => {
+                return Err(Error::range(
+                    "PCA target error",
+                    opts.max_error,
+                    format!("reachable within the memory of the fit: no rank up to {} meets it, and the fit of rank {fitted} needs more than --mem-budget allows ({e}); raise --mem-budget or the target", fitted / 2),
+                ))
+            }
+            r => r?,
+        };
+        let rank_errors: Vec<f64> = f.err2.iter().map(|&e| relative(e, f.norm2)).collect();
+        let rank = match opts.rank {
+            Some(k) => Some(k),
+            None => (1..=fitted).find(|&k| rank_errors[k] <= goal),
+        };
+        if let Some(rank) = rank {
+            return Ok(Fitted {
+                fit: f,
+                rank_errors,
+                rank,
+                fitted,
+            });
+        }
+        let left = rank_errors[fitted];
+        if !opts.raise_rank || fitted == full {
+            let limit = if fitted == full {
+                format!("the matrix's full rank min(pixels, lights·channels) = {full}")
+            } else {
+                format!("--max-rank {fitted} (the matrix's full rank is {full})")
+            };
+            return Err(Error::range(
+                "PCA target error",
+                opts.max_error,
+                format!("at least {:.4e}: rank {fitted}, limited by {limit}, leaves {left:.4e}; raise that or the target", left / 0.95),
+            ));
+        }
+        fitted = (fitted * 2).min(full);
     }
 }
 

@@ -122,6 +122,9 @@ impl LtmFile {
         let mut head = [0u8; 8];
         let head = &mut head[..len.min(8)];
         read_at(&file, path, head, 0)?;
+        if *head == crate::raw::RAW_MAGIC {
+            return Err(Error::raw_not_ltm(path));
+        }
         if *head != MAGIC {
             return Err(Error::BadMagic {
                 path: path.into(),

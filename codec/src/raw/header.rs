@@ -9,7 +9,7 @@ use crate::mesh::{
 use crate::surface::SURFACE_RECORD_LEN;
 use std::path::Path;
 
-pub(super) const MAGIC: [u8; 8] = *b"LTMRAW\0\x01";
+pub(crate) const MAGIC: [u8; 8] = *b"LTMRAW\0\x01";
 /// The newest version; versions 1 to 3 are still read and written (the
 /// version of a header is the oldest that holds what it stores).
 pub(super) const VERSION: u32 = 4;
@@ -419,6 +419,9 @@ pub(super) fn check_magic(bytes: &[u8], file_len: u64, path: &Path) -> Result<()
             "raw store",
             format!("{}: the file is empty (0 bytes)", path.display()),
         ));
+    }
+    if bytes[..n] == crate::container::MAGIC[..n] && n == 8 {
+        return Err(Error::ltm_not_raw(path));
     }
     if bytes[..n] != MAGIC[..n] {
         return Err(Error::BadMagic {

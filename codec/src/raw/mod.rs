@@ -61,6 +61,7 @@ mod verify;
 mod writer;
 
 pub use blocks::RowBlocks;
+pub(crate) use header::MAGIC as RAW_MAGIC;
 pub use header::{RawHeader, INPUT_ID_LEN};
 pub use store::RawStore;
 pub use verify::BlockVerifier;

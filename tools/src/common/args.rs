@@ -8,28 +8,32 @@ use ltm_relight::{Image, Relight, TermBasis, Weighting};
 use std::path::{Path, PathBuf};
 use std::str::FromStr;
 
+use super::Exposure;
+
 /// The image outputs of `ltm relight`, `ltm render` and `ltm reference`:
 /// a linear EXR and an optional tone-mapped PNG.
 #[derive(Args)]
 pub struct ImageOutput {
-    /// Output image: 32-bit float linear RGB OpenEXR (`ltm render --views`:
-    /// numbered VIEW-000.exr, ...).
+    /// Output image: 32-bit float linear RGB OpenEXR. `ltm render --views
+    /// K` with K > 1 numbers it: OUT-000.exr, OUT-001.exr, ...
     #[arg(short, long, value_name = "OUT.exr")]
     pub output: PathBuf,
-    /// Also write a tone-mapped 8-bit sRGB PNG (numbered like the EXR for
-    /// orbits).
+    /// Also write a tone-mapped 8-bit sRGB PNG, named like the EXR:
+    /// `ltm render --views K` with K > 1 writes OUT-000.png, OUT-001.png, ...
     #[arg(long, value_name = "OUT.png")]
     pub png: Option<PathBuf>,
-    /// Exposure of the PNG in stops: values are multiplied by 2^EV before
-    /// clamping to [0, 1].
+    /// Exposure of the PNG: `auto` maps the 99th-percentile luminance of the
+    /// image to 0.8 (for an orbit of views, of the first view, so that every
+    /// view has the same exposure), or a number of stops EV in -64..=64
+    /// (values are multiplied by 2^EV before clamping to [0, 1]). The EV
+    /// used is printed.
     #[arg(
         long,
-        value_name = "EV",
-        default_value_t = 0.0,
-        allow_hyphen_values = true,
-        value_parser = super::ranges::exposure
+        value_name = "auto|EV",
+        default_value = "auto",
+        allow_hyphen_values = true
     )]
-    pub exposure: f32,
+    pub exposure: Exposure,
 }
 
 impl ImageOutput {
@@ -42,24 +46,45 @@ impl ImageOutput {
         outputs
     }
 
+    /// The PNG's exposure for `image` (see [`Exposure::resolve`]).
+    pub fn ev(&self, image: &Image) -> f32 {
+        self.exposure.resolve(image)
+    }
+
     /// Writes `image` as the EXR and, when asked for, the PNG: both
-    /// appear, or neither.
+    /// appear, or neither. Prints the PNG's exposure.
     pub fn write(&self, image: &Image) -> Result<()> {
-        let staged = self.stage(image, &self.output, self.png.as_deref())?;
-        commit_all(staged)
+        let ev = self.ev(image);
+        let staged = self.stage(image, &self.output, self.png.as_deref(), ev)?;
+        commit_all(staged)?;
+        self.print_exposure(ev);
+        Ok(())
+    }
+
+    /// Prints the exposure `ev` of the PNG, when one is written.
+    pub fn print_exposure(&self, ev: f32) {
+        if let Some(png) = &self.png {
+            eprintln!("{}: {}", png.display(), self.exposure.describe(ev));
+        }
     }
 
     /// Writes `image` as the EXR `exr` and, when given, the PNG `png` at
-    /// this exposure, uncommitted ([`Image::stage_exr`]): they appear when
+    /// exposure `ev`, uncommitted ([`Image::stage_exr`]): they appear when
     /// passed to [`commit_all`].
-    pub fn stage(&self, image: &Image, exr: &Path, png: Option<&Path>) -> Result<Vec<AtomicFile>> {
+    pub fn stage(
+        &self,
+        image: &Image,
+        exr: &Path,
+        png: Option<&Path>,
+        ev: f32,
+    ) -> Result<Vec<AtomicFile>> {
         let mut files = vec![image
             .stage_exr(exr)
             .with_context(|| format!("writing {}", exr.display()))?];
         if let Some(png) = png {
             files.push(
                 image
-                    .stage_png(png, self.exposure)
+                    .stage_png(png, ev)
                     .with_context(|| format!("writing {}", png.display()))?,
             );
         }
@@ -113,6 +138,16 @@ pub struct TermsArgs {
     /// area |c|·support area (Ng et al. 2003).
     #[arg(long, default_value = "unweighted")]
     pub weighting: Weighting,
+}
+
+/// The terms a frame used, named as docs/GLOSSARY.md names them:
+/// `200 wavelet lights` or `48 principal components` (a pca file).
+pub fn describe_terms(relighter: &dyn Relight, used: usize) -> String {
+    let (one, many) = match relighter.term_basis() {
+        TermBasis::Wavelet => ("wavelet light", "wavelet lights"),
+        TermBasis::Linear => ("principal component", "principal components"),
+    };
+    format!("{used} {}", if used == 1 { one } else { many })
 }
 
 /// Wavelet lights per frame when `--terms` is not given.

@@ -2,7 +2,7 @@
 //! commands find and load them.
 
 use anyhow::{bail, Context, Result};
-use ltm_relight::{EnvMap, Image};
+use ltm_relight::EnvMap;
 use std::path::{Path, PathBuf};
 
 /// The assets directory: `given`, else ./assets, else the one this binary
@@ -61,20 +61,4 @@ pub fn load_maps(paths: &[PathBuf]) -> Result<Vec<(String, EnvMap)>> {
         maps.push((name, map));
     }
     Ok(maps)
-}
-
-/// Exposure (EV) that maps the 99th-percentile luminance of `image` to 0.8.
-pub fn auto_exposure(image: &Image) -> f32 {
-    let mut lum: Vec<f32> = image
-        .data
-        .iter()
-        .map(|p| 0.2126 * p[0] + 0.7152 * p[1] + 0.0722 * p[2])
-        .filter(|v| *v > 0.0)
-        .collect();
-    if lum.is_empty() {
-        return 0.0;
-    }
-    let k = (lum.len() * 99 / 100).min(lum.len() - 1);
-    let (_, v, _) = lum.select_nth_unstable_by(k, |a, b| a.total_cmp(b));
-    (0.8 / *v).log2().clamp(-30.0, 30.0)
 }

@@ -23,7 +23,7 @@ pub fn bake_cached(desc: &SceneDesc, dir: &Path, label: &str) -> Result<PathBuf>
         return Ok(raw_path);
     }
     let scene = Scene::build(desc)?;
-    let bar = progress::bar(0, "bake");
+    let bar = progress::bar(0, "bake", progress::Unit::rows(scene.dims()));
     let report = bake(
         &scene,
         &raw_path,

@@ -12,14 +12,23 @@ pub fn frames(s: &str) -> Result<usize, String> {
     }
 }
 
-/// An exposure in stops: finite, −64 to 64.
-pub fn exposure(s: &str) -> Result<f32, String> {
-    match s.parse::<f32>() {
-        Ok(v) if v.is_finite() && (-64.0..=64.0).contains(&v) => Ok(v),
-        _ => Err(format!(
-            "'{s}' is out of range (valid: a number of stops in -64..=64)"
-        )),
+/// An image size, in one grammar for every command that takes one
+/// (`--size` of `bake`, `demo` and `render`): `WxH` in pixels, or `N` for
+/// N×N; each side 1..=`max`.
+pub fn image_size(s: &str, max: u32) -> Result<(u32, u32), String> {
+    let bad = || format!("'{s}' is not an image size (valid: WxH or N, e.g. 640x480 or 256)");
+    let side = |t: &str| t.trim().parse::<u32>().map_err(|_| bad());
+    let (w, h) = match s.split_once(['x', 'X']) {
+        Some((w, h)) => (side(w)?, side(h)?),
+        None => {
+            let n = side(s)?;
+            (n, n)
+        }
+    };
+    if !(1..=max).contains(&w) || !(1..=max).contains(&h) {
+        return Err(format!("'{s}' is out of range (valid: sides 1..={max})"));
     }
+    Ok((w, h))
 }
 
 /// `--point X,Y,Z`: three finite world coordinates.
@@ -70,9 +79,12 @@ mod tests {
         for bad in ["0", "-1", "4000000000", "100001", "x", ""] {
             assert!(frames(bad).is_err(), "{bad}");
         }
-        assert_eq!(exposure("-2.5"), Ok(-2.5));
-        for bad in ["nan", "inf", "-inf", "65", "1e30", "x"] {
-            assert!(exposure(bad).is_err(), "{bad}");
+        assert_eq!(image_size("640x480", 1000), Ok((640, 480)));
+        assert_eq!(image_size("256", 1000), Ok((256, 256)));
+        assert_eq!(image_size("2X3", 1000), Ok((2, 3)));
+        for bad in ["0x10", "10x", "x", "", "1001", "10x1001", "-1", "2x3x4"] {
+            let e = image_size(bad, 1000).unwrap_err();
+            assert!(e.contains(&format!("'{bad}'")), "{e}");
         }
         assert_eq!(point("1,-2.5, 3e2"), Ok([1.0, -2.5, 300.0]));
         for bad in [

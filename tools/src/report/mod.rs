@@ -586,14 +586,12 @@ fn code_sweep(
         ..Default::default()
     };
     let t = Instant::now();
-    let bar = progress::bar(0, "transpose");
+    let unit = progress::Unit::of(ltm_codec::Stage::Rows, raw.dims());
+    let bar = progress::bar(0, "transpose", unit);
     let transposed = Transposed::new(
         raw,
         &transpose,
-        Progress::new(&|s| {
-            bar.set_length(s.total);
-            bar.set_position(s.done);
-        }),
+        Progress::new(&|s| progress::show(&bar, s, raw.dims())),
     )?;
     bar.finish_and_clear();
     let transpose_s = t.elapsed().as_secs_f64();
@@ -721,7 +719,8 @@ fn code_and_relight(
     };
     let path = files.dir.join(file_name(mode, bits, err));
     let label = format!("{counter} {} {bits} bits {err}", mode.name());
-    let bar = progress::bar(0, &label);
+    let unit = progress::Unit::of(ltm_codec::Stage::Coding, transposed.dims());
+    let bar = progress::bar(0, &label, unit);
     let t = Instant::now();
     let stats = transposed.code(
         &path,

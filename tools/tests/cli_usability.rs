@@ -1,0 +1,200 @@
+//! The CLI as a new user meets it (issue 33): PNG exposure, a raw store
+//! where an .ltm file is wanted, the pca rank search, and readable
+//! messages.
+
+use ltm_codec::Dims;
+use ltm_testkit::{block_bytes, run, write_raw};
+use std::path::{Path, PathBuf};
+
+const BIN: &str = env!("CARGO_BIN_EXE_ltm");
+
+fn s(p: &Path) -> &str {
+    p.to_str().unwrap()
+}
+
+fn envmap() -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("../assets/envmaps/interior.exr")
+}
+
+/// Runs `ltm args`, which must succeed without a panic; returns stderr.
+fn ok(args: &[&str]) -> String {
+    let r = run(BIN, args);
+    assert!(r.ok, "ltm {args:?} failed: {}", r.stderr);
+    r.stderr
+}
+
+/// Runs `ltm args`, which must fail with a message and no panic; returns
+/// stderr.
+fn fails(args: &[&str]) -> String {
+    let r = run(BIN, args);
+    assert!(!r.ok, "ltm {args:?} succeeded");
+    assert!(!r.stderr.contains("panicked"), "{args:?}: {}", r.stderr);
+    r.stderr
+}
+
+/// A 16×16 RGB store of 96 lights whose relit image is bright (values far
+/// above 1 under interior.exr) and ramps from one corner to the other.
+fn bright_store(dir: &Path) -> PathBuf {
+    let dims = Dims::image(16, 16, 4, 3);
+    let row = dims.row_len();
+    let t: Vec<f32> = (0..dims.pixels() * row)
+        .map(|i| {
+            let (p, j) = (i / row, i % row);
+            50.0 * (1 + p) as f32 / dims.pixels() as f32 * (1.0 + (j % 7) as f32 * 0.1)
+        })
+        .collect();
+    write_raw(&dir.join("b.raw"), dims, &t, None, block_bytes(dims, 64))
+}
+
+/// The 8-bit channels of a PNG and the fraction of them at 255.
+fn png_channels(path: &Path) -> (Vec<u8>, f64) {
+    let img = image::open(path).unwrap().to_rgb8().into_raw();
+    let clipped = img.iter().filter(|&&v| v == 255).count() as f64 / img.len() as f64;
+    (img, clipped)
+}
+
+/// The EV a command printed for its PNG.
+fn printed_ev(stderr: &str) -> f32 {
+    let at = stderr
+        .find("EV ")
+        .unwrap_or_else(|| panic!("no EV in {stderr}"));
+    let num: String = stderr[at + 3..]
+        .chars()
+        .take_while(|c| c.is_ascii_digit() || "+-.".contains(*c))
+        .collect();
+    num.parse().unwrap()
+}
+
+/// `relight --png` exposes automatically by default: a bright image no
+/// longer clips most pixels (as a fixed high EV does), the EV chosen is
+/// printed, and a number given to `--exposure` is used as given.
+#[test]
+fn relight_png_exposure_is_automatic_and_a_number_is_honoured() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let raw = bright_store(d);
+    let ltm = d.join("b.ltm");
+    ok(&["compress", s(&raw), "-o", s(&ltm)]);
+    let env = envmap();
+    let relight = |png: &str, extra: &[&str]| {
+        let (exr, png) = (d.join(format!("{png}.exr")), d.join(format!("{png}.png")));
+        let mut args = vec!["relight", s(&ltm), "--env", s(&env)];
+        args.extend(["-o", s(&exr), "--png", s(&png)]);
+        args.extend_from_slice(extra);
+        let stderr = ok(&args);
+        (png_channels(&png), stderr)
+    };
+    let ((auto, auto_clipped), stderr) = relight("auto", &[]);
+    assert!(stderr.contains("auto"), "{stderr}");
+    let ev = printed_ev(&stderr);
+    assert!(ev < -2.0, "a bright image needs a negative EV, got {ev}");
+    assert!(auto_clipped < 0.05, "auto clips {auto_clipped}");
+    let ((_, zero_clipped), stderr) = relight("zero", &["--exposure", "0"]);
+    assert!(zero_clipped > 0.5, "EV 0 clips only {zero_clipped}");
+    assert!(
+        stderr.contains("EV +0.00") && !stderr.contains("auto"),
+        "{stderr}"
+    );
+    // The printed EV, given as a number, writes the same PNG (up to its
+    // two printed decimals).
+    let ((same, _), _) = relight("same", &["--exposure", &format!("{ev}")]);
+    assert_eq!(auto.len(), same.len());
+    let most = auto.iter().zip(&same).map(|(a, b)| a.abs_diff(*b)).max();
+    assert!(most <= Some(1), "largest difference {most:?}");
+    // One stop darker is darker.
+    let ((dark, _), _) = relight("dark", &["--exposure", &format!("{}", ev - 1.0)]);
+    let sum = |v: &[u8]| v.iter().map(|&x| u64::from(x)).sum::<u64>();
+    assert!(sum(&dark) < sum(&same) * 9 / 10);
+    for bad in ["nan", "65", "bright"] {
+        let stderr = fails(&[
+            "relight",
+            s(&ltm),
+            "--env",
+            s(&env),
+            "-o",
+            s(&d.join("x.exr")),
+            "--exposure",
+            bad,
+        ]);
+        assert!(
+            stderr.contains("auto") && stderr.contains("-64..=64"),
+            "{stderr}"
+        );
+    }
+}
+
+/// A raw store given to commands that want an .ltm file is named as one,
+/// with the command that compresses it; an .ltm file given to `compress`
+/// is named as one too.
+#[test]
+fn a_raw_store_where_an_ltm_file_is_wanted_names_ltm_compress() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let raw = bright_store(d);
+    let env = envmap();
+    let want = format!("ltm compress {} -o {}", s(&raw), s(&d.join("b.ltm")));
+    for args in [
+        vec!["inspect", s(&raw)],
+        vec![
+            "relight",
+            s(&raw),
+            "--env",
+            s(&env),
+            "-o",
+            s(&d.join("r.exr")),
+        ],
+        vec!["export", s(&raw), "-o", s(&d.join("t.npy"))],
+    ] {
+        let stderr = fails(&args);
+        assert!(stderr.contains("raw transport store"), "{stderr}");
+        assert!(stderr.contains(&want), "{args:?}: {stderr}");
+        assert!(!stderr.contains("magic"), "{stderr}");
+    }
+    let ltm = d.join("b.ltm");
+    ok(&["compress", s(&raw), "-o", s(&ltm)]);
+    let stderr = fails(&["compress", s(&ltm), "-o", s(&d.join("again.ltm"))]);
+    assert!(
+        stderr.contains("an .ltm file (already compressed)"),
+        "{stderr}"
+    );
+}
+
+/// `compress --mode pca --max-error`: without `--max-rank` the rank grows
+/// past the first fit's 256 up to the matrix's full rank until the target
+/// is met; with `--max-rank` given, a target it cannot reach is refused
+/// with a message that names `--max-rank`.
+#[test]
+fn pca_rank_grows_to_the_target_unless_max_rank_limits_it() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    // Noise of full rank min(576, 6·4²·3) = 288: rank 256 leaves far more
+    // than 1 %.
+    let dims = Dims::image(24, 24, 4, 3);
+    let mut rng = ltm_testkit::Rng::new(7);
+    let t: Vec<f32> = (0..dims.pixels() * dims.row_len())
+        .map(|_| rng.uniform() as f32)
+        .collect();
+    let raw = write_raw(&d.join("n.raw"), dims, &t, None, block_bytes(dims, 64));
+    let out = d.join("n.ltm");
+    let compress = |extra: &[&str]| {
+        let mut args = vec!["compress", s(&raw), "-o", s(&out), "--mode", "pca"];
+        args.extend(["--max-error", "0.01"]);
+        args.extend_from_slice(extra);
+        args.iter().map(|a| a.to_string()).collect::<Vec<_>>()
+    };
+    let args = compress(&["--max-rank", "256"]);
+    let stderr = fails(&args.iter().map(String::as_str).collect::<Vec<_>>());
+    assert!(stderr.contains("--max-rank 256"), "{stderr}");
+    assert!(stderr.contains("full rank is 288"), "{stderr}");
+    assert!(!out.exists());
+    let args = compress(&[]);
+    let stderr = ok(&args.iter().map(String::as_str).collect::<Vec<_>>());
+    let rank: usize = stderr
+        .split("pca rank ")
+        .nth(1)
+        .and_then(|r| r.split(',').next())
+        .and_then(|r| r.parse().ok())
+        .unwrap_or_else(|| panic!("no rank in {stderr}"));
+    assert!((257..=288).contains(&rank), "rank {rank}: {stderr}");
+    assert!(!stderr.contains("warning"), "{stderr}");
+}

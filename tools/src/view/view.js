@@ -368,7 +368,8 @@ function drawPreview() {
   for (let p = 0; p < w * h; p++) { for (let k = 0; k < 3; k++) out[4 * p + k] = srgb8(preview.floats[3 * p + k] * scale); out[4 * p + 3] = 255; }
   const g = c.getContext("2d");
   g.putImageData(new ImageData(out, w, h), 0, 0);
-  const [dx, dy, dz] = rotate([0, 0, -1]);
+  // The map's centre pixel looks along +z (docs/FORMAT.md's lat-long map).
+  const [dx, dy, dz] = rotate([0, 0, 1]);
   const u = ((Math.atan2(dx, -dz) / (2 * Math.PI)) % 1 + 1) % 1, v = Math.acos(Math.max(-1, Math.min(1, dy))) / Math.PI;
   const x = u * w, y = v * h;
   g.strokeStyle = "#fd8"; g.lineWidth = 1.5;

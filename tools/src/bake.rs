@@ -62,8 +62,8 @@ pub struct BakeArgs {
     #[arg(long, value_name = "D")]
     pub texels_per_unit: Option<f64>,
     /// Bake a texture over these surfaces instead of camera pixels: a mesh
-    /// index into the scene's [[meshes]] (0, 1, ...) or `all` (every mesh
-    /// and quad, atlas only). Adds a [texture] section to a scene without
+    /// index into the scene's `[[meshes]]` (0, 1, ...) or `all` (every mesh
+    /// and quad, atlas only). Adds a `[texture]` section to a scene without
     /// one (then --texture-size or --texels-per-unit is needed; its other
     /// keys take their defaults), or overrides texture.mesh.
     #[arg(long, value_name = "MESH")]

@@ -10,6 +10,7 @@ mod output;
 mod paths;
 pub mod progress;
 pub mod ranges;
+pub mod shard;
 pub mod size;
 
 pub use args::{commit_all, ImageOutput, TermsArgs};

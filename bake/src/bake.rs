@@ -24,7 +24,7 @@ use crate::error::{BakeError, Result};
 use crate::transport::{RowStats, Scratch, Tables};
 use crate::world::Scene;
 use ltm_codec::raw::ResumeState;
-use ltm_codec::{Progress, RawHeader, RawWriter, Stage, Surface, SurfacePoint};
+use ltm_codec::{Progress, RawHeader, RawWriter, RowSpan, Stage, Surface, SurfacePoint};
 use rayon::prelude::*;
 use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicU64, Ordering};
@@ -154,7 +154,9 @@ impl<'a> BlockBaker<'a> {
         rows.resize(range.len() * row_len, 0.0);
         albedo.clear();
         albedo.resize(range.len() * 3, 0.0);
-        let start = range.start;
+        // Rows are numbered in the whole matrix, so that a part of a sharded
+        // bake computes the very rows a whole bake does.
+        let start = self.header.first_row() + range.start;
         rows.par_chunks_mut(row_len)
             .zip(albedo.par_chunks_mut(3))
             .enumerate()
@@ -186,8 +188,29 @@ pub fn bake(
     options: &BakeOptions,
     progress: Progress<'_>,
 ) -> Result<BakeReport> {
+    bake_part(scene, out, options, None, progress)
+}
+
+/// [`bake`] of the rows `part` only (all rows when `None`): a part of a
+/// sharded bake (raw store version 5, [`RawHeader::with_part`]) whose
+/// header carries the whole scene's input identity and the part's rows.
+/// Every row is a function of the inputs and its index in the whole
+/// matrix, so `ltm merge` of the parts equals a whole bake byte for byte.
+/// A `.partial` file of another part (or a whole store) is started over
+/// ([`ltm_codec::raw::RestartReason::DifferentRows`]).
+pub fn bake_part(
+    scene: &Scene,
+    out: &Path,
+    options: &BakeOptions,
+    part: Option<RowSpan>,
+    progress: Progress<'_>,
+) -> Result<BakeReport> {
     let start = Instant::now();
-    let header = raw_header(scene, options.block_bytes);
+    let whole = raw_header(scene, options.block_bytes);
+    let header = match part {
+        Some(span) => check_part(span, &whole)?,
+        None => whole,
+    };
     let baker = BlockBaker::new(scene, header)?;
     let mesh = receiver_mesh(scene);
     let mut writer =
@@ -199,7 +222,7 @@ pub fn bake(
         .iter()
         .map(|&b| header.block_range(b).len() as u64)
         .sum();
-    let all_rows = header.dims.pixels() as u64;
+    let all_rows = header.stored_rows() as u64;
     let rows_done = AtomicU64::new(all_rows - rows_total);
     let shadow = AtomicU64::new(0);
     let on_row = |s: RowStats| {
@@ -219,6 +242,20 @@ pub fn bake(
         rays,
         elapsed: start.elapsed(),
     })
+}
+
+/// The header of part `span` of a bake of `whole`: the span must hold at
+/// least one row and lie within the matrix.
+fn check_part(span: RowSpan, whole: &RawHeader) -> Result<RawHeader> {
+    let rows = whole.dims.pixels() as u64;
+    if span.is_empty() || span.end > rows {
+        return Err(BakeError::Store(ltm_codec::Error::OutOfRange {
+            what: "shard rows",
+            value: span.to_string(),
+            valid: format!("a non-empty range within rows 0..{rows}"),
+        }));
+    }
+    Ok(whole.with_part(span))
 }
 
 /// Computes the `pending` blocks one after the other while a writer thread

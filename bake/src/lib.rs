@@ -42,7 +42,7 @@ mod world;
 
 pub use atlas::AtlasQuality;
 pub use bake::{
-    bake, raw_header, receiver_mesh, row_surface, BakeOptions, BakeReport, BlockBaker,
+    bake, bake_part, raw_header, receiver_mesh, row_surface, BakeOptions, BakeReport, BlockBaker,
     DEFAULT_BLOCK_BYTES,
 };
 pub use error::{BakeError, Result};

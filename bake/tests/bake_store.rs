@@ -163,3 +163,35 @@ fn failed_bake_leaves_no_complete_output() {
     assert!(err.to_string().contains("missing-dir"), "{err}");
     assert!(!out.exists());
 }
+
+#[test]
+fn sharded_bake_with_small_blocks_merges_to_the_whole() {
+    // Blocks of a few rows, so that parts end inside blocks of the whole
+    // store and one output block gathers rows of several parts.
+    let scene = small_default(24, 20, 4);
+    let options = BakeOptions {
+        block_bytes: 16 << 10,
+    };
+    let dir = tempfile::tempdir().unwrap();
+    let whole = dir.path().join("whole.raw");
+    bake(&scene, &whole, &options, Progress::NONE).unwrap();
+    let want = std::fs::read(&whole).unwrap();
+    let rows = scene.dims().pixels() as u64;
+    for n in [3u64, 7, 40] {
+        let parts: Vec<std::path::PathBuf> = (0..n)
+            .map(|i| {
+                let path = dir.path().join(format!("part-{i}.raw"));
+                let span = ltm_codec::RowSpan::shard(rows, i, n);
+                let r = ltm_bake::bake_part(&scene, &path, &options, Some(span), Progress::NONE)
+                    .unwrap();
+                assert_eq!(r.rows_baked, span.len());
+                path
+            })
+            .collect();
+        let out = dir.path().join(format!("merged-{n}.raw"));
+        let limits = ltm_codec::Limits::default();
+        ltm_codec::raw::merge_parts(&parts, &out, &limits).unwrap();
+        assert!(std::fs::read(&out).unwrap() == want, "{n} parts");
+        assert_eq!(limits.used_bytes(), 0, "every charge given back");
+    }
+}

@@ -37,6 +37,15 @@ pub enum Error {
         #[source]
         error: io::Error,
     },
+    /// A part of a sharded bake that cannot be merged: the part and the
+    /// problem.
+    #[error("{}: {problem}", part.display())]
+    Part {
+        /// The part's file.
+        part: PathBuf,
+        /// What is wrong with it.
+        problem: String,
+    },
     /// The file is not of the expected kind.
     #[error("{path}: not {expected} (magic bytes {found:02x?})")]
     BadMagic {

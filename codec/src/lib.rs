@@ -62,6 +62,6 @@ pub use output::{AtomicFile, Claim, OutputLock, RunFiles};
 pub use pca::PcaModel;
 pub use progress::{Progress, Stage, Step};
 pub use quant::BandWeights;
-pub use raw::{RawHeader, RawStore, RawWriter};
+pub use raw::{RawHeader, RawStore, RawWriter, RowSpan};
 pub use surface::{Surface, SurfacePoint, SURFACE_RECORD_LEN};
 pub use wavelet::Filter;

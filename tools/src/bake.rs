@@ -1,10 +1,11 @@
 //! `ltm bake`.
 
+use crate::common::shard::{parse_shard, Shard};
 use crate::common::{claim_files, progress, Ctx};
-use anyhow::Context;
+use anyhow::{bail, Context};
 use clap::Args;
-use ltm_bake::{bake, BakeOptions, Overrides, ResumeState, Scene, SceneDesc};
-use ltm_codec::{Progress, Stage};
+use ltm_bake::{bake_part, BakeOptions, Overrides, ResumeState, Scene, SceneDesc};
+use ltm_codec::{Progress, RowSpan, Stage};
 use std::path::PathBuf;
 use std::sync::Once;
 use std::time::Instant;
@@ -24,6 +25,15 @@ command after an interruption resumes: completed blocks whose checksums verify a
 RAW.partial is resumed only when it was baked from the same inputs: its header holds a \
 SHA-256 of the resolved scene description (after these options), every mesh file's bytes and \
 the ltm version; after any change the bake starts over and says why.\n\n\
+More than one machine: `--shard I/N` bakes only shard I (numbered from 0) of N contiguous row \
+ranges, as even as possible (the first rows mod N shards hold one row more), into a part file \
+whose header records the whole scene's input identity and the part's rows; each row is computed \
+exactly as in a whole bake. `ltm merge part-*.raw -o RAW` then joins the parts into a store \
+byte-identical to a one-machine bake. A part resumes like a whole store, and only from a \
+RAW.partial of the same scene and the same rows. `--shard auto` takes I and N from a Slurm job \
+array (SLURM_ARRAY_TASK_ID minus SLURM_ARRAY_TASK_MIN, in steps of SLURM_ARRAY_TASK_STEP, of \
+SLURM_ARRAY_TASK_COUNT) or a Kubernetes Indexed Job (JOB_COMPLETION_INDEX, with N from \
+`--shard auto/N` or LTM_SHARD_COUNT).\n\n\
 The scene file format is described in the ltm-bake crate (module `scene`); \
 assets/scenes/default.toml is an example."
 )]
@@ -72,11 +82,29 @@ pub struct BakeArgs {
     /// texture.parameterization; default atlas).
     #[arg(long, value_name = "P")]
     pub parameterization: Option<ltm_codec::Parameterization>,
+    /// Bake only shard I (0-based) of N row ranges into a part for `ltm
+    /// merge`: `I/N`, `auto` (Slurm array or Kubernetes Indexed Job
+    /// variables) or `auto/N`; see the long help.
+    #[arg(long, value_name = "I/N|auto")]
+    pub shard: Option<String>,
 }
 
 /// `--size`: WxH or N, sides 1..=[`ltm_codec::MAX_SIDE`].
 fn bake_size(s: &str) -> std::result::Result<(u32, u32), String> {
     crate::common::ranges::image_size(s, ltm_codec::MAX_SIDE)
+}
+
+/// The rows of `shard` among the scene's `rows`, announced on stderr.
+fn shard_rows(shard: Shard, rows: usize) -> anyhow::Result<RowSpan> {
+    if shard.count > rows as u64 {
+        bail!(
+            "--shard {shard}: {} shards is more than the scene's {rows} rows (valid: 1..={rows})",
+            shard.count
+        );
+    }
+    let span = RowSpan::shard(rows as u64, shard.index, shard.count);
+    eprintln!("shard {shard}: {span} of {rows}");
+    Ok(span)
 }
 
 /// What became of an existing `RAW.partial`, for the user; `None` when
@@ -193,21 +221,32 @@ pub fn run(args: BakeArgs, _ctx: &Ctx) -> anyhow::Result<()> {
     let mut inputs = vec![("SCENE", args.scene.as_path())];
     inputs.extend(meshes.iter().map(|m| ("mesh", m.as_path())));
     let _claim = claim_files(&inputs, &[("-o", &args.output)])?;
-    ltm_codec::output::check_space(&args.output, desc.transport_bytes())?;
+    let env = |name: &str| std::env::var(name).ok();
+    let shard = args
+        .shard
+        .as_deref()
+        .map(|s| parse_shard(s, &env))
+        .transpose()?;
+    if shard.is_none() {
+        ltm_codec::output::check_space(&args.output, desc.transport_bytes())?;
+    }
     let scene = Scene::build(&desc)?;
     describe(&scene, &desc);
-    // An atlas sized by its density is known only now.
-    ltm_codec::output::check_space(&args.output, scene.dims().raw_bytes())?;
     let dims = scene.dims();
-    let bar = progress::bar(dims.pixels() as u64, "bake", progress::Unit::rows(dims));
+    let part = shard.map(|s| shard_rows(s, dims.pixels())).transpose()?;
+    // An atlas sized by its density is known only now.
+    let rows = part.map_or(dims.pixels() as u64, |s| s.len());
+    ltm_codec::output::check_space(&args.output, rows.saturating_mul(dims.row_len() as u64 * 4))?;
+    let bar = progress::bar(rows, "bake", progress::Unit::rows(dims));
     let options = BakeOptions::default();
     let partial = format!("{}.partial", args.output.display());
     let start = Instant::now();
     let first = Once::new();
-    let result = bake(
+    let result = bake_part(
         &scene,
         &args.output,
         &options,
+        part,
         Progress::new(&|s| {
             // The bar counts all rows; resumed ones are complete already.
             bar.set_position(s.done);

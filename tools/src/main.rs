@@ -4,6 +4,7 @@ mod bake;
 mod codec_cmds;
 mod common;
 mod demo;
+mod merge;
 mod reference;
 mod relight_cmd;
 mod render_cmd;
@@ -42,6 +43,8 @@ enum Command {
     Demo(demo::DemoArgs),
     /// Ray-trace a scene's transport matrix into a raw store.
     Bake(bake::BakeArgs),
+    /// Join the parts of a sharded bake (`ltm bake --shard`) into one raw store.
+    Merge(merge::MergeArgs),
     /// Convert a NumPy matrix into a raw store.
     Import(codec_cmds::ImportArgs),
     /// Compress a raw store into an .ltm file.
@@ -93,6 +96,7 @@ fn main() -> ExitCode {
     let result = match cli.command {
         Command::Demo(args) => demo::run(args, &ctx),
         Command::Bake(args) => bake::run(args, &ctx),
+        Command::Merge(args) => merge::run(args, &ctx),
         Command::Import(args) => codec_cmds::import(args, &ctx),
         Command::Compress(args) => codec_cmds::compress_cmd(args, &ctx),
         Command::Inspect(args) => codec_cmds::inspect_cmd(args, &ctx),

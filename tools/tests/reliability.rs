@@ -32,6 +32,8 @@ struct Corpus {
     mesh: PathBuf,
     tex_scene: PathBuf,
     raw: PathBuf,
+    /// `scene`'s bake in two parts (`ltm bake --shard`).
+    parts: [PathBuf; 2],
     ltm: PathBuf,
     tex_ltm: PathBuf,
     npy: PathBuf,
@@ -94,6 +96,21 @@ fn commands() -> Vec<Cmd> {
             outs: Outs::One,
             args: |c, o, _| vec!["bake".into(), s(&c.scene), "-o".into(), s(o)],
             inputs: |c| vec![c.scene.clone(), c.mesh.clone()],
+            streamed: None,
+        },
+        // Its inputs cannot be swapped for other valid ones mid-run (a part
+        // of another scene is refused), so it has no streamed input; a
+        // part that changes during the merge is refused by its stamp.
+        Cmd {
+            name: "merge",
+            outs: Outs::One,
+            args: |c, o, _| {
+                let mut a = vec!["merge".into()];
+                a.extend(c.parts.iter().map(|p| s(p)));
+                a.extend(["-o".into(), s(o)]);
+                a
+            },
+            inputs: |c| c.parts.to_vec(),
             streamed: None,
         },
         Cmd {
@@ -248,6 +265,17 @@ fn corpus() -> &'static Corpus {
         ] {
             run_ok(&strs(&["bake", &s(&p(scene)), "-o", &s(&p(raw))]));
         }
+        for k in 0..2 {
+            let (spec, part) = (format!("{k}/2"), format!("t.part{k}.raw"));
+            run_ok(&strs(&[
+                "bake",
+                &s(&p("scene.toml")),
+                "--shard",
+                &spec,
+                "-o",
+                &s(&p(&part)),
+            ]));
+        }
         for (raw, ltm) in [
             ("t.raw", "t.ltm"),
             ("tex.raw", "tex.ltm"),
@@ -263,6 +291,7 @@ fn corpus() -> &'static Corpus {
             mesh: p("box.obj"),
             tex_scene: p("tex.toml"),
             raw: p("t.raw"),
+            parts: [p("t.part0.raw"), p("t.part1.raw")],
             ltm: p("t.ltm"),
             tex_ltm: p("tex.ltm"),
             npy: p("t.npy"),

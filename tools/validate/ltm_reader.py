@@ -9,8 +9,10 @@ file of mode 2d, 4d or adaptive to the dense transport matrix exactly as
 encodings 0 to 4; a version-5 file's column norms (chunk NORM) are checked against
 the decoded columns; the row layout (chunk SURF) and a version-6 file's receiving
 mesh (chunk MESH) are decoded and checked. Given a raw transport store (magic
-LTMRAW) instead, it reads its header (versions 1 to 4), its surface records and its
-receiving mesh (version 4), and prints them; the matrix itself is not read.
+LTMRAW) instead, it reads its header (versions 1 to 5; version 5 is one part of a
+sharded bake, with its row range), its surface records and its receiving mesh
+(version 4, or version 5 with flag bit 2), and prints them; the matrix itself is not
+read.
 
 Usage:
     python3 tools/validate/ltm_reader.py FILE.ltm [--compare EXPORT.npy] [--out OUT.npy] [--f64]
@@ -244,28 +246,41 @@ RAW_MAGIC = b"LTMRAW\0\x01"
 
 
 def read_raw_store(buf):
-    """FORMAT.md "Raw transport store": the header of any version (1 to 4), the
-    surface records (versions 3 and 4) and the receiving mesh (version 4). Returns a
-    dict of the header fields, with "mesh" (parse_mesh's dict, or None)."""
+    """FORMAT.md "Raw transport store": the header of any version (1 to 5), the
+    surface records (versions 3 to 5) and the receiving mesh (version 4, or 5 with
+    flag bit 2). Returns a dict of the header fields, with "mesh" (parse_mesh's dict,
+    or None) and, for a version-5 part, "rows" = (first_row, first_row + row_count)."""
     if buf[:8] != RAW_MAGIC or len(buf) < 64:
         raise FormatError("not a raw store")
     version, flags, W, H, n, C, block_rows, block_count = struct.unpack_from("<8I", buf, 8)
-    hlen = {1: 64, 2: 96, 3: 112, 4: 128}.get(version)
+    hlen = {1: 64, 2: 96, 3: 112, 4: 128, 5: 144}.get(version)
     if hlen is None or len(buf) < hlen:
         raise FormatError(f"raw store version {version} or truncated header")
     if crc32(buf[:hlen - 4]) != struct.unpack_from("<I", buf, hlen - 4)[0]:
         raise FormatError("raw store header CRC mismatch")
-    allowed = {1: 1, 2: 1, 3: 3, 4: 7}[version]
-    if flags & ~allowed or bool(flags & 2) != (version >= 3) or bool(flags & 4) != (version == 4):
+    allowed = {1: 1, 2: 1, 3: 3, 4: 7, 5: 15}[version]
+    has_mesh = bool(flags & 4)
+    if (flags & ~allowed or bool(flags & 2) != (version >= 3)
+            or (version == 4 and not has_mesh) or bool(flags & 8) != (version == 5)):
         raise FormatError(f"raw store flags {flags:#x} in version {version}")
     data_offset, albedo_offset, reserved = struct.unpack_from("<QQI", buf, 40)
     if reserved:
         raise FormatError("raw store reserved field is not 0")
     P = W * H
-    end = hlen + 8 * block_count + P  # flags_offset + P
+    rows = (0, P)
+    if version == 5:
+        first, count = struct.unpack_from("<QQ", buf, 124)
+        if count == 0 or first + count > P:
+            raise FormatError(f"raw store part rows {first}+{count} outside 0..{P}")
+        rows = (first, first + count)
+    R = rows[1] - rows[0]  # rows stored: the table, flags, albedo and data cover them
+    if block_rows == 0 or block_rows > P or block_count != -(-R // block_rows):
+        raise FormatError("raw store block_rows or block_count is wrong")
+    end = hlen + 8 * block_count + R  # flags_offset + R
     if flags & 1:
-        end = -(-end // 64) * 64 + 12 * P
-    out = dict(version=version, W=W, H=H, n=n, C=C, data_offset=data_offset, mesh=None)
+        end = -(-end // 64) * 64 + 12 * R
+    out = dict(version=version, W=W, H=H, n=n, C=C, data_offset=data_offset, mesh=None,
+               rows=rows)
     if version >= 3:
         surface_offset, layout, param = struct.unpack_from("<QII", buf, 92)
         if surface_offset != -(-end // 64) * 64 or layout not in (0, 1):
@@ -276,16 +291,18 @@ def read_raw_store(buf):
         check_surface_records(recs[:-4], P)
         end = surface_offset + 28 * P + 4
         out.update(layout=layout, parameterization=param)
-    if version == 4:
+    if version == 5 and not has_mesh and struct.unpack_from("<QQ", buf, 108) != (0, 0):
+        raise FormatError("raw store mesh_offset or mesh_len is not 0 without a mesh")
+    if has_mesh:
         mesh_offset, mesh_len = struct.unpack_from("<QQ", buf, 108)
         if layout != 1 or W != H or mesh_offset != -(-end // 64) * 64:
-            raise FormatError("raw store mesh_offset or a version-4 row layout is wrong")
+            raise FormatError("raw store mesh_offset or a mesh's row layout is wrong")
         region = buf[mesh_offset:mesh_offset + mesh_len + 4]
         if len(region) != mesh_len + 4 or crc32(region[:-4]) != struct.unpack("<I", region[-4:])[0]:
             raise FormatError("raw store mesh truncated or CRC mismatch")
         out["mesh"] = parse_mesh(region[:-4], W)
         end = mesh_offset + mesh_len + 4
-    if data_offset != -(-end // 4096) * 4096 or len(buf) != data_offset + 4 * P * 6 * n * n * C:
+    if data_offset != -(-end // 4096) * 4096 or len(buf) != data_offset + 4 * R * 6 * n * n * C:
         raise FormatError("raw store data_offset or file length is wrong")
     return out
 
@@ -1060,8 +1077,10 @@ def main(argv=None):
             print(f"{args.file}: {e}", file=sys.stderr)
             return 2
         mesh = info["mesh"]
+        part = (f", part: rows {info['rows'][0]}..{info['rows'][1]}"
+                if info["version"] == 5 else "")
         print(f"raw store version {info['version']}, W={info['W']} H={info['H']} "
-              f"n={info['n']} C={info['C']}, mesh: "
+              f"n={info['n']} C={info['C']}{part}, mesh: "
               + (f"{len(mesh['positions'])} vertices, {len(mesh['triangles'])} triangles"
                  if mesh else "none"))
         if args.mesh_json:

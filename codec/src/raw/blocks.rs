@@ -31,7 +31,7 @@ impl<'a> RowBlocks<'a> {
     /// The next `count` rows (fewer at the end of the store; at least one),
     /// `M·C` values each, and their range; `None` once every row was read.
     pub fn next_rows(&mut self, count: usize) -> Result<Option<(Range<usize>, &[f32])>> {
-        let p = self.store.dims().pixels();
+        let p = self.store.header().stored_rows();
         if self.next >= p {
             return Ok(None);
         }

@@ -10,19 +10,24 @@ use crate::surface::SURFACE_RECORD_LEN;
 use std::path::Path;
 
 pub(crate) const MAGIC: [u8; 8] = *b"LTMRAW\0\x01";
-/// The newest version; versions 1 to 3 are still read and written (the
-/// version of a header is the oldest that holds what it stores).
-pub(super) const VERSION: u32 = 4;
-/// Header bytes of versions 1, 2, 3 and 4.
+/// The newest version; versions 1 to 4 are still read and written (the
+/// version of a header is the oldest that holds what it stores; version 5
+/// is a part of a sharded bake).
+pub(super) const VERSION: u32 = 5;
+/// Header bytes of versions 1, 2, 3, 4 and 5.
 pub(super) const HEADER_LEN_V1: u64 = 64;
 pub(super) const HEADER_LEN_V2: u64 = 96;
 pub(super) const HEADER_LEN_V3: u64 = 112;
 pub(super) const HEADER_LEN_V4: u64 = 128;
+pub(super) const HEADER_LEN_V5: u64 = 144;
+/// The longest header: the bytes a reader reads before decoding.
+pub(super) const HEADER_LEN_MAX: u64 = HEADER_LEN_V5;
 /// Bytes of an input identity.
 pub const INPUT_ID_LEN: usize = 32;
 pub(super) const FLAG_ALBEDO: u32 = 1;
 pub(super) const FLAG_SURFACE: u32 = 2;
 pub(super) const FLAG_MESH: u32 = 4;
+pub(super) const FLAG_PART: u32 = 8;
 pub(super) const DATA_ALIGN: u64 = 4096;
 /// Bytes read at a time when a block's CRC is checked.
 pub(super) const CRC_CHUNK: u64 = 8 << 20;
@@ -51,6 +56,49 @@ pub struct RawHeader {
     /// when one is stored (version 4; texture rows only); see
     /// [`RawHeader::with_mesh`].
     pub mesh_len: Option<u64>,
+    /// The rows this file holds when it is one part of a sharded bake
+    /// (version 5; see [`RawHeader::with_part`]); `None` for a whole store.
+    pub part: Option<RowSpan>,
+}
+
+/// A range of rows `start..end` of the whole matrix: the rows one part of a
+/// sharded bake holds.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct RowSpan {
+    /// First row.
+    pub start: u64,
+    /// One past the last row.
+    pub end: u64,
+}
+
+impl RowSpan {
+    /// Rows in the span.
+    pub fn len(&self) -> u64 {
+        self.end.saturating_sub(self.start)
+    }
+
+    /// Whether the span holds no row.
+    pub fn is_empty(&self) -> bool {
+        self.len() == 0
+    }
+
+    /// Part `index` (0-based) of `count` contiguous parts of `rows` rows, as
+    /// even as possible: the first `rows mod count` parts hold one row more.
+    pub fn shard(rows: u64, index: u64, count: u64) -> RowSpan {
+        let count = count.max(1);
+        let (base, extra) = (rows / count, rows % count);
+        let start = index * base + index.min(extra);
+        RowSpan {
+            start,
+            end: start + base + u64::from(index < extra),
+        }
+    }
+}
+
+impl std::fmt::Display for RowSpan {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(f, "rows {}..{}", self.start, self.end)
+    }
 }
 
 #[derive(Clone, Copy)]
@@ -80,7 +128,37 @@ impl RawHeader {
             input_id: None,
             has_surface: dims.rows.is_texture(),
             mesh_len: None,
+            part: None,
         }
+    }
+
+    /// The same header for one part of a sharded bake holding the rows
+    /// `span` of the whole matrix (written as version 5, which always has
+    /// surface data). Its block table, row flags, albedo values and row
+    /// data cover those rows only, in blocks of `block_rows` from
+    /// `span.start`; its surface records and mesh are the whole matrix's.
+    pub fn with_part(self, span: RowSpan) -> RawHeader {
+        RawHeader {
+            has_surface: true,
+            part: Some(span),
+            ..self
+        }
+    }
+
+    /// The same header as a whole store (no part range).
+    pub fn whole(self) -> RawHeader {
+        RawHeader { part: None, ..self }
+    }
+
+    /// Rows stored in the file: the part's rows, or every row.
+    pub fn stored_rows(&self) -> usize {
+        self.part.map_or(self.dims.pixels(), |s| s.len() as usize)
+    }
+
+    /// The first row stored in the file (0 but in a part): stored row `i`
+    /// is row `first_row() + i` of the matrix.
+    pub fn first_row(&self) -> usize {
+        self.part.map_or(0, |s| s.start as usize)
     }
 
     /// The same header with room for `mesh`, the receiving mesh of a
@@ -110,10 +188,13 @@ impl RawHeader {
         }
     }
 
-    /// The format version this header is written as: 4 with a receiving
-    /// mesh, else 3 with surface data, else 2 with an input identity, else 1.
+    /// The format version this header is written as: 5 for a part of a
+    /// sharded bake, else 4 with a receiving mesh, else 3 with surface data,
+    /// else 2 with an input identity, else 1.
     pub fn version(&self) -> u32 {
-        if self.mesh_len.is_some() {
+        if self.part.is_some() {
+            5
+        } else if self.mesh_len.is_some() {
             4
         } else if self.has_surface {
             3
@@ -126,6 +207,7 @@ impl RawHeader {
 
     pub(super) fn header_len(&self) -> u64 {
         match self.version() {
+            5 => HEADER_LEN_V5,
             4 => HEADER_LEN_V4,
             3 => HEADER_LEN_V3,
             2 => HEADER_LEN_V2,
@@ -148,12 +230,14 @@ impl RawHeader {
             ));
         }
         let mesh_len = self.checked_mesh_len()?;
-        let p = self.dims.pixels() as u64;
-        if self.block_rows == 0 || self.block_rows as u64 > p {
+        let all = self.dims.pixels() as u64;
+        self.check_part(all)?;
+        let p = self.stored_rows() as u64;
+        if self.block_rows == 0 || self.block_rows as u64 > all {
             return Err(Error::range(
                 "block_rows",
                 self.block_rows,
-                format!("1..={p}"),
+                format!("1..={all}"),
             ));
         }
         let block_count = p.div_ceil(self.block_rows as u64);
@@ -164,18 +248,17 @@ impl RawHeader {
         let surface_offset = albedo_end.next_multiple_of(64);
         let surface_end = surface_offset
             + if self.has_surface {
-                SURFACE_RECORD_LEN as u64 * p + 4
+                SURFACE_RECORD_LEN as u64 * all + 4
             } else {
                 0
             };
         let mesh_offset = surface_end.next_multiple_of(64);
         let mesh_end = mesh_len.map_or(surface_end, |len| mesh_offset + len + 4);
         let data_offset = mesh_end.next_multiple_of(DATA_ALIGN);
+        let data_len = (self.dims.row_len() as u64 * 4).saturating_mul(p);
         let file_len = data_offset
-            .checked_add(self.dims.raw_bytes())
-            .ok_or_else(|| {
-                Error::range("raw store size", self.dims.raw_bytes(), "below 2^64 bytes")
-            })?;
+            .checked_add(data_len)
+            .ok_or_else(|| Error::range("raw store size", data_len, "below 2^64 bytes"))?;
         Ok(Layout {
             table_offset,
             block_count,
@@ -186,6 +269,27 @@ impl RawHeader {
             data_offset,
             file_len,
         })
+    }
+
+    /// A part's rows: at least one, within the matrix's `all` rows, and
+    /// surface data stored.
+    fn check_part(&self, all: u64) -> Result<()> {
+        let Some(span) = self.part else {
+            return Ok(());
+        };
+        if span.is_empty() || span.end > all {
+            return Err(Error::range(
+                "raw store part rows",
+                span,
+                format!("a non-empty range within rows 0..{all}"),
+            ));
+        }
+        if !self.has_surface {
+            return Err(Error::Invalid(
+                "a part of a sharded bake must carry surface data".into(),
+            ));
+        }
+        Ok(())
     }
 
     /// The mesh length, checked: texture rows only, within the bytes of a
@@ -213,13 +317,14 @@ impl RawHeader {
 
     /// Number of blocks.
     pub fn block_count(&self) -> usize {
-        (self.dims.pixels()).div_ceil(self.block_rows as usize)
+        self.stored_rows().div_ceil(self.block_rows as usize)
     }
 
-    /// Rows of block `b`.
+    /// Stored rows of block `b` (in a part, counted from its first row:
+    /// add [`RawHeader::first_row`] for the rows of the matrix).
     pub fn block_range(&self, b: usize) -> std::ops::Range<usize> {
         let start = b * self.block_rows as usize;
-        start..(start + self.block_rows as usize).min(self.dims.pixels())
+        start..(start + self.block_rows as usize).min(self.stored_rows())
     }
 
     pub(super) fn encode(&self, layout: &Layout) -> Vec<u8> {
@@ -233,7 +338,8 @@ impl RawHeader {
                     FLAG_MESH
                 } else {
                     0
-                },
+                }
+                | if self.part.is_some() { FLAG_PART } else { 0 },
         );
         for v in self.dims.to_fields() {
             w.u32(v);
@@ -258,9 +364,13 @@ impl RawHeader {
                 _ => 0,
             });
         }
-        if let Some(len) = self.mesh_len {
+        if self.mesh_len.is_some() || self.part.is_some() {
             w.u64(layout.mesh_offset);
-            w.u64(len);
+            w.u64(self.mesh_len.unwrap_or(0));
+        }
+        if let Some(span) = self.part {
+            w.u64(span.start);
+            w.u64(span.len());
         }
         let crc = crc32fast::hash(&w.bytes);
         w.u32(crc);
@@ -268,7 +378,7 @@ impl RawHeader {
     }
 
     /// Decodes and checks a header from the first bytes of a file of
-    /// `file_len` bytes (`bytes` holds `min(file_len, HEADER_LEN_V4)` of
+    /// `file_len` bytes (`bytes` holds `min(file_len, HEADER_LEN_MAX)` of
     /// them).
     pub(super) fn decode(bytes: &[u8], file_len: u64, path: &Path) -> Result<(RawHeader, Layout)> {
         check_magic(bytes, file_len, path)?;
@@ -278,6 +388,7 @@ impl RawHeader {
             2 => HEADER_LEN_V2,
             3 => HEADER_LEN_V3,
             4 => HEADER_LEN_V4,
+            5 => HEADER_LEN_V5,
             _ => {
                 return Err(Error::Version {
                     what: "raw store",
@@ -320,8 +431,19 @@ impl RawHeader {
             has_albedo: flags & FLAG_ALBEDO != 0,
             input_id: (version == 2 || (version >= 3 && id != [0; INPUT_ID_LEN])).then_some(id),
             has_surface: version >= 3,
-            mesh_len: (version == 4).then(|| long(116)),
+            mesh_len: (flags & FLAG_MESH != 0).then(|| long(116)),
+            part: (version == 5).then(|| RowSpan {
+                start: long(124),
+                end: long(124).saturating_add(long(132)),
+            }),
         };
+        if version == 5 && flags & FLAG_MESH == 0 && long(116) != 0 {
+            return Err(Error::range(
+                "raw store mesh_len (header offset 116) without a mesh",
+                long(116),
+                "0",
+            ));
+        }
         if version == 4 && !dims.rows.is_texture() {
             return Err(Error::range(
                 "raw store row layout",
@@ -332,15 +454,16 @@ impl RawHeader {
         let layout = header.layout()?;
         let offsets = (r.u32()?, r.u64()?, r.u64()?);
         let surface_offset = if version >= 3 { long(92) } else { 0 };
-        let mesh_offset = if version == 4 { long(108) } else { 0 };
+        let mesh_offset = if version >= 4 { long(108) } else { 0 };
         check_offsets(&layout, offsets, (surface_offset, mesh_offset))?;
         Ok((header, layout))
     }
 }
 
 /// The header's CRC (over its first `len − 4` bytes), its flags (bit 0,
-/// bit 1 exactly in `version` 3 and 4, bit 2 exactly in version 4) and its
-/// reserved field (0).
+/// bit 1 exactly in `version` 3 to 5, bit 2 exactly in version 4 and
+/// optional in version 5, bit 3 exactly in version 5) and its reserved
+/// field (0).
 pub(super) fn check_fixed_fields(bytes: &[u8], len: usize, version: u32, flags: u32) -> Result<()> {
     let stored_crc = u32::from_le_bytes(bytes[len - 4..len].try_into().expect("4 bytes"));
     let crc = crc32fast::hash(&bytes[..len - 4]);
@@ -351,15 +474,21 @@ pub(super) fn check_fixed_fields(bytes: &[u8], len: usize, version: u32, flags: 
             computed: crc,
         });
     }
-    let allowed = FLAG_ALBEDO | FLAG_SURFACE | FLAG_MESH;
+    let allowed = FLAG_ALBEDO | FLAG_SURFACE | FLAG_MESH | FLAG_PART;
+    let mesh_ok = match version {
+        4 => flags & FLAG_MESH != 0,
+        5 => true,
+        _ => flags & FLAG_MESH == 0,
+    };
     if flags & !allowed != 0
         || (version >= 3) != (flags & FLAG_SURFACE != 0)
-        || (version == 4) != (flags & FLAG_MESH != 0)
+        || !mesh_ok
+        || (version == 5) != (flags & FLAG_PART != 0)
     {
         return Err(Error::range(
             "raw store flags",
             format!("{flags:#x} (version {version})"),
-            "bit 0, bit 1 exactly in versions 3 and 4, bit 2 exactly in version 4",
+            "bit 0, bit 1 exactly in versions 3 to 5, bit 2 exactly in version 4 (optional in 5), bit 3 exactly in version 5",
         ));
     }
     let reserved = u32::from_le_bytes(bytes[56..60].try_into().expect("4 bytes"));

@@ -4,14 +4,15 @@
 //! One little-endian file (layout in docs/FORMAT.md). Version 2 adds the
 //! input identity, version 3 the row layout and per-row surface data
 //! ([`Surface`](crate::Surface)), version 4 the receiving mesh of a texture layout
-//! ([`ReceiverMesh`](crate::ReceiverMesh)); a header is `hlen` = 64 bytes in version 1, 96 in version
-//! 2, 112 in version 3 and 128 in version 4:
+//! ([`ReceiverMesh`](crate::ReceiverMesh)); version 5 is one part of a sharded bake
+//! ([`RawHeader::with_part`], joined by [`merge_parts`]). A header is `hlen` = 64 bytes in
+//! version 1, 96 in version 2, 112 in version 3, 128 in version 4 and 144 in version 5:
 //!
 //! | offset | size | field |
 //! |---|---|---|
 //! | 0 | 8 | magic `LTMRAW\0\x01` |
 //! | 8 | 4 | version (1, 2, 3 or 4) |
-//! | 12 | 4 | flags: bit 0 = an albedo image is stored, bit 1 = surface data (exactly in versions 3 and 4), bit 2 = receiver mesh (exactly in version 4) |
+//! | 12 | 4 | flags: bit 0 = an albedo image is stored, bit 1 = surface data (exactly in versions 3 to 5), bit 2 = receiver mesh (exactly in version 4, optional in 5), bit 3 = a part (exactly in version 5) |
 //! | 16 | 4·5 | width, height, face_res, channels, block_rows |
 //! | 36 | 4 | block_count = ceil(width·height / block_rows) |
 //! | 40 | 8 | data_offset (multiple of 4096) |
@@ -22,6 +23,7 @@
 //! | 100 | 4·2 | versions 3 and 4: row layout (0 image, 1 texture; 1 in version 4), parameterization (0 none, 1 uv, 2 sphere, 3 atlas) |
 //! | 108 | 8 | version 4: mesh_offset |
 //! | 116 | 8 | version 4: mesh_len, bytes of the encoded mesh |
+//! | 124 | 8·2 | version 5: first row and row count of the part (mesh fields 0 without bit 2) |
 //! | hlen − 4 | 4 | CRC-32 of bytes 0..hlen−4 |
 //! | hlen | 8·block_count | block table: state (0 = pending, 1 = complete), CRC-32 of the block |
 //! | flags_offset | P | one byte per row: 1 = the row is all zero, else 0 |
@@ -31,7 +33,10 @@
 //! | data_offset | 4·P·M·C | T\[p\]\[j\]\[c\], f32 |
 //!
 //! A block is `block_rows` consecutive rows (the last may be shorter); its
-//! CRC covers its row flags, then its albedo values, then its data.
+//! CRC covers its row flags, then its albedo values, then its data. In a
+//! version-5 part the block table, flags, albedo and data cover only the
+//! part's rows (P is then the part's row count), the surface records and
+//! mesh the whole matrix; see docs/FORMAT.md, "Parts of a sharded bake".
 //!
 //! Writing goes to `PATH.partial`, one block at a time with plain positioned
 //! writes (so that a full disk is an error, not a signal), and the file is
@@ -54,6 +59,7 @@
 
 mod blocks;
 mod header;
+mod merge;
 mod store;
 #[cfg(test)]
 mod tests;
@@ -62,7 +68,8 @@ mod writer;
 
 pub use blocks::RowBlocks;
 pub(crate) use header::MAGIC as RAW_MAGIC;
-pub use header::{RawHeader, INPUT_ID_LEN};
+pub use header::{RawHeader, RowSpan, INPUT_ID_LEN};
+pub use merge::{merge_parts, MergeReport};
 pub use store::RawStore;
 pub use verify::BlockVerifier;
 pub use writer::{RawWriter, RestartReason, ResumeState};

@@ -3,7 +3,7 @@
 #[cfg(target_endian = "big")]
 compile_error!("ltm's file formats are little-endian and are read into native values directly; big-endian targets are not supported");
 
-use super::header::{Layout, RawHeader, CRC_CHUNK, HEADER_LEN_V4};
+use super::header::{Layout, RawHeader, CRC_CHUNK, HEADER_LEN_MAX};
 use super::verify::BlockVerifier;
 use super::writer::non_finite_albedo;
 use crate::dims::Dims;
@@ -53,12 +53,42 @@ impl RawStore {
         Self::open_with_limits(path, &Limits::default())
     }
 
-    /// [`RawStore::open`] with the given limits.
+    /// [`RawStore::open`] with the given limits. A part of a sharded bake
+    /// (version 5) is refused: it holds only some rows; `ltm merge`
+    /// ([`RawStore::open_part`]) joins the parts into a whole store.
     pub fn open_with_limits(path: &Path, limits: &Limits) -> Result<RawStore> {
+        let store = Self::open_any(path, limits)?;
+        match store.header.part {
+            Some(span) => Err(Error::Invalid(format!(
+                "{}: is one part ({span}) of a sharded bake, not a whole raw store; join the parts with `ltm merge`",
+                path.display()
+            ))),
+            None => Ok(store),
+        }
+    }
+
+    /// Opens a part of a sharded bake (version 5) as [`RawStore::open_with_limits`]
+    /// opens a whole store; a whole store is refused. Its stored rows are
+    /// numbered from 0 ([`RawStore::read_rows`], [`RawStore::verify_block`],
+    /// the row flags and albedo values): stored row `i` is row
+    /// `header().first_row() + i` of the matrix. Its surface data and mesh
+    /// are the whole matrix's.
+    pub fn open_part(path: &Path, limits: &Limits) -> Result<RawStore> {
+        let store = Self::open_any(path, limits)?;
+        if store.header.part.is_none() {
+            return Err(Error::Invalid(format!(
+                "{}: is a whole raw store, not a part of a sharded bake (`ltm bake --shard`)",
+                path.display()
+            )));
+        }
+        Ok(store)
+    }
+
+    fn open_any(path: &Path, limits: &Limits) -> Result<RawStore> {
         let file = File::open(path).map_err(|e| Error::io(path, e))?;
         check_regular(&file, path)?;
         let stamp = Stamp::of(&file, path)?;
-        let mut head = vec![0u8; stamp.len.min(HEADER_LEN_V4) as usize];
+        let mut head = vec![0u8; stamp.len.min(HEADER_LEN_MAX) as usize];
         read_at(&file, path, &mut head, 0)?;
         let (header, layout) = RawHeader::decode(&head, stamp.len, path)?;
         check_length(stamp.len, layout.file_len, path)?;
@@ -109,7 +139,7 @@ impl RawStore {
     /// gives an [`Error::Io`] that says so, never a signal. The values are
     /// as stored; a [`BlockVerifier`] checks them.
     pub fn read_rows(&self, range: Range<usize>, out: &mut Vec<f32>) -> Result<()> {
-        let p = self.header.dims.pixels();
+        let p = self.header.stored_rows();
         if range.start > range.end || range.end > p {
             return Err(Error::range(
                 "raw store rows",
@@ -288,7 +318,7 @@ pub(super) fn read_flags(
     layout: &Layout,
     limits: &Limits,
 ) -> Result<Vec<u8>> {
-    let (mut flags, _held) = limits.vec("raw store row flags", header.dims.pixels(), 0u8)?;
+    let (mut flags, _held) = limits.vec("raw store row flags", header.stored_rows(), 0u8)?;
     read_at(file, path, &mut flags, layout.flags_offset)?;
     if let Some(p) = flags.iter().position(|&f| f > 1) {
         return Err(Error::range(
@@ -368,7 +398,7 @@ pub(super) fn read_albedo(
     if !header.has_albedo {
         return Ok(None);
     }
-    let count = header.dims.pixels().saturating_mul(3);
+    let count = header.stored_rows().saturating_mul(3);
     let (mut albedo, _held) = limits.vec("raw store albedo image", count, 0.0f32)?;
     read_at(
         file,

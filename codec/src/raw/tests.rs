@@ -186,3 +186,54 @@ fn resume_needs_the_same_identity() {
     assert_eq!(state(a), restarted(RestartReason::Unreadable));
     assert!(state(a).to_string().contains("kept 0 of"));
 }
+
+/// Shards split the rows into contiguous ranges as even as possible.
+#[test]
+fn shards_cover_the_rows_evenly() {
+    for rows in [1u64, 7, 30, 432] {
+        for count in 1..=rows.min(9) {
+            let spans: Vec<RowSpan> = (0..count).map(|i| RowSpan::shard(rows, i, count)).collect();
+            assert_eq!(spans[0].start, 0);
+            assert_eq!(spans[spans.len() - 1].end, rows);
+            for w in spans.windows(2) {
+                assert_eq!(w[0].end, w[1].start);
+                assert!(w[0].len() == w[1].len() || w[0].len() == w[1].len() + 1);
+            }
+            assert!(spans.iter().all(|s| !s.is_empty()));
+        }
+    }
+}
+
+/// A part (version 5) round-trips, opens only as a part, and its rows are
+/// numbered from its first row; a bad range is refused.
+#[test]
+fn a_part_round_trips_and_is_not_a_whole_store() {
+    let dir = tempfile::tempdir().unwrap();
+    let whole = header(200).with_input_id([3; 32]).with_surface();
+    let span = RowSpan { start: 11, end: 23 };
+    let h = whole.with_part(span);
+    assert_eq!((h.version(), h.stored_rows(), h.first_row()), (5, 12, 11));
+    let path = dir.path().join("part.raw");
+    let s = surface(30);
+    let mut w = RawWriter::create_with_surface(&path, h, Some(&s)).unwrap();
+    fill(&mut w, &(0..h.block_count()).collect::<Vec<_>>(), 4.0);
+    w.finish().unwrap();
+    let e = RawStore::open(&path).err().unwrap().to_string();
+    assert!(e.contains("rows 11..23") && e.contains("ltm merge"), "{e}");
+    let store = RawStore::open_part(&path, &crate::Limits::default()).unwrap();
+    assert_eq!(*store.header(), h);
+    assert_eq!(store.header().whole(), whole);
+    assert_eq!(store.surface(), Some(&s));
+    for b in 0..h.block_count() {
+        store.verify_block(b).unwrap();
+    }
+    assert!(store.read_rows(11..13, &mut Vec::new()).is_err());
+    for bad in [RowSpan { start: 5, end: 5 }, RowSpan { start: 20, end: 31 }] {
+        let e = RawWriter::create_with_surface(
+            &dir.path().join("b.raw"),
+            whole.with_part(bad),
+            Some(&s),
+        );
+        assert!(e.err().unwrap().to_string().contains("part rows"));
+    }
+}

@@ -29,7 +29,10 @@ impl<'a> BlockVerifier<'a> {
     /// which must follow the rows fed so far, and checks every block whose
     /// last row is among them.
     pub fn feed(&mut self, first: usize, values: &[f32]) -> Result<()> {
-        let (p, row_len) = (self.store.dims().pixels(), self.store.dims().row_len());
+        let (p, row_len) = (
+            self.store.header().stored_rows(),
+            self.store.dims().row_len(),
+        );
         let rows = values.len() / row_len;
         if first != self.next_row || !values.len().is_multiple_of(row_len) || first + rows > p {
             return Err(Error::Invalid(format!(
@@ -46,7 +49,7 @@ impl<'a> BlockVerifier<'a> {
 
     /// Checks that every row of the store has been fed.
     pub fn finish(self) -> Result<()> {
-        let p = self.store.dims().pixels();
+        let p = self.store.header().stored_rows();
         if self.next_row != p {
             return Err(Error::Invalid(format!(
                 "raw store verification stopped at row {} of {p}",

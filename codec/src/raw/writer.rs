@@ -1,6 +1,6 @@
 //! The raw store's writer: block by block, resumable from `PATH.partial`.
 
-use super::header::{Layout, RawHeader, CRC_CHUNK, HEADER_LEN_V4};
+use super::header::{Layout, RawHeader, CRC_CHUNK, HEADER_LEN_MAX};
 use crate::error::{Error, Result};
 use crate::fileio::PositionedIo as _;
 use crate::mesh::ReceiverMesh;
@@ -51,6 +51,10 @@ pub enum RestartReason {
     /// Same inputs, but its receiving mesh differs from this run's (or one
     /// of the two has none).
     DifferentMesh,
+    /// Same inputs, but it holds other rows: a part of a sharded bake for
+    /// another shard, or a whole store where a part is written (or the
+    /// reverse).
+    DifferentRows,
 }
 
 impl std::fmt::Display for RestartReason {
@@ -72,6 +76,9 @@ impl std::fmt::Display for RestartReason {
             }
             RestartReason::DifferentMesh => {
                 "its receiver mesh differs from this run's (or only one of the two has one)"
+            }
+            RestartReason::DifferentRows => {
+                "it holds other rows (a part of a sharded bake for another shard, or a whole store where a part is baked, or the reverse)"
             }
         })
     }
@@ -105,7 +112,7 @@ fn probe_partial(
     if len == 0 {
         return Err(ResumeState::New);
     }
-    let mut bytes = vec![0u8; len.min(HEADER_LEN_V4) as usize];
+    let mut bytes = vec![0u8; len.min(HEADER_LEN_MAX) as usize];
     if file.read_exact_at(&mut bytes, 0).is_err() {
         return restart(RestartReason::Unreadable);
     }
@@ -114,6 +121,7 @@ fn probe_partial(
     };
     match (old.input_id, header.input_id) {
         (Some(a), Some(b)) if a != b => restart(RestartReason::DifferentInputs),
+        (Some(_), Some(_)) if old.part != header.part => restart(RestartReason::DifferentRows),
         (Some(_), Some(_)) if old.mesh_len.is_some() != header.mesh_len.is_some() => {
             restart(RestartReason::DifferentMesh)
         }
@@ -481,7 +489,7 @@ impl RawWriter {
         surface: Option<&Surface>,
         mesh: Option<&ReceiverMesh>,
     ) -> Result<PathBuf> {
-        let (p, row) = (header.dims.pixels(), header.dims.row_len());
+        let (p, row) = (header.stored_rows(), header.dims.row_len());
         if t.len() != p * row {
             return Err(Error::BufferTooSmall {
                 what: "dense matrix",

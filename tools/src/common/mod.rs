@@ -11,6 +11,7 @@ mod output;
 mod paths;
 pub mod progress;
 pub mod ranges;
+pub mod shard;
 pub mod size;
 
 pub use args::{commit_all, describe_terms, ImageOutput, TermsArgs};

@@ -35,7 +35,7 @@ use ltm::codec::entropy::{self, ColumnShape, ValueCoding};
 use ltm::codec::quant::{self, scale_groups, BandWeights};
 use ltm::codec::wavelet::{self, row_forward};
 use ltm::codec::{ColumnDecoder, Dims, Filter, Limits, Meta, RawStore, SparseColumn};
-use ltm::relight::{EnvMap, Relight, Relighter, Request, Rotation, Weighting};
+use ltm::relight::{EnvMap, PrefilteredMap, Relight, Relighter, Request, Rotation, Weighting};
 use std::time::Duration;
 
 fn bench(c: &mut Criterion) {
@@ -100,6 +100,14 @@ fn bench(c: &mut Criterion) {
     g.throughput(Throughput::Elements((env.width() * env.height()) as u64));
     g.bench_function("resample_1024x512_to_n16", |b| {
         b.iter(|| env.to_cubemap(16, &Rotation::new(30.0, 10.0, 0.0)))
+    });
+    // The viewer's drag: exact against draft resampling at n = 32.
+    g.bench_function("resample_1024x512_to_n32", |b| {
+        b.iter(|| env.to_cubemap(32, &Rotation::new(30.0, 10.0, 0.0)))
+    });
+    let prefiltered = PrefilteredMap::new(&env, 32);
+    g.bench_function("draft_resample_1024x512_to_n32", |b| {
+        b.iter(|| prefiltered.to_cubemap(&Rotation::new(30.0, 10.0, 0.0)))
     });
     let plane: Vec<f32> = light.iter().map(|l| l[1]).collect();
     let (mut x, mut work) = (plane.clone(), vec![0.0; 256]);

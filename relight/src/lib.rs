@@ -67,6 +67,7 @@ mod open;
 mod pca;
 mod pca_blocks;
 mod point;
+mod prefiltered;
 mod reference;
 mod relighter;
 mod render;
@@ -82,6 +83,7 @@ pub use image_io::{relative_l2, Image, MAX_READ_PIXELS};
 pub use open::{open, open_file, Source};
 pub use pca::PcaRelighter;
 pub use point::{point_light_taps, Lookup, PointLight, SurfaceSample, Taps};
+pub use prefiltered::{PrefilteredMap, PREFILTER_SCALE, SAMPLES_PER_SIDE};
 pub use reference::{reference, reference_with_progress};
 pub use relighter::Relighter;
 pub use render::{

@@ -15,7 +15,7 @@ mod view_support;
 use headless_chrome::protocol::cdp::{Input, Page};
 use headless_chrome::{Browser, LaunchOptions, Tab};
 use serde_json::{json, Value};
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 use std::time::{Duration, Instant};
 use view_support::*;
 
@@ -140,7 +140,11 @@ struct Settings<'a> {
 /// across a rounding boundary of the 8-bit encoding).
 fn check_pixels(tab: &Tab, file: usize, at: &Settings, exposure: f32) {
     let s = scene();
-    let path = [&s.ltm, &s.ltm2][file];
+    check_pixels_of(tab, file, [&s.ltm, &s.ltm2][file], at, exposure);
+}
+
+/// [`check_pixels`] for panel `file` showing the file at `path`.
+fn check_pixels_of(tab: &Tab, file: usize, path: &Path, at: &Settings, exposure: f32) {
     let (want, _) = relight(path, &map(at.map), at.rotate, at.n, at.weighting, None);
     let got = pixels(tab, &format!("view{file}"));
     assert_eq!(got.len(), want.len(), "displayed pixels");
@@ -249,6 +253,7 @@ fn page_controls_show_what_ltm_relight_computes() {
     tab.wait_for_element_with_custom_timeout("#view0[data-shown]", TIMEOUT)
         .expect("the first frame");
     opens_at_the_readme_settings(&tab);
+    fast_srgb_is_the_exact_encoding(&tab);
     let n = controls_relight_as_ltm_relight(&tab);
     let at = Settings {
         map: "sunset.exr",
@@ -274,6 +279,94 @@ fn page_controls_show_what_ltm_relight_computes() {
         "the offline state",
     );
     assert!(text(&tab, "document.getElementById('message').textContent").contains("still running"));
+}
+
+/// Files of different light counts (6·4² and 6·2²) get an N control each,
+/// and each panel relights at its own N as `ltm relight` does.
+#[test]
+fn files_with_different_light_counts_get_their_own_n() {
+    let Some(browser) = browser() else { return };
+    let s = scene();
+    let coarse = s.dir.join("coarse.ltm");
+    let raw = s.dir.join("coarse.raw");
+    let scene_file = assets().join("scenes/default.toml");
+    let p = |p: &Path| p.to_str().unwrap().to_string();
+    ltm(&[
+        "bake",
+        &p(&scene_file),
+        "-o",
+        &p(&raw),
+        "--size",
+        "24x20",
+        "--face-res",
+        "2",
+        "--texel-samples",
+        "1",
+    ]);
+    ltm(&[
+        "compress",
+        &p(&raw),
+        "-o",
+        &p(&coarse),
+        "--max-error",
+        "0.05",
+    ]);
+    let srv = Server::start(&[&p(&s.ltm), &p(&coarse), "--env", &p(&map("interior.exr"))]);
+    let tab = browser.new_tab().expect("open a tab");
+    tab.set_default_timeout(TIMEOUT);
+    tab.navigate_to(&srv.url())
+        .unwrap()
+        .wait_until_navigated()
+        .unwrap();
+    tab.wait_for_element_with_custom_timeout("#view1[data-shown]", TIMEOUT)
+        .expect("the first frames");
+    assert_eq!(
+        text(&tab, "document.getElementById('n-number').value"),
+        "96"
+    );
+    assert_eq!(
+        text(&tab, "document.getElementById('n-number-1').max"),
+        "24"
+    );
+    assert_eq!(
+        text(&tab, "document.getElementById('n-number-1').value"),
+        "24"
+    );
+    set(&tab, "weighting", "unweighted", "change");
+    set(&tab, "yaw", "25", "change");
+    set(&tab, "n-number-1", "7", "change");
+    let q = "map=0&yaw=25&pitch=0&roll=0";
+    wait_shown(
+        &tab,
+        "view0",
+        &format!("file=0&{q}&n=96&weighting=unweighted"),
+    );
+    wait_shown(
+        &tab,
+        "view1",
+        &format!("file=1&{q}&n=7&weighting=unweighted"),
+    );
+    let ev = eval(&tab, "ev()").as_f64().unwrap() as f32;
+    let at = |n| Settings {
+        map: "interior.exr",
+        rotate: "25,0,0",
+        n,
+        weighting: "unweighted",
+    };
+    check_pixels_of(&tab, 0, &s.ltm, &at(96), ev);
+    check_pixels_of(&tab, 1, &coarse, &at(7), ev);
+}
+
+/// The page's table-driven sRGB encoding (for whole frames) stores the
+/// codes of its per-value one (NaN stores 0 in both), on a fine grid, at random values, and on either
+/// side of every code's threshold.
+fn fast_srgb_is_the_exact_encoding(tab: &Tab) {
+    let js = "(() => { let bad = []; const check = (v) => { if (Uint8ClampedArray.of(srgb8Fast(v))[0] !== Uint8ClampedArray.of(srgb8(v))[0]) bad.push(v); }; \
+        for (let i = -10; i <= 2000010; i++) check(i / 2000000); \
+        for (let i = 0; i < 200000; i++) check(Math.fround(Math.random() ** 4)); \
+        for (let k = 1; k < 256; k++) { const t = SRGB_AT[k]; check(t); check(t * (1 - 1e-15)); check(t * (1 + 1e-15)); } \
+        [0, -0, 1, 1.5, 1e30, NaN, -1].forEach(check); return JSON.stringify(bad.slice(0, 5)); })()";
+    assert_eq!(text(tab, js), "[]", "values where the encodings differ");
 }
 
 /// Transport weighting, N = min(200, lights), auto exposure (the pixels at
@@ -771,94 +864,157 @@ fn mesh_views_show_what_ltm_render_draws() {
     mesh_view_matches_ltm_render(&browser, &atlas, &map("interior.exr"));
 }
 
-/// Interaction latency in the browser (`performance.now()` from a rotation
-/// input to the new frame on screen), the server's frame time and the
-/// resampling time, for the figures in docs/results/viewer.md. Not a test
-/// of correctness; run by hand:
+/// Interaction latency of a sustained drag (benchmark mode, not a test of
+/// correctness): both files of `LTM_VIEW_BENCH` open side by side, and the
+/// page's yaw turns by 1.5° every 16.7 ms (60 input events a second, as a
+/// drag's pointer moves fire them) for `LTM_VIEW_BENCH_SECONDS` (default
+/// 10). Latency is `performance.now()` from the oldest input a frame
+/// answers to the `requestAnimationFrame` after it is drawn. Also measures
+/// the draft light's relit error against the exact light's at 8 rotations.
+/// For docs/results/viewer.md; run by hand:
 ///
 /// `LTM_VIEW_BENCH=a.ltm,b.ltm LTM_VIEW_BENCH_ENV=map.exr LTM_VIEW_BENCH_OUT=out.json
-/// cargo test --release -p ltm-tools --test view_browser -- --ignored --nocapture`
+/// cargo test --release -p ltm-tools --test view_browser measure_latency -- --ignored --nocapture`
 #[test]
 #[ignore = "measurement, run by hand (see docs/results/viewer.md)"]
 fn measure_latency() {
-    let files = std::env::var("LTM_VIEW_BENCH").expect("LTM_VIEW_BENCH=FILE.ltm[,FILE.ltm]");
-    let env = std::env::var("LTM_VIEW_BENCH_ENV").expect("LTM_VIEW_BENCH_ENV=MAP");
-    let out = std::env::var("LTM_VIEW_BENCH_OUT").expect("LTM_VIEW_BENCH_OUT=results.json");
-    let rotations: usize = std::env::var("LTM_VIEW_BENCH_ROTATIONS")
+    let var = |k: &str| std::env::var(k).unwrap_or_else(|_| panic!("set {k}"));
+    let (files, env, out) = (
+        var("LTM_VIEW_BENCH"),
+        var("LTM_VIEW_BENCH_ENV"),
+        var("LTM_VIEW_BENCH_OUT"),
+    );
+    let seconds: f64 = std::env::var("LTM_VIEW_BENCH_SECONDS")
         .ok()
         .and_then(|s| s.parse().ok())
-        .unwrap_or(40);
+        .unwrap_or(10.0);
+    let mut args: Vec<&str> = files.split(',').collect();
+    args.extend(["--env", &env]);
+    let srv = Server::start(&args);
     let browser = browser().expect("Chromium");
-    let mut results = Vec::new();
-    for file in files.split(',') {
-        let srv = Server::start(&[file, "--env", &env]);
-        let tab = browser.new_tab().unwrap();
-        tab.navigate_to(&srv.url())
-            .unwrap()
-            .wait_until_navigated()
-            .unwrap();
-        tab.wait_for_element_with_custom_timeout("#view0[data-shown]", TIMEOUT)
-            .unwrap();
-        let max = eval(&tab, "window.ltmView && info.files[0].max_terms")
-            .as_u64()
-            .unwrap() as f64;
-        for target in [50.0f64, 200.0, 1000.0] {
-            let pos = (target.ln() / max.ln() * 1000.0).round().min(1000.0);
-            set(&tab, "n", &pos.to_string(), "input");
-            let n = eval(&tab, "document.getElementById('n-number').value");
-            let n = n.as_str().unwrap().to_string();
-            let settled = eval(&tab, "query(0)");
-            wait_shown(&tab, "view0", settled.as_str().unwrap());
-            let first = eval(&tab, "window.ltmView.latencies.length")
-                .as_u64()
-                .unwrap();
-            let start = Instant::now();
-            for k in 0..rotations {
-                let yaw = format!("{}", (k as f64 + 1.0) * 7.25);
-                set(&tab, "yaw", &yaw, "input");
-                let q = eval(&tab, "query(0)");
-                wait_shown(&tab, "view0", q.as_str().unwrap());
+    let tab = browser.new_tab().unwrap();
+    tab.navigate_to(&srv.url())
+        .unwrap()
+        .wait_until_navigated()
+        .unwrap();
+    tab.wait_for_element_with_custom_timeout("#view0[data-shown]", TIMEOUT)
+        .unwrap();
+    let panels = eval(&tab, "panels.length").as_u64().unwrap();
+    for i in 0..panels {
+        let q = eval(&tab, &format!("query({i})"));
+        wait_shown(&tab, &format!("view{i}"), q.as_str().unwrap());
+    }
+    let first = eval(&tab, "window.ltmView.latencies.length")
+        .as_u64()
+        .unwrap();
+    let drag = format!(
+        "new Promise((done) => {{ let k = 0; const t = setInterval(() => {{ \
+           const y = document.getElementById('yaw'); y.value = (++k * 1.5).toFixed(2); \
+           y.dispatchEvent(new Event('input', {{ bubbles: true }})); \
+           if (k >= {}) {{ clearInterval(t); done(k); }} }}, 1000 / 60); }})",
+        (seconds * 60.0).round()
+    );
+    let started = Instant::now();
+    let events = tab
+        .evaluate(&drag, true)
+        .unwrap()
+        .value
+        .unwrap_or(Value::Null);
+    let wall = started.elapsed().as_secs_f64();
+    for i in 0..panels {
+        let q = eval(&tab, &format!("query({i})"));
+        wait_shown(&tab, &format!("view{i}"), q.as_str().unwrap());
+    }
+    let samples = eval(
+        &tab,
+        &format!("JSON.stringify(window.ltmView.latencies.slice({first}))"),
+    );
+    let samples: Vec<Value> = serde_json::from_str(samples.as_str().unwrap()).unwrap();
+    let mut r = latency_stats(&samples, panels as usize, wall);
+    r["events"] = events;
+    r["files"] = json!(files);
+    r["query"] = eval(&tab, "query(0)");
+    r["draft_relit_error"] = draft_errors(&srv, &eval(&tab, "query(0)"));
+    eprintln!("{r:#}");
+    std::fs::write(out, serde_json::to_string_pretty(&r).unwrap()).unwrap();
+}
+
+/// Median and 95th percentile of each figure of the drag's frames, per file
+/// and light (draft frames during the drag, exact ones when it rests).
+fn latency_stats(samples: &[Value], files: usize, wall: f64) -> Value {
+    let mut out = serde_json::Map::new();
+    for file in 0..files {
+        for light in ["draft", "exact"] {
+            let s: Vec<&Value> = samples
+                .iter()
+                .filter(|s| s["file"] == json!(file) && s["light"] == light)
+                .collect();
+            if s.is_empty() {
+                continue;
             }
-            let samples = eval(
-                &tab,
-                &format!(
-                    "JSON.stringify(window.ltmView.latencies.slice({}))",
-                    first + 1
-                ),
-            );
-            let samples: Vec<Value> = serde_json::from_str(samples.as_str().unwrap()).unwrap();
             let stat = |key: &str| {
-                let mut v: Vec<f64> = samples.iter().map(|s| s[key].as_f64().unwrap()).collect();
+                let mut v: Vec<f64> = s
+                    .iter()
+                    .map(|x| x[key].as_f64().unwrap_or(f64::NAN))
+                    .collect();
                 v.sort_by(f64::total_cmp);
                 let q = |p: f64| v[((v.len() - 1) as f64 * p).round() as usize];
                 json!({ "median": q(0.5), "p95": q(0.95) })
             };
-            let r = json!({
-                "file": file,
-                "terms": n,
-                "samples": samples.len(),
-                "latency_ms": stat("latency_ms"),
-                "round_trip_ms": stat("round_trip_ms"),
-                "server_frame_ms": stat("server_ms"),
-                "resample_ms": stat("resample_ms"),
-                "wall_s": start.elapsed().as_secs_f64(),
-            });
-            eprintln!("{r}");
-            results.push(r);
-        }
-        if let Ok(shot) = std::env::var("LTM_VIEW_BENCH_SHOT") {
-            let png = tab
-                .capture_screenshot(Page::CaptureScreenshotFormatOption::Png, None, None, true)
-                .unwrap();
-            std::fs::write(shot, png).unwrap();
+            out.insert(
+                format!("file{file}_{light}"),
+                json!({
+                    "frames": s.len(),
+                    "frames_per_s": s.len() as f64 / wall,
+                    "latency_ms": stat("latency_ms"),
+                    "round_trip_ms": stat("round_trip_ms"),
+                    "server_frame_ms": stat("server_ms"),
+                    "resample_ms": stat("resample_ms"),
+                }),
+            );
         }
     }
-    std::fs::write(out, serde_json::to_string_pretty(&results).unwrap()).unwrap();
+    out.insert("drag_s".into(), json!(wall));
+    Value::Object(out)
+}
+
+/// Relative L2 error of draft frames against exact ones, file 0, at 8 new
+/// rotations (`query` gives the file, map and N).
+fn draft_errors(srv: &Server, query: &Value) -> Value {
+    let base: Vec<&str> = query
+        .as_str()
+        .unwrap()
+        .split('&')
+        .filter(|kv| !kv.starts_with("yaw=") && !kv.starts_with("pitch="))
+        .collect();
+    let mut errors: Vec<f64> = (0..8)
+        .map(|k| {
+            let q = format!(
+                "/api/frame?{}&yaw={}&pitch={}",
+                base.join("&"),
+                11.0 + 43.0 * f64::from(k),
+                5 * k - 20
+            );
+            let (_, _, a) = srv.get(&format!("{q}&light=draft")).frame();
+            let (_, _, b) = srv.get(&q).frame();
+            let num: f64 = a
+                .iter()
+                .zip(&b)
+                .map(|(x, y)| f64::from(x - y).powi(2))
+                .sum();
+            let den: f64 = b.iter().map(|y| f64::from(*y).powi(2)).sum();
+            (num / den).sqrt()
+        })
+        .collect();
+    errors.sort_by(f64::total_cmp);
+    json!({ "median": errors[4], "max": errors[7], "all": errors })
 }
 
 /// The README's screenshot: `LTM_VIEW_SHOT_ARGS` (the arguments of `ltm
 /// view`, separated by spaces) with the exact view on, saved to
-/// `LTM_VIEW_SHOT`. Run by hand like `measure_latency`.
+/// `LTM_VIEW_SHOT`; `LTM_VIEW_SHOT_SET` (`id=value,…`) sets more controls
+/// first (docs/view-split.png: `layout=split,display=heat`). Run by hand
+/// like `measure_latency`.
 #[test]
 #[ignore = "makes docs/view.png, run by hand"]
 fn screenshot_for_readme() {
@@ -876,6 +1032,11 @@ fn screenshot_for_readme() {
         .unwrap();
     set(&tab, "yaw", "40", "change");
     set(&tab, "n", "720", "input");
+    for kv in std::env::var("LTM_VIEW_SHOT_SET").unwrap_or_default().split(',') {
+        if let Some((id, value)) = kv.split_once('=') {
+            set(&tab, id, value, "change");
+        }
+    }
     let q = eval(&tab, "query(0)");
     wait_shown(&tab, "view0", q.as_str().unwrap());
     if eval(&tab, "!!info.reference") == json!(true) {

@@ -3,7 +3,7 @@
 //! I/O threads; frames and exact images are returned as a [`Job`] that the
 //! server runs on its bounded blocking pool (`server.rs`).
 
-use super::params::{self, BadRequest, Bounds, FrameParams};
+use super::params::{self, BadRequest, Bounds, FrameParams, Resampling};
 use super::state::{FrameError, FrameOut, Viewer};
 use half::f16;
 use http_body_util::Full;
@@ -271,6 +271,7 @@ fn frame_reply(f: &FrameOut, image: &Image) -> Reply {
     let mut r = body(encode_frame(image), "application/octet-stream");
     r = with_header(r, "X-Frame-Ms", &ms(f.frame_time));
     r = with_header(r, "X-Resample-Ms", &ms(f.resample_time));
+    r = with_header(r, "X-Light", if f.draft { "draft" } else { "exact" });
     r = with_header(r, "X-Lights", &f.stats.lights.to_string());
     r = with_header(r, "X-Nonzeros", &f.stats.nonzeros.to_string());
     if let Some(e) = f.error {
@@ -295,6 +296,7 @@ fn exact(viewer: &Viewer, p: &FrameParams) -> Reply {
     let took = t.elapsed();
     let p = FrameParams {
         client: None,
+        resampling: Resampling::Exact,
         ..p.clone()
     };
     match viewer.frame(&p) {

@@ -10,9 +10,13 @@
 //! - `/api/info`: JSON with `files` (name, bytes, mode, matrix_error, width,
 //!   height, lights, max_terms, layout `image` or `texture`), `maps` (name,
 //!   width, height), `reference` (the raw store's name or null).
-//! - `/api/frame?file=F&map=M&yaw=Y&pitch=P&roll=R&n=N&weighting=W&client=C&seq=S`:
-//!   one frame. `yaw`, `pitch`, `roll` (degrees, finite, |a| ≤ 36000) and
-//!   `weighting` (unweighted, transport, area) are optional; `n` is 1 to the
+//! - `/api/frame?file=F&map=M&yaw=Y&pitch=P&roll=R&n=N&weighting=W&light=L&client=C&seq=S`:
+//!   one frame. `yaw`, `pitch`, `roll` (degrees, finite, |a| ≤ 36000),
+//!   `weighting` (unweighted, transport, area) and `light` are optional.
+//!   `light=draft` lets a rotation whose exact light is not cached be
+//!   resampled approximately (`ltm_relight::PrefilteredMap`, about 1 ms
+//!   instead of tens): the page asks for drafts while the lighting moves
+//!   and for the exact frame once it rests. `n` is 1 to the
 //!   file's `max_terms`; `client` (1–32 letters and digits) and `seq` go
 //!   together: a request older than the newest seen from the same client
 //!   is dropped with 204 (latest request wins). Frames run in a fixed number
@@ -55,7 +59,9 @@
 //! little-endian IEEE half floats, linear RGB, rows top to bottom. Headers
 //! carry the readouts: `X-Frame-Ms` (relight wall time on the server),
 //! `X-Resample-Ms` (resampling the map to the rotated cubemap; 0 when the
-//! rotated light was cached), `X-Lights` (lights used), `X-Nonzeros`
+//! rotated light was cached), `X-Light` (`exact`, or `draft` for a frame
+//! asked for with `light=draft` whose exact light was not cached),
+//! `X-Lights` (lights used), `X-Nonzeros`
 //! (coefficients multiply-added), `X-Error` and `X-Exact-Ms` where given.
 
 mod http;

@@ -63,6 +63,20 @@ pub struct FrameParams {
     pub weighting: Weighting,
     /// The sender, for latest-request-wins (absent: never stale).
     pub client: Option<Client>,
+    /// How a rotated light not yet cached is resampled.
+    pub resampling: Resampling,
+}
+
+/// How a frame's rotated light is resampled when it is not cached
+/// (`light=exact|draft`).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Resampling {
+    /// [`ltm_relight::EnvMap::to_cubemap`]: exact, tens of milliseconds.
+    Exact,
+    /// [`ltm_relight::PrefilteredMap`]: approximate, about a millisecond at
+    /// `n = 32`, for frames during a drag. An exact light already cached is
+    /// used instead.
+    Draft,
 }
 
 /// Splits a query string into decoded `name → value` pairs; a repeated or
@@ -142,6 +156,7 @@ pub const FRAME_PARAMS: &[&str] = &[
     "weighting",
     "client",
     "seq",
+    "light",
 ];
 
 /// Parses a frame request's query (`n` is checked against `max_terms`).
@@ -170,12 +185,23 @@ pub fn frame(
         None => Weighting::Unweighted,
         Some(w) => w.parse().map_err(|e: String| BadRequest(truncate(&e)))?,
     };
+    let resampling = match q.get("light").map(String::as_str) {
+        None | Some("exact") => Resampling::Exact,
+        Some("draft") => Resampling::Draft,
+        Some(other) => {
+            return Err(BadRequest(format!(
+                "light '{}' is not exact or draft",
+                truncate(other)
+            )))
+        }
+    };
     Ok(FrameParams {
         file,
         lighting,
         terms,
         weighting,
         client: client(&q)?,
+        resampling,
     })
 }
 

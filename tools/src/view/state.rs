@@ -2,13 +2,14 @@
 //! lights and of exact images, the frame slots that bound concurrent work,
 //! and each client's latest sequence number.
 
-use super::params::{Client, FrameParams, Lighting};
+use super::params::{Client, FrameParams, Lighting, Resampling};
 use super::preview::Preview;
 use anyhow::{bail, Context, Result};
 use ltm_codec::container::LtmFile;
 use ltm_codec::{Limits, RawStore, RowLayout};
 use ltm_relight::{
-    reference, relative_l2, EnvMap, Frame, FrameStats, Image, Relight, Request, TexturedMesh,
+    reference, relative_l2, EnvMap, Frame, FrameStats, Image, PrefilteredMap, Relight, Request,
+    TexturedMesh,
 };
 use serde::Serialize;
 use std::collections::{HashMap, VecDeque};
@@ -20,6 +21,8 @@ use std::time::{Duration, Instant};
 const LIGHT_CACHE: usize = 16;
 /// Exact images kept (per map and rotation).
 const EXACT_CACHE: usize = 8;
+/// Maps prepared for draft resampling kept (per map and face resolution).
+const PREFILTERED_KEPT: usize = 4;
 /// Clients whose latest sequence number is remembered.
 const MAX_CLIENTS: usize = 256;
 
@@ -85,6 +88,8 @@ pub struct FrameOut {
     pub frame_time: Duration,
     /// Time spent resampling the map (zero when the rotated light was cached).
     pub resample_time: Duration,
+    /// Whether the light was the draft resampling (not the exact one).
+    pub draft: bool,
     /// Relative L2 error against the exact image, when it is cached.
     pub error: Option<f64>,
 }
@@ -105,6 +110,8 @@ type LightKey = (usize, usize, [u64; 3]);
 /// A cubemap light: one RGB value per texel.
 type Light = Arc<Vec<[f32; 3]>>;
 type ExactKey = (usize, [u64; 3]);
+/// Map index and face resolution.
+type PrefilteredKey = (usize, usize);
 
 /// The server's state, shared by all worker threads.
 pub struct Viewer {
@@ -114,6 +121,8 @@ pub struct Viewer {
     previews: Vec<Preview>,
     raw: Option<(PathBuf, RawStore)>,
     lights: Mutex<VecDeque<(LightKey, Light)>>,
+    /// Maps prepared for draft resampling, per map and face resolution.
+    prefiltered: Mutex<Vec<(PrefilteredKey, Arc<PrefilteredMap>)>>,
     exact: Mutex<VecDeque<(ExactKey, Arc<Image>)>>,
     slots: Slots,
     clients: Mutex<HashMap<String, (u64, Instant)>>,
@@ -228,6 +237,7 @@ impl Viewer {
             files,
             maps,
             previews,
+            prefiltered: Mutex::new(Vec::new()),
             raw,
             lights: Mutex::new(VecDeque::new()),
             exact: Mutex::new(VecDeque::new()),
@@ -262,11 +272,17 @@ impl Viewer {
     }
 
     /// The rotated cubemap light at face resolution `n`, and the time spent
-    /// resampling it (zero when cached).
-    pub fn light(&self, n: usize, l: &Lighting) -> (Light, Duration) {
+    /// resampling it (zero when cached): the exact one when it is cached or
+    /// `how` asks for it, else the draft (flagged `true`).
+    pub fn light(&self, n: usize, l: &Lighting, how: Resampling) -> (Light, Duration, bool) {
         let key = (n, l.map, key_of(l));
         if let Some(v) = lock(&self.lights).iter().find(|(k, _)| *k == key) {
-            return (v.1.clone(), Duration::ZERO);
+            return (v.1.clone(), Duration::ZERO, false);
+        }
+        if how == Resampling::Draft {
+            let t = Instant::now();
+            let light = Arc::new(self.prefiltered(n, l.map).to_cubemap(&l.rotation));
+            return (light, t.elapsed(), true);
         }
         let t = Instant::now();
         let light = Arc::new(self.maps[l.map].1.to_cubemap(n, &l.rotation));
@@ -276,7 +292,22 @@ impl Viewer {
         if cache.len() > LIGHT_CACHE {
             cache.pop_front();
         }
-        (light, took)
+        (light, took, false)
+    }
+
+    /// Map `map` prepared for draft resampling at face resolution `n`
+    /// (made on first use, about one exact resampling at `2n`).
+    fn prefiltered(&self, n: usize, map: usize) -> Arc<PrefilteredMap> {
+        let mut kept = lock(&self.prefiltered);
+        if let Some((_, p)) = kept.iter().find(|(k, _)| *k == (map, n)) {
+            return p.clone();
+        }
+        let p = Arc::new(PrefilteredMap::new(&self.maps[map].1, n));
+        kept.push(((map, n), p.clone()));
+        if kept.len() > PREFILTERED_KEPT {
+            kept.remove(0);
+        }
+        p
     }
 
     /// Records `c` as its client's latest request; false when a newer one
@@ -316,7 +347,7 @@ impl Viewer {
             return Err(FrameError::Stale);
         }
         let f = &self.files[p.file];
-        let (light, resample_time) = self.light(f.face_res(), &p.lighting);
+        let (light, resample_time, draft) = self.light(f.face_res(), &p.lighting, p.resampling);
         let kept = lock(&f.frames).pop();
         let mut frame = match kept {
             Some(frame) => frame,
@@ -342,6 +373,7 @@ impl Viewer {
                     stats,
                     frame_time,
                     resample_time,
+                    draft,
                     error,
                 })
             }
@@ -375,7 +407,7 @@ impl Viewer {
         }
         let _slot = self.slots.try_acquire().ok_or(FrameError::Busy)?;
         let n = raw.dims().face_res() as usize;
-        let (light, _) = self.light(n, l);
+        let (light, _, _) = self.light(n, l, Resampling::Exact);
         let t = Instant::now();
         let img =
             Arc::new(reference(raw, &light).map_err(|e| FrameError::Internal(e.to_string()))?);

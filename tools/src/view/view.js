@@ -15,6 +15,7 @@ const stats = { latencies: [], frames: 0 };
 window.ltmView = stats;
 const DEFAULT_N = 200;
 let autoEv = null; // the auto exposure, once a first image has come
+let autoEvDraft = false; // whether autoEv came from a draft frame
 let offline = false;
 
 // Half float → float, through a table of all 65536 values.
@@ -44,15 +45,40 @@ function srgb8(v) {
   return Math.floor(e * 255 + 0.5);
 }
 
+// srgb8 without a power per value, for whole frames: a table on a 4096-step
+// grid gives the code at the step's start, and the exact thresholds (the
+// least value that encodes to each code, found by bisection) decide the one
+// step the code can still rise within a grid step.
+const SRGB_STEPS = 4096;
+const SRGB_FROM = new Uint8Array(SRGB_STEPS + 1).map((_, i) => srgb8(i / SRGB_STEPS));
+const SRGB_AT = Array.from({ length: 257 }, (_, k) => {
+  if (k === 0) return -Infinity;
+  if (k === 256) return Infinity;
+  let lo = 0, hi = 1; // srgb8(lo) < k <= srgb8(hi)
+  for (let i = 0; i < 80 && hi - lo > 0; i++) {
+    const mid = 0.5 * (lo + hi);
+    if (mid === lo || mid === hi) break;
+    if (srgb8(mid) >= k) hi = mid; else lo = mid;
+  }
+  return hi;
+});
+function srgb8Fast(v) {
+  if (!(v > 0)) return 0;
+  if (v >= 1) return 255;
+  const k = SRGB_FROM[Math.floor(v * SRGB_STEPS)];
+  return v >= SRGB_AT[k + 1] ? k + 1 : k;
+}
+
 const lum = (f, i) => 0.2126 * f[i] + 0.7152 * f[i + 1] + 0.0722 * f[i + 2];
 
 // The auto exposure of `ltm demo` (and `--exposure auto`): the 99th
 // percentile of the positive luminances shows at 0.8.
 function autoExposure(floats) {
-  const l = [];
-  for (let i = 0; i < floats.length; i += 3) { const v = lum(floats, i); if (v > 0) l.push(v); }
-  if (!l.length) return 0;
-  l.sort((a, b) => a - b);
+  const all = new Float64Array(floats.length / 3);
+  let n = 0;
+  for (let i = 0; i < floats.length; i += 3) { const v = lum(floats, i); if (v > 0) all[n++] = v; }
+  if (!n) return 0;
+  const l = all.subarray(0, n).sort(); // typed arrays sort numerically
   const v = l[Math.min(Math.floor(l.length * 99 / 100), l.length - 1)];
   return Math.min(30, Math.max(-30, Math.log2(0.8 / v)));
 }
@@ -75,7 +101,7 @@ function toRgba(floats, w, h) {
       // Math.fround: the same f32 product as the PNG writer's.
       let v = Math.fround(floats[3 * p + c] * Math.fround(scale));
       if (reinhard) v = v / (1 + v);
-      out[4 * p + c] = srgb8(v);
+      out[4 * p + c] = srgb8Fast(v);
     }
     out[4 * p + 3] = 255;
   }
@@ -211,7 +237,7 @@ function showStates() {
   for (const p of [...panels, exactPanel].filter(Boolean)) {
     const s = p.state;
     const want = p === exactPanel ? lightingOf(query(0)) : query(p.index);
-    const have = p === exactPanel ? lightingOf(p.shownQuery || "") : p.shown;
+    const have = p === exactPanel ? lightingOf(p.shownQuery || "") : p.draft ? null : p.shown;
     s.className = offline ? "state offline" : "state";
     s.textContent = offline ? "offline: the server does not answer; this is the last frame"
       : p.floats && have !== want && (p.inFlight || p.pending) ? "updating…" : "";
@@ -237,6 +263,34 @@ function goneOffline(what, e) {
   showStates();
 }
 
+// Auto exposure follows file 0's frames: set by the first, then moved when
+// an exact frame's differs by more than 1/4 EV (or the current one came
+// from a draft). Drafts do not move it: a drag shows them as fast as it
+// moves, and they differ from the exact frame by a few per cent.
+function followAutoExposure(p) {
+  if (autoEv !== null && p.draft) return;
+  const e = autoExposure(p.floats);
+  if (autoEv === null || autoEvDraft || Math.abs(e - autoEv) > 0.25) {
+    autoEv = e;
+    autoEvDraft = p.draft;
+  }
+}
+
+// A job asks for a draft light (fast, approximate: see `light=draft` in
+// the server's API) unless it is the exact refinement of a draft frame.
+const REFINE_MS = 100;
+
+// The exact refinement of a draft frame, asked for once the settings have
+// rested for REFINE_MS (so that it never holds up a drag's next frame).
+function refineLater(p) {
+  clearTimeout(p.refineTimer);
+  p.refineTimer = setTimeout(() => {
+    if (!p.draft || p.pending || p.inFlight || offline || p.shown !== query(p.index)) return;
+    p.pending = { query: p.shown, input: performance.now(), exact: true };
+    send(p);
+  }, REFINE_MS);
+}
+
 async function send(p) {
   const job = p.pending;
   p.pending = null;
@@ -244,11 +298,14 @@ async function send(p) {
   const sent = performance.now();
   try {
     // Each panel is its own stream for latest-request-wins.
-    const r = await fetch(`/api/frame?${job.query}&client=${client}${p.index}&seq=${++seq}`);
+    const light = job.exact ? "exact" : "draft";
+    const r = await fetch(`/api/frame?${job.query}&light=${light}&client=${client}${p.index}&seq=${++seq}`);
     if (r.status === 200) {
       Object.assign(p, decodeFrame(await r.arrayBuffer()));
       p.shown = job.query;
-      if (p.index === 0 && (autoEv === null || Math.abs(autoExposure(p.floats) - autoEv) > 0.25)) autoEv = autoExposure(p.floats);
+      p.draft = r.headers.get("X-Light") === "draft";
+      const evBefore = ev();
+      if (p.index === 0) followAutoExposure(p);
       p.readout = {
         serverMs: Number(r.headers.get("X-Frame-Ms")),
         resampleMs: Number(r.headers.get("X-Resample-Ms")),
@@ -256,16 +313,20 @@ async function send(p) {
         nonzeros: r.headers.get("X-Nonzeros"),
         error: r.headers.get("X-Error"),
       };
-      if (p.index === 0) drawAll(); else draw(p);
+      // A new exposure redraws every panel; otherwise only this one changed.
+      if (ev() !== evBefore || !p.drawnOnce) drawAll(); else draw(p);
+      p.drawnOnce = true;
       if (wantsError(p)) askError(p);
       await new Promise((res) => requestAnimationFrame(res));
       const shown = performance.now();
       p.readout.latencyMs = shown - job.input;
       p.readout.roundTripMs = shown - sent;
       stats.frames++;
-      stats.latencies.push({ file: p.index, query: job.query, latency_ms: shown - job.input,
-        round_trip_ms: shown - sent, server_ms: p.readout.serverMs, resample_ms: p.readout.resampleMs });
-      p.canvas.dataset.shown = job.query;
+      stats.latencies.push({ file: p.index, query: job.query, light: p.draft ? "draft" : "exact",
+        latency_ms: shown - job.input, round_trip_ms: shown - sent, server_ms: p.readout.serverMs,
+        resample_ms: p.readout.resampleMs });
+      p.canvas.dataset.shown = p.draft ? `${job.query}&light=draft` : job.query;
+      if (p.draft) refineLater(p);
       message("");
     } else if (r.status === 503) {
       if (!p.pending) p.pending = job; // busy: retry with the newest settings
@@ -298,7 +359,7 @@ async function requestExact() {
       exactPanel.exactMs = r.headers.get("X-Exact-Ms");
       $("error").textContent = `computed in ${Number(exactPanel.exactMs).toFixed(1)} ms (0 when cached)`;
       // File 0's frame at this query: its error came with the exact image.
-      if (panels[0].shown === q) panels[0].readout.error = r.headers.get("X-Error");
+      if (panels[0].shown === q && !panels[0].draft) panels[0].readout.error = r.headers.get("X-Error");
       drawAll();
       for (const p of panels) if (wantsError(p)) askError(p);
     } else if (r.status !== 503) {
@@ -317,13 +378,13 @@ async function requestExact() {
 // is shown (it was made before the exact image was cached): asked for once
 // more, now with its error.
 function wantsError(p) {
-  return !!info.reference && !!p.readout && !p.readout.error && p.shown === query(p.index) && p.retried !== p.shown &&
+  return !!info.reference && !!p.readout && !p.readout.error && !p.draft && p.shown === query(p.index) && p.retried !== p.shown &&
     !!exactPanel.shownQuery && lightingOf(exactPanel.shownQuery) === lightingOf(p.shown);
 }
 
 function askError(p) {
   p.retried = p.shown;
-  if (!p.pending) p.pending = { query: p.shown, input: performance.now() };
+  if (!p.pending) p.pending = { query: p.shown, input: performance.now(), exact: true };
   if (!p.inFlight) send(p);
 }
 
@@ -409,7 +470,7 @@ function readouts() {
     if (p.errorEl) p.errorEl.dataset.value = r.error ?? "";
     return `${f.name}: ${fmt(f.bytes)} ${f.mode}, matrix error ${(100 * f.matrix_error).toFixed(3)} %, N = ${terms(p.index)} of ${f.max_terms}` +
       (err ? `, image error ${err}` : "") +
-      `\n  server ${r.serverMs?.toFixed(2) ?? "-"} ms (+ resample ${r.resampleMs?.toFixed(2) ?? "-"} ms), ` +
+      `\n  server ${r.serverMs?.toFixed(2) ?? "-"} ms (+ resample ${r.resampleMs?.toFixed(2) ?? "-"} ms${p.draft ? ", draft light" : ""}), ` +
       `round trip ${r.roundTripMs?.toFixed(1) ?? "-"} ms, input→screen ${r.latencyMs?.toFixed(1) ?? "-"} ms, ` +
       `lights ${r.lights ?? "-"}, nonzeros ${r.nonzeros ?? "-"}`;
   });

@@ -4,7 +4,8 @@
 
 use crate::errors::value;
 use ltm_relight::Image;
-use numpy::{PyArray1, PyArrayDyn, PyArrayMethods, PyUntypedArray, PyUntypedArrayMethods};
+use numpy::ndarray::{ArrayD, IxDyn};
+use numpy::{PyArrayDyn, PyArrayMethods, PyUntypedArray, PyUntypedArrayMethods};
 use pyo3::prelude::*;
 
 /// The array's shape, failing with a `ValueError` that names `what` when
@@ -29,9 +30,11 @@ pub fn floats(obj: &Bound<'_, PyAny>, what: &str) -> PyResult<Vec<f32>> {
     float_shape(obj, what)?;
     if let Ok(a) = obj.cast::<PyArrayDyn<f32>>() {
         let ro = a.try_readonly()?;
+        // `as_slice` also takes a Fortran-ordered array, in memory order:
+        // only a C-ordered one is copied whole.
         return Ok(match ro.as_slice() {
-            Ok(s) => s.to_vec(),
-            Err(_) => ro.as_array().iter().copied().collect(),
+            Ok(s) if a.is_c_contiguous() => s.to_vec(),
+            _ => ro.as_array().iter().copied().collect(),
         });
     }
     let a = obj.cast::<PyArrayDyn<f64>>()?;
@@ -42,6 +45,10 @@ pub fn floats(obj: &Bound<'_, PyAny>, what: &str) -> PyResult<Vec<f32>> {
 /// The first value that is not finite as an `f32`: its flat index and
 /// value.
 pub fn first_non_finite(values: &[f32]) -> Option<(usize, f32)> {
+    // A branch-free pass first (vectorized), the search only on failure.
+    if values.iter().fold(true, |ok, v| ok & v.is_finite()) {
+        return None;
+    }
     values
         .iter()
         .position(|v| !v.is_finite())
@@ -53,13 +60,15 @@ pub fn flatten(data: Vec<[f32; 3]>) -> Vec<f32> {
     bytemuck::allocation::cast_vec(data)
 }
 
-/// A flat vector as a numpy array of `shape`, without copying it.
+/// A flat vector as a numpy array of `shape`, without copying it (one
+/// array object, made in its shape).
 pub fn to_numpy<'py>(
     py: Python<'py>,
     data: Vec<f32>,
     shape: &[usize],
 ) -> PyResult<Bound<'py, PyArrayDyn<f32>>> {
-    PyArray1::from_vec(py, data).reshape(shape.to_vec())
+    let array = ArrayD::from_shape_vec(IxDyn(shape), data).map_err(|e| value(e.to_string()))?;
+    Ok(PyArrayDyn::from_owned_array(py, array))
 }
 
 /// An image as an `(H, W, 3)` float32 array, without copying it.

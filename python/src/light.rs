@@ -4,6 +4,7 @@
 use crate::arrays::{first_non_finite, float_shape, floats};
 use crate::errors::{self, value};
 use ltm_relight::{EnvMap, Rotation};
+use numpy::PyUntypedArray;
 use pyo3::prelude::*;
 use std::path::PathBuf;
 
@@ -18,23 +19,29 @@ pub enum Light {
     Cubemap(Vec<[f32; 3]>),
 }
 
-/// RGB triples from a flat vector of `3·k` values.
-fn triples(v: &[f32]) -> Vec<[f32; 3]> {
-    v.chunks_exact(3).map(|c| [c[0], c[1], c[2]]).collect()
+/// RGB triples from a flat vector of `3·k` values, moved (no copy) when
+/// its capacity allows.
+fn triples(v: Vec<f32>) -> Vec<[f32; 3]> {
+    bytemuck::allocation::try_cast_vec(v)
+        .unwrap_or_else(|(_, v)| v.chunks_exact(3).map(|c| [c[0], c[1], c[2]]).collect())
 }
 
 impl Light {
     /// Reads `obj`: a path (`str` or `os.PathLike`), an `(H, 2H, 3)`
     /// lat-long array, or a cubemap array `(6, n, n, 3)` or `(6·n², 3)`.
     pub fn extract(obj: &Bound<'_, PyAny>) -> PyResult<Light> {
-        if let Ok(path) = obj.extract::<PathBuf>() {
-            return Ok(Light::Path(path));
+        // An array is no path: not asking os.fspath spares a TypeError
+        // per frame.
+        if obj.cast::<PyUntypedArray>().is_err() {
+            if let Ok(path) = obj.extract::<PathBuf>() {
+                return Ok(Light::Path(path));
+            }
         }
         let shape = float_shape(obj, "light")?;
         let values = floats(obj, "light")?;
         match shape[..] {
             [h, w, 3] => Ok(Light::Map(
-                EnvMap::new(w, h, triples(&values)).map_err(errors::relight)?,
+                EnvMap::new(w, h, triples(values)).map_err(errors::relight)?,
             )),
             [6, n, m, 3] if n == m => Light::cube(values),
             [_, 3] => Light::cube(values),
@@ -52,15 +59,15 @@ impl Light {
                 k % 3
             )));
         }
-        Ok(Light::Cubemap(triples(&values)))
+        Ok(Light::Cubemap(triples(values)))
     }
 
     /// The lighting as `6·n²` cubemap texels, rotated; a cubemap given as
-    /// texels takes no rotation.
-    pub fn cubemap(&self, n: usize, rotation: &Rotation) -> PyResult<Vec<[f32; 3]>> {
+    /// texels takes no rotation (and is moved, not copied).
+    pub fn cubemap(self, n: usize, rotation: &Rotation) -> PyResult<Vec<[f32; 3]>> {
         match self {
             Light::Map(env) => Ok(env.to_cubemap(n, rotation)),
-            Light::Path(p) => Ok(EnvMap::load(p)
+            Light::Path(p) => Ok(EnvMap::load(&p)
                 .map_err(errors::relight)?
                 .to_cubemap(n, rotation)),
             Light::Cubemap(texels) => {
@@ -76,7 +83,7 @@ impl Light {
                         "rotation applies to lat-long maps; rotate a cubemap before passing it",
                     ));
                 }
-                Ok(texels.clone())
+                Ok(texels)
             }
         }
     }

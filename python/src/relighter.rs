@@ -11,6 +11,7 @@ use ltm_relight::{
     Weighting, MAX_SUPERSAMPLE,
 };
 use numpy::PyArrayDyn;
+use pyo3::intern;
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
 use std::sync::Mutex;
@@ -68,9 +69,10 @@ impl Relighter {
         let terms = match terms {
             None if linear => self.inner.max_terms(),
             None => DEFAULT_WAVELET_TERMS,
-            Some(t) if t.extract::<String>().is_ok_and(|s| s == "all") => self.inner.max_terms(),
+            // An int first: the usual case, without a failed conversion.
             Some(t) => match t.extract::<i64>() {
                 Ok(n) if n >= 1 => n as usize,
+                Err(_) if t.extract::<String>().is_ok_and(|s| s == "all") => self.inner.max_terms(),
                 _ => {
                     return Err(value(format!(
                         "terms {t}: expected a positive int or 'all'"
@@ -121,19 +123,20 @@ impl Relighter {
     }
 }
 
-/// A frame's stats as a dict (times in milliseconds).
+/// A frame's stats as a dict (times in milliseconds); its keys are
+/// interned once, not made anew each frame.
 fn stats_dict<'py>(py: Python<'py>, s: &FrameStats) -> PyResult<Bound<'py, PyDict>> {
     let ms = |d: std::time::Duration| d.as_secs_f64() * 1e3;
     let d = PyDict::new(py);
-    d.set_item("frame_ms", ms(s.total()))?;
-    d.set_item("light_transform_ms", ms(s.light_transform))?;
-    d.set_item("selection_ms", ms(s.selection))?;
-    d.set_item("multiply_ms", ms(s.multiply))?;
-    d.set_item("inverse_ms", ms(s.inverse))?;
-    d.set_item("decode_ms", ms(s.decode))?;
-    d.set_item("columns_decoded", s.columns_decoded)?;
-    d.set_item("lights", s.lights)?;
-    d.set_item("nonzeros", s.nonzeros)?;
+    d.set_item(intern!(py, "frame_ms"), ms(s.total()))?;
+    d.set_item(intern!(py, "light_transform_ms"), ms(s.light_transform))?;
+    d.set_item(intern!(py, "selection_ms"), ms(s.selection))?;
+    d.set_item(intern!(py, "multiply_ms"), ms(s.multiply))?;
+    d.set_item(intern!(py, "inverse_ms"), ms(s.inverse))?;
+    d.set_item(intern!(py, "decode_ms"), ms(s.decode))?;
+    d.set_item(intern!(py, "columns_decoded"), s.columns_decoded)?;
+    d.set_item(intern!(py, "lights"), s.lights)?;
+    d.set_item(intern!(py, "nonzeros"), s.nonzeros)?;
     Ok(d)
 }
 

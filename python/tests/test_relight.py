@@ -29,9 +29,12 @@ def test_light_forms_agree(ltm_path, sky, tmp_path):
     by_map, _ = r.relight(sky, terms=50)
     by_cube, _ = r.relight(r.cubemap(sky), terms=50)
     by_faces, _ = r.relight(r.cubemap(sky).reshape(6, 4, 4, 3), terms=50)
+    # Any memory order reads as its values (a Fortran-ordered cubemap too).
+    by_fortran, _ = r.relight(np.asfortranarray(r.cubemap(sky)), terms=50)
+    by_map_fortran, _ = r.relight(np.asfortranarray(sky), terms=50)
     ltm.write_exr(tmp_path / "sky.exr", sky)
     by_file, _ = r.relight(tmp_path / "sky.exr", terms=50)
-    for other in (by_cube, by_faces, by_file):
+    for other in (by_cube, by_faces, by_fortran, by_map_fortran, by_file):
         assert np.array_equal(by_map, other)
     rotated, _ = r.relight(sky, terms=50, rotation=(90, 0, 0))
     assert np.array_equal(rotated, r.relight(r.cubemap(sky, (90, 0, 0)), terms=50)[0])

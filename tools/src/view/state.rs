@@ -23,6 +23,8 @@ const LIGHT_CACHE: usize = 16;
 const EXACT_CACHE: usize = 8;
 /// Maps prepared for draft resampling kept (per map and face resolution).
 const PREFILTERED_KEPT: usize = 4;
+/// Draft lights kept.
+const DRAFTS_KEPT: usize = 4;
 /// Clients whose latest sequence number is remembered.
 const MAX_CLIENTS: usize = 256;
 
@@ -123,6 +125,8 @@ pub struct Viewer {
     lights: Mutex<VecDeque<(LightKey, Light)>>,
     /// Maps prepared for draft resampling, per map and face resolution.
     prefiltered: Mutex<Vec<(PrefilteredKey, Arc<PrefilteredMap>)>>,
+    /// The latest draft lights (two files turned together share one).
+    drafts: Mutex<VecDeque<(LightKey, Light)>>,
     exact: Mutex<VecDeque<(ExactKey, Arc<Image>)>>,
     slots: Slots,
     clients: Mutex<HashMap<String, (u64, Instant)>>,
@@ -238,6 +242,7 @@ impl Viewer {
             maps,
             previews,
             prefiltered: Mutex::new(Vec::new()),
+            drafts: Mutex::new(VecDeque::new()),
             raw,
             lights: Mutex::new(VecDeque::new()),
             exact: Mutex::new(VecDeque::new()),
@@ -280,9 +285,18 @@ impl Viewer {
             return (v.1.clone(), Duration::ZERO, false);
         }
         if how == Resampling::Draft {
+            if let Some(v) = lock(&self.drafts).iter().find(|(k, _)| *k == key) {
+                return (v.1.clone(), Duration::ZERO, true);
+            }
             let t = Instant::now();
             let light = Arc::new(self.prefiltered(n, l.map).to_cubemap(&l.rotation));
-            return (light, t.elapsed(), true);
+            let took = t.elapsed();
+            let mut drafts = lock(&self.drafts);
+            drafts.push_back((key, light.clone()));
+            if drafts.len() > DRAFTS_KEPT {
+                drafts.pop_front();
+            }
+            return (light, took, true);
         }
         let t = Instant::now();
         let light = Arc::new(self.maps[l.map].1.to_cubemap(n, &l.rotation));

@@ -426,7 +426,7 @@ function drawPreview() {
   const c = $("map-preview"), w = preview.width, h = preview.height;
   if (c.width !== w || c.height !== h) { c.width = w; c.height = h; }
   const scale = Math.pow(2, preview.ev), out = new Uint8ClampedArray(w * h * 4);
-  for (let p = 0; p < w * h; p++) { for (let k = 0; k < 3; k++) out[4 * p + k] = srgb8(preview.floats[3 * p + k] * scale); out[4 * p + 3] = 255; }
+  for (let p = 0; p < w * h; p++) { for (let k = 0; k < 3; k++) out[4 * p + k] = srgb8Fast(preview.floats[3 * p + k] * scale); out[4 * p + 3] = 255; }
   const g = c.getContext("2d");
   g.putImageData(new ImageData(out, w, h), 0, 0);
   // The map's centre pixel looks along +z (docs/FORMAT.md's lat-long map).

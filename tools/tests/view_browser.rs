@@ -970,6 +970,9 @@ fn latency_stats(samples: &[Value], files: usize, wall: f64) -> Value {
                     "round_trip_ms": stat("round_trip_ms"),
                     "server_frame_ms": stat("server_ms"),
                     "resample_ms": stat("resample_ms"),
+                    "fetch_and_decode_ms": stat("fetch_ms"),
+                    "draw_ms": stat("draw_ms"),
+                    "display_wait_ms": stat("display_wait_ms"),
                 }),
             );
         }

@@ -291,10 +291,20 @@ function refineLater(p) {
   }, REFINE_MS);
 }
 
+// Once a frame is drawn, the panel's next request goes out at once: its
+// round trip overlaps the wait for the display frame.
 async function send(p) {
   const job = p.pending;
   p.pending = null;
   p.inFlight = true;
+  let released = false;
+  const release = () => {
+    if (released) return;
+    released = true;
+    p.inFlight = false;
+    if (p.pending && !offline) send(p);
+    else if (p.index === 0) requestExact();
+  };
   const sent = performance.now();
   try {
     // Each panel is its own stream for latest-request-wins.
@@ -303,30 +313,34 @@ async function send(p) {
     if (r.status === 200) {
       Object.assign(p, decodeFrame(await r.arrayBuffer()));
       p.shown = job.query;
-      p.draft = r.headers.get("X-Light") === "draft";
+      const draft = (p.draft = r.headers.get("X-Light") === "draft");
       const evBefore = ev();
       if (p.index === 0) followAutoExposure(p);
-      p.readout = {
+      const readout = (p.readout = {
         serverMs: Number(r.headers.get("X-Frame-Ms")),
         resampleMs: Number(r.headers.get("X-Resample-Ms")),
         lights: r.headers.get("X-Lights"),
         nonzeros: r.headers.get("X-Nonzeros"),
         error: r.headers.get("X-Error"),
-      };
+      });
+      const received = performance.now();
       // A new exposure redraws every panel; otherwise only this one changed.
       if (ev() !== evBefore || !p.drawnOnce) drawAll(); else draw(p);
       p.drawnOnce = true;
+      const drawn = performance.now();
       if (wantsError(p)) askError(p);
+      release();
       await new Promise((res) => requestAnimationFrame(res));
       const shown = performance.now();
-      p.readout.latencyMs = shown - job.input;
-      p.readout.roundTripMs = shown - sent;
+      readout.latencyMs = shown - job.input;
+      readout.roundTripMs = shown - sent;
       stats.frames++;
-      stats.latencies.push({ file: p.index, query: job.query, light: p.draft ? "draft" : "exact",
-        latency_ms: shown - job.input, round_trip_ms: shown - sent, server_ms: p.readout.serverMs,
-        resample_ms: p.readout.resampleMs });
-      p.canvas.dataset.shown = p.draft ? `${job.query}&light=draft` : job.query;
-      if (p.draft) refineLater(p);
+      stats.latencies.push({ file: p.index, query: job.query, light: draft ? "draft" : "exact",
+        latency_ms: shown - job.input, round_trip_ms: shown - sent, server_ms: readout.serverMs,
+        resample_ms: readout.resampleMs, fetch_ms: received - sent, draw_ms: drawn - received,
+        display_wait_ms: shown - drawn });
+      p.canvas.dataset.shown = draft ? `${job.query}&light=draft` : job.query;
+      if (draft) refineLater(p);
       message("");
     } else if (r.status === 503) {
       if (!p.pending) p.pending = job; // busy: retry with the newest settings
@@ -336,9 +350,7 @@ async function send(p) {
   } catch (e) {
     goneOffline("frame", e);
   }
-  p.inFlight = false;
-  if (p.pending && !offline) send(p);
-  else if (p.index === 0) requestExact();
+  release();
   readouts();
   showStates();
 }

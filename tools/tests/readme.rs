@@ -80,9 +80,9 @@ fn fitted_bunny(assets: &Path, out: &Path) {
     };
     let (mut lo, mut hi) = ([f64::MAX; 3], [f64::MIN; 3]);
     for v in text.lines().filter_map(vertex) {
-        for k in 0..3 {
-            lo[k] = lo[k].min(v[k]);
-            hi[k] = hi[k].max(v[k]);
+        for (k, x) in v.into_iter().enumerate() {
+            lo[k] = lo[k].min(x);
+            hi[k] = hi[k].max(x);
         }
     }
     let scale = 0.987 / (hi[1] - lo[1]);
@@ -142,7 +142,11 @@ fn runnable(line: &str) -> String {
     match line.trim_start().strip_prefix("$ltm view ") {
         Some(args) => {
             let args = args.split(" #").next().unwrap_or(args).trim_end();
-            let port = if args.contains("--port") { "" } else { " --port 0" };
+            let port = if args.contains("--port") {
+                ""
+            } else {
+                " --port 0"
+            };
             format!("serve_briefly \"$ltm\" view {args}{port}")
         }
         None => line,
@@ -309,7 +313,11 @@ fn readme_command_blocks_run() {
                 block.first_line
             );
         }
-        eprintln!("README block at line {}: {:.1?}", block.first_line, start.elapsed());
+        eprintln!(
+            "README block at line {}: {:.1?}",
+            block.first_line,
+            start.elapsed()
+        );
     }
 }
 

@@ -25,9 +25,12 @@ const BIN: &str = env!("CARGO_BIN_EXE_ltm");
 /// Lines that start with these words are not run: they build or install.
 const SKIPPED: &[&str] = &["cargo", "pip"];
 
-/// Settings of the copied scenes, by file: `(table, key, value)`. Every
-/// scene file must be listed, and every key must be in its file.
-const SMALL_SCENES: &[(&str, &[(&str, &str, &str)])] = &[
+/// A setting of a copied scene: `(table, key, value)`.
+type Setting = (&'static str, &'static str, &'static str);
+
+/// Settings of the copied scenes, by file. Every scene file must be
+/// listed, and every key must be in its file.
+const SMALL_SCENES: &[(&str, &[Setting])] = &[
     (
         "default.toml",
         &[
@@ -205,7 +208,7 @@ fn run_block(dir: &Path, block: &Block) -> Result<(), String> {
         .lines()
         .filter_map(|l| l.strip_prefix("FAILED at script line "))
         .filter_map(|l| l.split(':').next()?.parse::<usize>().ok())
-        .last()
+        .next_back()
         .and_then(|n| n.checked_sub(prelude.lines().count() + 1))
         .map_or("a line of its prelude".to_string(), |k| {
             format!("README.md line {}", block.first_line + k)
@@ -237,7 +240,7 @@ fn named_outputs(block: &Block) -> Vec<String> {
 
 /// Rewrites `key = value` lines of a scene file's tables to `small`;
 /// panics when a key is not in its table.
-fn shrink_scene(text: &str, small: &[(&str, &str, &str)]) -> String {
+fn shrink_scene(text: &str, small: &[Setting]) -> String {
     let mut used = vec![false; small.len()];
     let mut table = String::new();
     let mut out = Vec::new();

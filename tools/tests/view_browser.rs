@@ -1035,7 +1035,10 @@ fn screenshot_for_readme() {
         .unwrap();
     set(&tab, "yaw", "40", "change");
     set(&tab, "n", "720", "input");
-    for kv in std::env::var("LTM_VIEW_SHOT_SET").unwrap_or_default().split(',') {
+    for kv in std::env::var("LTM_VIEW_SHOT_SET")
+        .unwrap_or_default()
+        .split(',')
+    {
         if let Some((id, value)) = kv.split_once('=') {
             set(&tab, id, value, "change");
         }

@@ -137,13 +137,7 @@ fn draft_lights_are_close_and_give_way_to_exact_ones() {
     assert_eq!(exact.header("x-light"), Some("exact"));
     let (_, _, a) = draft.frame();
     let (_, _, b) = exact.frame();
-    let num: f64 = a
-        .iter()
-        .zip(&b)
-        .map(|(x, y)| f64::from(x - y).powi(2))
-        .sum();
-    let den: f64 = b.iter().map(|y| f64::from(*y).powi(2)).sum();
-    let e = (num / den).sqrt();
+    let e = frame_distance(&a, &b);
     // At n = 4 a texel spans 22°, and the draft's prefilter moves up to a
     // third of a texel's light across its edges: about 13 % here (at n = 32
     // the same blur spans under 1°; see README's viewer figures).

@@ -230,6 +230,19 @@ fn lum(p: &[f32]) -> f64 {
     0.2126 * f64::from(p[0]) + 0.7152 * f64::from(p[1]) + 0.0722 * f64::from(p[2])
 }
 
+/// A new tab on the server's page, once `ready` (a selector) is there.
+fn open_page(browser: &Browser, srv: &Server, ready: &str) -> std::sync::Arc<Tab> {
+    let tab = browser.new_tab().expect("open a tab");
+    tab.set_default_timeout(TIMEOUT);
+    tab.navigate_to(&srv.url())
+        .unwrap()
+        .wait_until_navigated()
+        .unwrap();
+    tab.wait_for_element_with_custom_timeout(ready, TIMEOUT)
+        .unwrap_or_else(|e| panic!("{ready}: {e}"));
+    tab
+}
+
 #[test]
 fn page_controls_show_what_ltm_relight_computes() {
     let Some(browser) = browser() else { return };
@@ -244,14 +257,7 @@ fn page_controls_show_what_ltm_relight_computes() {
         "--reference",
         s.raw.to_str().unwrap(),
     ]);
-    let tab = browser.new_tab().expect("open a tab");
-    tab.set_default_timeout(TIMEOUT);
-    tab.navigate_to(&srv.url())
-        .unwrap()
-        .wait_until_navigated()
-        .unwrap();
-    tab.wait_for_element_with_custom_timeout("#view0[data-shown]", TIMEOUT)
-        .expect("the first frame");
+    let tab = open_page(&browser, &srv, "#view0[data-shown]");
     opens_at_the_readme_settings(&tab);
     fast_srgb_is_the_exact_encoding(&tab);
     let n = controls_relight_as_ltm_relight(&tab);
@@ -312,14 +318,7 @@ fn files_with_different_light_counts_get_their_own_n() {
         "0.05",
     ]);
     let srv = Server::start(&[&p(&s.ltm), &p(&coarse), "--env", &p(&map("interior.exr"))]);
-    let tab = browser.new_tab().expect("open a tab");
-    tab.set_default_timeout(TIMEOUT);
-    tab.navigate_to(&srv.url())
-        .unwrap()
-        .wait_until_navigated()
-        .unwrap();
-    tab.wait_for_element_with_custom_timeout("#view1[data-shown]", TIMEOUT)
-        .expect("the first frames");
+    let tab = open_page(&browser, &srv, "#view1[data-shown]");
     assert_eq!(
         text(&tab, "document.getElementById('n-number').value"),
         "96"
@@ -1000,13 +999,7 @@ fn draft_errors(srv: &Server, query: &Value) -> Value {
             );
             let (_, _, a) = srv.get(&format!("{q}&light=draft")).frame();
             let (_, _, b) = srv.get(&q).frame();
-            let num: f64 = a
-                .iter()
-                .zip(&b)
-                .map(|(x, y)| f64::from(x - y).powi(2))
-                .sum();
-            let den: f64 = b.iter().map(|y| f64::from(*y).powi(2)).sum();
-            (num / den).sqrt()
+            frame_distance(&a, &b)
         })
         .collect();
     errors.sort_by(f64::total_cmp);

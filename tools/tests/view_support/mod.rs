@@ -319,3 +319,10 @@ fn rand_suffix(parts: &[&str]) -> u64 {
 pub fn f16_tolerance(v: f32) -> f32 {
     v.abs() * 2f32.powi(-11) + 2f32.powi(-25)
 }
+
+/// Relative L2 distance of two frames' values, `‖a − b‖ / ‖b‖`.
+pub fn frame_distance(a: &[f32], b: &[f32]) -> f64 {
+    let num: f64 = a.iter().zip(b).map(|(x, y)| f64::from(x - y).powi(2)).sum();
+    let den: f64 = b.iter().map(|y| f64::from(*y).powi(2)).sum();
+    (num / den).sqrt()
+}

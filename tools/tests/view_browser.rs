@@ -891,13 +891,7 @@ fn measure_latency() {
     args.extend(["--env", &env]);
     let srv = Server::start(&args);
     let browser = browser().expect("Chromium");
-    let tab = browser.new_tab().unwrap();
-    tab.navigate_to(&srv.url())
-        .unwrap()
-        .wait_until_navigated()
-        .unwrap();
-    tab.wait_for_element_with_custom_timeout("#view0[data-shown]", TIMEOUT)
-        .unwrap();
+    let tab = open_page(&browser, &srv, "#view0[data-shown]");
     let panels = eval(&tab, "panels.length").as_u64().unwrap();
     for i in 0..panels {
         let q = eval(&tab, &format!("query({i})"));
@@ -1019,13 +1013,7 @@ fn screenshot_for_readme() {
     let args: Vec<&str> = args.split(' ').collect();
     let browser = browser().expect("Chromium");
     let srv = Server::start(&args);
-    let tab = browser.new_tab().unwrap();
-    tab.navigate_to(&srv.url())
-        .unwrap()
-        .wait_until_navigated()
-        .unwrap();
-    tab.wait_for_element_with_custom_timeout("#view0[data-shown]", TIMEOUT)
-        .unwrap();
+    let tab = open_page(&browser, &srv, "#view0[data-shown]");
     set(&tab, "yaw", "40", "change");
     set(&tab, "n", "720", "input");
     for kv in std::env::var("LTM_VIEW_SHOT_SET")

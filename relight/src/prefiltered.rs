@@ -109,9 +109,13 @@ impl PrefilteredMap {
     /// [`face_resolution`](Self::face_resolution) (`6·n²` values in the
     /// column order of docs/FORMAT.md), the lighting rotated by `rotation`:
     /// the approximation of [`EnvMap::to_cubemap`] that the module
-    /// documentation describes. Parallel over rayon's pool.
+    /// documentation describes. Parallel over rayon's pool; face resolution
+    /// 0 gives an empty vector.
     pub fn to_cubemap(&self, rotation: &Rotation) -> Vec<[f32; 3]> {
         let n = self.n;
+        if n == 0 {
+            return Vec::new();
+        }
         let inv = rotation.matrix().transpose().as_mat3();
         let s2 = SAMPLES_PER_SIDE * SAMPLES_PER_SIDE;
         let per_face = n * n;
@@ -280,5 +284,9 @@ mod tests {
         assert_eq!(a, b);
         assert!(a.iter().flatten().all(|v| v.is_finite() && *v >= 0.0));
         assert_eq!(a.len(), 6 * 25);
+        // Face resolution 0 (no lights) gives no texels, not a panic.
+        assert!(PrefilteredMap::new(&env, 0)
+            .to_cubemap(&Rotation::IDENTITY)
+            .is_empty());
     }
 }

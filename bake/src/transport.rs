@@ -175,6 +175,42 @@ impl Scene {
         row: &mut [f32],
         albedo_out: &mut [f32; 3],
     ) -> RowStats {
+        let mut occluded = |o, d| self.occluded(o, d);
+        self.row_traced(tables, scratch, p, row, albedo_out, &mut occluded)
+    }
+
+    /// Every shadow ray row `p` traces, in the bake's order, as world-space
+    /// (origin, unit direction), and whether it was occluded: the rays a
+    /// ray tracer is measured on (`examples/shadow_rays.rs`).
+    pub fn shadow_rays(&self, p: usize, visit: &mut impl FnMut(DVec3, DVec3, bool)) {
+        let tables = Tables::new(self);
+        let mut scratch = Scratch::new(self);
+        let mut row = vec![0.0; self.dims().row_len()];
+        let mut trace = |o, d| {
+            let hit = self.occluded(o, d);
+            visit(o, d, hit);
+            hit
+        };
+        self.row_traced(
+            &tables,
+            &mut scratch,
+            p,
+            &mut row,
+            &mut [0.0; 3],
+            &mut trace,
+        );
+    }
+
+    /// [`Scene::row_into`] with the shadow query `occluded`.
+    fn row_traced(
+        &self,
+        tables: &Tables,
+        scratch: &mut Scratch,
+        p: usize,
+        row: &mut [f32],
+        albedo_out: &mut [f32; 3],
+        occluded: &mut impl FnMut(DVec3, DVec3) -> bool,
+    ) -> RowStats {
         let k_count = self.rows.samples_per_row() as usize;
         let acc = &mut scratch.acc;
         acc.iter_mut().for_each(|v| *v = 0.0);
@@ -200,8 +236,8 @@ impl Scene {
                     continue;
                 }
                 lum_sum += lum;
-                stats.shadow_rays +=
-                    self.integrate(tables, &hit, seed, |_, _| [lum * FRAC_1_PI; 1], acc);
+                let f = |_: &Material, _| [lum * FRAC_1_PI; 1];
+                stats.shadow_rays += self.integrate(tables, &hit, seed, f, acc, occluded);
             } else {
                 let w = 1.0 / k_count as f64;
                 stats.shadow_rays += self.integrate(
@@ -210,6 +246,7 @@ impl Scene {
                     seed,
                     |m: &Material, d| m.eval(hit.ns, d, wo).map(|v| v * w),
                     acc,
+                    occluded,
                 );
             }
         }
@@ -231,7 +268,8 @@ impl Scene {
     }
 
     /// Adds `∫_{texel j} V · f(ω) · max(0, n_s·ω) dω` for every texel into
-    /// `acc` (C values per texel); returns the shadow rays traced.
+    /// `acc` (C values per texel), with visibility V from `occluded`;
+    /// returns the shadow rays traced.
     fn integrate<const C: usize>(
         &self,
         tables: &Tables,
@@ -239,6 +277,7 @@ impl Scene {
         seed: u64,
         f: impl Fn(&Material, DVec3) -> [f64; C],
         acc: &mut [f64],
+        occluded: &mut impl FnMut(DVec3, DVec3) -> bool,
     ) -> u64 {
         let n = tables.n;
         let nf = n as f64;
@@ -284,7 +323,7 @@ impl Scene {
                             continue;
                         }
                         rays += 1;
-                        if self.occluded(origin, d) {
+                        if occluded(origin, d) {
                             continue;
                         }
                         let w = jac * cos;

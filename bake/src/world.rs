@@ -428,6 +428,18 @@ impl Scene {
         }
     }
 
+    /// The triangles traced, in world units (three vertices each): the
+    /// geometry another ray tracer is measured on.
+    pub fn world_triangles(&self) -> Vec<[[f32; 3]; 3]> {
+        self.tris
+            .iter()
+            .map(|t| {
+                t.vertices()
+                    .map(|v| (v.as_dvec3() / self.scale).as_vec3().to_array())
+            })
+            .collect()
+    }
+
     /// True when a ray from `origin` in unit direction `dir` hits anything
     /// (any hit: the shadow query).
     pub fn occluded(&self, origin: DVec3, dir: DVec3) -> bool {

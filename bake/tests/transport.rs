@@ -217,3 +217,27 @@ fn whole_face_texel_follows_the_solid_angle_density() {
     let sum: f64 = row.iter().map(|&v| v as f64).sum();
     assert!((sum - 1.0).abs() < 0.01, "row sum {sum}");
 }
+
+/// `Scene::shadow_rays` yields exactly the rays the row traces (their count
+/// is the row's shadow-ray count), unit directions from finite origins, and
+/// the tracer's own answers; some are occluded (the box on the plane).
+#[test]
+fn shadow_rays_are_the_rows_rays() {
+    let bx = "[[quads]]\ncenter = [0.0, 0.3, 0.0]\nsize = [0.5, 0.5]\nmaterial = \"grey\"\n";
+    let scene = plane_scene(bx, "face_res = 4\ntexel_samples = 2");
+    let (mut occluded, mut total) = (0, 0);
+    for p in (0..scene.dims().pixels()).step_by(7) {
+        let mut row = vec![0.0; scene.dims().row_len()];
+        let stats = scene.transport_row(p, &mut row, &mut [0.0; 3]);
+        let mut count = 0u64;
+        scene.shadow_rays(p, &mut |o, d, hit| {
+            assert!(o.is_finite() && (d.length() - 1.0).abs() < 1e-9, "{o} {d}");
+            assert_eq!(hit, scene.occluded(o, d));
+            occluded += hit as u64;
+            count += 1;
+        });
+        assert_eq!(count, stats.shadow_rays, "pixel {p}");
+        total += count;
+    }
+    assert!(occluded > 0 && occluded < total, "{occluded} of {total}");
+}

@@ -155,11 +155,13 @@ fn pipeline_is_byte_identical_to_one_machine() {
     let (raw, ltm_file) = one_machine(&scene, dir.path());
     let work = dir.path().join("work");
     let (ok, log) = pipeline(&scene, &work, Path::new(BIN));
-    assert!(ok, "the pipeline failed:\n{log}");
+    let merged = work.join("scene.raw");
+    assert!(merged.exists(), "the pipeline merged no store:\n{log}");
     assert!(
-        read(&work.join("scene.raw"), "merged store") == raw,
+        read(&merged, "merged store") == raw,
         "the merged store differs from a one-machine bake:\n{log}"
     );
+    assert!(ok, "the pipeline failed after the merge:\n{log}");
     assert!(
         read(&work.join("scene.ltm"), "assembled file") == ltm_file,
         "the assembled .ltm differs from a one-machine compress:\n{log}"

@@ -3,7 +3,8 @@
 //! out-of-core transposition and hostile files.
 
 use ltm_codec::compress::{
-    compress, CodeOptions, Coder, CompressOptions, ErrorCurve, Plan, Target, TransposeOptions,
+    compress, CodeOptions, Coder, Coding, CompressOptions, Feedback, Next, Plan, Target,
+    TransposeOptions,
 };
 use ltm_codec::compress::{Entropy, Mode};
 use ltm_codec::container::LtmFile;
@@ -757,9 +758,11 @@ fn raise_bits_meets_a_target_that_fixed_bits_miss() {
     assert!(rel_error(&decoded, &t) <= 0.002 * 1.0001);
 }
 
-/// The stages run apart, as a sharded compressor runs them: analyses of
-/// two halves merge into the analysis of the whole, one plan codes each
-/// half, and the halves written in order give the file `Transposed::code`
+/// The stages run apart, as a sharded compressor runs them: each shard
+/// keeps only its columns (`Transposed::with_columns`), analyses of the
+/// shards merge into the analysis of the whole, the shared error-feedback
+/// loop (`Feedback`) plans every coding from what the shards measured, and
+/// the shards' columns written in order give the file `Transposed::code`
 /// writes (this setting lands on its target after two or three codings).
 #[test]
 fn stages_run_per_column_range_give_the_same_file() {
@@ -784,24 +787,34 @@ fn stages_run_per_column_range_give_the_same_file() {
         target: Target::MaxError(0.02),
         ..Default::default()
     };
-    let coder = Coder::new(&t, &code).unwrap();
     let (m, k) = (dims.lights(), 37);
-    let whole = coder.analyze(0..m, ltm_codec::Progress::NONE).unwrap();
-    let first = coder.analyze(0..k, ltm_codec::Progress::NONE).unwrap();
-    let second = coder.analyze(k..m, ltm_codec::Progress::NONE).unwrap();
+    let shards: Vec<Transposed> = [0..k, k..m]
+        .into_iter()
+        .map(|r| Transposed::with_columns(&raw, &transpose, r, ltm_codec::Progress::NONE).unwrap())
+        .collect();
+    let coders: Vec<Coder> = shards
+        .iter()
+        .map(|s| Coder::new(s, &code).unwrap())
+        .collect();
+    assert!(coders[0]
+        .analyze(0..k + 1, ltm_codec::Progress::NONE)
+        .is_err());
+    let whole = Coder::new(&t, &code)
+        .unwrap()
+        .analyze(0..m, ltm_codec::Progress::NONE)
+        .unwrap();
+    let first = coders[0].analyze(0..k, ltm_codec::Progress::NONE).unwrap();
+    let second = coders[1].analyze(k..m, ltm_codec::Progress::NONE).unwrap();
     assert_eq!(first.clone().merge(second.clone()).unwrap(), whole);
     assert!(second.merge(first).is_err());
-    // The driver's codings, by column range: the plan for the target, then
-    // the plans the previous coding's error curve calls for, at the first
-    // coding's depths.
-    let aim = coder.budget() * ltm_codec::compress::TARGET_AIM.powi(2);
-    let low = coder.budget() * ltm_codec::compress::TARGET_LOW.powi(2);
-    let mut plan = Plan::new(&whole, code.bits, aim).unwrap();
-    let (mut achieved, mut codings) = (0.0, 0);
-    for coding in 1..=3 {
+    let budget = coders[0].budget();
+    let feedback = Feedback::new(&code, budget, Some(&whole)).unwrap();
+    let mut step = feedback.first().unwrap();
+    let (achieved, codings) = loop {
+        assert_eq!(step.bits, code.bits);
         let mut writer = LtmWriter::create_with(
             &dir.path().join("staged.ltm"),
-            coder.meta().clone(),
+            coders[0].meta().clone(),
             None,
             ltm_codec::container::OptionalChunks {
                 surface: None,
@@ -811,33 +824,23 @@ fn stages_run_per_column_range_give_the_same_file() {
             },
         )
         .unwrap();
-        let (mut err, mut curve, mut depths) = (0.0, None::<ErrorCurve>, Vec::new());
-        for range in [0..k, k..m] {
-            let coded = coder.code_columns(range, &plan).unwrap();
-            err += coded.errors.iter().sum::<f64>();
-            depths.extend(coded.columns.iter().map(|c| c.entry.depth as u32));
-            for c in coded.curves {
-                match &mut curve {
-                    Some(total) => total.merge(&c),
-                    None => curve = Some(c),
-                }
-            }
+        let mut measured = Coding::default();
+        for (coder, range) in coders.iter().zip([0..k, k..m]) {
+            let coded = coder.code_columns(range, &step.plan).unwrap();
+            coded.measure_into(&mut measured);
             writer.push_columns(coded.first, coded.columns).unwrap();
         }
-        let landed = (low..=coder.budget() * 1.0001).contains(&err);
-        assert!(
-            landed || coding < 3,
-            "coding {coding}: {err} vs {low}..{aim}"
-        );
-        if landed {
-            codings = coding;
-            achieved = (err.sqrt() / t.norm()) as f32;
-            writer.finish(achieved).unwrap();
-            break;
+        match feedback.next(&step, &measured).unwrap() {
+            Next::Code(next) => step = next,
+            Next::Keep { target_met } => {
+                assert!(target_met);
+                let achieved = (measured.err.sqrt() / t.norm()) as f32;
+                writer.finish(achieved).unwrap();
+                break (achieved, step.coding);
+            }
+            other => panic!("{other:?}"),
         }
-        let tau_sq = curve.unwrap().threshold_for(err, aim - err).unwrap();
-        plan = Plan::at_threshold(&whole, code.bits, tau_sq, &depths).unwrap();
-    }
+    };
     let stats = t
         .code(
             &dir.path().join("driver.ltm"),

@@ -60,6 +60,23 @@ pub fn read_raw_store(bytes: &[u8]) {
     let _ = raw.albedo();
 }
 
+/// Writes `bytes` to a file and reads it as each file of a sharded
+/// compression: a coded part (`read_coded_header`: framing, checksums,
+/// header and every column record), a plan and an analysis part (JSON,
+/// every field validated). Each must give a value or an error.
+pub fn read_shard_files(bytes: &[u8]) {
+    use ltm_codec::compress::shard::{read_coded_header, read_json, AnalysisPart, PlanFile};
+    let Ok(dir) = tempfile::tempdir() else { return };
+    let path = dir.path().join("f.part");
+    if std::fs::write(&path, bytes).is_err() {
+        return;
+    }
+    let limits = Limits::with_max_alloc(BUDGET);
+    let _ = read_coded_header(&path, &limits).map(|h| h.columns.len());
+    let _ = read_json::<PlanFile>(&path, &limits).map(|p| p.step.plan.columns());
+    let _ = read_json::<AnalysisPart>(&path, &limits).map(|a| a.columns);
+}
+
 /// A valid `pca` file of a small matrix (10×7 pixels, n = 2, RGB, rank 4),
 /// made once per process, for the `pca_decode` target to mutate.
 pub fn small_pca_file() -> Option<Vec<u8>> {

@@ -127,6 +127,27 @@ pub struct CompressArgs {
     /// so either opens without decoding. Wavelet modes only [default: range].
     #[arg(long)]
     pub entropy: Option<Entropy>,
+    /// Sharded compression, stage 1: analyze this shard's columns (with the
+    /// coding options given here) into the analysis part -o (JSON); then
+    /// `ltm plan`. See `ltm plan --help`.
+    #[arg(long, conflicts_with = "plan")]
+    pub analyze: bool,
+    /// Sharded compression, stage 3: code this shard's columns with the
+    /// plan of `ltm plan` into the coded part -o; the coding options come
+    /// from the plan. See `ltm plan --help`.
+    #[arg(
+        long,
+        value_name = "PLAN",
+        conflicts_with_all = ["mode", "rank", "max_rank", "col_filter", "row_filter", "bits", "keep", "max_error", "seed", "entropy"]
+    )]
+    pub plan: Option<PathBuf>,
+    /// With --analyze or --plan: shard I (0-based) of N contiguous column
+    /// ranges; `auto` or `auto/N` takes them from a Slurm job array
+    /// (SLURM_ARRAY_TASK_ID) or a Kubernetes Indexed Job
+    /// (JOB_COMPLETION_INDEX, with N from `auto/N` or LTM_SHARD_COUNT)
+    /// [default: 0/1].
+    #[arg(long, value_name = "I/N|auto")]
+    pub shard: Option<String>,
 }
 
 /// Refuses `ltm compress --terms`, renamed to `--keep`.
@@ -138,7 +159,35 @@ fn renamed_terms(_: &str) -> std::result::Result<usize, String> {
     )
 }
 
+/// The coding options of `ltm compress`'s arguments (wavelet modes).
+pub fn code_options(a: &CompressArgs) -> CodeOptions {
+    let target = match (a.keep, a.max_error) {
+        (Some(n), _) => Target::Keep(n),
+        (None, Some(e)) => Target::MaxError(e),
+        (None, None) => Target::MaxError(DEFAULT_MAX_ERROR),
+    };
+    CodeOptions {
+        mode: a.mode,
+        col_filter: a.col_filter,
+        bits: a.bits.unwrap_or(DEFAULT_BITS),
+        raise_bits: a.bits.is_none(),
+        target,
+        seed: a.seed,
+        entropy: a.entropy.unwrap_or_default(),
+        ..Default::default()
+    }
+}
+
 pub fn compress_cmd(a: CompressArgs, ctx: &Ctx) -> Result<()> {
+    if a.analyze || a.plan.is_some() {
+        if a.mode == Mode::Pca || a.rank.is_some() || a.max_rank.is_some() {
+            bail!("sharded compression (--analyze, --plan) codes the wavelet modes 2d, 4d and adaptive, not pca");
+        }
+        return crate::shard_cmds::compress_shard(&a, ctx);
+    }
+    if a.shard.is_some() {
+        bail!("--shard needs --analyze (stage 1) or --plan PLAN (stage 3) of a sharded compression; see `ltm plan --help`");
+    }
     let _claim = claim_files(&[("input", &a.raw)], &[("-o", &a.output)])?;
     let raw = RawStore::open_with_limits(&a.raw, ctx.limits())
         .with_context(|| format!("opening {}", a.raw.display()))?;
@@ -151,11 +200,6 @@ pub fn compress_cmd(a: CompressArgs, ctx: &Ctx) -> Result<()> {
             a.mode.name()
         );
     }
-    let target = match (a.keep, a.max_error) {
-        (Some(n), _) => Target::Keep(n),
-        (None, Some(e)) => Target::MaxError(e),
-        (None, None) => Target::MaxError(DEFAULT_MAX_ERROR),
-    };
     let mem_budget = a.mem_budget.unwrap_or_else(default_mem_budget);
     let opts = CompressOptions {
         transpose: TransposeOptions {
@@ -163,16 +207,7 @@ pub fn compress_cmd(a: CompressArgs, ctx: &Ctx) -> Result<()> {
             mem_budget,
             temp_dir: None,
         },
-        code: CodeOptions {
-            mode: a.mode,
-            col_filter: a.col_filter,
-            bits: a.bits.unwrap_or(DEFAULT_BITS),
-            raise_bits: a.bits.is_none(),
-            target,
-            seed: a.seed,
-            entropy: a.entropy.unwrap_or_default(),
-            ..Default::default()
-        },
+        code: code_options(&a),
     };
     let dims = raw.dims();
     let bar = progress::bar(0, "transpose", progress::Unit::of(Stage::Rows, dims));

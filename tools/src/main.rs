@@ -9,6 +9,7 @@ mod reference;
 mod relight_cmd;
 mod render_cmd;
 mod report;
+mod shard_cmds;
 mod view;
 
 use clap::{Parser, Subcommand};
@@ -47,8 +48,15 @@ enum Command {
     Merge(merge::MergeArgs),
     /// Convert a NumPy matrix into a raw store.
     Import(codec_cmds::ImportArgs),
-    /// Compress a raw store into an .ltm file.
+    /// Compress a raw store into an .ltm file (or one shard's stage of a
+    /// sharded compression: --analyze, --plan).
     Compress(codec_cmds::CompressArgs),
+    /// Sharded compression: the plan of the next coding, from the analysis
+    /// parts (and the coded parts of the last coding).
+    Plan(shard_cmds::PlanArgs),
+    /// Sharded compression: join the coded parts of the last coding into
+    /// the .ltm file.
+    Assemble(shard_cmds::AssembleArgs),
     /// Show an .ltm file's dimensions, size, error and depth statistics.
     Inspect(codec_cmds::InspectArgs),
     /// Decode an .ltm file to a dense NumPy matrix.
@@ -99,6 +107,8 @@ fn main() -> ExitCode {
         Command::Merge(args) => merge::run(args, &ctx),
         Command::Import(args) => codec_cmds::import(args, &ctx),
         Command::Compress(args) => codec_cmds::compress_cmd(args, &ctx),
+        Command::Plan(args) => shard_cmds::plan_cmd(args, &ctx),
+        Command::Assemble(args) => shard_cmds::assemble_cmd(args, &ctx),
         Command::Inspect(args) => codec_cmds::inspect_cmd(args, &ctx),
         Command::Export(args) => codec_cmds::export(args, &ctx),
         Command::Relight(args) => relight_cmd::run(args, &ctx),

@@ -34,6 +34,10 @@ struct Corpus {
     raw: PathBuf,
     /// `scene`'s bake in two parts (`ltm bake --shard`).
     parts: [PathBuf; 2],
+    /// `raw`'s analysis parts of a sharded compression in two shards.
+    analyses: [PathBuf; 2],
+    /// The coded parts of that run's last coding.
+    coded: Vec<PathBuf>,
     ltm: PathBuf,
     tex_ltm: PathBuf,
     npy: PathBuf,
@@ -131,6 +135,31 @@ fn commands() -> Vec<Cmd> {
             args: |c, o, _| vec!["compress".into(), s(&c.raw), "-o".into(), s(o)],
             inputs: |c| vec![c.raw.clone()],
             streamed: Some(|c| (c.raw.clone(), c.dir.join("other.raw"))),
+        },
+        // Like merge, parts cannot be swapped for other valid ones mid-run.
+        Cmd {
+            name: "plan",
+            outs: Outs::One,
+            args: |c, o, _| {
+                let mut a = vec!["plan".into()];
+                a.extend(c.analyses.iter().map(|p| s(p)));
+                a.extend(["-o".into(), s(o)]);
+                a
+            },
+            inputs: |c| c.analyses.to_vec(),
+            streamed: None,
+        },
+        Cmd {
+            name: "assemble",
+            outs: Outs::One,
+            args: |c, o, _| {
+                let mut a = vec!["assemble".into()];
+                a.extend(c.coded.iter().map(|p| s(p)));
+                a.extend(["-o".into(), s(o)]);
+                a
+            },
+            inputs: |c| c.coded.clone(),
+            streamed: None,
         },
         Cmd {
             name: "inspect",
@@ -242,6 +271,57 @@ fn fails(args: &[String], expect: &str) {
     );
 }
 
+/// Compresses `raw` in two shards in `dir`: the analysis parts `a0.json`
+/// and `a1.json`, and the coded parts of the last coding (returned).
+fn sharded_compression(dir: &Path, raw: &Path) -> Vec<PathBuf> {
+    let (a0, a1) = (dir.join("a0.json"), dir.join("a1.json"));
+    for (spec, a) in [("0/2", &a0), ("1/2", &a1)] {
+        run_ok(&strs(&[
+            "compress",
+            &s(raw),
+            "--analyze",
+            "--shard",
+            spec,
+            "-o",
+            &s(a),
+        ]));
+    }
+    let mut coded: Vec<PathBuf> = Vec::new();
+    for k in 1.. {
+        let plan = dir.join(format!("plan-{k}.json"));
+        let mut args = vec!["plan".to_string(), s(&a0), s(&a1)];
+        args.extend(coded.iter().map(|c| s(c)));
+        args.extend(["-o".into(), s(&plan)]);
+        let out = run(&args);
+        assert!(
+            out.status.success(),
+            "{}",
+            String::from_utf8_lossy(&out.stderr)
+        );
+        if String::from_utf8_lossy(&out.stdout).trim() == "assemble" {
+            break;
+        }
+        coded = (0..2)
+            .map(|i| {
+                let part = dir.join(format!("c-{k}-{i}.part"));
+                let spec = format!("{i}/2");
+                run_ok(&strs(&[
+                    "compress",
+                    &s(raw),
+                    "--plan",
+                    &s(&plan),
+                    "--shard",
+                    &spec,
+                    "-o",
+                    &s(&part),
+                ]));
+                part
+            })
+            .collect();
+    }
+    coded
+}
+
 fn corpus() -> &'static Corpus {
     static CORPUS: OnceLock<Corpus> = OnceLock::new();
     CORPUS.get_or_init(|| {
@@ -283,6 +363,7 @@ fn corpus() -> &'static Corpus {
         ] {
             run_ok(&strs(&["compress", &s(&p(raw)), "-o", &s(&p(ltm))]));
         }
+        let coded = sharded_compression(&dir, &p("t.raw"));
         for (ltm, npy) in [("t.ltm", "t.npy"), ("other.ltm", "other.npy")] {
             run_ok(&strs(&["export", &s(&p(ltm)), "-o", &s(&p(npy))]));
         }
@@ -292,6 +373,8 @@ fn corpus() -> &'static Corpus {
             tex_scene: p("tex.toml"),
             raw: p("t.raw"),
             parts: [p("t.part0.raw"), p("t.part1.raw")],
+            analyses: [p("a0.json"), p("a1.json")],
+            coded,
             ltm: p("t.ltm"),
             tex_ltm: p("tex.ltm"),
             npy: p("t.npy"),
@@ -800,6 +883,46 @@ fn npy_bomb(path: &Path) {
     std::fs::write(path, b).unwrap();
 }
 
+/// An analysis part of a sharded compression (from `src`) claiming 2^40
+/// columns with a term-count target (no analysis to check them against).
+fn json_bomb(src: &Path, path: &Path) {
+    let mut part: serde_json::Value = serde_json::from_slice(&std::fs::read(src).unwrap()).unwrap();
+    let huge = serde_json::json!(1u64 << 40);
+    part["run"]["lights"] = huge.clone();
+    part["run"]["shards"] = serde_json::json!(1);
+    part["run"]["options"]["target"] = serde_json::json!({"Keep": 1u64 << 40});
+    part["shard"] = serde_json::json!(0);
+    part["columns"] = serde_json::json!({"start": 0, "end": huge});
+    part["analysis"] = serde_json::Value::Null;
+    std::fs::write(path, serde_json::to_vec(&part).unwrap()).unwrap();
+}
+
+/// A coded part (from `src`) whose header claims 2^40 columns, with every
+/// length and checksum of its framing valid (docs/FORMAT.md, "Coded
+/// part").
+fn part_bomb(src: &Path, path: &Path) {
+    let b = std::fs::read(src).unwrap();
+    let u64_at = |i: usize| u64::from_le_bytes(b[i..i + 8].try_into().unwrap()) as usize;
+    let t = b.len() - 48;
+    let (payloads, measures, header) = (u64_at(t), u64_at(t + 8), u64_at(t + 16));
+    let at = 16 + payloads + measures;
+    let mut json: serde_json::Value = serde_json::from_slice(&b[at..at + header]).unwrap();
+    json["columns"]["end"] = serde_json::json!(1u64 << 40);
+    let json = serde_json::to_vec(&json).unwrap();
+    let mut out = b[..at].to_vec();
+    out.extend_from_slice(&json);
+    let mut trailer = Vec::new();
+    for v in [payloads, measures, json.len()] {
+        trailer.extend_from_slice(&(v as u64).to_le_bytes());
+    }
+    trailer.extend_from_slice(&b[t + 24..t + 32]);
+    trailer.extend_from_slice(&crc32fast::hash(&json).to_le_bytes());
+    trailer.extend_from_slice(&crc32fast::hash(&trailer).to_le_bytes());
+    trailer.extend_from_slice(b"LTMCPART");
+    out.extend_from_slice(&trailer);
+    std::fs::write(path, out).unwrap();
+}
+
 /// Runs `args` under a 3 GB address-space limit.
 fn run_limited(args: &[String]) -> Output {
     let script = "ulimit -v 3000000; exec \"$0\" \"$@\"";
@@ -822,6 +945,8 @@ fn files_that_claim_huge_matrices_are_refused_under_an_address_space_limit() {
     let bombs = d.path();
     raw_bomb(&bombs.join("bomb.raw"));
     npy_bomb(&bombs.join("bomb.npy"));
+    json_bomb(&c.analyses[0], &bombs.join("bomb.json"));
+    part_bomb(&c.coded[0], &bombs.join("bomb.part"));
     let scene = std::fs::read_to_string(&c.scene).unwrap();
     let scene = scene
         .replace("width = 24", "width = 8192")
@@ -839,7 +964,7 @@ fn files_that_claim_huge_matrices_are_refused_under_an_address_space_limit() {
         for input in &inputs {
             let ext = input.extension().and_then(|e| e.to_str()).unwrap_or("");
             let bomb = match ext {
-                "raw" | "npy" | "toml" => bombs.join(format!("bomb.{ext}")),
+                "raw" | "npy" | "toml" | "json" | "part" => bombs.join(format!("bomb.{ext}")),
                 "ltm" => ltm_bomb.clone(),
                 _ => continue,
             };

@@ -9,6 +9,7 @@
 //! error.
 
 use super::analysis::{candidate_depths, AnalysisSettings};
+use super::feedback::{budget_for, Coding};
 use super::plan::{quantization_error, ErrorCurve, Plan, Rule};
 use super::{CodeOptions, Target, Transposed};
 use crate::column::{EncodedColumn, SparseColumn};
@@ -54,10 +55,19 @@ pub struct CodedColumns {
     pub columns: Vec<EncodedColumn>,
     /// The measured squared error of each column.
     pub errors: Vec<f64>,
-    /// How each column's error would change with the threshold (threshold
-    /// plans with τ > 0 only; else empty). Merged in column order, they give
+    /// How each column's error would change with the threshold (`Some` for
+    /// threshold plans with τ > 0 only). Merged in column order, they give
     /// the same sums however the columns were split into ranges.
-    pub curves: Vec<ErrorCurve>,
+    pub curves: Vec<Option<ErrorCurve>>,
+}
+
+impl CodedColumns {
+    /// Adds what the columns measured to `coding`, column by column.
+    pub fn measure_into(&self, coding: &mut Coding) {
+        for ((col, err), curve) in self.columns.iter().zip(&self.errors).zip(&self.curves) {
+            coding.push_column(*err, col.entry.depth as u32, curve.as_ref());
+        }
+    }
 }
 
 /// Buffers of one worker: weighted coefficients, a decoded plane, scratch.
@@ -147,10 +157,7 @@ impl<'t> Coder<'t> {
     /// The squared error budget of the target: `(E·‖T‖)²` for a target
     /// relative error `E`, 0 for a term count.
     pub fn budget(&self) -> f64 {
-        match self.opts.target {
-            Target::MaxError(e) => (e * self.transposed.norm()).powi(2),
-            Target::Keep(_) => 0.0,
-        }
+        budget_for(self.opts.target, self.transposed.norm())
     }
 
     /// The settings of this coder's analyses (a target error only).
@@ -217,7 +224,7 @@ impl<'t> Coder<'t> {
             first: columns.start,
             columns: Vec::with_capacity(columns.len()),
             errors: Vec::with_capacity(columns.len()),
-            curves: Vec::new(),
+            curves: Vec::with_capacity(columns.len()),
         };
         for batch in self.transposed.batches(columns) {
             let data = self.transposed.read_columns(batch.clone())?;
@@ -237,7 +244,7 @@ impl<'t> Coder<'t> {
             for (col, err, curve) in coded {
                 out.columns.push(col);
                 out.errors.push(err);
-                out.curves.extend(curve);
+                out.curves.push(curve);
             }
         }
         Ok(out)

@@ -33,13 +33,16 @@
 
 mod analysis;
 mod code;
+mod feedback;
 mod options;
 mod pca;
 mod plan;
+pub mod shard;
 mod transpose;
 
 pub use analysis::{Analysis, AnalysisSettings};
 pub use code::{CodedColumns, Coder};
+pub use feedback::{budget_for, Coding, Feedback, Next, Step};
 pub use options::{Entropy, Mode};
 pub use pca::{compress_pca, PcaOptions, PcaStats, DEFAULT_MAX_RANK, DEFAULT_PCA_BITS};
 pub use plan::{Calibration, ErrorCurve, Plan};
@@ -53,7 +56,7 @@ use crate::wavelet::Filter;
 use std::path::{Path, PathBuf};
 
 /// What the coder aims for.
-#[derive(Clone, Copy, Debug, PartialEq)]
+#[derive(Clone, Copy, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
 #[non_exhaustive]
 pub enum Target {
     /// Relative L2 (Frobenius) error of the whole decoded matrix.
@@ -148,7 +151,7 @@ impl TransposeOptions {
 
 /// Settings of the coding stages (analysis, plan, coding:
 /// [`Transposed::code`]).
-#[derive(Clone, Debug)]
+#[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct CodeOptions {
     /// How columns are transformed: rows only, full depth or adaptive.
     pub mode: Mode,
@@ -188,6 +191,14 @@ impl Default for CodeOptions {
 }
 
 impl CodeOptions {
+    /// These options at `bits` quantization bits.
+    pub fn with_bits(&self, bits: u32) -> CodeOptions {
+        CodeOptions {
+            bits,
+            ..self.clone()
+        }
+    }
+
     /// Checks every field against its valid range.
     pub fn validate(&self) -> Result<()> {
         if !(2..=16).contains(&self.bits) {
@@ -293,9 +304,11 @@ pub fn compress(
 
 impl Transposed<'_> {
     /// Codes the matrix with `opts` into `out` (written atomically): the
-    /// analysis (once, for a target error), then plan and coding at
-    /// `opts.bits`, and again at 2 more bits while the target is missed and
-    /// `opts.raise_bits` is set. The file records [`Transposed::row_filter`].
+    /// analysis (once, for a target error), then the codings of the
+    /// error-feedback loop ([`Feedback`]: plan and coding at `opts.bits`,
+    /// again while the measured error misses `[TARGET_LOW·E, E]`, and at 2
+    /// more bits while the target is missed and `opts.raise_bits` is set).
+    /// The file records [`Transposed::row_filter`].
     pub fn code(
         &self,
         out: &Path,
@@ -308,187 +321,31 @@ impl Transposed<'_> {
             Target::MaxError(_) => Some(coder.analyze(0..m, progress)?),
             Target::Keep(_) => None,
         };
+        let feedback = Feedback::new(opts, coder.budget(), analysis.as_ref())?;
+        let mut step = feedback.first()?;
         loop {
-            let bits = coder.options().bits;
-            let can_raise = opts.raise_bits && bits < 16;
-            // Bits whose estimated quantization floor alone misses the
-            // target are skipped without a coding.
-            let hopeless = match (&analysis, can_raise) {
-                (Some(a), true) => below_floor(a, bits, coder.budget())?,
-                _ => false,
-            };
-            if !hopeless {
-                let stats = code_at_bits(&coder, out, analysis.as_ref(), progress)?;
-                if stats.target_met || !can_raise {
+            if coder.options().bits != step.bits {
+                coder = Coder::new(self, &opts.with_bits(step.bits))?;
+            }
+            let (writer, mut stats, coded) = write_columns(&coder, out, &step.plan, progress)?;
+            match feedback.next(&step, &coded)? {
+                Next::Code(next) => {
+                    writer.abandon();
+                    step = next;
+                }
+                Next::Keep { target_met } => {
+                    stats.target_met = target_met;
+                    stats.codings = step.coding;
+                    if let Err(e) = self.raw().check_unchanged() {
+                        writer.abandon();
+                        return Err(e);
+                    }
+                    stats.file_bytes = writer.finish(stats.achieved_error as f32)?;
                     return Ok(stats);
                 }
             }
-            let raised = CodeOptions {
-                bits: (bits + 2).min(16),
-                ..opts.clone()
-            };
-            coder = Coder::new(self, &raised)?;
         }
     }
-}
-
-/// Whether even keeping every coefficient at `bits` is estimated to miss
-/// the squared-error `budget` (the quantization floor of `bits`): the
-/// analysis's plan at τ = 0 exceeds the budget by more than the plan's
-/// usual estimation error.
-fn below_floor(analysis: &Analysis, bits: u32, budget: f64) -> Result<bool> {
-    let plan = Plan::new(analysis, bits, budget)?;
-    Ok(plan.tau_sq() == 0.0 && plan.estimated_error() > FLOOR_MARGIN * budget)
-}
-
-/// How far the estimated floor must exceed the budget before [`below_floor`]
-/// skips the bits without trying them.
-const FLOOR_MARGIN: f64 = 1.5;
-
-/// The error-feedback loop at the coder's bits. The first coding follows
-/// the plan for [`TARGET_AIM`]·E; when its measured error lands outside
-/// [[`TARGET_LOW`]·E, E], the plan's estimate is calibrated by the
-/// measured error (their ratio) and the columns are planned again, with a
-/// threshold interpolated between histogram bins, and coded once more.
-/// Only when that still misses E (rare: the calibration holds between
-/// nearby thresholds) does the budget shrink by the miss, up to
-/// [`MAX_CODINGS`]; bits that are too few for the target give a floor no
-/// threshold can pass, hence the limit.
-fn code_at_bits(
-    coder: &Coder,
-    out: &Path,
-    analysis: Option<&Analysis>,
-    progress: Progress<'_>,
-) -> Result<CompressStats> {
-    let budget = coder.budget();
-    let (aim, low) = (budget * TARGET_AIM.powi(2), budget * TARGET_LOW.powi(2));
-    let bits = coder.options().bits;
-    let mut plan = match (analysis, coder.options().target) {
-        (_, Target::Keep(n)) => Plan::keep(n),
-        (Some(a), Target::MaxError(_)) => Plan::new(a, bits, aim)?,
-        (None, Target::MaxError(_)) => {
-            return Err(Error::Invalid("a target error needs an analysis".into()))
-        }
-    };
-    let mut coding = 1;
-    loop {
-        let (writer, mut stats, coded) = write_columns(coder, out, &plan, progress)?;
-        let err = coded.err;
-        let missed = err > budget * 1.0001;
-        let next = match analysis {
-            Some(a) if coding < MAX_CODINGS && (missed || err < low) => {
-                replan(a, &plan, &coded, bits, aim, coding, missed)?
-            }
-            _ => None,
-        };
-        if let Some(next) = next {
-            plan = next;
-            writer.abandon();
-            coding += 1;
-            continue;
-        }
-        stats.target_met = analysis.is_none() || !missed;
-        stats.codings = coding;
-        if let Err(e) = coder.transposed().raw().check_unchanged() {
-            writer.abandon();
-            return Err(e);
-        }
-        stats.file_bytes = writer.finish(stats.achieved_error as f32)?;
-        return Ok(stats);
-    }
-}
-
-/// The next plan after a coding with `plan` measured the squared error
-/// `err` outside the target range, or `None` to keep the coding. The
-/// second coding moves τ to where the first coding's [`ErrorCurve`] puts
-/// the error at `aim`; beyond the curve's range (or without one) the plan's
-/// estimate is calibrated by `err` ([`calibration`]). The third coding
-/// follows the second coding's own curve; later ones (after a miss of the
-/// budget) follow the curve when it lowers τ, else shrink the estimate's
-/// budget by the miss and lower τ. An error below the range is kept after
-/// the third coding, and whenever the plan's estimate is 0.
-fn replan(
-    a: &Analysis,
-    plan: &Plan,
-    coded: &Coding,
-    bits: u32,
-    aim: f64,
-    coding: u32,
-    missed: bool,
-) -> Result<Option<Plan>> {
-    let (estimate, err) = (plan.estimated_error(), coded.err);
-    if coding == 1 {
-        let curve = coded.curve.as_ref();
-        if let Some(tau_sq) = curve.and_then(|c| c.threshold_for(err, aim - err)) {
-            return Plan::at_threshold(a, bits, tau_sq, &coded.depths).map(Some);
-        }
-        if estimate > 0.0 && err > 0.0 {
-            return Plan::calibrated(a, bits, aim, calibration(plan, err)).map(Some);
-        }
-        return Ok(None);
-    }
-    if plan.fixed_depths() && missed && coding >= 5 {
-        // The first coding's depths cannot meet the target (a quantization
-        // floor): back to the analysis's conservative plans, free depths.
-        return Plan::new(a, bits, 0.5 * aim).map(Some);
-    }
-    if plan.tau_sq() > 0.0 && err > 0.0 && (coding == 2 || missed) {
-        // The curve of the re-coding itself, measured near the target,
-        // at its depths: a third coding, and later ones only while the
-        // error exceeds the target.
-        let next = coded
-            .curve
-            .as_ref()
-            .and_then(|c| c.threshold_for(err, aim - err));
-        let tau_sq = match next {
-            Some(t) if !missed || t < plan.tau_sq() => Some(t),
-            _ if plan.fixed_depths() => Some(plan.tau_sq() * 0.9 * aim / err),
-            _ => None,
-        };
-        if let Some(tau_sq) = tau_sq {
-            return Plan::at_threshold(a, bits, tau_sq, &coded.depths).map(Some);
-        }
-    }
-    if !missed || plan.tau_sq() <= 0.0 || err <= 0.0 {
-        return Ok(None);
-    }
-    if estimate <= 0.0 {
-        return Ok(None);
-    }
-    let shrink = 0.9 * aim / err;
-    Plan::below(a, bits, estimate * shrink, plan.tau_sq() * shrink).map(Some)
-}
-
-/// How a coding with `plan` that measured the squared error `err` (> 0)
-/// calibrates the plan's estimate (> 0). The dropped energy is counted
-/// from the analysis, while the quantization error is a model (which can
-/// be off by a factor of a few where few bits meet a wide range of values):
-/// when the plan's estimate is mostly quantization error, the measured
-/// error less the dropped energy calibrates the model alone; otherwise
-/// (or when that leaves too little) both parts scale by `err / estimate`.
-fn calibration(plan: &Plan, err: f64) -> Calibration {
-    let (estimate, quant) = (plan.estimated_error(), plan.estimated_quantization());
-    let dropped = estimate - quant;
-    let whole = err / estimate;
-    if quant > 0.5 * estimate && err > 2.0 * dropped {
-        Calibration {
-            dropped: 1.0,
-            quantization: ((err - dropped) / quant).clamp(0.1 * whole, 10.0 * whole),
-        }
-    } else {
-        Calibration {
-            dropped: whole,
-            quantization: whole,
-        }
-    }
-}
-
-/// What a coding measured: the total squared error, each column's depth
-/// and the columns' [`ErrorCurve`] (threshold plans).
-struct Coding {
-    err: f64,
-    depths: Vec<u32>,
-    curve: Option<ErrorCurve>,
 }
 
 /// Codes every column with `plan` in batches, written as they come: the
@@ -520,36 +377,27 @@ fn write_columns(
         out_of_core: t.out_of_core(),
         ..Default::default()
     };
-    let mut err_total = 0.0f64;
-    let mut curve: Option<ErrorCurve> = None;
-    let mut depths = Vec::with_capacity(m);
+    let mut coding = Coding::default();
     for batch in t.batches(0..m) {
         let coded = coder.code_columns(batch.clone(), plan)?;
-        for c in &coded.curves {
-            match &mut curve {
-                Some(total) => total.merge(c),
-                None => curve = Some(c.clone()),
-            }
-        }
-        for (col, err) in coded.columns.iter().zip(&coded.errors) {
+        coded.measure_into(&mut coding);
+        for col in &coded.columns {
             stats.nonzeros += col.entry.nnz as u64;
             stats.depth_histogram[col.entry.depth as usize] += 1;
-            depths.push(col.entry.depth as u32);
-            err_total += err;
         }
         writer.push_columns(coded.first, coded.columns)?;
         progress.report(Stage::Coding, batch.end as u64, m as u64);
     }
-    let norm = t.norm();
-    stats.achieved_error = if norm > 0.0 {
-        err_total.sqrt() / norm
+    stats.achieved_error = relative_error(coding.err, t.norm());
+    Ok((writer, stats, coding))
+}
+
+/// The relative error of a squared error `err` in a matrix of norm `norm`
+/// (0 for a zero matrix).
+pub(crate) fn relative_error(err: f64, norm: f64) -> f64 {
+    if norm > 0.0 {
+        err.sqrt() / norm
     } else {
         0.0
-    };
-    let coding = Coding {
-        err: err_total,
-        depths,
-        curve,
-    };
-    Ok((writer, stats, coding))
+    }
 }

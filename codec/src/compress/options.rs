@@ -68,7 +68,7 @@ impl std::str::FromStr for Mode {
 
 /// How the encoder stores column payloads.
 #[non_exhaustive]
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
 pub enum Entropy {
     /// Range-coded with context modelling (encoding 4) where that is no
     /// larger than the plain payload: the smallest files.

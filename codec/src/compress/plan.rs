@@ -13,12 +13,14 @@
 //! `x < Δ/2`, so those are dropped (as the quantizer does).
 
 use super::analysis::{bin_threshold, Analysis, AnalysisSettings, BINS, BINS_PER_OCTAVE};
+use crate::bytes::{Reader, Writer};
 use crate::error::{Error, Result};
 use crate::quant::levels;
+use serde::{Deserialize, Serialize};
 use std::ops::Range;
 
 /// How a plan keeps coefficients.
-#[derive(Clone, Copy, Debug, PartialEq)]
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
 pub(super) enum Rule {
     /// Positions whose squared weighted magnitude is at least τ².
     Above(f64),
@@ -27,7 +29,10 @@ pub(super) enum Rule {
 }
 
 /// What the coder keeps of each column, and at which depths it tries them.
-#[derive(Clone, Debug, PartialEq)]
+/// Deserializing validates every field, so that a plan read from a file
+/// never indexes out of range.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(try_from = "UncheckedPlan")]
 pub struct Plan {
     rule: Rule,
     /// The analysis settings and bits a threshold plan was made for.
@@ -45,6 +50,94 @@ pub struct Plan {
     /// Each column is coded at its best depth only (a re-coding that keeps
     /// the first coding's depths).
     fixed: bool,
+}
+
+/// A [`Plan`] as deserialized, before its fields are checked.
+#[derive(Deserialize)]
+struct UncheckedPlan {
+    rule: Rule,
+    made_for: Option<(AnalysisSettings, u32)>,
+    columns: Range<usize>,
+    choice: Vec<[u32; 2]>,
+    estimate: f64,
+    quantization: f64,
+    fixed: bool,
+}
+
+impl TryFrom<UncheckedPlan> for Plan {
+    type Error = Error;
+
+    fn try_from(u: UncheckedPlan) -> Result<Plan> {
+        for (what, v) in [
+            ("plan estimate", u.estimate),
+            ("plan quantization", u.quantization),
+        ] {
+            if !(v.is_finite() && v >= 0.0) {
+                return Err(Error::range(what, v, "finite and ≥ 0"));
+            }
+        }
+        match (u.rule, &u.made_for) {
+            (Rule::Largest(n), None) if n >= 1 && u.choice.is_empty() => {}
+            (Rule::Above(tau_sq), Some((settings, bits))) => {
+                check_threshold_plan(tau_sq, settings, *bits, &u.columns, &u.choice)?
+            }
+            (rule, _) => {
+                return Err(Error::corrupt(
+                    "plan",
+                    format!("rule {rule:?} with the wrong analysis settings or depth choices"),
+                ))
+            }
+        }
+        Ok(Plan {
+            rule: u.rule,
+            made_for: u.made_for,
+            columns: u.columns,
+            choice: u.choice,
+            estimate: u.estimate,
+            quantization: u.quantization,
+            fixed: u.fixed,
+        })
+    }
+}
+
+/// A threshold plan's fields are in range: τ² finite and ≥ 0, bits 2..=16,
+/// a column range within the matrix, and one pair of candidate depths per
+/// column.
+fn check_threshold_plan(
+    tau_sq: f64,
+    settings: &AnalysisSettings,
+    bits: u32,
+    columns: &Range<usize>,
+    choice: &[[u32; 2]],
+) -> Result<()> {
+    if !(tau_sq.is_finite() && tau_sq >= 0.0) {
+        return Err(Error::range("plan threshold τ²", tau_sq, "finite and ≥ 0"));
+    }
+    if !(2..=16).contains(&bits) {
+        return Err(Error::range("plan bits", bits, "2..=16"));
+    }
+    if settings.width == 0 || settings.height == 0 || settings.lights == 0 {
+        return Err(Error::corrupt("plan", "empty image or light set"));
+    }
+    if columns.start > columns.end || columns.end > settings.lights {
+        return Err(Error::range(
+            "plan columns",
+            format!("{}..{}", columns.start, columns.end),
+            format!("a range within 0..{}", settings.lights),
+        ));
+    }
+    let valid = settings.depths();
+    if choice.len() != columns.len() || choice.iter().flatten().any(|d| !valid.contains(d)) {
+        return Err(Error::corrupt(
+            "plan",
+            format!(
+                "{} depth choices for {} columns, each one of {valid:?}",
+                choice.len(),
+                columns.len()
+            ),
+        ));
+    }
+    Ok(())
 }
 
 impl Plan {
@@ -296,6 +389,43 @@ impl ErrorCurve {
     /// The threshold the curve was measured at.
     pub fn tau_sq(&self) -> f64 {
         self.tau_sq
+    }
+
+    /// Appends the curve as little-endian f64 values: τ², the quantization
+    /// error, the dropped energy, then the (energy, error) pairs of the
+    /// bins above and below τ² (a coded part's record).
+    pub(crate) fn write(&self, w: &mut Writer) {
+        let pairs = self.up.iter().chain(&self.down);
+        let values = [self.tau_sq, self.quantization, self.dropped]
+            .into_iter()
+            .chain(pairs.flat_map(|&(e, q)| [e, q]));
+        values.for_each(|v| w.u64(v.to_bits()));
+    }
+
+    /// Reads a curve [`ErrorCurve::write`] wrote: τ² finite and > 0, every
+    /// other value finite and ≥ 0.
+    pub(crate) fn read(r: &mut Reader) -> Result<ErrorCurve> {
+        let mut next = || -> Result<f64> { Ok(f64::from_bits(r.u64()?)) };
+        let tau_sq = next()?;
+        if !(tau_sq.is_finite() && tau_sq > 0.0) {
+            return Err(Error::range("error curve τ²", tau_sq, "finite and > 0"));
+        }
+        let mut values = Vec::with_capacity(2 + 4 * CURVE_BINS);
+        for _ in 0..2 + 4 * CURVE_BINS {
+            let v = next()?;
+            if !(v.is_finite() && v >= 0.0) {
+                return Err(Error::range("error curve value", v, "finite and ≥ 0"));
+            }
+            values.push(v);
+        }
+        let pairs: Vec<(f64, f64)> = values[2..].chunks_exact(2).map(|p| (p[0], p[1])).collect();
+        Ok(ErrorCurve {
+            tau_sq,
+            quantization: values[0],
+            dropped: values[1],
+            up: pairs[..CURVE_BINS].to_vec(),
+            down: pairs[CURVE_BINS..].to_vec(),
+        })
     }
 
     /// Adds a kept coefficient of squared magnitude `e` (≥ τ²) coded with

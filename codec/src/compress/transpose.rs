@@ -71,6 +71,8 @@ pub struct Transposed<'a> {
     out_of_core: bool,
     /// The rows whose values are all zero.
     empty_rows: EmptyRows,
+    /// The columns stored: all of them, or one shard's range.
+    kept: Range<usize>,
 }
 
 impl<'a> Transposed<'a> {
@@ -84,13 +86,35 @@ impl<'a> Transposed<'a> {
         opts: &TransposeOptions,
         progress: Progress<'_>,
     ) -> Result<Transposed<'a>> {
+        Self::with_columns(raw, opts, 0..raw.dims().lights(), progress)
+    }
+
+    /// [`Transposed::new`] keeping only the columns `kept` (one shard of a
+    /// sharded compression): every row is still read and transformed, so
+    /// the norm, the histogram of values, the empty rows and the monochrome
+    /// test are the whole matrix's, bit for bit, while the memory (or
+    /// temporary file) holds only `kept`. The coding stages accept only
+    /// column ranges within `kept`.
+    pub fn with_columns(
+        raw: &'a RawStore,
+        opts: &TransposeOptions,
+        kept: Range<usize>,
+        progress: Progress<'_>,
+    ) -> Result<Transposed<'a>> {
         opts.validate()?;
         let src = raw.dims();
+        if kept.start >= kept.end || kept.end > src.lights() {
+            return Err(Error::range(
+                "kept columns",
+                format!("{}..{}", kept.start, kept.end),
+                format!("a non-empty range within 0..{}", src.lights()),
+            ));
+        }
         let channels = if is_monochrome(raw)? { 1 } else { src.channels };
         let dims = Dims { channels, ..src };
         let (p, m, c) = (dims.pixels(), dims.lights(), channels as usize);
         let mem = usize::try_from(opts.mem_budget / 4).unwrap_or(usize::MAX); // in f32 values
-        let total = m * c * p;
+        let total = kept.len() * c * p;
         let out_of_core = total > mem;
         let store = if out_of_core {
             let dir = opts.temp_dir.clone().unwrap_or_else(std::env::temp_dir);
@@ -109,6 +133,7 @@ impl<'a> Transposed<'a> {
             hist0: vec![(0, 0.0); HIST0_BINS],
             out_of_core,
             empty_rows: EmptyRows::none(p),
+            kept,
         };
         // Blocks of rows within a quarter of the budget (raw rows are read
         // 8 MiB at a time).
@@ -218,25 +243,26 @@ impl<'a> Transposed<'a> {
         }
     }
 
-    /// Transposes a block of transformed rows through `tbuf`
-    /// (`tbuf[(j·C + c)·rows + r]`) and writes each run into its column.
+    /// Transposes the kept columns of a block of transformed rows through
+    /// `tbuf` (`tbuf[((j − kept.start)·C + c)·rows + r]`) and writes each
+    /// run into its column.
     fn scatter(&mut self, rbuf: &[f32], rows: Range<usize>, tbuf: &mut [f32]) -> Result<()> {
         let (p, m, channels) = (
             self.dims.pixels(),
             self.dims.lights(),
             self.dims.channels as usize,
         );
-        let len = rows.len();
-        tbuf[..len * m * channels]
+        let (len, kept) = (rows.len(), self.kept.clone());
+        tbuf[..len * kept.len() * channels]
             .par_chunks_mut(len)
             .enumerate()
             .for_each(|(jc, run)| {
-                let (j, c) = (jc / channels, jc % channels);
+                let (j, c) = (kept.start + jc / channels, jc % channels);
                 for (r, v) in run.iter_mut().enumerate() {
                     *v = rbuf[(r * channels + c) * m + j];
                 }
             });
-        for jc in 0..m * channels {
+        for jc in 0..kept.len() * channels {
             self.store
                 .write(jc * p + rows.start, &tbuf[jc * len..(jc + 1) * len])?;
         }
@@ -280,14 +306,20 @@ impl<'a> Transposed<'a> {
         self.norm_sq
     }
 
-    /// Checks that `columns` lies within the matrix's columns.
+    /// The columns stored: `0..M`, or the range of
+    /// [`Transposed::with_columns`].
+    pub fn kept_columns(&self) -> Range<usize> {
+        self.kept.clone()
+    }
+
+    /// Checks that `columns` lies within the stored columns.
     pub(super) fn check_columns(&self, columns: &Range<usize>) -> Result<()> {
-        let m = self.dims.lights();
-        if columns.start > columns.end || columns.end > m {
+        let kept = &self.kept;
+        if columns.start > columns.end || columns.start < kept.start || columns.end > kept.end {
             return Err(Error::range(
                 "columns",
                 format!("{}..{}", columns.start, columns.end),
-                format!("a range within 0..{m}"),
+                format!("a range within the stored {}..{}", kept.start, kept.end),
             ));
         }
         Ok(())
@@ -306,7 +338,8 @@ impl<'a> Transposed<'a> {
     pub(super) fn read_columns(&self, columns: Range<usize>) -> Result<Vec<f32>> {
         let len = self.dims.channels as usize * self.dims.pixels();
         let mut data = vec![0.0f32; columns.len() * len];
-        self.store.read(columns.start * len, &mut data)?;
+        self.store
+            .read((columns.start - self.kept.start) * len, &mut data)?;
         Ok(data)
     }
 

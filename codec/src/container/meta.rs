@@ -43,7 +43,7 @@ impl Meta {
         max_levels(self.dims.width() as usize, self.dims.height() as usize)
     }
 
-    pub(super) fn encode(&self) -> Vec<u8> {
+    pub(crate) fn encode(&self) -> Vec<u8> {
         let mut w = Writer::default();
         for v in self.dims.to_fields() {
             w.u32(v);
@@ -61,7 +61,7 @@ impl Meta {
         w.bytes
     }
 
-    pub(super) fn decode(bytes: &[u8]) -> Result<Meta> {
+    pub(crate) fn decode(bytes: &[u8]) -> Result<Meta> {
         let mut r = Reader::new(bytes, "META chunk");
         let dims = Dims::read_fields(&mut r)?;
         dims.validate()?;

@@ -33,6 +33,8 @@ pub struct RawStore {
     pub(super) path: PathBuf,
     /// CRC of every block, from the block table.
     pub(super) block_crcs: Vec<u32>,
+    /// The header's bytes as read.
+    pub(super) head: Vec<u8>,
     /// One byte per row: 1 = flagged all zero.
     pub(super) flags: Vec<u8>,
     pub(super) albedo: Option<Vec<f32>>,
@@ -111,6 +113,7 @@ impl RawStore {
             layout,
             path: path.into(),
             block_crcs,
+            head,
             flags,
             albedo,
             surface,
@@ -127,6 +130,31 @@ impl RawStore {
     /// The matrix dimensions.
     pub fn dims(&self) -> Dims {
         self.header.dims
+    }
+
+    /// The file's length in bytes, when it was opened.
+    pub fn file_len(&self) -> u64 {
+        self.stamp.len
+    }
+
+    /// A 64-bit checksum of the store's content, from what opening read:
+    /// the header, the block table (the CRC of every block of rows), the
+    /// row flags and the albedo image. Two stores with equal ids hold the
+    /// same matrix (sharded compression checks it).
+    pub fn content_id(&self) -> u64 {
+        let mut a = crc32fast::Hasher::new();
+        let mut b = crc32fast::Hasher::new_with_initial(0x6c74_6d21);
+        let parts: [&[u8]; 4] = [
+            &self.head,
+            bytemuck::cast_slice(&self.block_crcs),
+            &self.flags,
+            bytemuck::cast_slice(self.albedo.as_deref().unwrap_or(&[])),
+        ];
+        for p in parts {
+            a.update(p);
+            b.update(p);
+        }
+        (a.finalize() as u64) << 32 | b.finalize() as u64
     }
 
     /// The file's path.

@@ -1,8 +1,9 @@
 //! The Slurm pipeline of `tools/cluster/slurm` on a real Slurm: a tiny
 //! scene baked and compressed as 4-task job arrays gives a raw store and an
 //! `.ltm` file byte-identical to a one-machine `ltm bake` and
-//! `ltm compress`; a killed shard fails the pipeline without an `.ltm`
-//! file, and running the pipeline again completes it.
+//! `ltm compress` (with two codings: the check job submits the second); a
+//! killed shard fails the pipeline without an `.ltm` file, and running the
+//! pipeline again completes it.
 //!
 //! Needs a Slurm whose node is up (`sinfo`), as
 //! `tools/cluster/slurm/start-local-slurm.sh` starts one; without it the
@@ -162,6 +163,12 @@ fn pipeline_is_byte_identical_to_one_machine() {
         "the merged store differs from a one-machine bake:\n{log}"
     );
     assert!(ok, "the pipeline failed after the merge:\n{log}");
+    // COMPRESS makes the first coding miss the error window, so that the
+    // check job's second coding (submitted from inside the pipeline) runs.
+    assert!(
+        log.lines().any(|l| l.starts_with("ltm-check-2 ")),
+        "the pipeline coded once: pick COMPRESS options that code twice:\n{log}"
+    );
     assert!(
         read(&work.join("scene.ltm"), "assembled file") == ltm_file,
         "the assembled .ltm differs from a one-machine compress:\n{log}"

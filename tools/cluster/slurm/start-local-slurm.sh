@@ -94,6 +94,9 @@ JobAcctGatherType=jobacct_gather/none
 AccountingStorageType=accounting_storage/none
 JobCompType=jobcomp/none
 SchedulerType=sched/backfill
+# Start a dependent job as soon as the one it waits on ends (the default
+# delays batch scheduling by 3 s, at every stage of a pipeline).
+SchedulerParameters=batch_sched_delay=0
 SelectType=select/cons_tres
 SelectTypeParameters=CR_CPU
 SlurmdParameters=config_overrides
@@ -111,8 +114,10 @@ NodeName=$host NodeAddr=127.0.0.1 CPUs=$cpus RealMemory=$mem_mb State=UNKNOWN
 PartitionName=local Nodes=$host Default=YES MaxTime=INFINITE State=UP
 EOF
 )"
+conf_changed=""
 if [ ! -e "$conf" ] || [ "$new_conf" != "$(cat "$conf")" ]; then
     printf '%s\n' "$new_conf" | $sudo tee "$conf" >/dev/null
+    conf_changed=1
 fi
 
 # munge: a key readable only by its user, then the daemon (as that user).
@@ -143,6 +148,9 @@ running() { [ -s "$1" ] && $sudo kill -0 "$(cat "$1")" 2>/dev/null; }
 if ! running "$state/slurmctld.pid"; then
     echo "== starting slurmctld"
     $sudo slurmctld
+elif [ -n "$conf_changed" ]; then
+    echo "== slurmctld reads the new $conf"
+    $sudo scontrol reconfigure
 fi
 if ! running "$state/slurmd.pid"; then
     echo "== starting slurmd"

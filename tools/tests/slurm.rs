@@ -5,8 +5,9 @@
 //! killed shard fails the pipeline without an `.ltm` file, and running the
 //! pipeline again completes it.
 //!
-//! Needs a Slurm whose node is up (`sinfo`), as
-//! `tools/cluster/slurm/start-local-slurm.sh` starts one; without it the
+//! Needs a Slurm whose node is up (`sinfo`) and sees this machine's
+//! temporary directory, as the single-node Slurm of
+//! `tools/cluster/slurm/start-local-slurm.sh` does; without it the
 //! tests are skipped with a message, unless `LTM_SLURM=1` (set by
 //! `.ci/run`), where they fail. They wait on the jobs' state (`wait.sh`
 //! polls `squeue`) with a timeout, never for a fixed time.

@@ -32,6 +32,7 @@ pub use directory::{
     FEATURE_SURFACE, MAGIC, MAX_CHUNKS, MIN_VERSION, VERSION,
 };
 pub use meta::Meta;
+pub(crate) use read::check_column_entry;
 pub use read::{validate_bytes, LtmFile, LtmIndex};
 #[cfg(feature = "fuzzing")]
 pub use repair::repair_checksums;

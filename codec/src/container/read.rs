@@ -512,7 +512,7 @@ fn read_column_table(
 
 /// Checks column `j`'s table entry (its encoding code `enc` still raw, in
 /// a file of `version`) against the metadata and the DATA chunk's length.
-fn check_column_entry(
+pub(crate) fn check_column_entry(
     j: usize,
     mut e: ColumnEntry,
     (enc, version): (u8, u32),

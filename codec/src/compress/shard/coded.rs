@@ -241,6 +241,9 @@ fn read_part(path: &Path, limits: &Limits) -> Result<Part> {
             SHARD_FILES_VERSION,
         ));
     }
+    if lead[12..16] != [0; 4] {
+        return Err(corrupt("reserved bytes 12..16 are not zero".into()));
+    }
     let mut r = Reader::new(&tail, "coded part trailer");
     let lens = [r.u64()?, r.u64()?, r.u64()?];
     let crcs = [r.u32()?, r.u32()?, r.u32()?];
@@ -455,7 +458,7 @@ pub(super) fn assemble(paths: &[PathBuf], out: &Path, limits: &Limits) -> Result
     };
     let mut coding = Coding::default();
     for part in &parts {
-        push_part(&mut writer, part, &mut stats, &mut coding, limits)?;
+        push_part(&mut writer, &meta, part, &mut stats, &mut coding, limits)?;
     }
     stats.achieved_error = relative_error(coding.err, run.norm_sq.sqrt());
     stats.target_met = match run.options.target {
@@ -473,6 +476,7 @@ pub(super) fn assemble(paths: &[PathBuf], out: &Path, limits: &Limits) -> Result
 /// against its entry's checksum, and the whole against the part's.
 fn push_part(
     writer: &mut LtmWriter,
+    meta: &Meta,
     part: &Part,
     stats: &mut CompressStats,
     coding: &mut Coding,
@@ -483,6 +487,10 @@ fn push_part(
     for (k, r) in part.records.iter().enumerate() {
         let j = part.header.columns.start + k;
         let n = r.entry.stored_len as u64;
+        // The checks of a reader of the finished file's column table.
+        let code = (r.entry.encoding as u8, VERSION);
+        crate::container::check_column_entry(j, r.entry, code, meta, n)
+            .map_err(|e| Error::corrupt("coded part", format!("{}: {e}", part.path.display())))?;
         if offset - LEAD_LEN + n > part.payload_len {
             return Err(Error::corrupt(
                 "coded part",

@@ -27,6 +27,12 @@ fn matrix(dims: Dims) -> Vec<f32> {
         .collect()
 }
 
+/// [`matrix`] of `dims` as the raw store `dir/m.raw`.
+fn store(dir: &Path, dims: Dims) -> RawStore {
+    let path = ltm_testkit::write_raw(&dir.join("m.raw"), dims, &matrix(dims), None, 1 << 14);
+    RawStore::open(&path).unwrap()
+}
+
 /// Runs the stages in `shards` shards in `dir` (one plan per coding until
 /// the loop keeps one): the last coding's parts.
 fn sharded(raw: &RawStore, opts: &CodeOptions, shards: u64, dir: &Path) -> Vec<PathBuf> {
@@ -81,14 +87,7 @@ fn repair(b: &mut [u8]) {
 fn three_shards_assemble_the_file_of_one_machine() {
     let dir = tempfile::tempdir().unwrap();
     let dims = Dims::image(20, 14, 4, 3);
-    let raw_path = ltm_testkit::write_raw(
-        &dir.path().join("m.raw"),
-        dims,
-        &matrix(dims),
-        None,
-        1 << 14,
-    );
-    let raw = RawStore::open(&raw_path).unwrap();
+    let raw = store(dir.path(), dims);
     let opts = CodeOptions {
         target: Target::MaxError(0.02),
         ..Default::default()
@@ -111,14 +110,7 @@ fn three_shards_assemble_the_file_of_one_machine() {
 fn damaged_coded_parts_are_refused_or_read_never_panic() {
     let dir = tempfile::tempdir().unwrap();
     let dims = Dims::image(12, 9, 2, 1);
-    let raw_path = ltm_testkit::write_raw(
-        &dir.path().join("m.raw"),
-        dims,
-        &matrix(dims),
-        None,
-        1 << 14,
-    );
-    let raw = RawStore::open(&raw_path).unwrap();
+    let raw = store(dir.path(), dims);
     let opts = CodeOptions {
         target: Target::MaxError(0.05),
         ..Default::default()

@@ -187,12 +187,62 @@ fn report_quick_writes_every_section() {
         index
     );
     assert!(out.join("size-error.svg").is_file());
+    replot_with_peers(&out, &r);
     std::fs::write(out.join("results.json"), r#"{"codings": 3}"#).unwrap();
     let (ok, _, stderr) = ltm(&["report", "--replot", "-o", out.to_str().unwrap()]);
     assert!(
         !ok && stderr.contains("is not a report's results.json"),
         "{stderr}"
     );
+}
+
+/// `ltm report --replot --peers`: SZ3, ZFP and SPERR in the peers table,
+/// and adaptive's size over the smallest peer's.
+fn replot_with_peers(out: &std::path::Path, r: &serde_json::Value) {
+    let scene = &r["scene"];
+    let adaptive = |t: f64| {
+        r["codings"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .filter(|c| c["mode"] == "adaptive" && c["target_error"] == t)
+            .map(|c| c["file_bytes"].as_u64().unwrap())
+            .min()
+            .unwrap()
+    };
+    let point = |method: &str, bytes: u64, shape: &str| {
+        serde_json::json!({"method": method, "param": 0, "bytes": bytes, "matrix_error": 0.0098,
+            "target": 0.01, "shape": shape, "bound": 1e-4, "compress_s": 0.1,
+            "decompress_s": 0.1, "frame_s": 0.01})
+    };
+    let peers = serde_json::json!({
+        "dims": {"width": scene["width"], "height": scene["height"],
+                 "face_res": scene["face_res"], "channels": scene["channels"]},
+        "points": [point("sz3", 3000, "(P, M·C)"), point("zfp", 5000, "(H, W, M·C)"),
+                   point("sperr", 2000, "(M·C, H, W)")],
+    });
+    let path = out.join("peers.json");
+    std::fs::write(&path, peers.to_string()).unwrap();
+    let (ok, _, stderr) = ltm(&[
+        "report",
+        "--replot",
+        "--peers",
+        path.to_str().unwrap(),
+        "-o",
+        out.to_str().unwrap(),
+    ]);
+    assert!(ok, "{stderr}");
+    let index = std::fs::read_to_string(out.join("index.md")).unwrap();
+    assert!(
+        index.contains("| SZ3 | ZFP | SPERR | adaptive / best peer |"),
+        "{index}"
+    );
+    let row = index
+        .lines()
+        .find(|l| l.starts_with("| 1.000 % |") && l.contains("[(M·C, H, W)]"))
+        .unwrap_or_else(|| panic!("no peers row at 1 %: {index}"));
+    let ratio = format!("| {:.2} |", adaptive(0.01) as f64 / 2000.0);
+    assert!(row.ends_with(&ratio), "{row} does not end with {ratio}");
 }
 
 #[test]

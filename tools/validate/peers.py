@@ -1,16 +1,19 @@
 #!/usr/bin/env python3
-"""SZ3 and ZFP, the error-bounded scientific float compressors, on a raw
-transport store: the peers `ltm report --peers FILE` shows beside ltm.
+"""SZ3, ZFP and SPERR, the error-bounded scientific float compressors, on a
+raw transport store: the peers `ltm report --peers FILE` shows beside ltm.
 
 For each compressor, each target relative L2 (Frobenius) error E of the
-whole matrix and each shape the matrix can be given in,
+whole matrix and each layout the matrix can be given in,
 
   (P, M*C)         rows = pixels, one row of all lights and channels,
   (H, W, M*C)      the image grid, lights and channels innermost,
   (P, 6, n, n*C)   each row as its cubemap (channels innermost),
+  (M*C, H, W)      one image per light and channel (a transposed copy),
 
-the compressor's absolute error bound (SZ3: ABS mode; ZFP: fixed-accuracy
-tolerance) is bisected (secant steps on log bound vs log error) until the
+the compressor's error parameter (SZ3: the ABS error bound; ZFP: the
+fixed-accuracy tolerance; SPERR: the quantization step of its "q" mode,
+which bounds the L2 error; SPERR codes 3D arrays, and the 4D layout as 3D
+slices) is bisected (secant steps on log bound vs log error) until the
 measured error lies in [0.97 E, E]; the smallest compressed size with an
 error of at most E over all shapes is kept. The cost of relighting from
 the peer is recorded too: one decompression of the kept stream, and the
@@ -23,7 +26,9 @@ Output: JSON with one point per (method, target):
    "decompress_s": ..., "frame_s": ..., "tries": [...every shape's best...]}
 
 Usage (what the committed results were made with):
-  pip install pysz zfpy numpy
+  pip install pysz "zfpy==1.0.1" numcodecs-wasm-sperr numpy
+  (numcodecs, which the SPERR codec imports, cannot parse zfpy's version
+  "1.0.1.post0")
   python3 tools/validate/peers.py scene.raw -o peers.json --targets 0.003 0.01 0.03
   ltm report --raw scene.raw --peers peers.json -o report/
 """
@@ -54,13 +59,22 @@ def open_raw(path):
     return np.ascontiguousarray(t), dict(width=w, height=h, face_res=n, channels=c)
 
 
-def shapes(d):
+def layouts(d):
+    """Per layout label: (to the layout from (P, M, C), back to (P, M, C))."""
     w, h, n, c = d["width"], d["height"], d["face_res"], d["channels"]
     p, m = w * h, 6 * n * n
+
+    def reshaped(shape):
+        return (lambda t: t.reshape(shape), lambda u: u.reshape(p, m, c))
+
     return {
-        "(P, M·C)": (p, m * c),
-        "(H, W, M·C)": (h, w, m * c),
-        "(P, 6, n, n·C)": (p, 6, n, n * c),
+        "(P, M·C)": reshaped((p, m * c)),
+        "(H, W, M·C)": reshaped((h, w, m * c)),
+        "(P, 6, n, n·C)": reshaped((p, 6, n, n * c)),
+        "(M·C, H, W)": (
+            lambda t: np.ascontiguousarray(t.reshape(h, w, m * c).transpose(2, 0, 1)),
+            lambda u: u.transpose(1, 2, 0).reshape(p, m, c),
+        ),
     }
 
 
@@ -110,12 +124,29 @@ class Zfp:
         return self.zfpy.decompress_numpy(packed).reshape(shape)
 
 
-def bisect(codec, t, norm, shape, target, evals):
-    """The smallest stream of `codec` on `t` reshaped to `shape` with a
+class Sperr:
+    name = "sperr"
+
+    def __init__(self):
+        from numcodecs_wasm_sperr import Sperr as codec
+
+        self.codec = codec
+
+    def compress(self, a, bound):
+        return self.codec(mode="q", q=bound).encode(a)
+
+    def decompress(self, packed, shape):
+        return np.asarray(self.codec(mode="q", q=1.0).decode(packed)).reshape(shape)
+
+
+def bisect(codec, t, norm, layout, target, evals):
+    """The smallest stream of `codec` on `t` in `layout` (to, back) with a
     relative error of at most `target` found in `evals` codings: secant
     steps on (log bound, log error), aiming at 0.985 target, stopping once
     the error lies in [0.97 target, target]."""
-    a = t.reshape(shape)
+    to, back = layout
+    a = to(t)
+    shape = a.shape
     rms = math.sqrt(float(np.dot(t.reshape(-1).astype(np.float64), t.reshape(-1))) / t.size)
     aim = math.log(0.985 * target)
     bound = max(target * rms, 1e-30)
@@ -124,7 +155,7 @@ def bisect(codec, t, norm, shape, target, evals):
         t0 = time.perf_counter()
         packed = codec.compress(a, bound)
         ct = time.perf_counter() - t0
-        err = rel_error(t, codec.decompress(packed, shape), norm)
+        err = rel_error(t, back(codec.decompress(packed, shape)), norm)
         seen.append((math.log(bound), math.log(max(err, 1e-30))))
         size = len(bytes(packed)) if not isinstance(packed, bytes) else len(packed)
         if err <= target and (best is None or size < best["bytes"]):
@@ -143,14 +174,15 @@ def bisect(codec, t, norm, shape, target, evals):
     return best
 
 
-def relight_cost(codec, t, best_packed, shape, d, repeats=5):
-    """Seconds to decompress the kept stream, and the median seconds of a
-    dense frame B = T.L."""
+def relight_cost(codec, t, best_packed, layout, repeats=5):
+    """Seconds to decompress the kept stream (back to (P, M, C)), and the
+    median seconds of a dense frame B = T.L."""
+    to, back = layout
+    shape = to(t).shape
     t0 = time.perf_counter()
-    dense = codec.decompress(best_packed, shape)
+    dense = np.ascontiguousarray(back(codec.decompress(best_packed, shape)))
     decompress_s = time.perf_counter() - t0
     p, m, c = t.shape
-    dense = dense.reshape(p, m, c)
     rng = np.random.default_rng(1)
     light = rng.random((m, 3), dtype=np.float32)
     times = []
@@ -171,19 +203,19 @@ def main():
     ap.add_argument("-o", "--output", required=True, help="JSON to write")
     ap.add_argument("--targets", type=float, nargs="+", default=[0.003, 0.01, 0.03])
     ap.add_argument("--evals", type=int, default=8, help="codings per bisection")
-    ap.add_argument("--methods", nargs="+", default=["sz3", "zfp"])
+    ap.add_argument("--methods", nargs="+", default=["sz3", "zfp", "sperr"])
     args = ap.parse_args()
     t, d = open_raw(args.raw)
     norm = math.sqrt(float(np.dot(t.reshape(-1).astype(np.float64), t.reshape(-1))))
-    codecs = {"sz3": Sz3, "zfp": Zfp}
+    codecs = {"sz3": Sz3, "zfp": Zfp, "sperr": Sperr}
     points = []
     for name in args.methods:
         codec = codecs[name]()
         for target in args.targets:
             tries = []
-            for label, shape in shapes(d).items():
+            for label, layout in layouts(d).items():
                 try:
-                    best = bisect(codec, t, norm, shape, target, args.evals)
+                    best = bisect(codec, t, norm, layout, target, args.evals)
                 except RuntimeError as e:
                     # zfpy's header cannot hold some 4D shapes (a side
                     # above its field width): that shape is skipped.
@@ -195,9 +227,9 @@ def main():
             if not tries:
                 continue
             kept = min(tries, key=lambda b: b["bytes"])
-            shape = shapes(d)[kept["shape"]]
-            packed = codec.compress(t.reshape(shape), kept["bound"])
-            dec_s, frame_s = relight_cost(codec, t, packed, shape, d)
+            layout = layouts(d)[kept["shape"]]
+            packed = codec.compress(layout[0](t), kept["bound"])
+            dec_s, frame_s = relight_cost(codec, t, packed, layout)
             points.append(
                 dict(
                     method=name,
@@ -217,7 +249,12 @@ def main():
         source=args.raw,
         dims=d,
         raw_bytes=int(t.nbytes),
-        tools={"pysz": version("pysz"), "zfpy": version("zfpy"), "numpy": np.__version__},
+        tools={
+            "pysz": version("pysz"),
+            "zfpy": version("zfpy"),
+            "numcodecs-wasm-sperr": version("numcodecs-wasm-sperr"),
+            "numpy": np.__version__,
+        },
         points=points,
     )
     with open(args.output + ".tmp", "w") as f:

@@ -111,8 +111,9 @@ pub struct ReportArgs {
     /// directory from its results.json.
     #[arg(long)]
     pub replot: bool,
-    /// SZ3 and ZFP measured on the same raw store, as written by
-    /// `python3 tools/validate/peers.py RAW -o FILE` (pip: pysz, zfpy):
+    /// SZ3, ZFP and SPERR measured on the same raw store, as written by
+    /// `python3 tools/validate/peers.py RAW -o FILE` (pip: pysz, zfpy,
+    /// numcodecs-wasm-sperr):
     /// shown in the headline, the tables and the size/error plot. With
     /// --replot, replaces the peers of results.json.
     #[arg(long)]

@@ -1,7 +1,8 @@
-//! The peers: SZ3 and ZFP, error-bounded scientific float compressors,
-//! measured on the same raw store by `tools/validate/peers.py` (pip's `pysz`
-//! and `zfpy`) and read here from its JSON (`ltm report --peers FILE`).
-//! Each point is the smallest stream over three shapes of the matrix whose
+//! The peers: SZ3, ZFP and SPERR, error-bounded scientific float
+//! compressors, measured on the same raw store by `tools/validate/peers.py`
+//! (pip's `pysz`, `zfpy` and `numcodecs-wasm-sperr`) and read here from its
+//! JSON (`ltm report --peers FILE`).
+//! Each point is the smallest stream over four layouts of the matrix whose
 //! relative L2 matrix error is at most its target, with the cost of
 //! relighting from it: one decompression, then a dense `T·L` per frame.
 
@@ -13,7 +14,7 @@ use std::path::Path;
 /// One peer at one target error.
 #[derive(Clone, Debug, Serialize, Deserialize)]
 pub struct PeerPoint {
-    /// `"sz3"` or `"zfp"`.
+    /// `"sz3"`, `"zfp"` or `"sperr"`.
     pub method: String,
     /// The target relative L2 matrix error it was bisected to.
     pub target: f64,
@@ -87,6 +88,7 @@ pub fn name(method: &str) -> &str {
     match method {
         "sz3" => "SZ3",
         "zfp" => "ZFP",
+        "sperr" => "SPERR",
         other => other,
     }
 }

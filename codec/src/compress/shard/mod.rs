@@ -437,7 +437,7 @@ pub fn plan_first(run: &RunIdentity, analysis: Option<&Analysis>) -> Result<Plan
 }
 
 /// Stage 4: after the coding whose parts are `coded` (their headers and
-/// measurements, [`coded::read_measured`]), the plan of the next coding,
+/// per-column measures), the plan of the next coding,
 /// or `None` when the parts are the file.
 pub fn plan_next(
     run: &RunIdentity,

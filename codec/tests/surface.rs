@@ -154,7 +154,8 @@ fn hostile_surface_chunks_are_errors() {
         Dims::texture(8, Parameterization::Sphere, 2, 1),
         true,
     );
-    let good = std::fs::read(&out).unwrap();
+    // Stored as is, so that its bytes can be edited in place.
+    let good = ltm_codec::container::unpack_chunks(&std::fs::read(&out).unwrap()).unwrap();
     let limits = Limits::default();
     let (off, len, _) = surf_chunk(&good);
     assert_eq!(len, 16 + 28 * 64);

@@ -5,7 +5,8 @@ This file was written only from the specification in docs/FORMAT.md (no Rust sou
 was consulted). It checks that the specification is complete: it decodes a `.ltm`
 file of mode 2d, 4d or adaptive to the dense transport matrix exactly as
 `ltm export` writes it (float32, shape (P, M, C), or (P, M) when C = 1).
-`pca` files (mode 3) are refused. Format versions 1 to 6 are read, with column
+`pca` files (mode 3) are refused. Format versions 1 to 7 are read (version 7 stores
+side chunks as zstd frames: pip `zstandard`), with column
 encodings 0 to 4; a version-5 file's column norms (chunk NORM) are checked against
 the decoded columns; the row layout (chunk SURF) and a version-6 file's receiving
 mesh (chunk MESH) are decoded and checked. Given a raw transport store (magic
@@ -107,7 +108,7 @@ def read_container(buf):
     if len(buf) < 28 or buf[:8] != MAGIC:
         raise FormatError("not an .ltm file (bad magic)")
     version, features, k, reserved = struct.unpack_from("<4I", buf, 8)
-    if version not in (1, 2, 3, 4, 5, 6):
+    if version not in (1, 2, 3, 4, 5, 6, 7):
         raise FormatError(f"unsupported format version {version}")
     if reserved != 0:
         raise FormatError("reserved header field is not 0")
@@ -119,7 +120,7 @@ def read_container(buf):
         raise FormatError(f"feature bit 3 in a version-{version} file")
     if version < 6 and features & 16:
         raise FormatError(f"feature bit 4 in a version-{version} file")
-    if not 3 <= k <= {1: 4, 5: 8, 6: 9}.get(version, 7):
+    if not 3 <= k <= {1: 4, 5: 8, 6: 9, 7: 9}.get(version, 7):
         raise FormatError(f"bad chunk count {k}")
     end = 24 + 32 * k
     if len(buf) < end + 4:
@@ -131,7 +132,12 @@ def read_container(buf):
     for e in range(k):
         base = 24 + 32 * e
         tag = bytes(buf[base:base + 4])
-        _r1, off, ln, ccrc, _r2 = struct.unpack_from("<IQQII", buf, base + 4)
+        enc, off, ln, ccrc, unpacked = struct.unpack_from("<IQQII", buf, base + 4)
+        if version < 7:
+            enc, unpacked = 0, 0
+        if (enc, unpacked == 0) != (0, True) and not (
+                enc == 1 and unpacked > 0 and tag in (b"ALBD", b"EMPT", b"SURF", b"MESH")):
+            raise FormatError(f"chunk {tag!r}: encoding {enc} with unpacked length {unpacked}")
         if tag in chunks:
             raise FormatError(f"duplicate chunk {tag!r}")
         if off < last_end or off + ln > len(buf):
@@ -140,6 +146,11 @@ def read_container(buf):
         data = buf[off:off + ln]
         if tag != b"DATA" and crc32(data) != ccrc:
             raise FormatError(f"chunk {tag!r} CRC mismatch")
+        if enc == 1:
+            import zstandard
+            data = zstandard.ZstdDecompressor().decompress(bytes(data), max_output_size=unpacked)
+            if len(data) != unpacked:
+                raise FormatError(f"chunk {tag!r} unpacks to {len(data)} bytes, not {unpacked}")
         chunks[tag] = data
     want = {b"META"}
     if features & 1:

@@ -4,6 +4,8 @@
 
 use crate::bytes::{Reader, Writer};
 use crate::error::{Error, Result};
+use crate::limits::Limits;
+use std::borrow::Cow;
 
 /// File magic: `\x89LTM\r\n\x1a\n`.
 pub const MAGIC: [u8; 8] = *b"\x89LTM\r\n\x1a\n";
@@ -13,8 +15,9 @@ pub const MAGIC: [u8; 8] = *b"\x89LTM\r\n\x1a\n";
 /// Version 3 adds column encoding 3 ([`Encoding::Ranged`](crate::column::Encoding::Ranged)), version 4 column
 /// encoding 4 ([`Encoding::Classed`](crate::column::Encoding::Classed)), version 5 the column norms
 /// ([`FEATURE_COLUMN_NORMS`]), version 6 the receiver mesh
-/// ([`FEATURE_RECEIVER_MESH`]).
-pub const VERSION: u32 = 6;
+/// ([`FEATURE_RECEIVER_MESH`]), version 7 zstd-packed side chunks (a
+/// directory entry's [`DirEntry::unpacked`] length).
+pub const VERSION: u32 = 7;
 /// The oldest format version this build reads.
 pub const MIN_VERSION: u32 = 1;
 /// Feature flag: an RGB albedo image is stored (chunk ALBD).
@@ -47,7 +50,15 @@ const KNOWN_FEATURES: [u32; VERSION as usize] = [
         | FEATURE_SURFACE
         | FEATURE_COLUMN_NORMS
         | FEATURE_RECEIVER_MESH,
+    FEATURE_ALBEDO
+        | FEATURE_EMPTY_ROWS
+        | FEATURE_SURFACE
+        | FEATURE_COLUMN_NORMS
+        | FEATURE_RECEIVER_MESH,
 ];
+/// The chunks a version-7 file may store zstd-packed: the side data known
+/// when the file is started.
+pub(super) const PACKABLE: [&[u8; 4]; 4] = [b"ALBD", b"EMPT", b"SURF", b"MESH"];
 /// The most chunks a file of any version holds: 4 required (a `pca`
 /// file's) plus one per feature bit.
 pub const MAX_CHUNKS: usize = 4 + KNOWN_FEATURES[VERSION as usize - 1].count_ones() as usize;
@@ -58,8 +69,13 @@ pub(super) const DIR_ENTRY_LEN: usize = 32;
 pub(super) struct DirEntry {
     pub tag: [u8; 4],
     pub offset: u64,
+    /// Stored bytes.
     pub len: u64,
+    /// CRC-32 of the stored bytes.
     pub crc: u32,
+    /// Version 7: the chunk's length once unpacked when it is stored as one
+    /// zstd frame (encoding 1), else 0 (stored as is, encoding 0).
+    pub unpacked: u32,
 }
 
 /// Reads and checks the header and the chunk directory: magic, version,
@@ -99,14 +115,20 @@ pub(super) fn read_directory(bytes: &[u8]) -> Result<(u32, u32, Vec<DirEntry>)> 
     let mut dir = Vec::with_capacity(count);
     for _ in 0..count {
         let tag: [u8; 4] = r.take(4)?.try_into().expect("4 bytes");
-        r.u32()?;
+        let encoding = r.u32()?;
         let (offset, len, crc) = (r.u64()?, r.u64()?, r.u32()?);
-        r.u32()?;
+        let unpacked = r.u32()?;
+        let unpacked = if version >= 7 {
+            check_packing(&tag, encoding, unpacked)?
+        } else {
+            0
+        };
         dir.push(DirEntry {
             tag,
             offset,
             len,
             crc,
+            unpacked,
         });
     }
     let dir_end = r.pos();
@@ -121,6 +143,23 @@ pub(super) fn read_directory(bytes: &[u8]) -> Result<(u32, u32, Vec<DirEntry>)> 
     }
     check_directory(&dir, r.pos() as u64, bytes.len())?;
     Ok((version, features, dir))
+}
+
+/// A version-7 entry's encoding (0 stored, 1 zstd; only [`PACKABLE`]
+/// chunks are packed) and unpacked length (0 when stored, else at least
+/// 1): the unpacked length, 0 for a stored chunk.
+fn check_packing(tag: &[u8; 4], encoding: u32, unpacked: u32) -> Result<u32> {
+    let name = String::from_utf8_lossy(tag);
+    match (encoding, unpacked) {
+        (0, 0) => Ok(0),
+        (1, n) if n > 0 && PACKABLE.contains(&tag) => Ok(n),
+        _ => Err(Error::corrupt(
+            "chunk directory",
+            format!(
+                "chunk {name}: encoding {encoding} with unpacked length {unpacked} (valid: 0 with 0, or 1 (zstd) with a length >= 1 for ALBD, EMPT, SURF or MESH)"
+            ),
+        )),
+    }
 }
 
 /// Directory entries: known unique tags, in range, sorted, non-overlapping,
@@ -170,14 +209,15 @@ fn check_directory(dir: &[DirEntry], start: u64, file_len: usize) -> Result<()> 
     Ok(())
 }
 
-/// The bytes of chunk `tag`, CRC-checked (DATA has per-column CRCs
-/// instead), or `None` when the directory has no such chunk. The directory
-/// has been checked against the file's length.
-pub(super) fn chunk<'a>(
+/// The stored bytes of chunk `tag`, CRC-checked (DATA has per-column CRCs
+/// instead), and its directory entry, or `None` when the directory has no
+/// such chunk. The directory has been checked against the file's length.
+/// Only [`PACKABLE`] chunks can be packed; read them with [`chunk`].
+pub(super) fn stored_chunk<'a>(
     bytes: &'a [u8],
     dir: &[DirEntry],
     tag: &[u8; 4],
-) -> Result<Option<&'a [u8]>> {
+) -> Result<Option<(&'a [u8], DirEntry)>> {
     let Some(d) = dir.iter().find(|d| &d.tag == tag) else {
         return Ok(None);
     };
@@ -192,8 +232,60 @@ pub(super) fn chunk<'a>(
             });
         }
     }
-    Ok(Some(s))
+    Ok(Some((s, *d)))
 }
+
+/// The bytes of chunk `tag` as [`stored_chunk`] reads them, unpacked when
+/// packed: the unpacked length is charged to `limits` first, and must be
+/// exactly what the zstd frame holds.
+pub(super) fn chunk<'a>(
+    bytes: &'a [u8],
+    dir: &[DirEntry],
+    tag: &[u8; 4],
+    limits: &Limits,
+) -> Result<Option<Cow<'a, [u8]>>> {
+    let Some((s, d)) = stored_chunk(bytes, dir, tag)? else {
+        return Ok(None);
+    };
+    if d.unpacked == 0 {
+        return Ok(Some(Cow::Borrowed(s)));
+    }
+    let name = String::from_utf8_lossy(tag);
+    let _charge = limits.check_alloc("packed chunk", d.unpacked as u64, 1)?;
+    let unpacked = zstd::bulk::decompress(s, d.unpacked as usize).map_err(|e| {
+        Error::corrupt(
+            "chunk",
+            format!("{name}: is not a zstd frame of {} bytes ({e})", d.unpacked),
+        )
+    })?;
+    if unpacked.len() != d.unpacked as usize {
+        return Err(Error::corrupt(
+            "chunk",
+            format!(
+                "{name}: unpacks to {} bytes, the directory says {}",
+                unpacked.len(),
+                d.unpacked
+            ),
+        ));
+    }
+    Ok(Some(Cow::Owned(unpacked)))
+}
+
+/// `raw` as a side chunk is stored: one zstd frame when that is smaller
+/// (version 7), else as is. Returns the stored bytes and the unpacked
+/// length (0 when stored as is).
+pub(super) fn pack(raw: Vec<u8>) -> (Vec<u8>, u32) {
+    let Ok(len) = u32::try_from(raw.len()) else {
+        return (raw, 0);
+    };
+    match zstd::bulk::compress(&raw, PACK_LEVEL) {
+        Ok(z) if len > 0 && z.len() < raw.len() => (z, len),
+        _ => (raw, 0),
+    }
+}
+
+/// zstd level of packed side chunks.
+const PACK_LEVEL: i32 = 9;
 
 /// The header and chunk directory with its CRC.
 pub(super) fn encode_head(features: u32, dir: &[DirEntry]) -> Vec<u8> {
@@ -205,11 +297,11 @@ pub(super) fn encode_head(features: u32, dir: &[DirEntry]) -> Vec<u8> {
     head.u32(0);
     for d in dir {
         head.bytes.extend_from_slice(&d.tag);
-        head.u32(0);
+        head.u32(u32::from(d.unpacked > 0));
         head.u64(d.offset);
         head.u64(d.len);
         head.u32(d.crc);
-        head.u32(0);
+        head.u32(d.unpacked);
     }
     let crc = crc32fast::hash(&head.bytes);
     head.u32(crc);
@@ -226,7 +318,93 @@ mod tests {
             offset,
             len,
             crc: 0,
+            unpacked: 0,
         }
+    }
+
+    /// A file of a META, a SURF chunk holding `stored` with the directory's
+    /// unpacked length `unpacked`, and an empty DATA.
+    fn packed_file(stored: &[u8], unpacked: u32) -> (Vec<u8>, Vec<DirEntry>) {
+        let start = (HEADER_LEN + DIR_ENTRY_LEN * 3 + 4) as u64;
+        let surf = DirEntry {
+            crc: crc32fast::hash(stored),
+            unpacked,
+            ..entry(b"SURF", start + 64, stored.len() as u64)
+        };
+        let meta = DirEntry {
+            crc: crc32fast::hash(&[0; 64]),
+            ..entry(b"META", start, 64)
+        };
+        let data = entry(b"DATA", surf.offset + surf.len, 0);
+        let dir = vec![meta, surf, data];
+        let mut file = encode_head(FEATURE_SURFACE, &dir);
+        file.extend_from_slice(&[0; 64]);
+        file.extend_from_slice(stored);
+        (file, dir)
+    }
+
+    #[test]
+    fn packed_chunks_unpack_and_bad_packing_is_an_error() {
+        let raw: Vec<u8> = (0..5000u32).flat_map(|i| (i / 100).to_le_bytes()).collect();
+        let (stored, unpacked) = pack(raw.clone());
+        assert!(unpacked as usize == raw.len() && stored.len() < raw.len() / 4);
+        let limits = Limits::default();
+        let (file, _) = packed_file(&stored, unpacked);
+        let (_, _, dir) = read_directory(&file).unwrap();
+        assert_eq!(
+            *chunk(&file, &dir, b"SURF", &limits).unwrap().unwrap(),
+            raw[..]
+        );
+        // The stored bytes of a chunk stored as is come back as they are.
+        let (file, _) = packed_file(&raw, 0);
+        let (_, _, dir) = read_directory(&file).unwrap();
+        assert_eq!(
+            *chunk(&file, &dir, b"SURF", &limits).unwrap().unwrap(),
+            raw[..]
+        );
+        // A wrong unpacked length, a frame that unpacks to more than the
+        // budget allows, and bytes that are no zstd frame.
+        for (bytes, claimed, expect) in [
+            (&stored[..], unpacked - 1, "is not a zstd frame of"),
+            (&stored[..], unpacked + 1, "unpacks to"),
+            (&raw[..], 100, "is not a zstd frame of"),
+        ] {
+            let (file, _) = packed_file(bytes, claimed);
+            let (_, _, dir) = read_directory(&file).unwrap();
+            let e = chunk(&file, &dir, b"SURF", &limits)
+                .unwrap_err()
+                .to_string();
+            assert!(e.contains(expect), "{e}");
+        }
+        let (file, _) = packed_file(&stored, u32::MAX);
+        let (_, _, dir) = read_directory(&file).unwrap();
+        let small = Limits::with_max_alloc(1 << 20);
+        assert!(matches!(
+            chunk(&file, &dir, b"SURF", &small),
+            Err(Error::Limit { .. })
+        ));
+        // Packing is known for side chunks only, and as encoding 1 only.
+        let (mut file, dir) = packed_file(&stored, unpacked);
+        let packed_meta = DirEntry {
+            unpacked: 7,
+            ..dir[0]
+        };
+        let head = encode_head(FEATURE_SURFACE, &[packed_meta, dir[1], dir[2]]);
+        file[..head.len()].copy_from_slice(&head);
+        assert!(read_directory(&file)
+            .unwrap_err()
+            .to_string()
+            .contains("META"));
+        let (mut file, _) = packed_file(&stored, unpacked);
+        let at = HEADER_LEN + DIR_ENTRY_LEN + 4;
+        file[at] = 2;
+        let end = HEADER_LEN + DIR_ENTRY_LEN * 3;
+        let crc = crc32fast::hash(&file[..end]);
+        file[end..end + 4].copy_from_slice(&crc.to_le_bytes());
+        assert!(read_directory(&file)
+            .unwrap_err()
+            .to_string()
+            .contains("encoding 2"));
     }
 
     #[test]

@@ -35,6 +35,6 @@ pub use meta::Meta;
 pub(crate) use read::check_column_entry;
 pub use read::{validate_bytes, LtmFile, LtmIndex};
 #[cfg(feature = "fuzzing")]
-pub use repair::repair_checksums;
+pub use repair::{repair_checksums, unpack_chunks};
 pub(crate) use write::write_pca_file;
 pub use write::{LtmWriter, OptionalChunks};

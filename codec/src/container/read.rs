@@ -3,8 +3,8 @@
 //! columns on demand.
 
 use super::directory::{
-    chunk, read_directory, DirEntry, FEATURE_ALBEDO, FEATURE_COLUMN_NORMS, FEATURE_EMPTY_ROWS,
-    FEATURE_RECEIVER_MESH, FEATURE_SURFACE, MAGIC,
+    chunk, read_directory, stored_chunk, DirEntry, FEATURE_ALBEDO, FEATURE_COLUMN_NORMS,
+    FEATURE_EMPTY_ROWS, FEATURE_RECEIVER_MESH, FEATURE_SURFACE, MAGIC,
 };
 use super::Meta;
 use crate::bytes::Reader;
@@ -162,14 +162,14 @@ impl LtmFile {
         let (version, features, dir) = read_directory(bytes)?;
         let missing =
             |t: &str| Error::corrupt("chunk directory", format!("required chunk {t} is missing"));
-        let mut meta = Meta::decode(chunk(bytes, &dir, b"META")?.ok_or_else(|| missing("META"))?)?;
+        let mut meta = Meta::decode(stored(bytes, &dir, b"META")?.ok_or_else(|| missing("META"))?)?;
         let albedo = read_albedo(
-            chunk(bytes, &dir, b"ALBD")?,
+            chunk(bytes, &dir, b"ALBD", limits)?.as_deref(),
             features & FEATURE_ALBEDO != 0,
             &meta.dims,
         )?;
         let surface = match (
-            chunk(bytes, &dir, b"SURF")?,
+            chunk(bytes, &dir, b"SURF", limits)?.as_deref(),
             features & FEATURE_SURFACE != 0,
         ) {
             (Some(c), true) => {
@@ -187,19 +187,19 @@ impl LtmFile {
             }
         };
         let mesh = read_mesh(
-            chunk(bytes, &dir, b"MESH")?,
+            chunk(bytes, &dir, b"MESH", limits)?.as_deref(),
             features & FEATURE_RECEIVER_MESH != 0,
             &meta.dims,
             limits,
         )?;
         let empty_rows = read_empty_rows(
-            chunk(bytes, &dir, b"EMPT")?,
+            chunk(bytes, &dir, b"EMPT", limits)?.as_deref(),
             features & FEATURE_EMPTY_ROWS != 0,
             &meta.dims,
         )?;
         check_mode_chunks(version, &meta, &dir)?;
         let column_norms = read_column_norms(
-            chunk(bytes, &dir, b"NORM")?,
+            stored(bytes, &dir, b"NORM")?,
             features & FEATURE_COLUMN_NORMS != 0,
             &meta.dims,
             limits,
@@ -228,7 +228,7 @@ impl LtmFile {
                 pca: Some(pca),
             });
         }
-        let cols = chunk(bytes, &dir, b"COLS")?.ok_or_else(|| missing("COLS"))?;
+        let cols = stored(bytes, &dir, b"COLS")?.ok_or_else(|| missing("COLS"))?;
         let data_dir = dir
             .iter()
             .find(|d| &d.tag == b"DATA")
@@ -625,6 +625,12 @@ fn check_mode_chunks(version: u32, meta: &Meta, dir: &[DirEntry]) -> Result<()> 
     Ok(())
 }
 
+/// The stored bytes of a chunk that is never packed (META, NORM, COLS,
+/// the PCA chunks).
+fn stored<'a>(bytes: &'a [u8], dir: &[DirEntry], tag: &[u8; 4]) -> Result<Option<&'a [u8]>> {
+    Ok(stored_chunk(bytes, dir, tag)?.map(|(s, _)| s))
+}
+
 /// Decodes the PCA chunks ([`crate::pca::read_chunks`]) of a `pca` file.
 fn read_pca_chunks(
     bytes: &[u8],
@@ -633,7 +639,7 @@ fn read_pca_chunks(
     limits: &Limits,
 ) -> Result<PcaModel> {
     let get = |t: &[u8; 4]| -> Result<&[u8]> {
-        chunk(bytes, dir, t)?
+        stored(bytes, dir, t)?
             .ok_or_else(|| Error::corrupt("chunk directory", "a PCA chunk is missing"))
     };
     crate::pca::read_chunks(get, meta.dims, meta.terms as usize, meta.bits, limits)

@@ -66,3 +66,42 @@ pub fn repair_checksums(b: &mut [u8]) {
         b[dir_end..dir_end + 4].copy_from_slice(&crc.to_le_bytes());
     }
 }
+
+/// A valid `.ltm` image with every packed chunk (version 7) stored as is,
+/// offsets, lengths and checksums rewritten: the same file in the layout
+/// that tests and fuzzers can edit byte by byte. Only with the `fuzzing`
+/// feature.
+pub fn unpack_chunks(b: &[u8]) -> crate::Result<Vec<u8>> {
+    use super::directory::DIR_ENTRY_LEN;
+    use super::directory::{chunk, encode_head, read_directory, DirEntry, HEADER_LEN};
+    let (_, features, dir) = read_directory(b)?;
+    let limits = crate::Limits::default();
+    let mut bodies = Vec::with_capacity(dir.len());
+    for d in &dir {
+        bodies.push(
+            chunk(b, &dir, &d.tag, &limits)?
+                .map(|c| c.into_owned())
+                .unwrap_or_default(),
+        );
+    }
+    let mut offset = (HEADER_LEN + DIR_ENTRY_LEN * dir.len() + 4) as u64;
+    let mut out_dir = Vec::with_capacity(dir.len());
+    for (d, body) in dir.iter().zip(&bodies) {
+        let crc = if &d.tag == b"DATA" {
+            0
+        } else {
+            crc32fast::hash(body)
+        };
+        out_dir.push(DirEntry {
+            offset,
+            len: body.len() as u64,
+            crc,
+            unpacked: 0,
+            ..*d
+        });
+        offset += body.len() as u64;
+    }
+    let mut out = encode_head(features, &out_dir);
+    bodies.iter().for_each(|body| out.extend_from_slice(body));
+    Ok(out)
+}

@@ -2,8 +2,8 @@
 //! [`write_pca_file`] writes a `pca` file at once.
 
 use super::directory::{
-    encode_head, DirEntry, DIR_ENTRY_LEN, FEATURE_ALBEDO, FEATURE_COLUMN_NORMS, FEATURE_EMPTY_ROWS,
-    FEATURE_RECEIVER_MESH, FEATURE_SURFACE, HEADER_LEN,
+    encode_head, pack, DirEntry, DIR_ENTRY_LEN, FEATURE_ALBEDO, FEATURE_COLUMN_NORMS,
+    FEATURE_EMPTY_ROWS, FEATURE_RECEIVER_MESH, FEATURE_SURFACE, HEADER_LEN,
 };
 use super::meta::{Meta, META_LEN};
 use crate::bytes::Writer;
@@ -32,16 +32,22 @@ pub struct OptionalChunks<'a> {
     pub column_norms: bool,
 }
 
+/// A chunk as stored and its unpacked length (0: stored as is; see
+/// [`pack`]).
+type Stored = (Vec<u8>, u32);
+
 /// Streams a `.ltm` file to a unique temporary file beside `PATH`, then
 /// renames it into place ([`AtomicFile`]).
 pub struct LtmWriter {
     file: BufWriter<AtomicFile>,
     tmp: PathBuf,
     meta: Meta,
-    albedo: Option<Vec<u8>>,
-    surface: Option<Vec<u8>>,
-    mesh: Option<Vec<u8>>,
-    empty_rows: Option<Vec<u8>>,
+    /// The side chunks known at the start, as stored (packed when smaller)
+    /// with their unpacked length (0: stored as is).
+    albedo: Option<Stored>,
+    surface: Option<Stored>,
+    mesh: Option<Stored>,
+    empty_rows: Option<Stored>,
     entries: Vec<ColumnEntry>,
     /// The columns' norms, when the file stores them.
     norms: Option<Vec<f32>>,
@@ -106,6 +112,8 @@ impl LtmWriter {
             }
             None => None,
         };
+        let [albedo, empty_rows, surface, mesh] =
+            [albedo, empty_rows, surface, mesh].map(|c| c.map(pack));
         let file = AtomicFile::create(path)?;
         let tmp = file.tmp_path().to_path_buf();
         let chunks = 3
@@ -117,7 +125,7 @@ impl LtmWriter {
         let head_len = HEADER_LEN as u64 + DIR_ENTRY_LEN as u64 * chunks + 4;
         let cols_len = (COLUMN_ENTRY_LEN * meta.dims.lights()) as u64;
         let norms_len = 4 * meta.dims.lights() as u64 * extra.column_norms as u64;
-        let optional = |c: &Option<Vec<u8>>| c.as_ref().map_or(0, |a| a.len() as u64);
+        let optional = |c: &Option<Stored>| c.as_ref().map_or(0, |a| a.0.len() as u64);
         let data_start = head_len
             + META_LEN as u64
             + optional(&albedo)
@@ -219,7 +227,7 @@ impl LtmWriter {
             cols.u16(0);
         }
         let meta = self.meta.encode();
-        let mut chunks: Vec<(&[u8; 4], Vec<u8>)> = vec![(b"META", meta)];
+        let mut chunks: Vec<(&[u8; 4], Stored)> = vec![(b"META", (meta, 0))];
         let mut features = 0;
         if let Some(a) = self.albedo.take() {
             chunks.push((b"ALBD", a));
@@ -238,19 +246,20 @@ impl LtmWriter {
             features |= FEATURE_RECEIVER_MESH;
         }
         if let Some(n) = self.norms.take() {
-            chunks.push((b"NORM", bytemuck::cast_slice::<f32, u8>(&n).to_vec()));
+            chunks.push((b"NORM", (bytemuck::cast_slice::<f32, u8>(&n).to_vec(), 0)));
             features |= FEATURE_COLUMN_NORMS;
         }
-        chunks.push((b"COLS", cols.bytes));
+        chunks.push((b"COLS", (cols.bytes, 0)));
         let head_len = HEADER_LEN + DIR_ENTRY_LEN * (chunks.len() + 1) + 4;
         let mut dir = Vec::new();
         let mut offset = head_len as u64;
-        for (tag, bytes) in &chunks {
+        for (tag, (bytes, unpacked)) in &chunks {
             dir.push(DirEntry {
                 tag: **tag,
                 offset,
                 len: bytes.len() as u64,
                 crc: crc32fast::hash(bytes),
+                unpacked: *unpacked,
             });
             offset += bytes.len() as u64;
         }
@@ -260,12 +269,13 @@ impl LtmWriter {
             offset,
             len: self.data_len,
             crc: 0,
+            unpacked: 0,
         });
         let head = encode_head(features, &dir);
         let io = |e| Error::io(&self.tmp, e);
         self.file.seek(SeekFrom::Start(0)).map_err(io)?;
         self.file.write_all(&head).map_err(io)?;
-        for (_, bytes) in &chunks {
+        for (_, (bytes, _)) in &chunks {
             self.file.write_all(bytes).map_err(io)?;
         }
         let file = self
@@ -351,6 +361,7 @@ pub(crate) fn write_pca_file(
             offset,
             len: bytes.len() as u64,
             crc: crc32fast::hash(bytes),
+            unpacked: 0,
         });
         offset += bytes.len() as u64;
     }

@@ -16,7 +16,7 @@ pub const MAGIC: [u8; 8] = *b"\x89LTM\r\n\x1a\n";
 /// encoding 4 ([`Encoding::Classed`](crate::column::Encoding::Classed)), version 5 the column norms
 /// ([`FEATURE_COLUMN_NORMS`]), version 6 the receiver mesh
 /// ([`FEATURE_RECEIVER_MESH`]), version 7 zstd-packed side chunks (a
-/// directory entry's [`DirEntry::unpacked`] length).
+/// directory entry's unpacked length).
 pub const VERSION: u32 = 7;
 /// The oldest format version this build reads.
 pub const MIN_VERSION: u32 = 1;

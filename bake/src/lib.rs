@@ -31,6 +31,7 @@ pub mod inside;
 mod intersect;
 pub mod material;
 mod mesh;
+pub mod plane;
 mod ply;
 mod rows;
 pub mod sampling;
@@ -48,6 +49,7 @@ pub use bake::{
 pub use error::{BakeError, Result};
 pub use inside::INSIDE_LIMIT;
 pub use ltm_codec::raw::{RestartReason, ResumeState};
+pub use plane::{LightPlane, PlaneRow};
 pub use rows::{RowSample, RowSource};
 pub use scene::{Overrides, Receivers, SceneDesc, DEFAULT_SCENE_TOML};
 pub use texture::{TexelMap, TexelStats};

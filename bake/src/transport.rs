@@ -97,46 +97,116 @@ impl std::ops::AddAssign for RowStats {
 
 /// Tables shared by every row of a bake.
 pub(crate) struct Tables {
+    /// The cubemap's directions.
+    grid: Grid,
+    texel_pts: Vec<[f64; 2]>,
+    pixel_pts: Vec<[f64; 2]>,
+}
+
+impl Tables {
+    pub(crate) fn pixel_points(&self) -> &[[f64; 2]] {
+        &self.pixel_pts
+    }
+
+    pub(crate) fn new(scene: &Scene) -> Tables {
+        Tables {
+            grid: Grid::cubemap(scene.face_res as usize),
+            texel_pts: hammersley(scene.texel_samples),
+            pixel_pts: hammersley(scene.rows.samples_per_row()),
+        }
+    }
+}
+
+/// How a face of a [`Grid`] maps face coordinates `(s, t) ∈ [0, 1]²` to
+/// directions.
+#[derive(Clone, Copy, Debug)]
+enum GridFace {
+    /// A cubemap face ([`face_point_direction`]).
+    Cube(usize),
+    /// `normalize(forward + a·right + b·up)` with tangent coordinates
+    /// `a = h(2s − 1)`, `b = h(2t − 1)`.
+    Axes {
+        right: DVec3,
+        up: DVec3,
+        forward: DVec3,
+    },
+}
+
+/// A grid of direction texels: faces of `n × n` texels over tangent
+/// coordinates `[−h, h]²` (h = 1 for a cube face), with the texel corners'
+/// directions and the texels' exact solid angles.
+pub(crate) struct Grid {
     n: usize,
+    half: f64,
+    faces: Vec<GridFace>,
     /// Corner directions, `face·(n+1)² + r·(n+1) + c` for the grid point at
     /// `s = c/n`, `t = r/n`.
     corners: Vec<DVec3>,
     /// Solid angle of the face-local texel `row·n + col` (the same on every
     /// face).
     omega: Vec<f64>,
-    texel_pts: Vec<[f64; 2]>,
-    pixel_pts: Vec<[f64; 2]>,
 }
 
-impl Tables {
-    pub(crate) fn new(scene: &Scene) -> Tables {
-        let n = scene.face_res as usize;
+impl Grid {
+    /// The six faces of a cubemap at face resolution `n`.
+    pub(crate) fn cubemap(n: usize) -> Grid {
+        Grid::new(n, 1.0, (0..6).map(GridFace::Cube).collect())
+    }
+
+    /// One face of `n × n` texels over tangent coordinates
+    /// `[−side/2, side/2]²` around `forward`.
+    pub(crate) fn face(n: usize, side: f64, right: DVec3, up: DVec3, forward: DVec3) -> Grid {
+        Grid::new(n, 0.5 * side, vec![GridFace::Axes { right, up, forward }])
+    }
+
+    fn new(n: usize, half: f64, faces: Vec<GridFace>) -> Grid {
         let nf = n as f64;
-        let mut corners = Vec::with_capacity(6 * (n + 1) * (n + 1));
-        for face in 0..6 {
+        let mut grid = Grid {
+            n,
+            half,
+            faces,
+            corners: Vec::with_capacity(6 * (n + 1) * (n + 1)),
+            omega: Vec::with_capacity(n * n),
+        };
+        for face in 0..grid.faces.len() {
             for r in 0..=n {
                 for c in 0..=n {
-                    corners.push(face_point_direction(face, c as f64 / nf, r as f64 / nf));
+                    let d = grid.direction(face, c as f64 / nf, r as f64 / nf);
+                    grid.corners.push(d);
                 }
             }
         }
-        let mut omega = Vec::with_capacity(n * n);
+        // ∫∫ da db / (1 + a² + b²)^{3/2} over a rectangle, in closed form.
+        let f = |a: f64, b: f64| (a * b).atan2((a * a + b * b + 1.0).sqrt());
+        let at = |i: usize| half * (2.0 * i as f64 / nf - 1.0);
         for r in 0..n {
             for c in 0..n {
-                omega.push(face_rect_solid_angle(
-                    c as f64 / nf,
-                    (c + 1) as f64 / nf,
-                    r as f64 / nf,
-                    (r + 1) as f64 / nf,
-                ));
+                // A cube face (h = 1) through the codec's function, so that
+                // cubemap rows stay bit for bit what they were.
+                let omega = if half == 1.0 {
+                    face_rect_solid_angle(
+                        c as f64 / nf,
+                        (c + 1) as f64 / nf,
+                        r as f64 / nf,
+                        (r + 1) as f64 / nf,
+                    )
+                } else {
+                    let (a0, a1, b0, b1) = (at(c), at(c + 1), at(r), at(r + 1));
+                    f(a1, b1) - f(a0, b1) - f(a1, b0) + f(a0, b0)
+                };
+                grid.omega.push(omega);
             }
         }
-        Tables {
-            n,
-            corners,
-            omega,
-            texel_pts: hammersley(scene.texel_samples),
-            pixel_pts: hammersley(scene.rows.samples_per_row()),
+        grid
+    }
+
+    fn direction(&self, face: usize, s: f64, t: f64) -> DVec3 {
+        match self.faces[face] {
+            GridFace::Cube(f) => face_point_direction(f, s, t),
+            GridFace::Axes { right, up, forward } => {
+                let (a, b) = (self.half * (2.0 * s - 1.0), self.half * (2.0 * t - 1.0));
+                (forward + a * right + b * up).normalize()
+            }
         }
     }
 }
@@ -149,8 +219,12 @@ pub(crate) struct Scratch {
 impl Scratch {
     pub(crate) fn new(scene: &Scene) -> Scratch {
         let m = 6 * scene.face_res as usize * scene.face_res as usize;
+        Scratch::with_texels(scene, m)
+    }
+
+    pub(crate) fn with_texels(scene: &Scene, texels: usize) -> Scratch {
         Scratch {
-            acc: vec![0.0; m * scene.channels as usize],
+            acc: vec![0.0; texels * scene.channels as usize],
         }
     }
 }
@@ -176,7 +250,8 @@ impl Scene {
         albedo_out: &mut [f32; 3],
     ) -> RowStats {
         let mut occluded = |o, d| self.occluded(o, d);
-        self.row_traced(tables, scratch, p, row, albedo_out, &mut occluded)
+        let grid = &tables.grid;
+        self.row_traced(tables, grid, scratch, p, row, albedo_out, &mut occluded)
     }
 
     /// Every shadow ray row `p` traces, in the bake's order, as world-space
@@ -193,6 +268,7 @@ impl Scene {
         };
         self.row_traced(
             &tables,
+            &tables.grid,
             &mut scratch,
             p,
             &mut row,
@@ -201,10 +277,13 @@ impl Scene {
         );
     }
 
-    /// [`Scene::row_into`] with the shadow query `occluded`.
-    fn row_traced(
+    /// [`Scene::row_into`] over the texels of `grid`, with the shadow
+    /// query `occluded`.
+    #[allow(clippy::too_many_arguments)]
+    pub(crate) fn row_traced(
         &self,
         tables: &Tables,
+        grid: &Grid,
         scratch: &mut Scratch,
         p: usize,
         row: &mut [f32],
@@ -237,11 +316,12 @@ impl Scene {
                 }
                 lum_sum += lum;
                 let f = |_: &Material, _| [lum * FRAC_1_PI; 1];
-                stats.shadow_rays += self.integrate(tables, &hit, seed, f, acc, occluded);
+                stats.shadow_rays += self.integrate(tables, grid, &hit, seed, f, acc, occluded);
             } else {
                 let w = 1.0 / k_count as f64;
                 stats.shadow_rays += self.integrate(
                     tables,
+                    grid,
                     &hit,
                     seed,
                     |m: &Material, d| m.eval(hit.ns, d, wo).map(|v| v * w),
@@ -270,32 +350,34 @@ impl Scene {
     /// Adds `∫_{texel j} V · f(ω) · max(0, n_s·ω) dω` for every texel into
     /// `acc` (C values per texel), with visibility V from `occluded`;
     /// returns the shadow rays traced.
+    #[allow(clippy::too_many_arguments)]
     fn integrate<const C: usize>(
         &self,
         tables: &Tables,
+        grid: &Grid,
         hit: &crate::world::Hit,
         seed: u64,
         f: impl Fn(&Material, DVec3) -> [f64; C],
         acc: &mut [f64],
         occluded: &mut impl FnMut(DVec3, DVec3) -> bool,
     ) -> u64 {
-        let n = tables.n;
+        let n = grid.n;
         let nf = n as f64;
         let (ns, ng) = (hit.ns, hit.ng);
         let origin = hit.point + self.epsilon * ng;
         let material = &self.materials[hit.material];
         let stride = n + 1;
         let mut rays = 0;
-        for face in 0..6 {
+        for face in 0..grid.faces.len() {
             let cbase = face * stride * stride;
             for r in 0..n {
                 for c in 0..n {
                     let i0 = cbase + r * stride + c;
                     let quad = [
-                        tables.corners[i0],
-                        tables.corners[i0 + 1],
-                        tables.corners[i0 + stride],
-                        tables.corners[i0 + stride + 1],
+                        grid.corners[i0],
+                        grid.corners[i0 + 1],
+                        grid.corners[i0 + stride],
+                        grid.corners[i0 + stride + 1],
                     ];
                     if quad.iter().all(|d| ns.dot(*d) <= 0.0)
                         || quad.iter().all(|d| ng.dot(*d) <= 0.0)
@@ -310,10 +392,11 @@ impl Scene {
                         let s = (c as f64 + wrap(u, rot[0])) / nf;
                         let t = (r as f64 + wrap(v, rot[1])) / nf;
                         let (a, b) = (2.0 * s - 1.0, 2.0 * t - 1.0);
+                        let (a, b) = (grid.half * a, grid.half * b);
                         let q = 1.0 + a * a + b * b;
                         let jac = 1.0 / (q * q.sqrt());
                         sum_j += jac;
-                        let d = face_point_direction(face, s, t);
+                        let d = grid.direction(face, s, t);
                         let cos = ns.dot(d);
                         if cos <= 0.0 || ng.dot(d) <= 0.0 {
                             continue;
@@ -331,7 +414,7 @@ impl Scene {
                             sum[ch] += w * fr[ch];
                         }
                     }
-                    let scale = tables.omega[r * n + c] / sum_j;
+                    let scale = grid.omega[r * n + c] / sum_j;
                     for ch in 0..C {
                         acc[j * C + ch] += sum[ch] * scale;
                     }

@@ -241,3 +241,65 @@ fn shadow_rays_are_the_rows_rays() {
     }
     assert!(occluded > 0 && occluded < total, "{occluded} of {total}");
 }
+
+/// Rows over a light plane's face: on an unoccluded floor facing the
+/// plane, `Σ_j t[j] = (1/π) ∫∫ (1 + |v|²)⁻² dv` over the face `[−2, 2]²`
+/// (cos·dω in tangent coordinates), here by a fine midpoint rule; the
+/// texels' share of it follows the cosine; bad calls are errors.
+#[test]
+fn plane_rows_integrate_the_face_and_bad_calls_error() {
+    use ltm_bake::LightPlane;
+    let scene = plane_scene("", "face_res = 8\ntexel_samples = 4");
+    let plane = LightPlane::new(DVec3::new(0.0, 2.0, 0.0), DVec3::X, DVec3::Z).unwrap();
+    let order = 16;
+    let m = 2000;
+    let h = 4.0 / m as f64;
+    let mut expected = 0.0;
+    for i in 0..m {
+        for j in 0..m {
+            let (x, y) = (-2.0 + (i as f64 + 0.5) * h, -2.0 + (j as f64 + 0.5) * h);
+            expected += h * h / (1.0 + x * x + y * y).powi(2);
+        }
+    }
+    expected /= PI;
+    let mut row = vec![0.0f32; order * order];
+    let mut albedo = [0.0f32; 3];
+    let info = scene
+        .plane_row(40, &plane, order, 4.0, &mut row, &mut albedo)
+        .unwrap();
+    let point = info.point.expect("the floor");
+    assert!(
+        point.y.abs() < 1e-3 && info.stats.shadow_rays > 0,
+        "{point} {:?}",
+        info.stats
+    );
+    let sum: f64 = row.iter().map(|&v| f64::from(v)).sum();
+    assert!(
+        (sum - expected).abs() < 0.01 * expected,
+        "{sum} against {expected}"
+    );
+    // The centre texels see the most, the corners the least.
+    let centre = row[(order / 2) * order + order / 2];
+    assert!(centre > 5.0 * row[0] && row.iter().all(|&v| v >= 0.0));
+    assert_eq!(albedo, [0.5, 0.25, 0.8]);
+
+    for (order, side, len) in [
+        (0, 4.0, 0),
+        (2048, 4.0, 4),
+        (16, 0.0, 256),
+        (16, f64::NAN, 256),
+        (16, 4.0, 255),
+    ] {
+        let mut row = vec![0.0f32; len];
+        let err = scene
+            .plane_row(40, &plane, order, side, &mut row, &mut albedo)
+            .unwrap_err();
+        assert!(err.to_string().contains("valid"), "{err}");
+    }
+    // A plane facing away from the floor: the face is below its horizon.
+    let away = LightPlane::new(DVec3::new(0.0, 2.0, 0.0), DVec3::Z, DVec3::X).unwrap();
+    scene
+        .plane_row(40, &away, 16, 4.0, &mut row, &mut albedo)
+        .unwrap();
+    assert!(row.iter().all(|&v| v == 0.0));
+}

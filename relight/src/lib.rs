@@ -15,6 +15,10 @@
 //! by wavelet rotation (Wang et al. 2006): precomputed sparse Haar rotation
 //! matrices per normal and view-dependent BRDF slices.
 //!
+//! [`nearfield`] lights points from planar, textured area lights at a
+//! finite distance (Sun and Ramamoorthi 2009): the light's Haar
+//! coefficients propagated to each point by affine wavelet couplings.
+//!
 //! Features (all on by default): `exr` (OpenEXR maps and images), `png`
 //! (PNG output), `hdr` (Radiance HDR maps). Without them the relighting core
 //! builds alone: [`EnvMap::from_fn`] and [`EnvMap::new`] take lighting from
@@ -63,6 +67,7 @@ mod error;
 mod frame;
 mod image_io;
 mod kernel;
+pub mod nearfield;
 mod open;
 mod pca;
 mod pca_blocks;

@@ -1,0 +1,111 @@
+//! Near-field light propagation and shading per receiving point
+//! (`ltm_relight::nearfield`, Sun and Ramamoorthi 2009 §5.3), in points per
+//! second: a 256² textured light at order 32 (the paper's wavelet order),
+//! 4096 points at depths 0.1 to 3 light sizes, each with a transport row of
+//! 30 % nonzero Haar coefficients, at the paper's operating point (1 % of
+//! source and 20 % of target terms), at 5 % and 30 %, and at every term.
+
+use criterion::{criterion_group, criterion_main, BenchmarkId, Criterion, Throughput};
+use ltm::relight::nearfield::{
+    transport_coefficients, LightTexture, Placement, PlaneFace, Propagator, Receiver,
+    SourceCoefficients, Targets,
+};
+
+const ORDER: usize = 32;
+const POINTS: usize = 4096;
+
+struct Xorshift(u64);
+
+impl Xorshift {
+    fn uniform(&mut self) -> f64 {
+        self.0 ^= self.0 << 13;
+        self.0 ^= self.0 >> 7;
+        self.0 ^= self.0 << 17;
+        (self.0 >> 11) as f64 / (1u64 << 53) as f64
+    }
+}
+
+/// A softbox: a bright disc with a soft edge and a darker grid over it.
+fn texture() -> LightTexture {
+    let side = 256;
+    let texels = (0..side * side)
+        .map(|j| {
+            let (x, y) = (
+                (j % side) as f32 / 256.0 - 0.5,
+                (j / side) as f32 / 256.0 - 0.5,
+            );
+            let disc = (1.0 - (x * x + y * y).sqrt() * 2.2).clamp(0.0, 0.2) * 5.0;
+            let grid = if (j % side) % 32 < 3 || (j / side) % 32 < 3 {
+                0.2
+            } else {
+                1.0
+            };
+            let v = disc * grid;
+            [v * 10.0, v * 9.0, v * 7.0]
+        })
+        .collect();
+    LightTexture::new(side, side, texels).unwrap()
+}
+
+fn bench(c: &mut Criterion) {
+    let mut rng = Xorshift(0x9e37_79b9_7f4a_7c15);
+    let light = texture();
+    let placement = Placement {
+        center: [0.0; 2],
+        size: [1.0; 2],
+        intensity: 1.0,
+    };
+    let face = PlaneFace {
+        order: ORDER,
+        side: 4.0,
+    };
+    let points: Vec<Receiver> = (0..POINTS)
+        .map(|_| Receiver {
+            depth: 0.1 + 2.9 * rng.uniform(),
+            position: [rng.uniform() * 4.0 - 2.0, rng.uniform() * 4.0 - 2.0],
+        })
+        .collect();
+    let rows: Vec<Vec<(u32, f32)>> = (0..POINTS)
+        .map(|_| {
+            let t: Vec<f32> = (0..ORDER * ORDER).map(|_| rng.uniform() as f32).collect();
+            let mut coefficients = transport_coefficients(&t, ORDER).unwrap();
+            coefficients.sort_by(|a, b| b.1.abs().total_cmp(&a.1.abs()));
+            coefficients.truncate(ORDER * ORDER * 3 / 10);
+            coefficients.sort_by_key(|e| e.0);
+            coefficients
+        })
+        .collect();
+    let mut group = c.benchmark_group("nearfield_order32");
+    group.throughput(Throughput::Elements(POINTS as u64));
+    for (source, target) in [(0.01, 0.2), (0.05, 0.3), (1.0, 1.0)] {
+        let keep = ((source * (ORDER * ORDER) as f64).ceil() as usize).max(1);
+        let coefficients = SourceCoefficients::new(&light, &placement, ORDER, keep).unwrap();
+        let targets = if target < 1.0 {
+            Targets::Share(target)
+        } else {
+            Targets::All
+        };
+        let mut propagator = Propagator::new(face).unwrap();
+        let name = format!(
+            "source {:.0}%, target {:.0}%",
+            source * 100.0,
+            target * 100.0
+        );
+        group.bench_function(BenchmarkId::new("propagate_and_shade", name), |b| {
+            b.iter(|| {
+                let mut sum = 0.0;
+                for (p, row) in points.iter().zip(&rows) {
+                    propagator
+                        .prepare(&coefficients, &placement, p, targets)
+                        .unwrap();
+                    sum += propagator.shade(row)[0];
+                }
+                sum
+            })
+        });
+    }
+    group.finish();
+}
+
+criterion_group!(benches, bench);
+criterion_main!(benches);

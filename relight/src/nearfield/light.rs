@@ -1,0 +1,286 @@
+//! A planar, textured area light and its Haar coefficients with source-level
+//! truncation (§5.3.3).
+
+use crate::error::{RelightError, Result};
+use ltm_codec::wavelet;
+use ltm_codec::Filter;
+
+/// The largest light texture side accepted, in pixels.
+pub const MAX_TEXTURE_SIDE: usize = 16384;
+
+/// An RGB radiance texture over the light's rectangle: `width × height`
+/// pixels, row-major, row 0 at the light's `−y` edge and column 0 at its
+/// `−x` edge (texture coordinates `u = (x, y) ∈ [0, 1)²`). Radiance is
+/// uniform over outgoing angle, as in §5.2.2.
+#[derive(Clone, Debug)]
+pub struct LightTexture {
+    width: usize,
+    height: usize,
+    texels: Vec<[f32; 3]>,
+}
+
+impl LightTexture {
+    /// A texture from its pixels; refuses empty or oversized shapes and
+    /// negative, NaN or infinite radiance.
+    pub fn new(width: usize, height: usize, texels: Vec<[f32; 3]>) -> Result<LightTexture> {
+        let valid = format!("1..={MAX_TEXTURE_SIDE}");
+        if width == 0 || width > MAX_TEXTURE_SIDE {
+            return Err(RelightError::range("light texture width", width, &valid));
+        }
+        if height == 0 || height > MAX_TEXTURE_SIDE {
+            return Err(RelightError::range("light texture height", height, &valid));
+        }
+        if texels.len() != width * height {
+            return Err(RelightError::Invalid(format!(
+                "light texture of {width}x{height} has {} texels",
+                texels.len()
+            )));
+        }
+        if let Some(bad) = texels
+            .iter()
+            .flatten()
+            .find(|v| !v.is_finite() || **v < 0.0)
+        {
+            return Err(RelightError::range(
+                "light texture radiance",
+                bad,
+                "finite and >= 0",
+            ));
+        }
+        Ok(LightTexture {
+            width,
+            height,
+            texels,
+        })
+    }
+
+    /// A texture of one radiance.
+    pub fn constant(rgb: [f32; 3]) -> Result<LightTexture> {
+        LightTexture::new(1, 1, vec![rgb])
+    }
+
+    /// The area average of the texture over each texel of an
+    /// `order × order` grid (row-major, `y` major): the exact projection onto
+    /// the grid's box functions.
+    pub fn box_average(&self, order: usize) -> Vec<[f64; 3]> {
+        let wx = box_weights(self.width, order);
+        let wy = box_weights(self.height, order);
+        // One texture row at a time (width → order), added into the output
+        // rows it overlaps: memory O(order²) whatever the texture's size.
+        let mut row = vec![[0.0f64; 3]; order];
+        let mut row_of = usize::MAX;
+        let mut out = vec![[0.0f64; 3]; order * order];
+        for &(j, p, w) in &wy {
+            if p != row_of {
+                row.fill([0.0; 3]);
+                let src = &self.texels[p * self.width..(p + 1) * self.width];
+                for &(x, q, wq) in &wx {
+                    for c in 0..3 {
+                        row[x][c] += wq * f64::from(src[q][c]);
+                    }
+                }
+                row_of = p;
+            }
+            for (dst, src) in out[j * order..(j + 1) * order].iter_mut().zip(&row) {
+                for c in 0..3 {
+                    dst[c] += w * src[c];
+                }
+            }
+        }
+        out
+    }
+}
+
+/// `(target, source, weight)` triples: source pixel `p` of `from` covers
+/// `[p/from, (p+1)/from)`, target texel `j` of `to` covers `[j/to, (j+1)/to)`,
+/// and the weight is their overlap over the target's width.
+fn box_weights(from: usize, to: usize) -> Vec<(usize, usize, f64)> {
+    let mut out = Vec::with_capacity(from + to);
+    let (mut p, mut j) = (0usize, 0usize);
+    // Integer breakpoints on a common grid of from·to cells.
+    while p < from && j < to {
+        let end = ((p + 1) * to).min((j + 1) * from);
+        let start = (p * to).max(j * from);
+        out.push((j, p, (end - start) as f64 / from as f64));
+        if (p + 1) * to == end {
+            p += 1;
+        }
+        if (j + 1) * from == end {
+            j += 1;
+        }
+    }
+    out
+}
+
+/// Where a light sits in its plane: the centre of its rectangle and its
+/// side lengths in plane units, and a radiance scale.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Placement {
+    /// Centre `(x, y)` of the rectangle in the light plane.
+    pub center: [f64; 2],
+    /// Side lengths `(x, y)`, both > 0.
+    pub size: [f64; 2],
+    /// Radiance scale, finite and >= 0.
+    pub intensity: f64,
+}
+
+impl Placement {
+    /// Refuses NaN or infinite fields, sides that are not > 0 and a negative
+    /// intensity.
+    pub fn check(&self) -> Result<()> {
+        for (what, v) in [
+            ("light centre x", self.center[0]),
+            ("light centre y", self.center[1]),
+        ] {
+            if !v.is_finite() {
+                return Err(RelightError::range(what, v, "finite"));
+            }
+        }
+        for (what, v) in [
+            ("light width", self.size[0]),
+            ("light height", self.size[1]),
+        ] {
+            if !(v.is_finite() && v > 0.0) {
+                return Err(RelightError::range(what, v, "finite and > 0"));
+            }
+        }
+        if !(self.intensity.is_finite() && self.intensity >= 0.0) {
+            let v = self.intensity;
+            return Err(RelightError::range("light intensity", v, "finite and >= 0"));
+        }
+        Ok(())
+    }
+}
+
+/// The source-level lighting: the light texture's largest Haar coefficients
+/// at `order × order` (standard 2D decomposition, intensity applied), with
+/// the distinct indices of each axis gathered for the separable propagation
+/// (§5.3.1).
+#[derive(Clone, Debug)]
+pub struct SourceCoefficients {
+    pub(super) order: usize,
+    /// Distinct `i₁` (axis x) and `i₂` (axis y) indices, increasing.
+    pub(super) axis: [Vec<u32>; 2],
+    /// `(position in axis[0], position in axis[1], rgb)` per kept term.
+    pub(super) terms: Vec<(u32, u32, [f64; 3])>,
+    /// The squared norm of all coefficients and of the kept ones.
+    energy: (f64, f64),
+}
+
+impl SourceCoefficients {
+    /// Transforms `texture` at `order` (a power of two, 1..=1024) and keeps
+    /// its `keep` largest coefficients by summed magnitude (`keep >= 1`;
+    /// more than `order²` keeps all).
+    pub fn new(
+        texture: &LightTexture,
+        placement: &Placement,
+        order: usize,
+        keep: usize,
+    ) -> Result<SourceCoefficients> {
+        placement.check()?;
+        if !order.is_power_of_two() || order > 1024 {
+            return Err(RelightError::range(
+                "near-field order",
+                order,
+                "a power of two in 1..=1024",
+            ));
+        }
+        if keep == 0 {
+            return Err(RelightError::range("source terms", keep, ">= 1"));
+        }
+        let coefficients = haar_2d(&texture.box_average(order), order, placement.intensity)?;
+        if coefficients.iter().flatten().any(|v| !v.is_finite()) {
+            return Err(RelightError::range(
+                "light intensity",
+                placement.intensity,
+                "small enough that intensity × radiance stays within f32",
+            ));
+        }
+        let mut ranked: Vec<(usize, f64)> = coefficients
+            .iter()
+            .enumerate()
+            .map(|(i, c)| (i, c.iter().map(|v| v.abs()).sum()))
+            .filter(|&(_, m)| m > 0.0)
+            .collect();
+        ranked.sort_by(|a, b| b.1.total_cmp(&a.1).then(a.0.cmp(&b.0)));
+        ranked.truncate(keep);
+        ranked.sort_by_key(|&(i, _)| i);
+        let energy_of = |c: &[f64; 3]| c.iter().map(|v| v * v).sum::<f64>();
+        let total = coefficients.iter().map(energy_of).sum();
+        let kept = ranked
+            .iter()
+            .map(|&(i, _)| energy_of(&coefficients[i]))
+            .sum();
+        let mut axis = [Vec::new(), Vec::new()];
+        for &(i, _) in &ranked {
+            axis[0].push((i % order) as u32);
+            axis[1].push((i / order) as u32);
+        }
+        for a in &mut axis {
+            a.sort_unstable();
+            a.dedup();
+        }
+        let position = |a: &[u32], v: usize| a.binary_search(&(v as u32)).unwrap_or(0) as u32;
+        let terms = ranked
+            .iter()
+            .map(|&(i, _)| {
+                let (x, y) = (i % order, i / order);
+                (
+                    position(&axis[0], x),
+                    position(&axis[1], y),
+                    coefficients[i],
+                )
+            })
+            .collect();
+        Ok(SourceCoefficients {
+            order,
+            axis,
+            terms,
+            energy: (total, kept),
+        })
+    }
+
+    /// The number of kept terms.
+    pub fn terms(&self) -> usize {
+        self.terms.len()
+    }
+
+    /// The share of the light's energy (squared L2 norm) the kept terms hold.
+    pub fn kept_energy(&self) -> f64 {
+        if self.energy.0 > 0.0 {
+            self.energy.1 / self.energy.0
+        } else {
+            1.0
+        }
+    }
+}
+
+/// The standard 2D orthonormal Haar transform (every row fully, then every
+/// column fully) of the pixel-basis coefficients of an `order × order`
+/// grid of averages: a texel average `a` is `a/order` in the pixel basis
+/// (`order` per axis, `1/√order` each). The result is scaled by `scale`.
+pub fn haar_2d(averages: &[[f64; 3]], order: usize, scale: f64) -> Result<Vec<[f64; 3]>> {
+    let mut out = vec![[0.0f64; 3]; order * order];
+    let levels = order.trailing_zeros();
+    let mut plane = vec![0.0f32; order * order];
+    let mut column = vec![0.0f32; order];
+    let mut work = vec![0.0f32; order];
+    for c in 0..3 {
+        for (p, a) in plane.iter_mut().zip(averages) {
+            *p = (a[c] * scale / order as f64) as f32;
+        }
+        for row in plane.chunks_exact_mut(order) {
+            wavelet::forward_1d(Filter::Haar, row, levels, &mut work)?;
+        }
+        for x in 0..order {
+            for y in 0..order {
+                column[y] = plane[y * order + x];
+            }
+            wavelet::forward_1d(Filter::Haar, &mut column, levels, &mut work)?;
+            for y in 0..order {
+                out[y * order + x][c] = f64::from(column[y]);
+            }
+        }
+    }
+    Ok(out)
+}

@@ -1,0 +1,505 @@
+//! Near-field tests: couplings against numerical integration of eq. 8,
+//! propagation and shading against an exact pixel-domain resampling of the
+//! light, and hostile placements.
+
+use super::acc::{coupling, couplings};
+use super::*;
+use ltm_testkit::Rng;
+
+/// Basis function `i` at `w`, written from the definition (not from the
+/// pieces the couplings use).
+fn basis(i: usize, w: f64) -> f64 {
+    if !(0.0..1.0).contains(&w) {
+        return 0.0;
+    }
+    if i == 0 {
+        return 1.0;
+    }
+    let level = (i as f64).log2().floor() as i32;
+    let t = (i - (1usize << level)) as f64;
+    let x = 2f64.powi(level) * w - t;
+    let amplitude = 2f64.powf(f64::from(level) / 2.0);
+    if (0.0..0.5).contains(&x) {
+        amplitude
+    } else if (0.5..1.0).contains(&x) {
+        -amplitude
+    } else {
+        0.0
+    }
+}
+
+fn amplitude(i: usize) -> f64 {
+    if i == 0 {
+        1.0
+    } else {
+        2f64.powf((i as f64).log2().floor() / 2.0)
+    }
+}
+
+/// Midpoint rule for eq. 8 over `[0, 1)` with `samples` points.
+fn integrate(i: usize, k: usize, s: f64, o: f64, samples: usize) -> f64 {
+    let h = 1.0 / samples as f64;
+    (0..samples)
+        .map(|m| {
+            let w = (m as f64 + 0.5) * h;
+            basis(i, s * w + o) * basis(k, w)
+        })
+        .sum::<f64>()
+        * h
+}
+
+fn random_affine(rng: &mut Rng) -> (f64, f64) {
+    let s = 10f64.powf(rng.uniform() * 3.0 - 1.5);
+    let o = (rng.uniform() * 1.4 - 0.2) - 0.5 * s;
+    (s, o)
+}
+
+#[test]
+fn couplings_match_numerical_integration_of_eq_8() {
+    let mut rng = Rng::new(7);
+    let samples = 1 << 17;
+    for _ in 0..300 {
+        let (s, o) = random_affine(&mut rng);
+        let i = (rng.next_u64() % 32) as usize;
+        let k = (rng.next_u64() % 32) as usize;
+        let exact = coupling(i, k, s, o);
+        let numeric = integrate(i, k, s, o, samples);
+        // Each of at most 6 breaks costs the midpoint rule one sample.
+        let bound = 6.0 * amplitude(i) * amplitude(k) / samples as f64;
+        assert!(
+            (exact - numeric).abs() <= bound,
+            "D_{i},{k}({s}, {o}) = {exact}, numerically {numeric}"
+        );
+    }
+}
+
+#[test]
+fn identity_map_gives_the_kronecker_delta_and_eq_13_holds() {
+    for i in 0..32 {
+        for k in 0..32 {
+            let expected = if i == k { 1.0 } else { 0.0 };
+            assert!(
+                (coupling(i, k, 1.0, 0.0) - expected).abs() < 1e-12,
+                "{i} {k}"
+            );
+        }
+    }
+    let mut rng = Rng::new(3);
+    for _ in 0..500 {
+        let (s, o) = random_affine(&mut rng);
+        let (i, j) = (
+            (rng.next_u64() % 64) as usize,
+            (rng.next_u64() % 64) as usize,
+        );
+        let left = coupling(i, j, s, o);
+        let right = coupling(j, i, 1.0 / s, -o / s) / s;
+        assert!(
+            (left - right).abs() < 1e-9 * (1.0 + left.abs()),
+            "{i} {j} {s} {o}"
+        );
+    }
+}
+
+#[test]
+fn sparse_couplings_are_every_nonzero_coefficient() {
+    let mut rng = Rng::new(11);
+    let mut cases: Vec<(f64, f64)> = (0..200).map(|_| random_affine(&mut rng)).collect();
+    cases.extend([
+        (1.0, 0.0),
+        (1e-6, 0.3),
+        (1e6, -5e5),
+        (0.5, 0.25),
+        (2.0, -1.0),
+        (1e-9, 1.0),
+    ]);
+    let order = 64;
+    let mut list = Vec::new();
+    let mut total = 0;
+    for &(s, o) in &cases {
+        for i in 0..order {
+            list.clear();
+            couplings(i, order, s, o, &mut list);
+            let dense: Vec<(u32, f64)> = (0..order)
+                .map(|k| (k as u32, coupling(i, k, s, o)))
+                .filter(|&(_, d)| d.abs() > 1e-12)
+                .collect();
+            let kept: Vec<(u32, f64)> = list
+                .iter()
+                .copied()
+                .filter(|&(_, d)| d.abs() > 1e-12)
+                .collect();
+            assert_eq!(kept.len(), dense.len(), "i {i}, s {s}, o {o}");
+            for (a, b) in kept.iter().zip(&dense) {
+                assert!(a.0 == b.0 && (a.1 - b.1).abs() < 1e-12);
+            }
+            total += list.len();
+        }
+    }
+    // O(N log N) per (s, o): at most 1 + 3·log₂N targets per source.
+    assert!(total <= cases.len() * order * (1 + 3 * 6));
+}
+
+/// The exact mean of `f(s·w + o)` over `w ∈ [a, b)` for a function that is
+/// `values[p]` on `[p/len, (p+1)/len)` and zero outside `[0, 1)`.
+fn mean_1d(values: &[f64], s: f64, o: f64, a: f64, b: f64) -> f64 {
+    let (lo, hi) = (s * a + o, s * b + o);
+    let n = values.len() as f64;
+    let mut sum = 0.0;
+    for (p, v) in values.iter().enumerate() {
+        let start = (p as f64 / n).max(lo);
+        let end = ((p + 1) as f64 / n).min(hi);
+        if end > start {
+            sum += v * (end - start);
+        }
+    }
+    sum / (hi - lo)
+}
+
+/// The face texels' exact mean radiance in the pixel domain, for a
+/// grey `side × side` texture that is separable: `fx[x]·fy[y]`.
+fn face_means(fx: &[f64], fy: &[f64], axes: [(f64, f64); 2], order: usize) -> Vec<f64> {
+    let h = 1.0 / order as f64;
+    let mx: Vec<f64> = (0..order)
+        .map(|j| mean_1d(fx, axes[0].0, axes[0].1, j as f64 * h, (j + 1) as f64 * h))
+        .collect();
+    let my: Vec<f64> = (0..order)
+        .map(|j| mean_1d(fy, axes[1].0, axes[1].1, j as f64 * h, (j + 1) as f64 * h))
+        .collect();
+    my.iter()
+        .flat_map(|y| mx.iter().map(move |x| x * y))
+        .collect()
+}
+
+fn separable_light(fx: &[f64], fy: &[f64]) -> LightTexture {
+    let texels = fy
+        .iter()
+        .flat_map(|y| fx.iter().map(move |x| [(x * y) as f32; 3]))
+        .collect();
+    LightTexture::new(fx.len(), fy.len(), texels).unwrap()
+}
+
+fn receivers(rng: &mut Rng, count: usize) -> Vec<Receiver> {
+    (0..count)
+        .map(|_| Receiver {
+            depth: 10f64.powf(rng.uniform() * 2.0 - 1.5),
+            position: [rng.uniform() * 3.0 - 1.5, rng.uniform() * 2.0 - 1.0],
+        })
+        .collect()
+}
+
+#[test]
+fn propagated_light_and_shading_equal_the_exact_resampled_light() {
+    let mut rng = Rng::new(5);
+    let order = 16;
+    // A separable texture at the face's order, so the light's box average is
+    // the texture itself and the reference is exact.
+    let fx: Vec<f64> = (0..order).map(|_| rng.uniform() * 4.0).collect();
+    let fy: Vec<f64> = (0..order).map(|_| rng.uniform() * 2.0 + 0.1).collect();
+    let light = separable_light(&fx, &fy);
+    let placement = Placement {
+        center: [0.2, -0.1],
+        size: [1.5, 0.8],
+        intensity: 3.0,
+    };
+    let face = PlaneFace {
+        order,
+        side: DEFAULT_FACE_SIDE,
+    };
+    let source = SourceCoefficients::new(&light, &placement, order, usize::MAX).unwrap();
+    let mut propagator = Propagator::new(face).unwrap();
+    for receiver in receivers(&mut rng, 40) {
+        assert!(propagator
+            .prepare(&source, &placement, &receiver, Targets::All)
+            .unwrap());
+        let axes = affine(&face, &placement, &receiver);
+        let means: Vec<[f64; 3]> = face_means(&fx, &fy, axes, order)
+            .iter()
+            .map(|m| [m * placement.intensity; 3])
+            .collect();
+        let reference = haar_2d(&means, order, 1.0).unwrap();
+        let got = propagator.incident();
+        let norm: f64 = reference.iter().map(|c| c[0] * c[0]).sum::<f64>().sqrt();
+        let diff: f64 = got
+            .iter()
+            .zip(&reference)
+            .map(|(a, b)| (a[1] - b[1]).powi(2))
+            .sum::<f64>()
+            .sqrt();
+        assert!(
+            diff <= 1e-5 * norm + 1e-9,
+            "{receiver:?}: {diff} against {norm}"
+        );
+
+        // Shading: a random transport row against Σ_j mean_j·t_j.
+        let per_texel: Vec<f32> = (0..order * order)
+            .map(|_| rng.uniform() as f32 * 1e-3)
+            .collect();
+        let exact: f64 = means
+            .iter()
+            .zip(&per_texel)
+            .map(|(m, t)| m[0] * f64::from(*t))
+            .sum();
+        let transport = transport_coefficients(&per_texel, order).unwrap();
+        let b = propagator.shade(&transport);
+        assert!(
+            (b[2] - exact).abs() <= 1e-5 * exact.abs() + 1e-12,
+            "{b:?} against {exact}"
+        );
+    }
+}
+
+#[test]
+fn fewer_terms_lose_accuracy_gracefully_and_all_terms_are_exact() {
+    let mut rng = Rng::new(9);
+    let order = 32;
+    let fx: Vec<f64> = (0..order)
+        .map(|x| if (x / 4) % 2 == 0 { 5.0 } else { 0.2 })
+        .collect();
+    let fy: Vec<f64> = (0..order).map(|_| rng.uniform() + 0.5).collect();
+    let light = separable_light(&fx, &fy);
+    let placement = Placement {
+        center: [0.0, 0.0],
+        size: [1.0, 1.0],
+        intensity: 1.0,
+    };
+    let face = PlaneFace { order, side: 4.0 };
+    let rows = receivers(&mut rng, 30);
+    let transport: Vec<Vec<(u32, f32)>> = rows
+        .iter()
+        .map(|_| {
+            let t: Vec<f32> = (0..order * order).map(|_| rng.uniform() as f32).collect();
+            transport_coefficients(&t, order).unwrap()
+        })
+        .collect();
+    let shade_all = |keep: usize, targets: Targets| -> Vec<f64> {
+        let source = SourceCoefficients::new(&light, &placement, order, keep).unwrap();
+        let mut p = Propagator::new(face).unwrap();
+        rows.iter()
+            .zip(&transport)
+            .map(|(r, t)| {
+                p.prepare(&source, &placement, r, targets).unwrap();
+                p.shade(t)[0]
+            })
+            .collect()
+    };
+    let exact = shade_all(usize::MAX, Targets::All);
+    let error = |got: &[f64]| -> f64 {
+        let num: f64 = got.iter().zip(&exact).map(|(a, b)| (a - b).powi(2)).sum();
+        (num / exact.iter().map(|b| b * b).sum::<f64>()).sqrt()
+    };
+    assert!(error(&shade_all(usize::MAX, Targets::Share(1.0))) < 1e-12);
+    let coarse = error(&shade_all(4, Targets::Share(0.05)));
+    let middle = error(&shade_all(64, Targets::Share(0.3)));
+    let fine = error(&shade_all(512, Targets::Share(0.8)));
+    assert!(coarse > middle && middle > fine, "{coarse} {middle} {fine}");
+    assert!(fine < 0.05, "{fine}");
+}
+
+#[test]
+fn box_average_keeps_the_mean_of_any_texture_shape() {
+    let mut rng = Rng::new(2);
+    for (w, h) in [
+        (1, 1),
+        (7, 5),
+        (16, 16),
+        (33, 2),
+        (1, 8192),
+        (8192, 1),
+        (100, 3),
+    ] {
+        let texels: Vec<[f32; 3]> = (0..w * h)
+            .map(|_| [rng.uniform() as f32, 1.0, 0.0])
+            .collect();
+        let mean: f64 = texels.iter().map(|t| f64::from(t[0])).sum::<f64>() / (w * h) as f64;
+        let light = LightTexture::new(w, h, texels).unwrap();
+        for order in [1, 4, 32] {
+            let avg = light.box_average(order);
+            let got: f64 = avg.iter().map(|a| a[0]).sum::<f64>() / (order * order) as f64;
+            assert!((got - mean).abs() < 1e-9, "{w}x{h} at {order}");
+            assert!(avg.iter().all(|a| (a[1] - 1.0).abs() < 1e-9 && a[2] == 0.0));
+        }
+    }
+}
+
+#[test]
+fn source_coefficients_are_projections_onto_the_basis() {
+    let mut rng = Rng::new(4);
+    let order = 8;
+    let texels: Vec<[f32; 3]> = (0..order * order)
+        .map(|_| [rng.uniform() as f32; 3])
+        .collect();
+    let light = LightTexture::new(order, order, texels.clone()).unwrap();
+    let averages: Vec<[f64; 3]> = texels.iter().map(|t| [f64::from(t[0]); 3]).collect();
+    let got = haar_2d(&averages, order, 1.0).unwrap();
+    let h = 1.0 / order as f64;
+    for (k, coefficient) in got.iter().enumerate() {
+        let (kx, ky) = (k % order, k / order);
+        let expected: f64 = averages
+            .iter()
+            .enumerate()
+            .map(|(j, a)| {
+                let (x, y) = ((j % order) as f64 + 0.5, (j / order) as f64 + 0.5);
+                a[0] * basis(kx, x * h) * basis(ky, y * h) * h * h
+            })
+            .sum();
+        assert!((coefficient[0] - expected).abs() < 1e-6, "{k}");
+    }
+    let all = SourceCoefficients::new(
+        &light,
+        &Placement {
+            center: [0.0; 2],
+            size: [1.0; 2],
+            intensity: 1.0,
+        },
+        order,
+        64,
+    )
+    .unwrap();
+    assert!((all.kept_energy() - 1.0).abs() < 1e-12);
+}
+
+#[test]
+fn hostile_placements_and_points_error_or_go_dark() {
+    let light = LightTexture::constant([1.0; 3]).unwrap();
+    let ok = Placement {
+        center: [0.0; 2],
+        size: [1.0; 2],
+        intensity: 1.0,
+    };
+    let face = PlaneFace {
+        order: 8,
+        side: 4.0,
+    };
+    let bad_placements = [
+        Placement {
+            center: [f64::NAN, 0.0],
+            ..ok
+        },
+        Placement {
+            size: [0.0, 1.0],
+            ..ok
+        },
+        Placement {
+            size: [1.0, f64::INFINITY],
+            ..ok
+        },
+        Placement {
+            intensity: -1.0,
+            ..ok
+        },
+        Placement {
+            intensity: 1e300,
+            ..ok
+        },
+    ];
+    for p in bad_placements {
+        let err = SourceCoefficients::new(&light, &p, 8, 10)
+            .unwrap_err()
+            .to_string();
+        assert!(err.contains("valid"), "{p:?}: {err}");
+    }
+    assert!(SourceCoefficients::new(&light, &ok, 6, 10).is_err());
+    assert!(SourceCoefficients::new(&light, &ok, 8, 0).is_err());
+    assert!(LightTexture::new(2, 1, vec![[f32::NAN, 0.0, 0.0]; 2]).is_err());
+    assert!(LightTexture::new(0, 1, vec![]).is_err());
+    assert!(LightTexture::new(1, 1, vec![[-1.0, 0.0, 0.0]]).is_err());
+    assert!(Propagator::new(PlaneFace {
+        order: 8,
+        side: 0.0
+    })
+    .is_err());
+    assert!(Propagator::new(PlaneFace {
+        order: 12,
+        side: 4.0
+    })
+    .is_err());
+
+    let source = SourceCoefficients::new(&light, &ok, 8, 64).unwrap();
+    let mut p = Propagator::new(face).unwrap();
+    let row = [(0u32, 1.0f32)];
+    for depth in [0.0, -1.0, -1e300] {
+        let r = Receiver {
+            depth,
+            position: [0.0; 2],
+        };
+        assert!(!p.prepare(&source, &ok, &r, Targets::All).unwrap());
+        assert_eq!(p.shade(&row), [0.0; 3]);
+    }
+    for r in [
+        Receiver {
+            depth: f64::NAN,
+            position: [0.0; 2],
+        },
+        Receiver {
+            depth: 1.0,
+            position: [f64::INFINITY, 0.0],
+        },
+    ] {
+        assert!(p.prepare(&source, &ok, &r, Targets::All).is_err());
+    }
+    // Extreme but valid: on the plane, very far, far to the side. Defined
+    // and finite; far to the side is dark.
+    for (depth, x) in [(1e-300, 0.2), (1e12, 0.0), (1.0, 1e9), (1e-3, 1e-3)] {
+        let r = Receiver {
+            depth,
+            position: [x, 0.0],
+        };
+        p.prepare(&source, &ok, &r, Targets::Share(0.2)).unwrap();
+        let b = p.shade(&row);
+        assert!(
+            b.iter().all(|v| v.is_finite() && *v >= 0.0),
+            "{depth} {x}: {b:?}"
+        );
+    }
+    let mismatched = SourceCoefficients::new(&light, &ok, 16, 4).unwrap();
+    let r = Receiver {
+        depth: 1.0,
+        position: [0.0; 2],
+    };
+    assert!(p.prepare(&mismatched, &ok, &r, Targets::All).is_err());
+}
+
+#[test]
+fn a_constant_light_overhead_gives_the_lit_solid_angle_of_a_unit_transport() {
+    // Transport = solid angle per face texel (V = ρ = cos = 1), so B is
+    // the solid angle of the light seen through the face times radiance.
+    // A 2×2 light at depth 1 under a face of side 4 lies inside the face
+    // and subtends 4·asin(a·b/√((a² + 4d²)(b² + 4d²))) = 4·asin(1/2).
+    let order = 64;
+    let face = PlaneFace { order, side: 4.0 };
+    let h = face.side / order as f64;
+    let per_texel: Vec<f32> = (0..order * order)
+        .map(|j| {
+            let vx = ((j % order) as f64 + 0.5) * h - 2.0;
+            let vy = ((j / order) as f64 + 0.5) * h - 2.0;
+            (h * h / (1.0 + vx * vx + vy * vy).powf(1.5)) as f32
+        })
+        .collect();
+    let transport = transport_coefficients(&per_texel, order).unwrap();
+    let light = LightTexture::constant([2.0, 1.0, 0.5]).unwrap();
+    let placement = Placement {
+        center: [0.0; 2],
+        size: [2.0; 2],
+        intensity: 1.0,
+    };
+    let source = SourceCoefficients::new(&light, &placement, order, 1).unwrap();
+    let mut p = Propagator::new(face).unwrap();
+    p.prepare(
+        &source,
+        &placement,
+        &Receiver {
+            depth: 1.0,
+            position: [0.0; 2],
+        },
+        Targets::All,
+    )
+    .unwrap();
+    let b = p.shade(&transport);
+    let omega = 4.0 * 0.5f64.asin();
+    for (c, radiance) in [2.0, 1.0, 0.5].into_iter().enumerate() {
+        assert!(
+            (b[c] / radiance - omega).abs() < 2e-3 * omega,
+            "{b:?} against {omega}"
+        );
+    }
+}

@@ -1,0 +1,209 @@
+//! Near-field area lights end to end: rows baked over a light plane's face
+//! (`Scene::plane_row`) and lit by propagating a textured light's Haar
+//! coefficients (`ltm::relight::nearfield`), against an independent
+//! estimate that samples the light's rectangle by area:
+//! `B = (ρ/π) ∫ F(y)·V(x, y)·cos θ_x·cos θ_y / r² dA_y`.
+
+use glam::DVec3;
+use ltm::bake::{LightPlane, Scene, SceneDesc};
+use ltm::relight::nearfield::{
+    transport_coefficients, LightTexture, Placement, PlaneFace, Propagator, Receiver,
+    SourceCoefficients, Targets,
+};
+
+const SCENE: &str = r#"
+[camera]
+eye = [0.0, 2.6, 2.2]
+target = [0.0, 0.0, 0.0]
+fov = 50.0
+width = 24
+height = 18
+spp = 1
+
+[lighting]
+face_res = 4
+texel_samples = 16
+
+[materials.grey]
+type = "lambert"
+albedo = [0.5, 0.4, 0.3]
+
+[[quads]]
+center = [0.0, 0.0, 0.0]
+size = [4.0, 4.0]
+material = "grey"
+
+[[quads]]
+center = [0.25, 0.6, 0.1]
+size = [0.5, 0.4]
+material = "grey"
+"#;
+
+/// Side of the light texture.
+const SIDE: usize = 16;
+
+/// A 16×16 light texture: a colour ramp, stripes and a dark corner.
+fn texels() -> Vec<[f32; 3]> {
+    (0..SIDE * SIDE)
+        .map(|j| {
+            let (x, y) = ((j % SIDE) as f32, (j / SIDE) as f32);
+            let stripe = if (j % SIDE) % 4 < 2 { 3.0 } else { 0.3 };
+            let corner = if x < 5.0 && y < 5.0 { 0.0 } else { 1.0 };
+            [
+                corner * (1.0 + 0.2 * x),
+                corner * (0.5 + 0.1 * y),
+                corner * stripe,
+            ]
+        })
+        .collect()
+}
+
+/// Radiance of the light at in-plane position `q` (zero outside).
+fn radiance(light: &[[f32; 3]], placement: &Placement, q: [f64; 2]) -> [f64; 3] {
+    let u = (q[0] - placement.center[0]) / placement.size[0] + 0.5;
+    let v = (q[1] - placement.center[1]) / placement.size[1] + 0.5;
+    if !(0.0..1.0).contains(&u) || !(0.0..1.0).contains(&v) {
+        return [0.0; 3];
+    }
+    let s = SIDE as f64;
+    let t = light[(v * s) as usize * SIDE + (u * s) as usize];
+    [0, 1, 2].map(|c| f64::from(t[c]) * placement.intensity)
+}
+
+/// The area estimate of the reflected radiance at a floor row's point
+/// (normal +Y), with `m × m` midpoint samples over the light, with or
+/// without the scene's shadows.
+fn by_area(
+    scene: &Scene,
+    plane: &LightPlane,
+    placement: &Placement,
+    row: &FloorRow,
+    m: usize,
+    shadows: bool,
+) -> [f64; 3] {
+    let (x, albedo) = (row.point, row.albedo);
+    let texels = texels();
+    let normal = DVec3::Y;
+    let area = placement.size[0] * placement.size[1] / (m * m) as f64;
+    let mut sum = [0.0f64; 3];
+    for i in 0..m {
+        for j in 0..m {
+            let q = [
+                placement.center[0] + placement.size[0] * ((i as f64 + 0.5) / m as f64 - 0.5),
+                placement.center[1] + placement.size[1] * ((j as f64 + 0.5) / m as f64 - 0.5),
+            ];
+            let y = plane.point(q);
+            let d = y - x;
+            let r2 = d.length_squared();
+            let w = d / r2.sqrt();
+            let (cos_x, cos_y) = (normal.dot(w), -plane.normal().dot(w));
+            if cos_x <= 0.0 || (shadows && scene.occluded(x + 1e-6 * normal, w)) {
+                continue;
+            }
+            let f = radiance(&texels, placement, q);
+            for c in 0..3 {
+                sum[c] += f[c] * cos_x * cos_y / r2 * area;
+            }
+        }
+    }
+    [0, 1, 2].map(|c| sum[c] * f64::from(albedo[c]) / std::f64::consts::PI)
+}
+
+/// A floor row: its point, albedo and transport's Haar coefficients.
+struct FloorRow {
+    point: DVec3,
+    albedo: [f32; 3],
+    transport: Vec<(u32, f32)>,
+}
+
+fn floor_rows(scene: &Scene, plane: &LightPlane, face: &PlaneFace) -> Vec<FloorRow> {
+    let order = face.order;
+    let mut row = vec![0.0f32; order * order];
+    let mut rows = Vec::new();
+    for p in 0..scene.dims().pixels() {
+        let mut albedo = [0.0f32; 3];
+        let info = scene
+            .plane_row(p, plane, order, face.side, &mut row, &mut albedo)
+            .unwrap();
+        // Only floor points: the occluder's top is not compared.
+        if let Some(point) = info.point.filter(|x| x.y.abs() < 1e-3) {
+            let transport = transport_coefficients(&row, order).unwrap();
+            rows.push(FloorRow {
+                point,
+                albedo,
+                transport,
+            });
+        }
+    }
+    rows
+}
+
+fn relative_l2(a: &[[f64; 3]], b: &[[f64; 3]]) -> f64 {
+    let num: f64 = a
+        .iter()
+        .zip(b)
+        .flat_map(|(x, y)| (0..3).map(move |c| (x[c] - y[c]).powi(2)))
+        .sum();
+    let den: f64 = b.iter().flat_map(|y| y.iter().map(|v| v * v)).sum();
+    (num / den).sqrt()
+}
+
+#[test]
+fn near_field_light_matches_an_area_integral_with_shadows() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("scene.toml");
+    std::fs::write(&path, SCENE).unwrap();
+    let scene = Scene::build(&SceneDesc::load(&path).unwrap()).unwrap();
+    // The light plane 1.5 above the floor, lit side down (x × z = −y).
+    let plane = LightPlane::new(DVec3::new(0.0, 1.5, 0.0), DVec3::X, DVec3::Z).unwrap();
+    let placement = Placement {
+        center: [-0.1, 0.2],
+        size: [1.0, 0.8],
+        intensity: 1.0,
+    };
+    let face = PlaneFace {
+        order: 32,
+        side: 4.0,
+    };
+    let rows = floor_rows(&scene, &plane, &face);
+    assert!(rows.len() > 200, "{} floor rows", rows.len());
+    let reference: Vec<[f64; 3]> = rows
+        .iter()
+        .map(|r| by_area(&scene, &plane, &placement, r, 96, true))
+        .collect();
+    let light = LightTexture::new(SIDE, SIDE, texels()).unwrap();
+    let mut propagator = Propagator::new(face).unwrap();
+    let mut relit = |keep: usize, targets: Targets| -> Vec<[f64; 3]> {
+        let source = SourceCoefficients::new(&light, &placement, face.order, keep).unwrap();
+        rows.iter()
+            .map(|r| {
+                let (depth, position) = plane.locate(r.point);
+                let receiver = Receiver { depth, position };
+                propagator
+                    .prepare(&source, &placement, &receiver, targets)
+                    .unwrap();
+                let b = propagator.shade(&r.transport);
+                [0, 1, 2].map(|c| b[c] * f64::from(r.albedo[c]))
+            })
+            .collect()
+    };
+    let full = relative_l2(&relit(usize::MAX, Targets::All), &reference);
+    eprintln!(
+        "{} floor rows: every term, relative L2 {full:.4}",
+        rows.len()
+    );
+    assert!(full < 0.03, "relative L2 {full}");
+    for (source, target) in [(0.01, 0.2), (0.05, 0.3), (0.25, 0.5)] {
+        let keep = (source * 1024.0f64).ceil() as usize;
+        let e = relative_l2(&relit(keep, Targets::Share(target)), &reference);
+        eprintln!("source {source}, target {target}: relative L2 {e:.4}");
+    }
+    // The shadow is part of what is checked: without it the floor differs.
+    let unshadowed: Vec<[f64; 3]> = rows
+        .iter()
+        .map(|r| by_area(&scene, &plane, &placement, r, 96, false))
+        .collect();
+    let shadow = relative_l2(&unshadowed, &reference);
+    eprintln!("the occluder's shadow: {shadow:.3} of the floor's light");
+    assert!(shadow > 0.1, "{shadow}");
+}

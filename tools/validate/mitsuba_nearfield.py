@@ -1,0 +1,227 @@
+#!/usr/bin/env python3
+"""Check near-field area lights (Sun and Ramamoorthi 2009) against Mitsuba 3.
+
+The scene `tools/validate/point/scene.toml` (the small bunny, flat-shaded
+and Lambertian, on a ground quad before a wall) is lit by one planar,
+textured area light above it, parallel to the ground and facing down:
+
+  * ltm: `cargo run --release --example nearfield`, which bakes every pixel
+    over the light plane's expanded top face (`Scene::plane_row`, order 32,
+    side 4) and propagates the light's Haar coefficients to it
+    (`ltm::relight::nearfield`);
+  * Mitsuba: a `rectangle` shape with an `area` emitter whose radiance is a
+    `bitmap` texture (nearest, raw), `direct` integrator, rendered at F = 5
+    times ltm's resolution with the centre sub-pixel of each F x F block
+    kept (ltm's rows are the pixel centres' first hits, as in
+    mitsuba_point.py).
+
+Two placements: `near` (the light 0.75 above the bunny's top, about half the
+scene's size) and `far` (2.5 higher and 3 times larger). Each is measured at
+every source and target term and at the paper's 1 % / 20 %.
+
+Conventions: the light's texture row 0 lies at its -y edge and column 0 at
+its -x edge, with the plane's x axis = world +X and y axis = world +Z (lit
+side x × y = -Y). Mitsuba's rectangle maps its local [-1, 1]^2 to uv
+[0, 1]^2 and its bitmap's row 0 to v = 0, so the same texture is passed to
+both. Pixels whose light arrives from outside the face (more than
+atan(side/2) = 63 degrees off the plane's normal) are darker in ltm by
+design: the summary reports the error over all pixels and over pixels that
+see the whole light rectangle inside the face and lie more than 1 px from
+a silhouette (where ltm's pixel-centre ray and Mitsuba's 1/F-wide box see
+different surfaces).
+
+Usage:
+  python3 tools/validate/mitsuba_nearfield.py [--spp 256] [--out DIR]
+"""
+
+import argparse
+import json
+import math
+import os
+import subprocess
+import sys
+import tempfile
+import time
+import tomllib
+
+import numpy as np
+
+HERE = os.path.dirname(os.path.abspath(__file__))
+ROOT = os.path.normpath(os.path.join(HERE, "..", ".."))
+sys.path.insert(0, HERE)
+import mitsuba_compare  # noqa: E402  (the shared scene builder)
+
+SCENE = os.path.join(HERE, "point", "scene.toml")
+FACTOR = 5
+SIDE = 4.0
+ORDER = 32
+# name: (plane height, centre (x, z), size (x, z), intensity)
+PLACEMENTS = {
+    "near": (1.5, (0.15, 0.25), (0.8, 0.6), 4.0),
+    "far": (4.0, (0.3, 0.5), (2.4, 1.8), 4.0),
+}
+
+
+def light_texture(w=64, h=48):
+    """A softbox: warm left half, cool right half, dark bars, a bright spot."""
+    y, x = np.mgrid[0:h, 0:w] + 0.5
+    u, v = x / w, y / h
+    tex = np.zeros((h, w, 3), np.float32)
+    tex[..., 0] = np.where(u < 0.5, 1.6, 0.5)
+    tex[..., 1] = 0.9
+    tex[..., 2] = np.where(u < 0.5, 0.4, 1.5)
+    bars = (np.floor(v * 6) % 2 == 1) & (u > 0.2) & (u < 0.8)
+    tex[bars] *= 0.15
+    spot = (u - 0.8) ** 2 + (v - 0.2) ** 2 < 0.01
+    tex[spot] = [6.0, 6.0, 5.0]
+    return tex
+
+
+def mitsuba_image(mi, scene, tex_path, height, center, size, spp, seed):
+    """Mitsuba's image at ltm's pixel centres; `tex_path` holds the radiance
+    with the intensity applied."""
+    d = mitsuba_compare.mitsuba_scene(mi, scene, os.path.dirname(SCENE),
+                                      np.zeros((8, 16, 3)), spp)
+    del d["env"]
+    film = d["sensor"]["film"]
+    film["width"] *= FACTOR
+    film["height"] *= FACTOR
+    T = mi.ScalarTransform4f
+    # local x -> +X·w/2, local y -> +Z·h/2, local z (emitting side) -> -Y.
+    cx, cz = center
+    sx, sz = size
+    to_world = T([[sx / 2, 0, 0, cx], [0, 0, -1, height], [0, sz / 2, 0, cz], [0, 0, 0, 1]])
+    d["light"] = {"type": "rectangle", "to_world": to_world,
+                  "emitter": {"type": "area", "radiance": {
+                      "type": "bitmap", "filename": tex_path, "raw": True,
+                      "filter_type": "nearest"}}}
+    img = np.array(mi.render(mi.load_dict(d), seed=seed), dtype=np.float64)[..., :3]
+    c = FACTOR // 2
+    return img[c::FACTOR, c::FACTOR]
+
+
+def silhouettes(points, eye, jump=0.01):
+    """Pixels within 1 px of a silhouette: a miss, or a distance to the eye
+    that bends by more than `jump` (relative) between a pixel and its two
+    neighbours along a row or a column (a plane seen in perspective stays
+    nearly straight)."""
+    dist = np.linalg.norm(points - np.asarray(eye), axis=-1)
+    edge = ~np.isfinite(dist)
+    d = np.where(edge, 0.0, dist)
+    bend = np.zeros_like(edge)
+    bend[1:-1] |= np.abs(d[:-2] + d[2:] - 2 * d[1:-1]) > jump * d[1:-1]
+    bend[:, 1:-1] |= np.abs(d[:, :-2] + d[:, 2:] - 2 * d[:, 1:-1]) > jump * d[:, 1:-1]
+    edge |= bend
+    grown = edge.copy()
+    grown[1:] |= edge[:-1]
+    grown[:-1] |= edge[1:]
+    grown[:, 1:] |= edge[:, :-1]
+    grown[:, :-1] |= edge[:, 1:]
+    return grown
+
+
+def rel_l2(a, b, mask=None):
+    if mask is not None:
+        a, b = a[mask], b[mask]
+    return float(np.linalg.norm(a - b) / np.linalg.norm(b))
+
+
+def run_ltm(scene_path, tex_file, tex, height, center, size, intensity, out, source, target):
+    """Runs the example; returns its seconds and its summary line."""
+    h, w = tex.shape[:2]
+    cmd = ["cargo", "run", "--release", "--quiet", "--example", "nearfield", "--", scene_path,
+           "--plane", f"0,{height},0,1,0,0,0,0,1", "--texture", f"{w},{h},{tex_file}",
+           "--center", f"{center[0]},{center[1]}", "--size", f"{size[0]},{size[1]}",
+           "--intensity", str(intensity), "--order", str(ORDER), "--side", str(SIDE),
+           "--source-share", str(source), "--target-share", str(target), "-o", out,
+           "--coverage", out + ".coverage", "--points", out + ".points"]
+    t0 = time.time()
+    log = subprocess.run(cmd, check=True, cwd=ROOT, capture_output=True, text=True).stdout
+    return time.time() - t0, log.strip()
+
+
+def main():
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--spp", type=int, default=256, help="Mitsuba samples per sub-pixel")
+    ap.add_argument("--texel-samples", type=int, default=16)
+    ap.add_argument("--order", type=int, default=32, help="face texels per side")
+    ap.add_argument("--only", default=None, help="one placement: near or far")
+    ap.add_argument("--out", default=None)
+    args = ap.parse_args()
+    global ORDER
+    ORDER = args.order
+    import mitsuba as mi
+    mi.set_variant("scalar_rgb")
+    out = args.out or tempfile.mkdtemp(prefix="ltm-nearfield-")
+    os.makedirs(out, exist_ok=True)
+    with open(SCENE, "rb") as f:
+        scene = tomllib.load(f)
+    # The same scene with more direction samples per texel, beside the
+    # original so its relative mesh path still holds.
+    text = open(SCENE).read().replace("texel_samples = 4", f"texel_samples = {args.texel_samples}")
+    scene_path = os.path.join(HERE, "point", "nearfield-scene.toml")
+    with open(scene_path, "w") as f:
+        f.write(text)
+    tex = light_texture()
+    tex_f32 = os.path.join(out, "light.f32")
+    tex.astype("<f4").tofile(tex_f32)
+    cam = scene["camera"]
+    H, W = cam["height"], cam["width"]
+    results = {}
+    try:
+        for name, (height, center, size, inten) in PLACEMENTS.items():
+            if args.only and name != args.only:
+                continue
+            tex_exr = os.path.join(out, f"light-{name}.exr")
+            mi.Bitmap(tex * np.float32(inten)).write(tex_exr)
+            t0 = time.time()
+            ref = mitsuba_image(mi, scene, tex_exr, height, center, size, args.spp, 1)
+            render_s = time.time() - t0
+            ref2 = mitsuba_image(mi, scene, tex_exr, height, center, size, args.spp, 2)
+            noise = rel_l2(ref2, ref) / math.sqrt(2)
+            np.save(os.path.join(out, f"{name}_mitsuba.npy"), ref.astype(np.float32))
+            np.save(os.path.join(out, f"{name}_mitsuba_seed2.npy"), ref2.astype(np.float32))
+            r = dict(height=height, center=center, size=size, intensity=inten,
+                     mitsuba_render_s=render_s, mitsuba_noise=noise, runs=[])
+            for source, target in [(1.0, 1.0), (0.05, 0.3), (0.01, 0.2)]:
+                img_path = os.path.join(out, f"{name}-{source}-{target}.f32")
+                secs, log = run_ltm(scene_path, tex_f32, tex, height, center, size, inten,
+                                    img_path, source, target)
+                ours = np.fromfile(img_path, dtype="<f4").reshape(H, W, 3).astype(np.float64)
+                cov = np.fromfile(img_path + ".coverage", dtype=np.uint8).reshape(H, W)
+                pts = np.fromfile(img_path + ".points", dtype="<f4").reshape(H, W, 3)
+                inside = (cov == 2) & ~silhouettes(pts.astype(np.float64), cam["eye"])
+                e, e_in = rel_l2(ours, ref), rel_l2(ours, ref, inside)
+                noise_in = rel_l2(ref2, ref, inside) / math.sqrt(2)
+                r["runs"].append(dict(
+                    source=source, target=target, rel_l2=e,
+                    rel_l2_noise_removed=math.sqrt(max(e * e - noise * noise, 0)),
+                    inside_share=float(inside.mean()), rel_l2_inside=e_in,
+                    mitsuba_noise_inside=noise_in,
+                    rel_l2_inside_noise_removed=math.sqrt(max(e_in ** 2 - noise_in ** 2, 0)),
+                    # The share of the image's light, and of the light of
+                    # the pixels the face does not fully cover, left out.
+                    image_energy_left_out=float((ref[cov == 1].sum() - ours[cov == 1].sum())
+                                                / ref.sum()),
+                    partial_energy_left_out=(
+                        float(1 - ours[cov == 1].sum() / ref[cov == 1].sum())
+                        if (cov == 1).any() else None),
+                    ltm_s=secs, log=log))
+                if source == 1.0:
+                    peak = np.percentile(ref, 99.5)
+                    mitsuba_compare.save_png(os.path.join(out, f"{name}_ltm.png"), ours / peak)
+                    mitsuba_compare.save_png(os.path.join(out, f"{name}_mitsuba.png"), ref / peak)
+            results[name] = r
+            print(json.dumps({name: r}, indent=1), flush=True)
+    finally:
+        os.remove(scene_path)
+    summary = dict(mitsuba_version=mi.__version__, spp=args.spp, factor=FACTOR,
+                   scene=os.path.relpath(SCENE, ROOT), side=SIDE, order=ORDER,
+                   texel_samples=args.texel_samples, results=results)
+    with open(os.path.join(out, "summary.json"), "w") as f:
+        json.dump(summary, f, indent=2)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

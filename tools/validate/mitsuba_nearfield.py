@@ -30,8 +30,11 @@ see the whole light rectangle inside the face and lie more than 1 px from
 a silhouette (where ltm's pixel-centre ray and Mitsuba's 1/F-wide box see
 different surfaces).
 
+With --write-fixtures the light texture and Mitsuba's images (float32
+.npy, H x W x 3) are written to tests/fixtures/ for tests/nearfield.rs.
+
 Usage:
-  python3 tools/validate/mitsuba_nearfield.py [--spp 256] [--out DIR]
+  python3 tools/validate/mitsuba_nearfield.py [--spp 1024] [--out DIR] [--write-fixtures]
 """
 
 import argparse
@@ -52,10 +55,12 @@ sys.path.insert(0, HERE)
 import mitsuba_compare  # noqa: E402  (the shared scene builder)
 
 SCENE = os.path.join(HERE, "point", "scene.toml")
+FIXTURES = os.path.join(ROOT, "tests", "fixtures")
 FACTOR = 5
 SIDE = 4.0
 ORDER = 32
-# name: (plane height, centre (x, z), size (x, z), intensity)
+# name: (plane height, centre (x, z), size (x, z), intensity). Keep in step
+# with tests/nearfield.rs.
 PLACEMENTS = {
     "near": (1.5, (0.15, 0.25), (0.8, 0.6), 4.0),
     "far": (4.0, (0.3, 0.5), (2.4, 1.8), 4.0),
@@ -146,6 +151,9 @@ def main():
     ap.add_argument("--texel-samples", type=int, default=16)
     ap.add_argument("--order", type=int, default=32, help="face texels per side")
     ap.add_argument("--only", default=None, help="one placement: near or far")
+    ap.add_argument("--write-fixtures", action="store_true",
+                    help="write the light and Mitsuba's images to tests/fixtures/ "
+                         "(read by tests/nearfield.rs)")
     ap.add_argument("--out", default=None)
     args = ap.parse_args()
     global ORDER
@@ -165,6 +173,9 @@ def main():
     tex = light_texture()
     tex_f32 = os.path.join(out, "light.f32")
     tex.astype("<f4").tofile(tex_f32)
+    if args.write_fixtures:
+        os.makedirs(FIXTURES, exist_ok=True)
+        np.save(os.path.join(FIXTURES, "nearfield_light.npy"), tex.astype(np.float32))
     cam = scene["camera"]
     H, W = cam["height"], cam["width"]
     results = {}
@@ -181,6 +192,9 @@ def main():
             noise = rel_l2(ref2, ref) / math.sqrt(2)
             np.save(os.path.join(out, f"{name}_mitsuba.npy"), ref.astype(np.float32))
             np.save(os.path.join(out, f"{name}_mitsuba_seed2.npy"), ref2.astype(np.float32))
+            if args.write_fixtures:
+                np.save(os.path.join(FIXTURES, f"nearfield_mitsuba_{name}.npy"),
+                        ref.astype(np.float32))
             r = dict(height=height, center=center, size=size, intensity=inten,
                      mitsuba_render_s=render_s, mitsuba_noise=noise, runs=[])
             for source, target in [(1.0, 1.0), (0.05, 0.3), (0.01, 0.2)]:

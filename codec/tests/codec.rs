@@ -295,6 +295,50 @@ fn version_6_files_still_decode_to_the_current_files_matrix() {
     assert_eq!(old.empty_rows(), new.empty_rows());
 }
 
+/// Version 7 packs the column table (chunk COLS, written after DATA) when
+/// its zstd frame is smaller, and the file decodes exactly as the same file
+/// with its chunks stored as is.
+#[test]
+fn the_column_table_is_packed_when_smaller_and_decodes_identically() {
+    let dir = tempfile::tempdir().unwrap();
+    let dims = Dims::image(24, 20, 4, 3);
+    let raw = write_raw(
+        &dir.path().join("g.raw"),
+        dims,
+        &golden_matrix(dims),
+        None,
+        64 << 10,
+    );
+    let (out, _) = run(dir.path(), &raw, &CompressOptions::default(), "g.ltm");
+    let packed = std::fs::read(&out).unwrap();
+    let u32_at = |b: &[u8], at: usize| u32::from_le_bytes(b[at..at + 4].try_into().unwrap());
+    let table = 28 * dims.lights();
+    let (entry, at, len) = chunk_entry(&packed, b"COLS");
+    assert_eq!(
+        (u32_at(&packed, entry + 4), u32_at(&packed, entry + 28)),
+        (1, table as u32)
+    );
+    assert!(len < table, "{len} stored bytes for a {table}-byte table");
+    // COLS follows DATA and ends the file.
+    let (_, data_at, data_len) = chunk_entry(&packed, b"DATA");
+    assert_eq!((at, at + len), (data_at + data_len, packed.len()));
+    let stored = ltm_codec::container::unpack_chunks(&packed).unwrap();
+    let (entry, _, len) = chunk_entry(&stored, b"COLS");
+    assert_eq!((u32_at(&stored, entry + 4), len), (0, table));
+    let limits = Limits::default();
+    let a = LtmFile::from_bytes(packed, &limits).unwrap();
+    let b = LtmFile::from_bytes(stored, &limits).unwrap();
+    assert_eq!(a.columns(), b.columns());
+    for j in 0..a.columns().len() {
+        assert_eq!(a.column(j).unwrap(), b.column(j).unwrap(), "column {j}");
+    }
+    let (x, y) = (
+        decode_matrix(&a, &limits).unwrap(),
+        decode_matrix(&b, &limits).unwrap(),
+    );
+    assert!(x.len() == y.len() && x.iter().zip(&y).all(|(p, q)| p.to_bits() == q.to_bits()));
+}
+
 /// Every wavelet file stores each column's priority norm (chunk NORM), and
 /// it is the norm of the column as the decoder reads it, bit for bit: in
 /// every wavelet mode, with either entropy coder, grey and RGB, with zero
@@ -1000,7 +1044,10 @@ fn hostile_files_error_and_never_panic() {
     let t = scene(dims);
     let raw = write_raw(&dir.path().join("x.raw"), dims, &t, None, 64 << 10);
     let (out, _) = run(dir.path(), &raw, &CompressOptions::default(), "x.ltm");
-    let good = std::fs::read(&out).unwrap();
+    let packed = std::fs::read(&out).unwrap();
+    // Mutated as written (a packed column table) and with every chunk
+    // stored as is, whose column CRCs `repair_checksums` can rewrite.
+    let unpacked = ltm_codec::container::unpack_chunks(&packed).unwrap();
     let check = |bytes: &[u8]| {
         let _ = ltm_codec::container::validate_bytes(bytes, &ltm_codec::Limits::default());
         // Also past the checksums, to reach the structural checks.
@@ -1015,23 +1062,25 @@ fn hostile_files_error_and_never_panic() {
             }
         }
     };
-    for len in 0..good.len() {
-        check(&good[..len]);
-    }
     let mut s = 0x1234_5678_9abc_def0u64;
-    for _ in 0..3000 {
-        let mut bytes = good.clone();
-        for _ in 0..1 + (s % 4) {
-            s ^= s << 13;
-            s ^= s >> 7;
-            s ^= s << 17;
-            let i = (s % bytes.len() as u64) as usize;
-            bytes[i] ^= 1 << (s >> 60 & 7);
+    for good in [&packed, &unpacked] {
+        for len in 0..good.len() {
+            check(&good[..len]);
         }
-        check(&bytes);
+        for _ in 0..3000 {
+            let mut bytes = good.clone();
+            for _ in 0..1 + (s % 4) {
+                s ^= s << 13;
+                s ^= s >> 7;
+                s ^= s << 17;
+                let i = (s % bytes.len() as u64) as usize;
+                bytes[i] ^= 1 << (s >> 60 & 7);
+            }
+            check(&bytes);
+        }
     }
     // A header that claims a newer version is refused with a clear message.
-    let mut newer = good.clone();
+    let mut newer = packed.clone();
     newer[8] = 9;
     let err = LtmFile::parse(&newer, &ltm_codec::Limits::default())
         .unwrap_err()
@@ -1193,8 +1242,8 @@ const GOLDEN_LTM_V1: u32 = 0x5832_3993;
 
 const GOLDEN_RAW: u32 = 0xf20f_83f3;
 /// The default options: adaptive, 10 bits, 1 % target (version 7: the
-/// EMPT chunk packed).
-const GOLDEN_LTM: u32 = 0xb63d_0ff3;
+/// EMPT chunk packed, and the column table packed after DATA).
+const GOLDEN_LTM: u32 = 0xce3f_8a13;
 /// The committed version-5 fixture `tests/fixtures/golden-v5.ltm`: the
 /// same options, written before version 6 (the receiver mesh). A file
 /// without a mesh differs from version 6 only in its version field and

@@ -6,7 +6,7 @@ was consulted). It checks that the specification is complete: it decodes a `.ltm
 file of mode 2d, 4d or adaptive to the dense transport matrix exactly as
 `ltm export` writes it (float32, shape (P, M, C), or (P, M) when C = 1).
 `pca` files (mode 3) are refused. Format versions 1 to 7 are read (version 7 stores
-side chunks as zstd frames: pip `zstandard`), with column
+side chunks and the column table as zstd frames: pip `zstandard`), with column
 encodings 0 to 4; a version-5 file's column norms (chunk NORM) are checked against
 the decoded columns; the row layout (chunk SURF) and a version-6 file's receiving
 mesh (chunk MESH) are decoded and checked. Given a raw transport store (magic
@@ -136,7 +136,7 @@ def read_container(buf):
         if version < 7:
             enc, unpacked = 0, 0
         if (enc, unpacked == 0) != (0, True) and not (
-                enc == 1 and unpacked > 0 and tag in (b"ALBD", b"EMPT", b"SURF", b"MESH")):
+                enc == 1 and unpacked > 0 and tag in (b"ALBD", b"EMPT", b"SURF", b"MESH", b"COLS")):
             raise FormatError(f"chunk {tag!r}: encoding {enc} with unpacked length {unpacked}")
         if tag in chunks:
             raise FormatError(f"duplicate chunk {tag!r}")

@@ -4,7 +4,7 @@
 
 use crate::bytes::{Reader, Writer};
 use crate::error::{Error, Result};
-use crate::limits::Limits;
+use crate::limits::{Charge, Limits};
 use std::borrow::Cow;
 
 /// File magic: `\x89LTM\r\n\x1a\n`.
@@ -57,8 +57,9 @@ const KNOWN_FEATURES: [u32; VERSION as usize] = [
         | FEATURE_RECEIVER_MESH,
 ];
 /// The chunks a version-7 file may store zstd-packed: the side data known
-/// when the file is started.
-pub(super) const PACKABLE: [&[u8; 4]; 4] = [b"ALBD", b"EMPT", b"SURF", b"MESH"];
+/// when the file is started, and the column table (which ltm writes after
+/// DATA, once every column is known).
+pub(super) const PACKABLE: [&[u8; 4]; 5] = [b"ALBD", b"EMPT", b"SURF", b"MESH", b"COLS"];
 /// The most chunks a file of any version holds: 4 required (a `pca`
 /// file's) plus one per feature bit.
 pub const MAX_CHUNKS: usize = 4 + KNOWN_FEATURES[VERSION as usize - 1].count_ones() as usize;
@@ -156,7 +157,7 @@ fn check_packing(tag: &[u8; 4], encoding: u32, unpacked: u32) -> Result<u32> {
         _ => Err(Error::corrupt(
             "chunk directory",
             format!(
-                "chunk {name}: encoding {encoding} with unpacked length {unpacked} (valid: 0 with 0, or 1 (zstd) with a length >= 1 for ALBD, EMPT, SURF or MESH)"
+                "chunk {name}: encoding {encoding} with unpacked length {unpacked} (valid: 0 with 0, or 1 (zstd) with a length >= 1 for ALBD, EMPT, SURF, MESH or COLS)"
             ),
         )),
     }
@@ -235,23 +236,43 @@ pub(super) fn stored_chunk<'a>(
     Ok(Some((s, *d)))
 }
 
+/// A chunk's bytes as [`chunk`] reads them: the stored bytes, or the
+/// unpacked copy with its charge to the limits, held as long as the copy.
+#[derive(Debug)]
+pub(super) struct ChunkBytes<'a> {
+    bytes: Cow<'a, [u8]>,
+    /// The unpacked copy's bytes, charged (empty for stored bytes).
+    _charge: Charge,
+}
+
+impl std::ops::Deref for ChunkBytes<'_> {
+    type Target = [u8];
+    fn deref(&self) -> &[u8] {
+        &self.bytes
+    }
+}
+
 /// The bytes of chunk `tag` as [`stored_chunk`] reads them, unpacked when
-/// packed: the unpacked length is charged to `limits` first, and must be
-/// exactly what the zstd frame holds.
+/// packed: the unpacked length is charged to `limits` first (and stays
+/// charged while the copy lives), and must be exactly what the zstd frame
+/// holds.
 pub(super) fn chunk<'a>(
     bytes: &'a [u8],
     dir: &[DirEntry],
     tag: &[u8; 4],
     limits: &Limits,
-) -> Result<Option<Cow<'a, [u8]>>> {
+) -> Result<Option<ChunkBytes<'a>>> {
     let Some((s, d)) = stored_chunk(bytes, dir, tag)? else {
         return Ok(None);
     };
     if d.unpacked == 0 {
-        return Ok(Some(Cow::Borrowed(s)));
+        return Ok(Some(ChunkBytes {
+            bytes: Cow::Borrowed(s),
+            _charge: Charge::default(),
+        }));
     }
     let name = String::from_utf8_lossy(tag);
-    let _charge = limits.check_alloc("packed chunk", d.unpacked as u64, 1)?;
+    let charge = limits.check_alloc("packed chunk", d.unpacked as u64, 1)?;
     let unpacked = zstd::bulk::decompress(s, d.unpacked as usize).map_err(|e| {
         Error::corrupt(
             "chunk",
@@ -268,10 +289,13 @@ pub(super) fn chunk<'a>(
             ),
         ));
     }
-    Ok(Some(Cow::Owned(unpacked)))
+    Ok(Some(ChunkBytes {
+        bytes: Cow::Owned(unpacked),
+        _charge: charge,
+    }))
 }
 
-/// `raw` as a side chunk is stored: one zstd frame when that is smaller
+/// `raw` as a packable chunk is stored: one zstd frame when that is smaller
 /// (version 7), else as is. Returns the stored bytes and the unpacked
 /// length (0 when stored as is).
 pub(super) fn pack(raw: Vec<u8>) -> (Vec<u8>, u32) {
@@ -351,10 +375,12 @@ mod tests {
         let limits = Limits::default();
         let (file, _) = packed_file(&stored, unpacked);
         let (_, _, dir) = read_directory(&file).unwrap();
-        assert_eq!(
-            *chunk(&file, &dir, b"SURF", &limits).unwrap().unwrap(),
-            raw[..]
-        );
+        let unpacked_chunk = chunk(&file, &dir, b"SURF", &limits).unwrap().unwrap();
+        assert_eq!(*unpacked_chunk, raw[..]);
+        // The unpacked copy stays charged while it lives.
+        assert_eq!(limits.used_bytes(), raw.len() as u64);
+        drop(unpacked_chunk);
+        assert_eq!(limits.used_bytes(), 0);
         // The stored bytes of a chunk stored as is come back as they are.
         let (file, _) = packed_file(&raw, 0);
         let (_, _, dir) = read_directory(&file).unwrap();

@@ -3,8 +3,11 @@
 //!
 //! ```text
 //! header (24 bytes) | chunk directory (32 bytes × count) | directory CRC
-//! META | ALBD | EMPT | SURF | MESH | NORM (each optional) | COLS (column table) | DATA (column payloads)
+//! META | ALBD | EMPT | SURF | MESH | NORM (each optional) | DATA (column payloads) | COLS (column table)
 //! ```
+//!
+//! (Files of versions 1 to 6 hold COLS before DATA; readers find chunks by
+//! tag.)
 //!
 //! Version 2 adds feature 4 and chunk `SURF`: the row layout (image pixels
 //! or texture texels) and per-row surface data ([`Surface`](crate::Surface)). Version-1
@@ -12,7 +15,9 @@
 //! chunk `NORM`: each column's priority norm, so that a relighter can rank
 //! lights by transport without decoding every column first. Version 6
 //! adds feature 16 and chunk `MESH`: the receiving mesh of a texture-space
-//! file ([`ReceiverMesh`](crate::ReceiverMesh)).
+//! file ([`ReceiverMesh`](crate::ReceiverMesh)). Version 7 stores ALBD,
+//! EMPT, SURF, MESH and COLS as zstd frames when that is smaller, and
+//! writes COLS after DATA.
 //!
 //! Every chunk has a CRC-32 in the directory, except DATA whose columns
 //! each have their own CRC in the column table. The directory is validated

@@ -228,13 +228,13 @@ impl LtmFile {
                 pca: Some(pca),
             });
         }
-        let cols = stored(bytes, &dir, b"COLS")?.ok_or_else(|| missing("COLS"))?;
+        let cols = chunk(bytes, &dir, b"COLS", limits)?.ok_or_else(|| missing("COLS"))?;
         let data_dir = dir
             .iter()
             .find(|d| &d.tag == b"DATA")
             .ok_or_else(|| missing("DATA"))?;
         let data = data_dir.offset as usize..(data_dir.offset + data_dir.len) as usize;
-        let columns = read_column_table(cols, &meta, version, data.len() as u64, limits)?;
+        let columns = read_column_table(&cols, &meta, version, data.len() as u64, limits)?;
         let charge = index_charge(
             limits,
             &albedo,
@@ -625,8 +625,8 @@ fn check_mode_chunks(version: u32, meta: &Meta, dir: &[DirEntry]) -> Result<()> 
     Ok(())
 }
 
-/// The stored bytes of a chunk that is never packed (META, NORM, COLS,
-/// the PCA chunks).
+/// The stored bytes of a chunk that is never packed (META, NORM, the PCA
+/// chunks).
 fn stored<'a>(bytes: &'a [u8], dir: &[DirEntry], tag: &[u8; 4]) -> Result<Option<&'a [u8]>> {
     Ok(stored_chunk(bytes, dir, tag)?.map(|(s, _)| s))
 }

@@ -6,7 +6,9 @@ use crate::column::COLUMN_ENTRY_LEN;
 /// chunk's and the directory's — from the bytes it covers, as far as the
 /// (unchecked) directory and column table can be followed. For fuzzing and
 /// tests: it lets mutated files reach the structural checks behind the CRCs.
-/// Only with the `fuzzing` feature.
+/// The columns' CRCs are rewritten only in a column table stored as is, not
+/// in a packed one (version 7): start from [`unpack_chunks`]'s image to
+/// have them rewritten. Only with the `fuzzing` feature.
 pub fn repair_checksums(b: &mut [u8]) {
     let u32_at = |b: &[u8], at: usize| {
         b.get(at..at + 4)
@@ -80,7 +82,7 @@ pub fn unpack_chunks(b: &[u8]) -> crate::Result<Vec<u8>> {
     for d in &dir {
         bodies.push(
             chunk(b, &dir, &d.tag, &limits)?
-                .map(|c| c.into_owned())
+                .map(|c| c.to_vec())
                 .unwrap_or_default(),
         );
     }

@@ -7,7 +7,7 @@ use super::directory::{
 };
 use super::meta::{Meta, META_LEN};
 use crate::bytes::Writer;
-use crate::column::{ColumnEntry, EncodedColumn, COLUMN_ENTRY_LEN};
+use crate::column::{ColumnEntry, EncodedColumn};
 use crate::empty::EmptyRows;
 use crate::error::{Error, Result};
 use crate::mesh::ReceiverMesh;
@@ -123,7 +123,6 @@ impl LtmWriter {
             + mesh.is_some() as u64
             + extra.column_norms as u64;
         let head_len = HEADER_LEN as u64 + DIR_ENTRY_LEN as u64 * chunks + 4;
-        let cols_len = (COLUMN_ENTRY_LEN * meta.dims.lights()) as u64;
         let norms_len = 4 * meta.dims.lights() as u64 * extra.column_norms as u64;
         let optional = |c: &Option<Stored>| c.as_ref().map_or(0, |a| a.0.len() as u64);
         let data_start = head_len
@@ -132,8 +131,7 @@ impl LtmWriter {
             + optional(&empty_rows)
             + optional(&surface)
             + optional(&mesh)
-            + norms_len
-            + cols_len;
+            + norms_len;
         let mut w = LtmWriter {
             file: BufWriter::with_capacity(1 << 20, file),
             tmp,
@@ -249,8 +247,10 @@ impl LtmWriter {
             chunks.push((b"NORM", (bytemuck::cast_slice::<f32, u8>(&n).to_vec(), 0)));
             features |= FEATURE_COLUMN_NORMS;
         }
-        chunks.push((b"COLS", (cols.bytes, 0)));
-        let head_len = HEADER_LEN + DIR_ENTRY_LEN * (chunks.len() + 1) + 4;
+        // The column table follows DATA: it is known only now, and packed
+        // when smaller.
+        let (cols, cols_unpacked) = pack(cols.bytes);
+        let head_len = HEADER_LEN + DIR_ENTRY_LEN * (chunks.len() + 2) + 4;
         let mut dir = Vec::new();
         let mut offset = head_len as u64;
         for (tag, (bytes, unpacked)) in &chunks {
@@ -271,8 +271,17 @@ impl LtmWriter {
             crc: 0,
             unpacked: 0,
         });
+        let cols_offset = offset + self.data_len;
+        dir.push(DirEntry {
+            tag: *b"COLS",
+            offset: cols_offset,
+            len: cols.len() as u64,
+            crc: crc32fast::hash(&cols),
+            unpacked: cols_unpacked,
+        });
         let head = encode_head(features, &dir);
         let io = |e| Error::io(&self.tmp, e);
+        self.file.write_all(&cols).map_err(io)?;
         self.file.seek(SeekFrom::Start(0)).map_err(io)?;
         self.file.write_all(&head).map_err(io)?;
         for (_, (bytes, _)) in &chunks {
@@ -283,7 +292,7 @@ impl LtmWriter {
             .into_inner()
             .map_err(|e| Error::io(&self.tmp, e.into_error()))?;
         file.commit()?;
-        Ok(self.data_start + self.data_len)
+        Ok(cols_offset + cols.len() as u64)
     }
 }
 

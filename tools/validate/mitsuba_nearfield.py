@@ -17,7 +17,9 @@ textured area light above it, parallel to the ground and facing down:
 
 Two placements: `near` (the light 0.75 above the bunny's top, about half the
 scene's size) and `far` (2.5 higher and 3 times larger). Each is measured at
-every source and target term and at the paper's 1 % / 20 %.
+every source and target term and at the paper's 1 % / 20 %. Each is also
+rendered by Mitsuba under a distant map of the same light as seen from the
+camera's target (the paper's Fig. 8c), to show what the near field changes.
 
 Conventions: the light's texture row 0 lies at its -y edge and column 0 at
 its -x edge, with the plane's x axis = world +X and y axis = world +Z (lit
@@ -125,6 +127,31 @@ def silhouettes(points, eye, jump=0.01):
     return grown
 
 
+def distant_env(tex, height, center, size, origin, w=2048):
+    """The light as a distant environment seen from `origin`: a lat-long map
+    in Mitsuba's envmap convention (mitsuba_compare.env_lookup), each texel
+    the light's radiance along its direction (the paper's Fig. 8c)."""
+    h = w // 2
+    v = np.arange(h) / (h - 1)
+    u = (np.arange(w) + 0.5) / w
+    theta, phi = np.meshgrid(np.pi * v, 2 * np.pi * u, indexing="ij")
+    d = np.stack([np.sin(theta) * np.sin(phi), np.cos(theta),
+                  -np.sin(theta) * np.cos(phi)], -1)
+    env = np.zeros((h, w, 3), np.float32)
+    up = d[..., 1] > 1e-9
+    t = np.where(up, (height - origin[1]) / np.where(up, d[..., 1], 1.0), 0.0)
+    qx = origin[0] + t * d[..., 0]
+    qz = origin[2] + t * d[..., 2]
+    tu = (qx - center[0]) / size[0] + 0.5
+    tv = (qz - center[1]) / size[1] + 0.5
+    hit = up & (tu >= 0) & (tu < 1) & (tv >= 0) & (tv < 1)
+    th, tw = tex.shape[:2]
+    iy = np.clip((tv * th).astype(int), 0, th - 1)
+    ix = np.clip((tu * tw).astype(int), 0, tw - 1)
+    env[hit] = tex[iy[hit], ix[hit]]
+    return env
+
+
 def rel_l2(a, b, mask=None):
     if mask is not None:
         a, b = a[mask], b[mask]
@@ -195,8 +222,21 @@ def main():
             if args.write_fixtures:
                 np.save(os.path.join(FIXTURES, f"nearfield_mitsuba_{name}.npy"),
                         ref.astype(np.float32))
+            # What a distant map of the same light would give (Mitsuba on
+            # both sides): the light as seen from the scene's centre.
+            env = distant_env(tex * np.float32(inten), height, center, size, cam["target"])
+            d = mitsuba_compare.mitsuba_scene(mi, scene, os.path.dirname(SCENE), env, args.spp)
+            film = d["sensor"]["film"]
+            film["width"] *= FACTOR
+            film["height"] *= FACTOR
+            c = FACTOR // 2
+            distant = np.array(mi.render(mi.load_dict(d), seed=1),
+                               dtype=np.float64)[c::FACTOR, c::FACTOR, :3]
             r = dict(height=height, center=center, size=size, intensity=inten,
-                     mitsuba_render_s=render_s, mitsuba_noise=noise, runs=[])
+                     mitsuba_render_s=render_s, mitsuba_noise=noise,
+                     distant_map_against_near_field=rel_l2(distant, ref), runs=[])
+            mitsuba_compare.save_png(os.path.join(out, f"{name}_distant.png"),
+                                     distant / np.percentile(ref, 99.5))
             for source, target in [(1.0, 1.0), (0.05, 0.3), (0.01, 0.2)]:
                 img_path = os.path.join(out, f"{name}-{source}-{target}.f32")
                 secs, log = run_ltm(scene_path, tex_f32, tex, height, center, size, inten,

@@ -119,7 +119,9 @@ impl Propagator {
 
     /// Propagates `source` to `receiver` (steps 1 and 2's couplings) and
     /// selects the targets. Returns false, and shades to zero, when the
-    /// point is not in front of the plane.
+    /// point is not in front of the plane. The light's centre and size are
+    /// read from `placement`, so a moved or resized light needs no new
+    /// source; its intensity is the one `source` was made with.
     pub fn prepare(
         &mut self,
         source: &SourceCoefficients,
@@ -127,6 +129,7 @@ impl Propagator {
         receiver: &Receiver,
         targets: Targets,
     ) -> Result<bool> {
+        placement.check()?;
         let order = self.face.order;
         if source.order != order {
             let valid = format!("{order}, the face's order");

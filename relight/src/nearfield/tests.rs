@@ -437,8 +437,8 @@ fn hostile_placements_and_points_error_or_go_dark() {
     ] {
         assert!(p.prepare(&source, &ok, &r, Targets::All).is_err());
     }
-    // Extreme but valid: on the plane, very far, far to the side. Defined
-    // and finite; far to the side is dark.
+    // Extreme but valid: on the plane, very far, far to the side: defined,
+    // finite and not negative.
     for (depth, x) in [(1e-300, 0.2), (1e12, 0.0), (1.0, 1e9), (1e-3, 1e-3)] {
         let r = Receiver {
             depth,
@@ -451,11 +451,18 @@ fn hostile_placements_and_points_error_or_go_dark() {
             "{depth} {x}: {b:?}"
         );
     }
-    let mismatched = SourceCoefficients::new(&light, &ok, 16, 4).unwrap();
+    // A bad placement at propagation time is an error too, never NaN.
     let r = Receiver {
         depth: 1.0,
         position: [0.0; 2],
     };
+    for bad in &bad_placements[..3] {
+        assert!(
+            p.prepare(&source, bad, &r, Targets::All).is_err(),
+            "{bad:?}"
+        );
+    }
+    let mismatched = SourceCoefficients::new(&light, &ok, 16, 4).unwrap();
     assert!(p.prepare(&mismatched, &ok, &r, Targets::All).is_err());
 }
 

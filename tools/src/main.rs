@@ -8,6 +8,7 @@ mod merge;
 mod reference;
 mod relight_cmd;
 mod render_cmd;
+mod render_glossy;
 mod report;
 mod shard_cmds;
 mod view;

@@ -1,11 +1,13 @@
 //! `ltm render`: relight a texture-space file once and draw the relit mesh
-//! from one camera or an orbit of cameras.
+//! from one camera or an orbit of cameras, optionally with a glossy
+//! material shaded per view (`--brdf`, [`crate::render_glossy`]).
 
 use crate::common::{claim_files, commit_all, describe_terms, Ctx, ImageOutput, TermsArgs};
+use crate::render_glossy::{Glossy, GlossyArgs};
 use anyhow::{bail, Context, Result};
 use clap::Args;
 use glam::DVec3;
-use ltm_codec::LtmFile;
+use ltm_codec::{LtmFile, SurfacePoint};
 use ltm_relight::{EnvMap, Relight, Request, Rotation, TexturedMesh, ViewCamera, MAX_SUPERSAMPLE};
 use std::path::{Path, PathBuf};
 use std::time::Instant;
@@ -55,9 +57,12 @@ pub struct RenderArgs {
     pub views: usize,
     #[command(flatten)]
     pub out: ImageOutput,
-    /// Also write the relit texture (EXR).
+    /// Also write the relit texture (EXR): the transport's, without the
+    /// view-dependent glossy part.
     #[arg(long)]
     pub texture: Option<PathBuf>,
+    #[command(flatten)]
+    pub glossy: GlossyArgs,
     /// Print one JSON line with the settings and timings.
     #[arg(long)]
     pub json: bool,
@@ -103,14 +108,34 @@ fn numbered(path: &Path, k: usize, count: usize) -> PathBuf {
     path.with_file_name(name)
 }
 
-/// The relighter of a texture-space file of any mode (wavelet or `pca`)
-/// and the mesh of its geometry image.
-fn open(path: &Path, ctx: &Ctx) -> Result<(Box<dyn Relight + Send + Sync>, TexturedMesh)> {
+/// What `ltm render` draws from: the relighter of a texture-space file of
+/// any mode (wavelet or `pca`), the mesh of its geometry, and its surface
+/// points when `--brdf` shades them.
+struct Opened {
+    relighter: Box<dyn Relight + Send + Sync>,
+    mesh: TexturedMesh,
+    points: Vec<SurfacePoint>,
+}
+
+fn open(path: &Path, with_points: bool, ctx: &Ctx) -> Result<Opened> {
     let context = || format!("opening {}", path.display());
     let file = LtmFile::open_with_limits(path, ctx.limits()).with_context(context)?;
     let mesh = TexturedMesh::from_file(&file, ctx.limits()).with_context(context)?;
+    let mut points = Vec::new();
+    if let Some(surface) = file.surface().filter(|_| with_points) {
+        let bytes = std::mem::size_of::<SurfacePoint>() as u64;
+        // The copy lives as long as the run; the charge covers its making.
+        let _charge = ctx
+            .limits()
+            .check_alloc("surface points", surface.len() as u64, bytes)?;
+        points = surface.points().to_vec();
+    }
     let relighter = ltm_relight::open_file(file, ctx.limits()).with_context(context)?;
-    Ok((relighter, mesh))
+    Ok(Opened {
+        relighter,
+        mesh,
+        points,
+    })
 }
 
 pub fn run(a: RenderArgs, ctx: &Ctx) -> Result<()> {
@@ -136,12 +161,22 @@ pub fn run(a: RenderArgs, ctx: &Ctx) -> Result<()> {
         names.extend((0..a.views).map(|k| ("--png", numbered(png, k, a.views))));
     }
     names.extend(a.texture.clone().map(|t| ("--texture", t)));
+    names.extend(
+        a.glossy
+            .rotation_cache
+            .clone()
+            .map(|c| ("--rotation-cache", c)),
+    );
     let outputs: Vec<(&str, &Path)> = names.iter().map(|(r, p)| (*r, p.as_path())).collect();
     let _claim = claim_files(
         &[("input", a.file.as_path()), ("--env", a.env.as_path())],
         &outputs,
     )?;
-    let (relighter, mesh) = open(&a.file, ctx)?;
+    let Opened {
+        relighter,
+        mesh,
+        points,
+    } = open(&a.file, a.glossy.brdf.is_some(), ctx)?;
     let mut frame = relighter.frame()?;
     let env = EnvMap::load(&a.env).with_context(|| format!("loading {}", a.env.display()))?;
     let light = env.to_cubemap(relighter.face_res(), &a.rotate);
@@ -150,16 +185,33 @@ pub fn run(a: RenderArgs, ctx: &Ctx) -> Result<()> {
         weighting: a.terms.weighting,
     };
     let stats = relighter.relight(&light, &request, &mut frame)?;
+    let glossy = match a.glossy.brdf {
+        Some(brdf) => Some(Glossy::prepare(
+            &a.glossy,
+            brdf,
+            points,
+            &env,
+            &a.rotate,
+            ctx.limits(),
+        )?),
+        None => None,
+    };
     // Every file of the run appears together at the end, or none does.
     let mut staged = Vec::new();
     if let Some(t) = &a.texture {
         let file = frame.image.stage_exr(t);
         staged.push(file.with_context(|| format!("writing {}", t.display()))?);
     }
-    let (ev, mut render_ms) = draw_views(&a, &mesh, &frame.image, &camera, &mut staged)?;
+    let views = draw_views(
+        &a,
+        &mesh,
+        &frame.image,
+        glossy.as_ref(),
+        &camera,
+        &mut staged,
+    )?;
     commit_all(staged)?;
-    render_ms.sort_by(f64::total_cmp);
-    let median = render_ms[render_ms.len() / 2];
+    let median = median_ms(views.render_ms);
     let relight_ms = stats.total().as_secs_f64() * 1e3;
     if a.json {
         let line = serde_json::json!({
@@ -171,8 +223,18 @@ pub fn run(a: RenderArgs, ctx: &Ctx) -> Result<()> {
             "triangles": mesh.triangle_count(),
             "relight_ms": relight_ms,
             "render_ms_median": median,
+            "brdf": glossy.as_ref().map(|g| g.brdf().to_string()),
+            "glossy_setup_ms": glossy.as_ref().map(|g| g.setup_ms),
+            "glossy_shade_ms_median": glossy.as_ref().map(|_| median_ms(views.shade_ms.clone())),
         });
         println!("{line}");
+    }
+    if let Some(g) = &glossy {
+        eprintln!(
+            "{}; shading (step 2) {:.1} ms per view (median)",
+            g.describe(),
+            median_ms(views.shade_ms)
+        );
     }
     eprintln!(
         "relit the {}² texture in {relight_ms:.3} ms ({}); drew {} view(s) of {} triangles, {median:.3} ms each (median); wrote {}",
@@ -185,34 +247,63 @@ pub fn run(a: RenderArgs, ctx: &Ctx) -> Result<()> {
     if let Some(png) = &a.out.png {
         eprintln!("wrote {}", written(png, a.views));
     }
-    a.out.print_exposure(ev);
+    a.out.print_exposure(views.ev);
     Ok(())
 }
 
-/// Draws every view of the orbit of the relit `texture` and stages its
-/// files in `staged`: the PNGs' exposure (one for the orbit, the first
-/// view's) and each view's drawing time in ms.
+/// The median of some timings (0 for none).
+fn median_ms(mut v: Vec<f64>) -> f64 {
+    v.sort_by(f64::total_cmp);
+    v.get(v.len() / 2).copied().unwrap_or(0.0)
+}
+
+/// What [`draw_views`] measured.
+struct Drawn {
+    /// The PNGs' exposure (one for the orbit, the first view's).
+    ev: f32,
+    /// Each view's drawing time in ms.
+    render_ms: Vec<f64>,
+    /// Each view's glossy shading time in ms (empty without `--brdf`).
+    shade_ms: Vec<f64>,
+}
+
+/// Draws every view of the orbit of the relit `texture` (with the glossy
+/// part of each view's eye, if any) and stages its files in `staged`.
 fn draw_views(
     a: &RenderArgs,
     mesh: &TexturedMesh,
     texture: &ltm_relight::Image,
+    glossy: Option<&Glossy>,
     camera: &ViewCamera,
     staged: &mut Vec<ltm_codec::AtomicFile>,
-) -> Result<(f32, Vec<f64>)> {
-    let mut render_ms = Vec::with_capacity(a.views);
+) -> Result<Drawn> {
+    let mut drawn = Drawn {
+        ev: 0.0,
+        render_ms: Vec::with_capacity(a.views),
+        shade_ms: Vec::new(),
+    };
     let mut ev = None;
     for k in 0..a.views {
         let view = camera.orbit(k, a.views);
         mesh.check_outside(view.eye)?;
         let start = Instant::now();
-        let image = mesh.render(texture, &view, a.supersample)?;
-        render_ms.push(start.elapsed().as_secs_f64() * 1e3);
+        let shaded = match glossy {
+            Some(g) => Some(g.texture(texture, view.eye)?),
+            None => None,
+        };
+        if shaded.is_some() {
+            drawn.shade_ms.push(start.elapsed().as_secs_f64() * 1e3);
+        }
+        let start = Instant::now();
+        let image = mesh.render(shaded.as_ref().unwrap_or(texture), &view, a.supersample)?;
+        drawn.render_ms.push(start.elapsed().as_secs_f64() * 1e3);
         let view_ev = *ev.get_or_insert_with(|| a.out.ev(&image));
         let exr = numbered(&a.out.output, k, a.views);
         let png = a.out.png.as_ref().map(|p| numbered(p, k, a.views));
         staged.extend(a.out.stage(&image, &exr, png.as_deref(), view_ev)?);
     }
-    Ok((ev.unwrap_or(0.0), render_ms))
+    drawn.ev = ev.unwrap_or(0.0);
+    Ok(drawn)
 }
 
 /// The files [`numbered`] names for `count` views: `PATH`, or the first

@@ -2,7 +2,8 @@
 //! BRDFs"): for each view direction `ω_o` at the centre of a texel of a
 //! hemi-octahedral view grid, the target-resolution map of
 //! `∫_texel f_r(ω, ω_o) cos θ dω` (sub-sampled, exact Jacobian), Haar
-//! transformed, keeping its largest terms (by `|r| + |g| + |b|`).
+//! transformed, keeping its scaling coefficient and its largest detail terms
+//! (by `|r| + |g| + |b|`).
 //!
 //! Local frames have the normal on `+z`; `ω` and `ω_o` point away from the
 //! surface.
@@ -144,6 +145,130 @@ impl Brdf {
     }
 }
 
+/// Parses a grey value `v` or an RGB triple `r/g/b`.
+fn parse_rgb(what: &'static str, s: &str) -> Result<[f32; 3]> {
+    let bad = || RelightError::Invalid(format!("{what} '{s}' is not a number or r/g/b"));
+    let v: Vec<f32> = s
+        .split('/')
+        .map(|t| t.trim().parse::<f32>().map_err(|_| bad()))
+        .collect::<Result<_>>()?;
+    match v[..] {
+        [g] => Ok([g; 3]),
+        [r, g, b] => Ok([r, g, b]),
+        _ => Err(bad()),
+    }
+}
+
+fn parse_scalar(what: &'static str, s: &str) -> Result<f32> {
+    s.trim()
+        .parse::<f32>()
+        .map_err(|_| RelightError::Invalid(format!("{what} '{s}' is not a number")))
+}
+
+/// The spellings [`Brdf::from_str`] accepts.
+pub const BRDF_SYNTAX: &str = "lambert[:ALBEDO] | ggx:ALPHA[,f0=F0] | phong:EXPONENT[,specular=S] | plastic:ALPHA[,albedo=A][,ior=IOR] (colours grey or r/g/b)";
+
+impl std::str::FromStr for Brdf {
+    type Err = RelightError;
+
+    /// `lambert[:ALBEDO]` (albedo 0.8 by default), `ggx:ALPHA[,f0=F0]`
+    /// (F0 0.9), `phong:EXPONENT[,specular=S]` (S 1) or
+    /// `plastic:ALPHA[,albedo=A][,ior=IOR]` (A 0.5, IOR 1.5); colours are a
+    /// grey value or `r/g/b`; names and keys are case-insensitive. The
+    /// result is validated.
+    fn from_str(spec: &str) -> Result<Brdf> {
+        let (kind, rest) = spec.split_once(':').unwrap_or((spec, ""));
+        let mut parts = rest.split(',').map(str::trim).filter(|p| !p.is_empty());
+        let first = parts.next();
+        let mut keys = Vec::new();
+        for p in parts {
+            let (k, v) = p.split_once('=').ok_or_else(|| {
+                RelightError::Invalid(format!("'{p}' in BRDF '{spec}' is not key=value"))
+            })?;
+            keys.push((k.trim().to_ascii_lowercase(), v));
+        }
+        let need = |what: &'static str| {
+            first.ok_or_else(|| {
+                RelightError::Invalid(format!("BRDF '{spec}' needs its {what}: {BRDF_SYNTAX}"))
+            })
+        };
+        let mut brdf = match kind.trim().to_ascii_lowercase().as_str() {
+            "lambert" => Brdf::Lambert {
+                albedo: first.map_or(Ok([0.8; 3]), |a| parse_rgb("albedo", a))?,
+            },
+            "ggx" => Brdf::Ggx {
+                alpha: parse_scalar("GGX roughness", need("roughness")?)?,
+                f0: [0.9; 3],
+            },
+            "phong" => Brdf::Phong {
+                exponent: parse_scalar("Phong exponent", need("exponent")?)?,
+                specular: [1.0; 3],
+            },
+            "plastic" => Brdf::Plastic {
+                albedo: [0.5; 3],
+                alpha: parse_scalar("plastic roughness", need("roughness")?)?,
+                ior: 1.5,
+            },
+            other => {
+                return Err(RelightError::Invalid(format!(
+                    "unknown BRDF '{other}' (valid: {BRDF_SYNTAX})"
+                )))
+            }
+        };
+        for (k, v) in keys {
+            brdf.set_key(&k, v, spec)?;
+        }
+        brdf.validate()?;
+        Ok(brdf)
+    }
+}
+
+impl Brdf {
+    /// Sets the optional parameter `key` of a parsed spec.
+    fn set_key(&mut self, key: &str, value: &str, spec: &str) -> Result<()> {
+        match (self, key) {
+            (Brdf::Ggx { f0, .. }, "f0") => *f0 = parse_rgb("GGX F0", value)?,
+            (Brdf::Phong { specular, .. }, "specular") => {
+                *specular = parse_rgb("Phong specular", value)?
+            }
+            (Brdf::Plastic { albedo, .. }, "albedo") => {
+                *albedo = parse_rgb("plastic albedo", value)?
+            }
+            (Brdf::Plastic { ior, .. }, "ior") => *ior = parse_scalar("plastic ior", value)?,
+            _ => {
+                return Err(RelightError::Invalid(format!(
+                    "BRDF '{spec}' has no parameter '{key}' (valid: {BRDF_SYNTAX})"
+                )))
+            }
+        }
+        Ok(())
+    }
+}
+
+fn rgb_spec(c: [f32; 3]) -> String {
+    if c[0] == c[1] && c[1] == c[2] {
+        c[0].to_string()
+    } else {
+        format!("{}/{}/{}", c[0], c[1], c[2])
+    }
+}
+
+impl std::fmt::Display for Brdf {
+    /// The spec [`Brdf::from_str`] parses back to the same BRDF.
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match *self {
+            Brdf::Lambert { albedo } => write!(f, "lambert:{}", rgb_spec(albedo)),
+            Brdf::Ggx { alpha, f0 } => write!(f, "ggx:{alpha},f0={}", rgb_spec(f0)),
+            Brdf::Phong { exponent, specular } => {
+                write!(f, "phong:{exponent},specular={}", rgb_spec(specular))
+            }
+            Brdf::Plastic { albedo, alpha, ior } => {
+                write!(f, "plastic:{alpha},albedo={},ior={ior}", rgb_spec(albedo))
+            }
+        }
+    }
+}
+
 /// How [`BrdfSlices`] are built.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct SliceConfig {
@@ -240,17 +365,20 @@ fn hemi_decode_sub(m: usize, t: usize, s: usize, i: usize, j: usize) -> (DVec3, 
     hemi_decode(u, v)
 }
 
-/// Haar transform of a spatial slice, keeping its `terms` largest.
+/// Haar transform of a spatial slice, keeping its scaling coefficient (the
+/// slice's mean: without it, a constant lighting would reflect nothing
+/// where a narrow lobe's detail terms outweigh it) and its `terms − 1`
+/// largest detail coefficients.
 fn sparse_slice(spatial: &[[f64; 3]], m: usize, terms: usize) -> Result<Vec<Term>> {
     let mut planes = [0, 1, 2].map(|c| spatial.iter().map(|p| p[c] as f32).collect::<Vec<_>>());
     for p in planes.iter_mut() {
         haar::forward(p, m)?;
     }
-    let mut order: Vec<u32> = (0..(m * m) as u32).collect();
+    let mut order: Vec<u32> = (1..(m * m) as u32).collect();
     let mag = |i: u32| planes.iter().map(|p| p[i as usize].abs()).sum::<f32>();
     order.sort_unstable_by(|&a, &b| mag(b).total_cmp(&mag(a)).then(a.cmp(&b)));
-    let mut kept: Vec<u32> = order
-        .into_iter()
+    let mut kept: Vec<u32> = std::iter::once(0)
+        .chain(order)
         .take(terms)
         .filter(|&i| mag(i) > 0.0)
         .collect();

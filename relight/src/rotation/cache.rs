@@ -31,6 +31,18 @@ fn bad(detail: impl Into<String>) -> RelightError {
     RelightError::InvalidRotationCache(detail.into())
 }
 
+/// How [`RotationSet::cached`] got its set.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[non_exhaustive]
+pub enum CacheUse {
+    /// Read from the cache.
+    Read,
+    /// Built and written to a new cache file.
+    Built,
+    /// Built and written over a cache of other settings, or a damaged one.
+    Replaced,
+}
+
 impl RotationSet {
     /// The set in the cache format.
     pub fn to_bytes(&self) -> Vec<u8> {
@@ -101,6 +113,44 @@ impl RotationSet {
             .map_err(|_| bad(format!("{len} bytes cannot be allocated")))?;
         file.take(len).read_to_end(&mut bytes).map_err(io)?;
         RotationSet::from_bytes(&bytes, limits)
+    }
+
+    /// The set of `cfg` through the cache file at `path`: read when the
+    /// file holds that configuration, else built (in parallel) and written
+    /// there atomically, replacing a cache of other settings or a damaged
+    /// one. A file at `path` that is not a rotation cache (its first bytes
+    /// are not the magic) is never replaced: that is an error.
+    pub fn cached(
+        cfg: RotationConfig,
+        path: &Path,
+        limits: &Limits,
+    ) -> Result<(RotationSet, CacheUse)> {
+        let outcome = match std::fs::File::open(path) {
+            Err(e) if e.kind() == std::io::ErrorKind::NotFound => CacheUse::Built,
+            Err(error) => {
+                return Err(RelightError::Io {
+                    path: path.to_path_buf(),
+                    error,
+                })
+            }
+            Ok(mut file) => {
+                let mut head = [0u8; 8];
+                if file.read_exact(&mut head).is_err() || head != MAGIC {
+                    return Err(RelightError::Invalid(format!(
+                        "{} is not a rotation cache (its first bytes are not the magic); refusing to replace it",
+                        path.display()
+                    )));
+                }
+                match RotationSet::read(path, limits) {
+                    Ok(set) if *set.config() == cfg => return Ok((set, CacheUse::Read)),
+                    Ok(_) | Err(RelightError::InvalidRotationCache(_)) => CacheUse::Replaced,
+                    Err(e) => return Err(e),
+                }
+            }
+        };
+        let set = RotationSet::build(cfg, limits)?;
+        set.write(path)?;
+        Ok((set, outcome))
     }
 
     /// Parses the cache format (see the module documentation).

@@ -31,8 +31,8 @@ mod shade;
 #[cfg(test)]
 mod tests;
 
-pub use brdf::{Brdf, BrdfSlices, SliceConfig};
-pub use cache::{MAGIC as CACHE_MAGIC, VERSION as CACHE_VERSION};
+pub use brdf::{Brdf, BrdfSlices, SliceConfig, BRDF_SYNTAX};
+pub use cache::{CacheUse, MAGIC as CACHE_MAGIC, VERSION as CACHE_VERSION};
 pub use matrix::{Columns, RotationMatrix, QMAX};
 pub use shade::{resample_local, OctMap, Shader};
 

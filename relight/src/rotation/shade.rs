@@ -5,7 +5,7 @@ use super::maps::{hemi_decode, oct_bilinear, oct_decode, oct_encode, subsample, 
 use super::{check_pow2, haar, BrdfSlices, RotationSet, MAX_SOURCE_SIDE};
 use crate::error::{RelightError, Result};
 use glam::DVec3;
-use ltm_codec::{Charge, Limits};
+use ltm_codec::{Charge, Limits, SurfacePoint};
 use rayon::prelude::*;
 use std::sync::Arc;
 
@@ -57,6 +57,28 @@ impl OctMap {
             })
             .collect();
         OctMap::new(n, texels)
+    }
+
+    /// The octahedral map of a cubemap of face resolution `face_res` (the
+    /// `6·face_res²` texels of a transport relighter's light, in the column
+    /// order of docs/FORMAT.md): each texel the mean of the cube texels
+    /// that its `s × s` sub-sample directions fall in, so the glossy and the
+    /// transport parts of a render see one lighting, rotation included.
+    pub fn from_cubemap(
+        n: usize,
+        s: usize,
+        face_res: usize,
+        cubemap: &[[f32; 3]],
+    ) -> Result<OctMap> {
+        let expected = ltm_codec::cubemap::texel_count(face_res);
+        if face_res == 0 || cubemap.len() != expected {
+            let valid =
+                format!("6·face_res² = {expected} with face_res ≥ 1 (face_res = {face_res})");
+            return Err(RelightError::range("cubemap texels", cubemap.len(), valid));
+        }
+        OctMap::from_fn(n, s, |d| {
+            cubemap[ltm_codec::cubemap::direction_texel(face_res, d.as_vec3())]
+        })
     }
 
     /// Side `n`.
@@ -162,6 +184,11 @@ impl Shader {
         })
     }
 
+    /// The rotation matrices.
+    pub fn rotations(&self) -> &RotationSet {
+        &self.rotations
+    }
+
     /// Switches the BRDF: no rotation or lighting is recomputed.
     pub fn set_brdf(&mut self, slices: Arc<BrdfSlices>) -> Result<()> {
         check_slices(&self.rotations, &slices)?;
@@ -209,6 +236,50 @@ impl Shader {
             (0..3).for_each(|c| out[c] += w as f32 * b[c]);
         }
         out
+    }
+}
+
+/// Step 2 at one surface point seen from `eye`: zero where the point is
+/// not on the surface or its normal or view is degenerate. A point facing
+/// away from the eye is shaded as seen from its horizon (the view moved
+/// onto it), so that texels blended across a silhouette stay continuous.
+fn shade_point(shader: &Shader, p: &SurfacePoint, eye: DVec3) -> [f32; 3] {
+    let position = DVec3::from(p.position.map(f64::from));
+    let normal = DVec3::from(p.normal.map(f64::from)).normalize_or_zero();
+    let view = (eye - position).normalize_or_zero();
+    if !p.valid || normal == DVec3::ZERO || view == DVec3::ZERO {
+        return [0.0; 3];
+    }
+    // Truncated Haar terms can ring below zero; radiance cannot.
+    shader.shade(normal, view).map(|v| v.max(0.0))
+}
+
+impl Shader {
+    /// Step 2 for every point of a surface seen from `eye` (world space),
+    /// in parallel, into `out` (one RGB radiance per point): the view
+    /// direction is the point's own, so highlights follow a perspective
+    /// camera. Points not on the surface get zero; points facing away from
+    /// the eye are shaded as seen from their horizon; negative values (the
+    /// ringing of truncated Haar terms) are clamped to zero.
+    pub fn shade_points(
+        &self,
+        points: &[SurfacePoint],
+        eye: DVec3,
+        out: &mut [[f32; 3]],
+    ) -> Result<()> {
+        if out.len() != points.len() {
+            let valid = format!("{} (one per surface point)", points.len());
+            return Err(RelightError::range("shaded outputs", out.len(), valid));
+        }
+        if !eye.is_finite() {
+            return Err(RelightError::Invalid(format!(
+                "the eye {eye} is not finite"
+            )));
+        }
+        out.par_iter_mut()
+            .zip(points.par_iter())
+            .for_each(|(o, p)| *o = shade_point(self, p, eye));
+        Ok(())
     }
 }
 

@@ -7,7 +7,7 @@ use crate::render_glossy::{Glossy, GlossyArgs};
 use anyhow::{bail, Context, Result};
 use clap::Args;
 use glam::DVec3;
-use ltm_codec::{LtmFile, SurfacePoint};
+use ltm_codec::{Charge, LtmFile, SurfacePoint};
 use ltm_relight::{EnvMap, Relight, Request, Rotation, TexturedMesh, ViewCamera, MAX_SUPERSAMPLE};
 use std::path::{Path, PathBuf};
 use std::time::Instant;
@@ -115,17 +115,18 @@ struct Opened {
     relighter: Box<dyn Relight + Send + Sync>,
     mesh: TexturedMesh,
     points: Vec<SurfacePoint>,
+    /// The points' bytes, charged to the run's budget while they live.
+    points_charge: Charge,
 }
 
 fn open(path: &Path, with_points: bool, ctx: &Ctx) -> Result<Opened> {
     let context = || format!("opening {}", path.display());
     let file = LtmFile::open_with_limits(path, ctx.limits()).with_context(context)?;
     let mesh = TexturedMesh::from_file(&file, ctx.limits()).with_context(context)?;
-    let mut points = Vec::new();
+    let (mut points, mut points_charge) = (Vec::new(), Charge::default());
     if let Some(surface) = file.surface().filter(|_| with_points) {
         let bytes = std::mem::size_of::<SurfacePoint>() as u64;
-        // The copy lives as long as the run; the charge covers its making.
-        let _charge = ctx
+        points_charge = ctx
             .limits()
             .check_alloc("surface points", surface.len() as u64, bytes)?;
         points = surface.points().to_vec();
@@ -135,6 +136,7 @@ fn open(path: &Path, with_points: bool, ctx: &Ctx) -> Result<Opened> {
         relighter,
         mesh,
         points,
+        points_charge,
     })
 }
 
@@ -176,6 +178,7 @@ pub fn run(a: RenderArgs, ctx: &Ctx) -> Result<()> {
         relighter,
         mesh,
         points,
+        points_charge: _points_charge,
     } = open(&a.file, a.glossy.brdf.is_some(), ctx)?;
     let mut frame = relighter.frame()?;
     let env = EnvMap::load(&a.env).with_context(|| format!("loading {}", a.env.display()))?;

@@ -170,16 +170,16 @@ pub fn run(a: RenderArgs, ctx: &Ctx) -> Result<()> {
             .map(|c| ("--rotation-cache", c)),
     );
     let outputs: Vec<(&str, &Path)> = names.iter().map(|(r, p)| (*r, p.as_path())).collect();
-    let _claim = claim_files(
-        &[("input", a.file.as_path()), ("--env", a.env.as_path())],
-        &outputs,
-    )?;
+    let mut inputs = vec![("input", a.file.as_path()), ("--env", a.env.as_path())];
+    inputs.extend(a.glossy.measured_file().map(|m| ("--brdf", m)));
+    let _claim = claim_files(&inputs, &outputs)?;
+    let material = a.glossy.material(ctx.limits())?;
     let Opened {
         relighter,
         mesh,
         points,
         points_charge: _points_charge,
-    } = open(&a.file, a.glossy.brdf.is_some(), ctx)?;
+    } = open(&a.file, material.is_some(), ctx)?;
     let mut frame = relighter.frame()?;
     let env = EnvMap::load(&a.env).with_context(|| format!("loading {}", a.env.display()))?;
     let light = env.to_cubemap(relighter.face_res(), &a.rotate);
@@ -188,7 +188,7 @@ pub fn run(a: RenderArgs, ctx: &Ctx) -> Result<()> {
         weighting: a.terms.weighting,
     };
     let stats = relighter.relight(&light, &request, &mut frame)?;
-    let glossy = match a.glossy.brdf {
+    let glossy = match material {
         Some(brdf) => Some(Glossy::prepare(
             &a.glossy,
             brdf,

@@ -39,12 +39,13 @@ pub enum Shading {
 pub struct GlossyArgs {
     /// Add a glossy material, shaded per view by wavelet rotation (Wang et
     /// al. 2006), so highlights move with the camera across --views. SPEC:
-    /// lambert[:ALBEDO] | ggx:ALPHA[,f0=F0] | phong:EXPONENT[,specular=S] |
-    /// plastic:ALPHA[,albedo=A][,ior=IOR]; colours are grey or r/g/b, e.g.
+    /// `lambert[:ALBEDO]` | `ggx:ALPHA[,f0=F0]` | `phong:EXPONENT[,specular=S]`
+    /// | `plastic:ALPHA[,albedo=A][,ior=IOR]`; colours are grey or r/g/b, e.g.
     /// ggx:0.2,f0=0.95/0.64/0.54 (gold-like). Defaults: albedo 0.8, F0 0.9,
-    /// S 1, plastic albedo 0.5 and IOR 1.5.
+    /// S 1, plastic albedo 0.5 and IOR 1.5. Or merl:PATH, a measured BRDF
+    /// file in the MERL database's binary layout (90×90×180 bins).
     #[arg(long, value_name = "SPEC")]
-    pub brdf: Option<Brdf>,
+    pub brdf: Option<String>,
     /// With --brdf: `sum` draws the relit transport plus the glossy
     /// reflection; `glossy` draws the glossy reflection alone.
     #[arg(long, value_enum, default_value = "sum", requires = "brdf")]
@@ -103,6 +104,22 @@ fn ms(start: Instant) -> f64 {
 }
 
 impl GlossyArgs {
+    /// The `--brdf` material, if any (a `merl:` table read and charged to
+    /// `limits`), and the measured file it names, an input of the run.
+    pub fn material(&self, limits: &Limits) -> Result<Option<Brdf>> {
+        let Some(spec) = &self.brdf else {
+            return Ok(None);
+        };
+        let brdf = Brdf::from_spec(spec, limits).with_context(|| format!("--brdf {spec}"))?;
+        Ok(Some(brdf))
+    }
+
+    /// The measured BRDF file `--brdf merl:PATH` names.
+    pub fn measured_file(&self) -> Option<&std::path::Path> {
+        let spec = self.brdf.as_deref()?;
+        spec.strip_prefix("merl:").map(std::path::Path::new)
+    }
+
     fn rotation_config(&self) -> RotationConfig {
         RotationConfig {
             n: self.glossy_n,
@@ -156,7 +173,7 @@ impl Glossy {
             views: a.brdf_views,
             ..SliceConfig::default()
         };
-        let slices = BrdfSlices::build(brdf, slice_cfg, limits)?;
+        let slices = BrdfSlices::build(brdf.clone(), slice_cfg, limits)?;
         let slices_ms = ms(start);
         let start = Instant::now();
         // The lighting the transport sees (same rotation and cube
@@ -202,8 +219,8 @@ impl Glossy {
         *self.shader.rotations().config()
     }
 
-    /// The BRDF's spec.
-    pub fn brdf(&self) -> Brdf {
-        self.brdf
+    /// The BRDF.
+    pub fn brdf(&self) -> &Brdf {
+        &self.brdf
     }
 }

@@ -9,17 +9,23 @@
 //! surface.
 
 use super::maps::{hemi_decode, hemi_encode, subsample, texel_center, texel_of};
+use super::merl::MeasuredBrdf;
 use super::{check_pow2, haar};
 use crate::error::{RelightError, Result};
 use glam::DVec3;
 use ltm_codec::{Charge, Limits};
 use rayon::prelude::*;
 use std::f64::consts::PI;
+use std::path::Path;
+use std::sync::Arc;
 
 /// A reflectance model, isotropic, in the local frame.
-#[derive(Clone, Copy, Debug, PartialEq)]
+#[derive(Clone, Debug, PartialEq)]
 #[non_exhaustive]
 pub enum Brdf {
+    /// A measured table in the MERL database's layout ([`MeasuredBrdf`]),
+    /// shared.
+    Measured(Arc<MeasuredBrdf>),
     /// Lambertian: `albedo / π`.
     Lambert {
         /// Albedo per channel, in `[0, 1]`.
@@ -91,6 +97,7 @@ impl Brdf {
     /// Checks the parameters (errors name the value and its valid range).
     pub fn validate(&self) -> Result<()> {
         match *self {
+            Brdf::Measured(_) => Ok(()),
             Brdf::Lambert { albedo } => check_rgb("Lambert albedo", albedo),
             Brdf::Ggx { alpha, f0 } => {
                 check_alpha(alpha)?;
@@ -123,6 +130,7 @@ impl Brdf {
             return [0.0; 3];
         }
         match *self {
+            Brdf::Measured(ref table) => table.eval(wi, wo),
             Brdf::Lambert { albedo } => albedo.map(|a| f64::from(a) / PI),
             Brdf::Ggx { alpha, f0 } => {
                 let (lobe, cos_h) = ggx_lobe(f64::from(alpha), wi, wo);
@@ -165,8 +173,8 @@ fn parse_scalar(what: &'static str, s: &str) -> Result<f32> {
         .map_err(|_| RelightError::Invalid(format!("{what} '{s}' is not a number")))
 }
 
-/// The spellings [`Brdf::from_str`] accepts.
-pub const BRDF_SYNTAX: &str = "lambert[:ALBEDO] | ggx:ALPHA[,f0=F0] | phong:EXPONENT[,specular=S] | plastic:ALPHA[,albedo=A][,ior=IOR] (colours grey or r/g/b)";
+/// The spellings `Brdf`'s [`FromStr`](std::str::FromStr) accepts.
+pub const BRDF_SYNTAX: &str = "lambert[:ALBEDO] | ggx:ALPHA[,f0=F0] | phong:EXPONENT[,specular=S] | plastic:ALPHA[,albedo=A][,ior=IOR] (colours grey or r/g/b) | merl:PATH (a measured BRDF file)";
 
 impl std::str::FromStr for Brdf {
     type Err = RelightError;
@@ -175,8 +183,22 @@ impl std::str::FromStr for Brdf {
     /// (F0 0.9), `phong:EXPONENT[,specular=S]` (S 1) or
     /// `plastic:ALPHA[,albedo=A][,ior=IOR]` (A 0.5, IOR 1.5); colours are a
     /// grey value or `r/g/b`; names and keys are case-insensitive. The
-    /// result is validated.
+    /// result is validated. `merl:PATH` reads a measured table
+    /// ([`MeasuredBrdf::read`]) charged to the default budget; see
+    /// [`Brdf::from_spec`] to pass one.
     fn from_str(spec: &str) -> Result<Brdf> {
+        Brdf::from_spec(spec, &Limits::default())
+    }
+}
+
+impl Brdf {
+    /// `Brdf`'s [`FromStr`](std::str::FromStr), with a `merl:PATH` table
+    /// charged to `limits`.
+    pub fn from_spec(spec: &str, limits: &Limits) -> Result<Brdf> {
+        if let Some(path) = spec.strip_prefix("merl:") {
+            let table = MeasuredBrdf::read(Path::new(path), limits)?;
+            return Ok(Brdf::Measured(Arc::new(table)));
+        }
         let (kind, rest) = spec.split_once(':').unwrap_or((spec, ""));
         let mut parts = rest.split(',').map(str::trim).filter(|p| !p.is_empty());
         let first = parts.next();
@@ -254,9 +276,10 @@ fn rgb_spec(c: [f32; 3]) -> String {
 }
 
 impl std::fmt::Display for Brdf {
-    /// The spec [`Brdf::from_str`] parses back to the same BRDF.
+    /// The spec that parses back to the same BRDF.
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         match *self {
+            Brdf::Measured(ref table) => write!(f, "merl:{}", table.name()),
             Brdf::Lambert { albedo } => write!(f, "lambert:{}", rgb_spec(albedo)),
             Brdf::Ggx { alpha, f0 } => write!(f, "ggx:{alpha},f0={}", rgb_spec(f0)),
             Brdf::Phong { exponent, specular } => {

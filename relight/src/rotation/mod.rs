@@ -27,6 +27,7 @@ mod cache;
 pub mod haar;
 pub mod maps;
 mod matrix;
+mod merl;
 mod shade;
 #[cfg(test)]
 mod tests;
@@ -34,6 +35,7 @@ mod tests;
 pub use brdf::{Brdf, BrdfSlices, SliceConfig, BRDF_SYNTAX};
 pub use cache::{CacheUse, MAGIC as CACHE_MAGIC, VERSION as CACHE_VERSION};
 pub use matrix::{Columns, RotationMatrix, QMAX};
+pub use merl::{MeasuredBrdf, MERL_DIMS, MERL_FILE_BYTES};
 pub use shade::{resample_local, OctMap, Shader};
 
 use crate::error::{RelightError, Result};

@@ -461,7 +461,7 @@ fn glossy_brdfs_under_a_white_map_reflect_their_directional_albedo() {
         },
     ];
     for brdf in brdfs {
-        let mut sh = shader(cfg, brdf, slices);
+        let mut sh = shader(cfg, brdf.clone(), slices);
         sh.light(&OctMap::from_fn(32, 1, |_| [1.0; 3]).unwrap(), None)
             .unwrap();
         let frame = Frame::new(cfg.grid_normal(5));
@@ -703,8 +703,10 @@ fn render_accuracy(sh: &mut Shader, limits: &Limits) {
             supersample: 4,
             keep: 0.03,
         };
-        sh.set_brdf(Arc::new(BrdfSlices::build(brdf, sc, limits).unwrap()))
-            .unwrap();
+        sh.set_brdf(Arc::new(
+            BrdfSlices::build(brdf.clone(), sc, limits).unwrap(),
+        ))
+        .unwrap();
         for (name, map) in [("sky+sun", &maps[0]), ("lobes", &maps[2])] {
             let exact: Vec<[f64; 3]> = points
                 .par_iter()
@@ -820,7 +822,7 @@ fn error_sources() {
                 supersample: 4,
                 keep,
             };
-            let slices = Arc::new(BrdfSlices::build(brdf, sc, &limits).unwrap());
+            let slices = Arc::new(BrdfSlices::build(brdf.clone(), sc, &limits).unwrap());
             let mut sh = Shader::new(set.clone(), slices, &limits).unwrap();
             sh.light(map, None).unwrap();
             let mut line = format!("normals {normals}² keep {keep}:");

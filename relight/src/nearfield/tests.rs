@@ -358,48 +358,50 @@ fn source_coefficients_are_projections_onto_the_basis() {
     assert!((all.kept_energy() - 1.0).abs() < 1e-12);
 }
 
-#[test]
-fn hostile_placements_and_points_error_or_go_dark() {
-    let light = LightTexture::constant([1.0; 3]).unwrap();
-    let ok = Placement {
-        center: [0.0; 2],
-        size: [1.0; 2],
-        intensity: 1.0,
-    };
-    let face = PlaneFace {
-        order: 8,
-        side: 4.0,
-    };
-    let bad_placements = [
+const OK: Placement = Placement {
+    center: [0.0; 2],
+    size: [1.0; 2],
+    intensity: 1.0,
+};
+
+/// Placements that are NaN, of zero or infinite size, negative, or so
+/// bright that radiance × intensity overflows f32.
+fn bad_placements() -> [Placement; 5] {
+    [
         Placement {
             center: [f64::NAN, 0.0],
-            ..ok
+            ..OK
         },
         Placement {
             size: [0.0, 1.0],
-            ..ok
+            ..OK
         },
         Placement {
             size: [1.0, f64::INFINITY],
-            ..ok
+            ..OK
         },
         Placement {
             intensity: -1.0,
-            ..ok
+            ..OK
         },
         Placement {
             intensity: 1e300,
-            ..ok
+            ..OK
         },
-    ];
-    for p in bad_placements {
+    ]
+}
+
+#[test]
+fn hostile_lights_and_faces_are_errors() {
+    let light = LightTexture::constant([1.0; 3]).unwrap();
+    for p in bad_placements() {
         let err = SourceCoefficients::new(&light, &p, 8, 10)
             .unwrap_err()
             .to_string();
         assert!(err.contains("valid"), "{p:?}: {err}");
     }
-    assert!(SourceCoefficients::new(&light, &ok, 6, 10).is_err());
-    assert!(SourceCoefficients::new(&light, &ok, 8, 0).is_err());
+    assert!(SourceCoefficients::new(&light, &OK, 6, 10).is_err());
+    assert!(SourceCoefficients::new(&light, &OK, 8, 0).is_err());
     assert!(LightTexture::new(2, 1, vec![[f32::NAN, 0.0, 0.0]; 2]).is_err());
     assert!(LightTexture::new(0, 1, vec![]).is_err());
     assert!(LightTexture::new(1, 1, vec![[-1.0, 0.0, 0.0]]).is_err());
@@ -413,8 +415,16 @@ fn hostile_placements_and_points_error_or_go_dark() {
         side: 4.0
     })
     .is_err());
+}
 
-    let source = SourceCoefficients::new(&light, &ok, 8, 64).unwrap();
+#[test]
+fn hostile_points_and_placements_error_or_go_dark() {
+    let light = LightTexture::constant([1.0; 3]).unwrap();
+    let face = PlaneFace {
+        order: 8,
+        side: 4.0,
+    };
+    let source = SourceCoefficients::new(&light, &OK, 8, 64).unwrap();
     let mut p = Propagator::new(face).unwrap();
     let row = [(0u32, 1.0f32)];
     for depth in [0.0, -1.0, -1e300] {
@@ -422,7 +432,7 @@ fn hostile_placements_and_points_error_or_go_dark() {
             depth,
             position: [0.0; 2],
         };
-        assert!(!p.prepare(&source, &ok, &r, Targets::All).unwrap());
+        assert!(!p.prepare(&source, &OK, &r, Targets::All).unwrap());
         assert_eq!(p.shade(&row), [0.0; 3]);
     }
     for r in [
@@ -435,7 +445,7 @@ fn hostile_placements_and_points_error_or_go_dark() {
             position: [f64::INFINITY, 0.0],
         },
     ] {
-        assert!(p.prepare(&source, &ok, &r, Targets::All).is_err());
+        assert!(p.prepare(&source, &OK, &r, Targets::All).is_err());
     }
     // Extreme but valid: on the plane, very far, far to the side: defined,
     // finite and not negative.
@@ -444,7 +454,7 @@ fn hostile_placements_and_points_error_or_go_dark() {
             depth,
             position: [x, 0.0],
         };
-        p.prepare(&source, &ok, &r, Targets::Share(0.2)).unwrap();
+        p.prepare(&source, &OK, &r, Targets::Share(0.2)).unwrap();
         let b = p.shade(&row);
         assert!(
             b.iter().all(|v| v.is_finite() && *v >= 0.0),
@@ -456,14 +466,14 @@ fn hostile_placements_and_points_error_or_go_dark() {
         depth: 1.0,
         position: [0.0; 2],
     };
-    for bad in &bad_placements[..3] {
+    for bad in &bad_placements()[..3] {
         assert!(
             p.prepare(&source, bad, &r, Targets::All).is_err(),
             "{bad:?}"
         );
     }
-    let mismatched = SourceCoefficients::new(&light, &ok, 16, 4).unwrap();
-    assert!(p.prepare(&mismatched, &ok, &r, Targets::All).is_err());
+    let mismatched = SourceCoefficients::new(&light, &OK, 16, 4).unwrap();
+    assert!(p.prepare(&mismatched, &OK, &r, Targets::All).is_err());
 }
 
 #[test]

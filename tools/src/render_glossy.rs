@@ -105,13 +105,39 @@ fn ms(start: Instant) -> f64 {
 
 impl GlossyArgs {
     /// The `--brdf` material, if any (a `merl:` table read and charged to
-    /// `limits`), and the measured file it names, an input of the run.
+    /// `limits`), after every glossy setting is checked: called before any
+    /// work, so that a bad value fails at once.
     pub fn material(&self, limits: &Limits) -> Result<Option<Brdf>> {
         let Some(spec) = &self.brdf else {
             return Ok(None);
         };
+        self.check()?;
         let brdf = Brdf::from_spec(spec, limits).with_context(|| format!("--brdf {spec}"))?;
         Ok(Some(brdf))
+    }
+
+    /// Checks the rotation and slice settings (messages name the flag's
+    /// value and its valid range).
+    fn check(&self) -> Result<()> {
+        let cfg = self.rotation_config();
+        if !cfg.n.is_power_of_two() || cfg.n < 8 || cfg.n > 128 {
+            bail!(
+                "--glossy-n {} is out of range (valid: a power of two, 8..=128)",
+                cfg.n
+            );
+        }
+        cfg.validate()?;
+        self.slice_config(cfg.n).validate()?;
+        Ok(())
+    }
+
+    fn slice_config(&self, n: usize) -> SliceConfig {
+        SliceConfig {
+            m: n / 2,
+            keep: self.brdf_keep,
+            views: self.brdf_views,
+            ..SliceConfig::default()
+        }
     }
 
     /// The measured BRDF file `--brdf merl:PATH` names.
@@ -130,13 +156,6 @@ impl GlossyArgs {
 
     fn rotations(&self, limits: &Limits) -> Result<(RotationSet, &'static str)> {
         let cfg = self.rotation_config();
-        cfg.validate()?;
-        if cfg.n < 8 || cfg.n > 128 {
-            bail!(
-                "--glossy-n {} is out of range (valid: a power of two, 8..=128)",
-                cfg.n
-            );
-        }
         let Some(path) = &self.rotation_cache else {
             return Ok((RotationSet::build(cfg, limits)?, "built"));
         };
@@ -144,7 +163,7 @@ impl GlossyArgs {
             .with_context(|| format!("rotation cache {}", path.display()))?;
         let source = match used {
             CacheUse::Read => "read from the cache",
-            CacheUse::Replaced => "built (replacing a cache of other settings)",
+            CacheUse::Replaced => "built (replacing a cache of other settings or a damaged one)",
             _ => "built and cached",
         };
         Ok((set, source))
@@ -167,12 +186,7 @@ impl Glossy {
         let rotations_ms = ms(start);
         let n = rotations.config().n;
         let start = Instant::now();
-        let slice_cfg = SliceConfig {
-            m: n / 2,
-            keep: a.brdf_keep,
-            views: a.brdf_views,
-            ..SliceConfig::default()
-        };
+        let slice_cfg = a.slice_config(n);
         let slices = BrdfSlices::build(brdf.clone(), slice_cfg, limits)?;
         let slices_ms = ms(start);
         let start = Instant::now();

@@ -637,6 +637,11 @@ fn render_brdf_shades_by_rotation_and_agrees_with_the_transport() {
         ),
         (&["--shading", "glossy"], &["--brdf"]),
         (&["--brdf", "merl:/no/such.binary"], &["/no/such.binary"]),
+        (
+            &["--brdf", "ggx:0.2", "--brdf-keep", "0"],
+            &["kept BRDF fraction", "(0, 1]"],
+        ),
+        (&["--brdf", "ggx:0.2", "--normals", "0"], &["1..=256"]),
     ] {
         let out = p("bad.exr");
         let (ok, stderr) = render(&out, &env, extra);

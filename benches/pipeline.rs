@@ -141,7 +141,8 @@ fn column_image(w: usize, h: usize, seed: u64) -> Vec<f32> {
 }
 
 /// Keeps positions with `u² ≥ tau_sq` of one channel of weighted
-/// coefficients and quantizes them with the coder's quantizer.
+/// coefficients and quantizes them with the coder's default quantizer (the
+/// uniform one, its step tied to τ).
 fn code_column(
     coefs: &[f32],
     groups: &[u8],
@@ -157,15 +158,15 @@ fn code_column(
             e >= tau_sq && e > 0.0
         })
         .collect();
-    quant::quantize(
-        coefs,
-        1,
-        &kept,
-        groups,
-        depth,
+    let how = quant::Quantization {
         bits,
-        quant::Dither { seed, column: j },
-    )
+        step: CodeOptions::default()
+            .quantizer
+            .step(tau_sq, 1)
+            .map(|s| s as f32),
+        dither: quant::Dither { seed, column: j },
+    };
+    quant::quantize(coefs, 1, &kept, groups, depth, how)
 }
 
 fn quantize(c: &mut Criterion) {

@@ -156,6 +156,7 @@ def compress(
     mode: Literal["2d", "4d", "adaptive", "pca"] = "adaptive",
     max_error: Optional[float] = None,
     bits: Optional[int] = None,
+    quantizer: Literal["uniform", "peak"] = "uniform",
     keep: Optional[int] = None,
     rank: Optional[int] = None,
     max_rank: Optional[int] = None,
@@ -167,7 +168,8 @@ def compress(
     progress: Optional[Progress] = None,
 ) -> Union[bytes, dict]:
     """Compresses a matrix as ``ltm compress`` does (same options and
-    defaults: max_error 0.01, bits 10 raised while the target is missed;
+    defaults: max_error 0.01, the uniform quantizer at 16 bits (``peak``:
+    bits 10, raised while the target is missed);
     for pca without ``max_rank``, the fit's rank doubled from 256 up to the
     full rank while the target is missed).
 

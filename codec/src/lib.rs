@@ -44,7 +44,8 @@ pub use baseline::{PcaBasis, ShProjection, MAX_SH_ORDER};
 pub use column::SparseColumn;
 pub use compress::{
     compress, compress_pca, default_mem_budget, Analysis, CodeOptions, Coder, CompressOptions,
-    CompressStats, Entropy, Mode, PcaOptions, PcaStats, Plan, Target, TransposeOptions, Transposed,
+    CompressStats, Entropy, Mode, PcaOptions, PcaStats, Plan, Quantizer, Target, TransposeOptions,
+    Transposed,
 };
 pub use container::{LtmFile, LtmWriter, Meta, OptionalChunks};
 pub use decode::ColumnDecoder;

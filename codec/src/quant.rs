@@ -14,6 +14,11 @@
 //! (seed, column, index, channel). The dither makes the quantizer unbiased
 //! (`E[q] = u/s·Q`), so small kept coefficients survive on average instead of
 //! all rounding the same way; zero stays zero. Decoding is `u = q·s/Q`.
+//!
+//! That peak quantizer spends many bits on every kept value. The uniform
+//! quantizer of target-error runs instead takes one step `Δ` for the whole
+//! matrix, tied to the threshold, stores `s = Δ·Q` (or the peak, if larger)
+//! and rounds `u/Δ` to the nearest integer: the same decoder reads both.
 
 use crate::bands::{band_count, band_level, band_map, band_rect};
 use crate::column::SparseColumn;
@@ -100,26 +105,47 @@ pub fn encode_scale(s: f32) -> u16 {
     e
 }
 
+/// How [`quantize`] quantizes one column: the bits (levels `Q =
+/// 2^(bits−1) − 1` of a scale group's largest value), and either a uniform
+/// step or a dither.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Quantization {
+    /// Quantization bits, 2..=16.
+    pub bits: u32,
+    /// The uniform quantizer's weighted step per channel (rounding to the
+    /// nearest step); `None` for the peak quantizer's dithered steps.
+    pub step: Option<f32>,
+    /// The dither stream of the peak quantizer.
+    pub dither: Dither,
+}
+
 /// The coder's quantizer: stores the sorted positions `kept` of one column's
 /// weighted coefficients `coefs` (`channels` planes of equal length, in the
 /// column transform's layout at `depth`). Each scale group (`groups`, from
-/// [`scale_groups`]) and channel gets one log-coded scale, its largest kept
-/// magnitude; values become `floor(u/s·Q + d)` with `Q = levels(bits)` and
-/// `d` the dither of (the [`Dither`]'s `seed` and `column`, position,
-/// channel). Positions whose every channel is below half a step are dropped
-/// (dithering them costs more error than dropping them), as are positions
-/// that quantize to zero.
+/// [`scale_groups`]) and channel gets one log-coded scale `s`; values become
+/// integers `q` that decode as `q·s/Q` with `Q = levels(bits)`.
+/// - The peak quantizer (no `step`): `s` is the group's largest kept
+///   magnitude and `q = floor(u/s·Q + d)`, `d` the dither of (the
+///   [`Dither`]'s `seed` and `column`, position, channel). Positions whose
+///   every channel is below half a step are dropped (dithering them costs
+///   more error than dropping them).
+/// - The uniform quantizer: `s` is the larger of `step·Q` and the group's
+///   largest kept magnitude (so that no value needs more than `Q` steps),
+///   and `q` is `u/s·Q` rounded to the nearest integer (halves away from
+///   zero).
+///
+/// Positions whose every channel quantizes to zero are dropped.
 pub fn quantize(
     coefs: &[f32],
     channels: usize,
     kept: &[u32],
     groups: &[u8],
     depth: u32,
-    bits: u32,
-    Dither { seed, column }: Dither,
+    how: Quantization,
 ) -> SparseColumn {
     let p = coefs.len() / channels.max(1);
     let c_n = channels;
+    let q = levels(how.bits);
     let mut peak = vec![0.0f32; (depth as usize + 1) * c_n];
     for &i in kept {
         let g = groups[i as usize] as usize;
@@ -127,19 +153,26 @@ pub fn quantize(
             peak[g * c_n + c] = peak[g * c_n + c].max(coefs[c * p + i as usize].abs());
         }
     }
+    if let Some(step) = how.step {
+        let floor = step * q;
+        peak.iter_mut()
+            .filter(|s| **s > 0.0)
+            .for_each(|s| *s = s.max(floor));
+    }
     let scale_codes: Vec<u16> = peak.iter().map(|&s| encode_scale(s)).collect();
     let scales: Vec<f32> = scale_codes.iter().map(|&e| decode_scale(e)).collect();
-    let q = levels(bits);
     let mut col = SparseColumn {
         depth,
         scale_codes,
         ..Default::default()
     };
+    let Dither { seed, column } = how.dither;
     let mut vals = [0i32; 3];
     for &i in kept {
         let g = groups[i as usize] as usize;
         let half_step = |c: usize| 0.5 * scales[g * c_n + c] / q;
-        if (0..c_n).all(|c| coefs[c * p + i as usize].abs() < half_step(c)) {
+        let dithered = how.step.is_none();
+        if dithered && (0..c_n).all(|c| coefs[c * p + i as usize].abs() < half_step(c)) {
             continue;
         }
         let mut any = false;
@@ -147,7 +180,12 @@ pub fn quantize(
             let s = scales[g * c_n + c];
             *v = if s > 0.0 {
                 let x = coefs[c * p + i as usize] / s * q;
-                ((x + dither(seed, column, i, c as u32)).floor()).clamp(-q, q) as i32
+                let x = if dithered {
+                    (x + dither(seed, column, i, c as u32)).floor()
+                } else {
+                    x.round()
+                };
+                x.clamp(-q, q) as i32
             } else {
                 0
             };
@@ -231,6 +269,48 @@ impl BandWeights {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// The uniform quantizer rounds every kept value to the nearest
+    /// multiple of its group's step (the given step, or the group's
+    /// peak/Q where that is larger), stores the step as `s/Q`, and drops
+    /// positions whose every channel rounds to zero.
+    #[test]
+    fn uniform_quantizer_rounds_to_one_step_per_group() {
+        let (p, c_n, bits) = (6usize, 2usize, 4u32);
+        let q = levels(bits); // 7
+                              // Group 0: positions 0..3, group 1: 3..6 with a peak of 100 (more
+                              // than 7 steps of 1 in channel 0: its step there grows to about
+                              // 100/7; channel 1 keeps the step 1).
+        let groups = [0u8, 0, 0, 1, 1, 1];
+        let coefs = [
+            0.4f32, 2.6, -1.49, 100.0, 3.0, 0.2, // channel 0
+            0.3, 0.0, 0.51, -7.0, 0.0, 0.1, // channel 1
+        ];
+        let how = Quantization {
+            bits,
+            step: Some(1.0),
+            dither: Dither { seed: 0, column: 0 },
+        };
+        let col = quantize(&coefs, c_n, &[0, 1, 2, 3, 4, 5], &groups, 1, how);
+        let step = |g: usize, c: usize| decode_scale(col.scale_codes[g * c_n + c]) / q;
+        assert!((step(0, 0) - 1.0).abs() < 3e-3 && (step(0, 1) - 1.0).abs() < 3e-3);
+        assert!(step(1, 0) >= 100.0 / q && step(1, 0) < 1.003 * 100.0 / q);
+        // Position 0 rounds to 0 in both channels and is dropped; so are
+        // 5 and 4 (3.0 is under half of group 1's step of 100/7).
+        assert_eq!(col.indices, vec![1, 2, 3]);
+        let value = |k: usize, c: usize| col.values[k * c_n + c];
+        assert_eq!((value(0, 0), value(0, 1)), (3, 0));
+        assert_eq!((value(1, 0), value(1, 1)), (-1, 1));
+        assert_eq!((value(2, 0), value(2, 1)), (7, -7));
+        for (k, &i) in col.indices.iter().enumerate() {
+            for c in 0..c_n {
+                let g = groups[i as usize] as usize;
+                let back = value(k, c) as f32 * step(g, c);
+                let err = (back - coefs[c * p + i as usize]).abs();
+                assert!(err <= 0.5 * step(g, c) + 1e-4, "position {i} channel {c}");
+            }
+        }
+    }
 
     /// Every stored scale is a finite positive f32 (subnormal at the bottom,
     /// below `f32::MAX` at the top), and any positive f32 up to the largest

@@ -280,7 +280,8 @@ fn tiny_matrices_keep_their_values() {
     )
     .unwrap();
     assert!(stats.target_met && stats.nonzeros > 0, "{stats:?}");
-    assert_eq!(stats.bits, 10);
+    // Coded at the bits asked for: none were blamed.
+    assert_eq!(stats.bits, CompressOptions::default().code.bits);
 }
 
 /// Columns 10^20 apart (the small ones far below the error budget) leave a

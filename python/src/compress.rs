@@ -4,7 +4,7 @@
 use crate::errors::{self, value};
 use crate::progress::Callback;
 use ltm_codec::compress::{
-    CodeOptions, CompressOptions, Target, TransposeOptions, DEFAULT_BITS, DEFAULT_MAX_ERROR,
+    CodeOptions, CompressOptions, Quantizer, Target, TransposeOptions, DEFAULT_MAX_ERROR,
     DEFAULT_MAX_RANK, DEFAULT_PCA_BITS,
 };
 use ltm_codec::{default_mem_budget, Dims, Entropy, Filter, Mode, PcaOptions, Progress, RawStore};
@@ -19,6 +19,7 @@ pub struct Settings {
     mode: Mode,
     max_error: Option<f64>,
     bits: Option<u32>,
+    quantizer: Quantizer,
     keep: Option<usize>,
     rank: Option<usize>,
     max_rank: Option<usize>,
@@ -78,7 +79,8 @@ impl Settings {
             code: CodeOptions {
                 mode: self.mode,
                 col_filter: self.col_filter,
-                bits: self.bits.unwrap_or(DEFAULT_BITS),
+                quantizer: self.quantizer,
+                bits: self.bits.unwrap_or(self.quantizer.default_bits()),
                 raise_bits: self.bits.is_none(),
                 target,
                 seed: self.seed,
@@ -155,7 +157,7 @@ fn stats_dict<'py>(py: Python<'py>, stats: &[Stat]) -> PyResult<Bound<'py, PyDic
 /// Compresses a matrix (see `ltm.pyi`).
 #[pyfunction]
 #[pyo3(signature = (matrix, out = None, *, width = None, height = None, albedo = None,
-    mode = "adaptive", max_error = None, bits = None, keep = None, rank = None,
+    mode = "adaptive", max_error = None, bits = None, quantizer = "uniform", keep = None, rank = None,
     max_rank = None, row_filter = "haar", col_filter = "legall53", entropy = None,
     seed = 0x6c74_6d00, mem_budget = None, progress = None))]
 #[allow(clippy::too_many_arguments)]
@@ -169,6 +171,7 @@ pub fn compress<'py>(
     mode: &str,
     max_error: Option<f64>,
     bits: Option<u32>,
+    quantizer: &str,
     keep: Option<usize>,
     rank: Option<usize>,
     max_rank: Option<usize>,
@@ -183,6 +186,7 @@ pub fn compress<'py>(
         mode: parse("mode", mode)?,
         max_error,
         bits,
+        quantizer: parse("quantizer", quantizer)?,
         keep,
         rank,
         max_rank,

@@ -40,6 +40,7 @@ def test_bad_settings_are_value_errors(matrix):
     for kwargs, match in [
         (dict(mode="3d"), "mode"),
         (dict(bits=20), "bits"),
+        (dict(quantizer="lloyd"), "quantizer 'lloyd'.*uniform or peak"),
         (dict(keep=10, max_error=0.1), "keep"),
         (dict(rank=4), "rank"),
         (dict(mode="pca", entropy="zstd"), "entropy"),

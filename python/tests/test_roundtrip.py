@@ -28,6 +28,15 @@ def test_compress_to_a_path_and_from_a_raw_store(matrix, tmp_path):
     assert ltm.compress(matrix, max_error=0.01, bits=12) == out.read_bytes()
 
 
+def test_both_quantizers_meet_the_target(matrix):
+    uniform = ltm.compress(matrix, max_error=0.02)
+    peak = ltm.compress(matrix, max_error=0.02, quantizer="peak")
+    assert uniform != peak
+    for data in (uniform, peak):
+        f = ltm.open(data)
+        assert f.error <= 0.02
+
+
 def test_float64_and_strided_input_match_float32(matrix):
     a = ltm.compress(matrix, max_error=0.05)
     assert ltm.compress(matrix.astype(np.float64), max_error=0.05) == a

@@ -4,10 +4,9 @@ use crate::common::{claim_files, progress, Ctx};
 use anyhow::{bail, Context, Result};
 use clap::Args;
 use ltm_codec::compress::{
-    compress, CodeOptions, CompressOptions, Target, TransposeOptions, DEFAULT_BITS,
-    DEFAULT_MAX_ERROR,
+    compress, CodeOptions, CompressOptions, Target, TransposeOptions, DEFAULT_MAX_ERROR,
 };
-use ltm_codec::compress::{Entropy, Mode};
+use ltm_codec::compress::{Entropy, Mode, Quantizer};
 use ltm_codec::container::LtmFile;
 use ltm_codec::default_mem_budget;
 use ltm_codec::npy::{export_npy, import_npy};
@@ -91,10 +90,20 @@ pub struct CompressArgs {
     /// Column image filter: legall53, cdf97, haar, d4, d6 or d8.
     #[arg(long, default_value = "legall53")]
     pub col_filter: Filter,
-    /// Quantization bits per coefficient (2..=16) [default: 10 (pca: 12),
-    /// raised by 2 at a time (up to 16) while a --max-error target is missed].
+    /// Quantization bits per coefficient (2..=16): the levels of each
+    /// band's largest value [default: 16 with the uniform quantizer, whose
+    /// steps do not depend on them; 10 with `peak` (pca: 12), raised by 2 at
+    /// a time (up to 16) while a --max-error target is missed].
     #[arg(long, value_parser = clap::value_parser!(u32).range(2..=16))]
     pub bits: Option<u32>,
+    /// How a --max-error run quantizes the kept coefficients: `uniform`
+    /// (one step for the whole matrix, tied to the threshold, values
+    /// rounded: the smallest files) or `peak` (each band's step from its
+    /// largest value and --bits, dithered: what ltm wrote before; about
+    /// 1.1–1.4× larger files). Either decodes with the same reader. A
+    /// --keep run quantizes with `peak`.
+    #[arg(long, default_value = "uniform")]
+    pub quantizer: Quantizer,
     /// Keep the N largest coefficients of each column (the paper's N-term
     /// rule).
     #[arg(long, value_name = "N", conflicts_with = "max_error")]
@@ -138,7 +147,7 @@ pub struct CompressArgs {
     #[arg(
         long,
         value_name = "PLAN",
-        conflicts_with_all = ["mode", "rank", "max_rank", "col_filter", "row_filter", "bits", "keep", "max_error", "seed", "entropy"]
+        conflicts_with_all = ["mode", "rank", "max_rank", "col_filter", "row_filter", "bits", "quantizer", "keep", "max_error", "seed", "entropy"]
     )]
     pub plan: Option<PathBuf>,
     /// With --analyze or --plan: shard I (0-based) of N contiguous column
@@ -169,7 +178,8 @@ pub fn code_options(a: &CompressArgs) -> CodeOptions {
     CodeOptions {
         mode: a.mode,
         col_filter: a.col_filter,
-        bits: a.bits.unwrap_or(DEFAULT_BITS),
+        quantizer: a.quantizer,
+        bits: a.bits.unwrap_or(a.quantizer.default_bits()),
         raise_bits: a.bits.is_none(),
         target,
         seed: a.seed,

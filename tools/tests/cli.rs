@@ -339,6 +339,17 @@ fn bad_input_exits_non_zero_with_a_message() {
             ],
             "bits",
         ),
+        (
+            vec![
+                "compress",
+                missing.to_str().unwrap(),
+                "-o",
+                out.to_str().unwrap(),
+                "--quantizer",
+                "lloyd",
+            ],
+            "expected uniform or peak",
+        ),
     ];
     for (args, expect) in cases {
         let (ok, _, stderr) = ltm(&args);

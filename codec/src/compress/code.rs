@@ -10,7 +10,7 @@
 
 use super::analysis::{candidate_depths, AnalysisSettings};
 use super::feedback::{budget_for, Coding};
-use super::plan::{quantization_error, ErrorCurve, Plan, Rule};
+use super::plan::{quantization_error, rounded_grid, rounding_error, ErrorCurve, Plan, Rule};
 use super::{CodeOptions, Target, Transposed};
 use crate::column::{EncodedColumn, SparseColumn};
 use crate::container::Meta;
@@ -18,7 +18,9 @@ use crate::decode::ColumnDecoder;
 use crate::dims::Dims;
 use crate::entropy::ColumnShape;
 use crate::error::{Error, Result};
-use crate::quant::{decode_scale, levels, quantize, scale_groups, BandWeights, Dither};
+use crate::quant::{
+    decode_scale, levels, quantize, scale_groups, BandWeights, Dither, Quantization,
+};
 use crate::wavelet::{self, max_levels};
 use rayon::prelude::*;
 use std::ops::Range;
@@ -261,16 +263,24 @@ impl<'t> Coder<'t> {
         match (plan.rule(), self.opts.target) {
             (Rule::Largest(n), Target::Keep(k)) if n == k => Ok(()),
             (Rule::Above(_), Target::MaxError(_)) => {
-                let (settings, bits) = plan
+                let (settings, spec) = plan
                     .made_for()
                     .ok_or_else(|| differ("none".into(), "an analysis".into()))?;
                 self.analysis_settings()?.check_same(settings, "plan")?;
-                if *bits != self.opts.bits {
+                if spec.bits != self.opts.bits {
                     return Err(Error::SettingsDiffer {
                         what: "plan",
                         field: "bits",
-                        found: bits.to_string(),
+                        found: spec.bits.to_string(),
                         expected: self.opts.bits.to_string(),
+                    });
+                }
+                if spec.quantizer != self.opts.quantizer {
+                    return Err(Error::SettingsDiffer {
+                        what: "plan",
+                        field: "quantizer",
+                        found: spec.quantizer.name().into(),
+                        expected: self.opts.quantizer.name().into(),
                     });
                 }
                 let all = plan.columns();
@@ -338,11 +348,18 @@ impl<'t> Coder<'t> {
         let groups = &self.groups[col.depth as usize];
         let q = levels(self.opts.bits) as f64;
         let mut curve = ErrorCurve::new(tau_sq);
+        let uniform = self.step(Rule::Above(tau_sq));
+        let grid = uniform.map(|step| rounded_grid(tau_sq, step));
+        let mut u = [0.0f64; 3];
         let mut next = 0;
         for i in 0..p {
             let e = self.energy(coefs, i);
             if e <= 0.0 {
                 continue;
+            }
+            if let Some(grid) = &grid {
+                (0..channels).for_each(|c| u[c] = (coefs[c * p + i] as f64).abs());
+                curve.add_rounded(e, &u[..channels], grid);
             }
             let stored = col.indices.get(next) == Some(&(i as u32));
             if stored {
@@ -362,10 +379,13 @@ impl<'t> Coder<'t> {
                         let u = (coefs[c * p + i] as f64).abs();
                         let code = col.scale_codes.get(g * channels + c).copied().unwrap_or(0);
                         let step = decode_scale(code) as f64 / q;
-                        match quantization_error(u, step) {
-                            Some(qe) if step > 0.0 => qe,
-                            _ => u * u,
-                        }
+                        let kept = match uniform {
+                            // A group with nothing kept stored no scale.
+                            Some(s) => rounding_error(u, step.max(s)),
+                            None if step > 0.0 => quantization_error(u, step),
+                            None => None,
+                        };
+                        kept.unwrap_or(u * u)
                     })
                     .sum();
                 curve.add_dropped(e, coded);
@@ -457,12 +477,24 @@ impl<'t> Coder<'t> {
             &kept,
             &self.groups[depth as usize],
             depth,
-            self.opts.bits,
-            Dither {
-                seed: self.opts.seed,
-                column: j as u32,
+            Quantization {
+                bits: self.opts.bits,
+                step: self.step(rule).map(|s| s as f32),
+                dither: Dither {
+                    seed: self.opts.seed,
+                    column: j as u32,
+                },
             },
         )
+    }
+
+    /// The uniform quantizer's step under `rule` (a threshold plan with
+    /// τ > 0); `None` quantizes with the peak quantizer.
+    fn step(&self, rule: Rule) -> Option<f64> {
+        match rule {
+            Rule::Above(tau_sq) => self.opts.quantizer.step(tau_sq, self.channels()),
+            Rule::Largest(_) => None,
+        }
     }
 
     /// Squared pixel-domain error of `col` against `planes`, decoded with the

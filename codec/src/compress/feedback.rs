@@ -18,7 +18,7 @@
 //! estimated quantization floor alone misses the target.
 
 use super::analysis::Analysis;
-use super::plan::{Calibration, ErrorCurve, Plan};
+use super::plan::{Calibration, ErrorCurve, Plan, QuantSpec};
 use super::{CodeOptions, Target, MAX_CODINGS, TARGET_AIM, TARGET_LOW};
 use crate::error::{Error, Result};
 use serde::{Deserialize, Serialize};
@@ -122,14 +122,14 @@ impl<'a> Feedback<'a> {
         loop {
             let can_raise = self.opts.raise_bits && bits < 16;
             let hopeless = match (self.analysis, can_raise) {
-                (Some(a), true) => below_floor(a, bits, self.budget)?,
+                (Some(a), true) => below_floor(a, self.spec(bits), self.budget)?,
                 _ => false,
             };
             if !hopeless {
                 let aim = self.budget * TARGET_AIM.powi(2);
                 let plan = match (self.analysis, self.opts.target) {
                     (_, Target::Keep(n)) => Plan::keep(n),
-                    (Some(a), Target::MaxError(_)) => Plan::new(a, bits, aim)?,
+                    (Some(a), Target::MaxError(_)) => Plan::new(a, self.spec(bits), aim)?,
                     (None, Target::MaxError(_)) => {
                         return Err(Error::Invalid("a target error needs an analysis".into()))
                     }
@@ -144,6 +144,14 @@ impl<'a> Feedback<'a> {
         }
     }
 
+    /// The quantizer of a coding at `bits`.
+    fn spec(&self, bits: u32) -> QuantSpec {
+        QuantSpec {
+            quantizer: self.opts.quantizer,
+            bits,
+        }
+    }
+
     /// What follows the coding `step` that measured `coded`.
     pub fn next(&self, step: &Step, coded: &Coding) -> Result<Next> {
         let (aim, low) = (
@@ -153,7 +161,15 @@ impl<'a> Feedback<'a> {
         let missed = coded.err > self.budget * 1.0001;
         if let Some(a) = self.analysis {
             if step.coding < MAX_CODINGS && (missed || coded.err < low) {
-                let next = replan(a, &step.plan, coded, step.bits, aim, step.coding, missed)?;
+                let next = replan(
+                    a,
+                    &step.plan,
+                    coded,
+                    self.spec(step.bits),
+                    aim,
+                    step.coding,
+                    missed,
+                )?;
                 if let Some(plan) = next {
                     return Ok(Next::Code(Step {
                         bits: step.bits,
@@ -175,8 +191,8 @@ impl<'a> Feedback<'a> {
 /// the squared-error `budget` (the quantization floor of `bits`): the
 /// analysis's plan at τ = 0 exceeds the budget by more than the plan's
 /// usual estimation error.
-fn below_floor(analysis: &Analysis, bits: u32, budget: f64) -> Result<bool> {
-    let plan = Plan::new(analysis, bits, budget)?;
+fn below_floor(analysis: &Analysis, spec: QuantSpec, budget: f64) -> Result<bool> {
+    let plan = Plan::new(analysis, spec, budget)?;
     Ok(plan.tau_sq() == 0.0 && plan.estimated_error() > FLOOR_MARGIN * budget)
 }
 
@@ -192,12 +208,13 @@ const FLOOR_MARGIN: f64 = 1.5;
 /// follows the second coding's own curve; later ones (after a miss of the
 /// budget) follow the curve when it lowers τ, else shrink the estimate's
 /// budget by the miss and lower τ. An error below the range is kept after
-/// the third coding, and whenever the plan's estimate is 0.
+/// the third coding, and whenever
+/// the plan's estimate is 0.
 fn replan(
     a: &Analysis,
     plan: &Plan,
     coded: &Coding,
-    bits: u32,
+    spec: QuantSpec,
     aim: f64,
     coding: u32,
     missed: bool,
@@ -205,18 +222,18 @@ fn replan(
     let (estimate, err) = (plan.estimated_error(), coded.err);
     if coding == 1 {
         let curve = coded.curve.as_ref();
-        if let Some(tau_sq) = curve.and_then(|c| c.threshold_for(err, aim - err)) {
-            return Plan::at_threshold(a, bits, tau_sq, &coded.depths).map(Some);
+        if let Some(tau_sq) = curve.and_then(|c| c.threshold_for(err, aim - err, spec.quantizer)) {
+            return Plan::at_threshold(a, spec, tau_sq, &coded.depths).map(Some);
         }
         if estimate > 0.0 && err > 0.0 {
-            return Plan::calibrated(a, bits, aim, calibration(plan, err)).map(Some);
+            return Plan::calibrated(a, spec, aim, calibration(plan, err)).map(Some);
         }
         return Ok(None);
     }
     if plan.fixed_depths() && missed && coding >= 5 {
         // The first coding's depths cannot meet the target (a quantization
         // floor): back to the analysis's conservative plans, free depths.
-        return Plan::new(a, bits, 0.5 * aim).map(Some);
+        return Plan::new(a, spec, 0.5 * aim).map(Some);
     }
     if plan.tau_sq() > 0.0 && err > 0.0 && (coding == 2 || missed) {
         // The curve of the re-coding itself, measured near the target,
@@ -225,14 +242,14 @@ fn replan(
         let next = coded
             .curve
             .as_ref()
-            .and_then(|c| c.threshold_for(err, aim - err));
+            .and_then(|c| c.threshold_for(err, aim - err, spec.quantizer));
         let tau_sq = match next {
             Some(t) if !missed || t < plan.tau_sq() => Some(t),
             _ if plan.fixed_depths() => Some(plan.tau_sq() * 0.9 * aim / err),
             _ => None,
         };
         if let Some(tau_sq) = tau_sq {
-            return Plan::at_threshold(a, bits, tau_sq, &coded.depths).map(Some);
+            return Plan::at_threshold(a, spec, tau_sq, &coded.depths).map(Some);
         }
     }
     if !missed || plan.tau_sq() <= 0.0 || err <= 0.0 {
@@ -242,7 +259,7 @@ fn replan(
         return Ok(None);
     }
     let shrink = 0.9 * aim / err;
-    Plan::below(a, bits, estimate * shrink, plan.tau_sq() * shrink).map(Some)
+    Plan::below(a, spec, estimate * shrink, plan.tau_sq() * shrink).map(Some)
 }
 
 /// How a coding with `plan` that measured the squared error `err` (> 0)

@@ -43,9 +43,9 @@ mod transpose;
 pub use analysis::{Analysis, AnalysisSettings};
 pub use code::{CodedColumns, Coder};
 pub use feedback::{budget_for, Coding, Feedback, Next, Step};
-pub use options::{Entropy, Mode};
+pub use options::{Entropy, Mode, Quantizer, UNIFORM_STEP_PER_THRESHOLD};
 pub use pca::{compress_pca, PcaOptions, PcaStats, DEFAULT_MAX_RANK, DEFAULT_PCA_BITS};
-pub use plan::{Calibration, ErrorCurve, Plan};
+pub use plan::{Calibration, ErrorCurve, Plan, QuantSpec};
 pub use transpose::{Transposed, MAX_NORM, MIN_NONZERO_RMS};
 
 use crate::container::{LtmWriter, OptionalChunks};
@@ -157,7 +157,14 @@ pub struct CodeOptions {
     pub mode: Mode,
     /// Column image filter.
     pub col_filter: Filter,
-    /// Quantization bits, 2..=16.
+    /// How kept values are quantized (target-error runs; a term count
+    /// quantizes with [`Quantizer::Peak`]).
+    #[serde(default = "Quantizer::before_uniform")]
+    pub quantizer: Quantizer,
+    /// Quantization bits, 2..=16: the levels `Q = 2^(bits−1) − 1` of a
+    /// scale group's largest value (with [`Quantizer::Uniform`], the
+    /// largest number of steps a value may take before its group's step
+    /// grows).
     pub bits: u32,
     /// When a target error is missed because `bits` quantize too coarsely,
     /// code again with 2 more bits (up to 16) until it is met. The file
@@ -180,7 +187,8 @@ impl Default for CodeOptions {
         CodeOptions {
             mode: Mode::Adaptive,
             col_filter: Filter::LeGall53,
-            bits: DEFAULT_BITS,
+            quantizer: Quantizer::Uniform,
+            bits: Quantizer::Uniform.default_bits(),
             raise_bits: false,
             target: Target::MaxError(DEFAULT_MAX_ERROR),
             seed: 0x6c74_6d00,

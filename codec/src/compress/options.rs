@@ -91,3 +91,85 @@ impl std::str::FromStr for Entropy {
         }
     }
 }
+
+/// How the coder quantizes the kept coefficients of a target-error run.
+/// The decoder does not need to know: both store per scale group a scale
+/// `s`, and a value decodes as `q·s/Q` (docs/FORMAT.md).
+#[non_exhaustive]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+pub enum Quantizer {
+    /// One step for the whole matrix, tied to the threshold τ
+    /// ([`UNIFORM_STEP_PER_THRESHOLD`]·τ per channel, in the band-weighted
+    /// domain), with values rounded to the nearest step: the entropy-coded
+    /// uniform quantizer, which spends the error where it buys the most
+    /// bytes. A scale group whose largest value exceeds `Q` steps gets the
+    /// coarser step `peak/Q`. Term-count runs (`--keep`), which have no τ,
+    /// quantize with [`Quantizer::Peak`].
+    #[default]
+    #[serde(rename = "uniform")]
+    Uniform,
+    /// Each scale group's step is its largest kept value over `Q =
+    /// 2^(bits−1) − 1`, with a dither (every file before the uniform
+    /// quantizer was written so): many bits for every kept value, most of
+    /// them noise.
+    #[serde(rename = "peak")]
+    Peak,
+}
+
+/// The uniform quantizer's step over the threshold (per channel): values
+/// below τ are dropped, values from τ to 2.25·τ round to one step. So the
+/// zero bin is wider than the others (a deadzone of 1.33 steps). 1.5 gave
+/// smaller files than 2, 2.5 and 3 on grey and RGB matrices at 0.3–3 %
+/// (docs/results/codec.md).
+pub const UNIFORM_STEP_PER_THRESHOLD: f64 = 1.5;
+
+impl Quantizer {
+    /// The quantizer of options serialized before the uniform one existed.
+    pub(crate) fn before_uniform() -> Quantizer {
+        Quantizer::Peak
+    }
+
+    /// The name on the command line: `uniform` or `peak`.
+    pub fn name(self) -> &'static str {
+        match self {
+            Quantizer::Uniform => "uniform",
+            Quantizer::Peak => "peak",
+        }
+    }
+
+    /// The bits a run takes when none are given: 16 for the uniform
+    /// quantizer, whose bits only bound how many steps a value may take
+    /// (fewer would coarsen the steps of the bands with the largest values),
+    /// [`DEFAULT_BITS`](super::DEFAULT_BITS) for the peak quantizer.
+    pub fn default_bits(self) -> u32 {
+        match self {
+            Quantizer::Uniform => 16,
+            Quantizer::Peak => super::DEFAULT_BITS,
+        }
+    }
+
+    /// The weighted step per channel of the uniform quantizer at the
+    /// threshold `tau_sq` (a squared magnitude summed over `channels`);
+    /// `None` for the peak quantizer or without a threshold.
+    pub fn step(self, tau_sq: f64, channels: usize) -> Option<f64> {
+        match self {
+            Quantizer::Uniform if tau_sq > 0.0 => {
+                Some(UNIFORM_STEP_PER_THRESHOLD * (tau_sq / channels.max(1) as f64).sqrt())
+            }
+            _ => None,
+        }
+    }
+}
+
+impl std::str::FromStr for Quantizer {
+    type Err = String;
+    fn from_str(s: &str) -> std::result::Result<Quantizer, String> {
+        match s {
+            "uniform" => Ok(Quantizer::Uniform),
+            "peak" => Ok(Quantizer::Peak),
+            _ => Err(format!(
+                "unknown quantizer '{s}' (expected uniform or peak)"
+            )),
+        }
+    }
+}

@@ -41,7 +41,7 @@ use std::path::{Path, PathBuf};
 
 /// Version of the sharded-compression files (analysis parts, plans and
 /// coded parts).
-pub const SHARD_FILES_VERSION: u32 = 1;
+pub const SHARD_FILES_VERSION: u32 = 2;
 
 /// The `kind` of an analysis part.
 pub const ANALYSIS_PART_KIND: &str = "ltm analysis part";

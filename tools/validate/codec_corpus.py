@@ -22,7 +22,8 @@ Usage:
   python3 tools/validate/peers.py /tmp/corpus/NAME.raw -o /tmp/corpus/peers-NAME.json
   python3 tools/validate/codec_corpus.py --out /tmp/corpus --table-only
 
-Writes OUT/corpus.json (every coding: bytes, error, nonzeros, seconds) and
+Writes OUT/corpus.json (every file: bytes, bits, nonzeros, error, coding
+passes, seconds) and
 prints a markdown table; a peer column shows the smallest stream of that
 compressor at an error at most the target.
 """
@@ -142,14 +143,6 @@ def torus_mesh(big=0.45, small=0.16, nu=96, nv=48):
     return verts.reshape(-1, 3), faces.reshape(-1, 3)
 
 
-def write_obj(path, verts, faces):
-    with open(path, "w") as f:
-        for p in verts:
-            f.write(f"v {p[0]:.6f} {p[1]:.6f} {p[2]:.6f}\n")
-        for t in faces:
-            f.write(f"f {t[0] + 1} {t[1] + 1} {t[2] + 1}\n")
-
-
 def bake(ltm, out, name, text, extra):
     raw = os.path.join(out, f"{name}.raw")
     if os.path.exists(raw):
@@ -171,10 +164,11 @@ def compress(ltm, raw, target, args):
                          check=True, capture_output=True, text=True)
     seconds = time.monotonic() - t0
     line = next(l for l in run.stdout.splitlines() + run.stderr.splitlines() if l.startswith("wrote"))
-    m = re.search(r": (\d+) bytes .*?, (\d+) bits, (\d+) nonzeros, relative L2 error ([0-9.]+)", line)
+    m = re.search(r": (\d+) bytes .*?, (\d+) bits, (\d+) nonzeros, relative L2 error ([0-9.]+), "
+                  r"(\d+) coding pass", line)
     os.remove(out)
     return {"bytes": int(m[1]), "bits": int(m[2]), "nonzeros": int(m[3]),
-            "error": float(m[4]), "seconds": seconds}
+            "error": float(m[4]), "codings": int(m[5]), "seconds": seconds}
 
 
 def peers(out, name):
@@ -224,7 +218,7 @@ def main():
     path = os.path.join(a.out, "corpus.json")
     results = json.load(open(path)) if os.path.exists(path) else {}
     if not a.table_only:
-        from mitsuba_texture import limbs_mesh
+        from mitsuba_texture import limbs_mesh, write_obj
         write_obj(os.path.join(a.out, "limbs.obj"), *limbs_mesh())
         write_obj(os.path.join(a.out, "torus.obj"), *torus_mesh())
         for name, (text, extra) in scenes().items():

@@ -19,7 +19,7 @@
 
 use super::analysis::Analysis;
 use super::plan::{Calibration, ErrorCurve, Plan, QuantSpec};
-use super::{CodeOptions, Target, MAX_CODINGS, TARGET_AIM, TARGET_LOW};
+use super::{CodeOptions, Quantizer, Target, MAX_CODINGS, TARGET_AIM, TARGET_LOW};
 use crate::error::{Error, Result};
 use serde::{Deserialize, Serialize};
 
@@ -208,7 +208,7 @@ const FLOOR_MARGIN: f64 = 1.5;
 /// follows the second coding's own curve; later ones (after a miss of the
 /// budget) follow the curve when it lowers τ, else shrink the estimate's
 /// budget by the miss and lower τ. An error below the range is kept after
-/// the third coding, and whenever
+/// the third coding (the fourth with the uniform quantizer), and whenever
 /// the plan's estimate is 0.
 fn replan(
     a: &Analysis,
@@ -235,7 +235,11 @@ fn replan(
         // floor): back to the analysis's conservative plans, free depths.
         return Plan::new(a, spec, 0.5 * aim).map(Some);
     }
-    if plan.tau_sq() > 0.0 && err > 0.0 && (coding == 2 || missed) {
+    // A uniform coding's error moves with its step as well as its
+    // threshold: an error still below the range after the third coding
+    // gets one more try along the curve.
+    let low_again = spec.quantizer == Quantizer::Uniform && coding == 3;
+    if plan.tau_sq() > 0.0 && err > 0.0 && (coding == 2 || missed || low_again) {
         // The curve of the re-coding itself, measured near the target,
         // at its depths: a third coding, and later ones only while the
         // error exceeds the target.

@@ -167,11 +167,11 @@ pub fn quantize(
         ..Default::default()
     };
     let Dither { seed, column } = how.dither;
+    let dithered = how.step.is_none();
     let mut vals = [0i32; 3];
     for &i in kept {
         let g = groups[i as usize] as usize;
         let half_step = |c: usize| 0.5 * scales[g * c_n + c] / q;
-        let dithered = how.step.is_none();
         if dithered && (0..c_n).all(|c| coefs[c * p + i as usize].abs() < half_step(c)) {
             continue;
         }

@@ -174,13 +174,21 @@ impl ColumnDecoder {
         let Some(norms) = file.column_norms() else {
             return Ok(());
         };
-        let problem = (0..norms.len()).into_par_iter().find_map_first(|j| {
-            let checked = file.column(j).and_then(|col| {
-                ColumnDecoder::check_norm(j, norms[j], self.weighted_norm(&col) as f32)
-            });
-            checked.err()
-        });
+        let decoded = self.column_norms(file)?;
+        let problem =
+            (0..norms.len()).find_map(|j| ColumnDecoder::check_norm(j, norms[j], decoded[j]).err());
         problem.map_or(Ok(()), Err)
+    }
+
+    /// Every column's priority norm, [`ColumnDecoder::weighted_norm`] of
+    /// the decoded column rounded to `f32`: each column is decoded once, in
+    /// parallel, and not kept. The first column (in column order) that
+    /// fails to decode is the error.
+    pub fn column_norms(&self, file: &LtmFile) -> Result<Vec<f32>> {
+        (0..file.meta().dims.lights())
+            .into_par_iter()
+            .map(|j| Ok(self.weighted_norm(&file.column(j)?) as f32))
+            .collect()
     }
 
     /// The dequantization step `s/Q` of scale group `group`, channel

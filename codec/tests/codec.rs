@@ -199,9 +199,7 @@ fn files_without_empty_rows_have_no_mask() {
 /// version, and checks that it decodes to the error it recorded. Returns
 /// the file and the CRC-32 of its bytes.
 fn old_fixture_decodes(name: &str, version: u32) -> (LtmFile, u32) {
-    let path = Path::new(env!("CARGO_MANIFEST_DIR"))
-        .join("tests/fixtures")
-        .join(name);
+    let path = fixture(name);
     let bytes = std::fs::read(&path).unwrap();
     assert_eq!(
         u32::from_le_bytes(bytes[8..12].try_into().unwrap()),
@@ -267,14 +265,31 @@ fn version_5_files_still_decode() {
     assert!(file.mesh().is_none());
 }
 
-/// A version-6 file (the receiver mesh, before packed side chunks) still
-/// opens and decodes, and to exactly the matrix the current version's file
-/// of the same options decodes to: packing the side chunks changed no
-/// value.
+/// A version-6 file (the receiver mesh, before packed side chunks) and a
+/// version-7 file (column encoding 4, the column norms, no planes) still
+/// open and decode, and to exactly the matrix the current version's file
+/// of the same options decodes to: packing the side chunks, encoding 5 and
+/// dropping the norms changed no value.
 #[test]
-fn version_6_files_still_decode_to_the_current_files_matrix() {
-    let (old, crc) = old_fixture_decodes("golden-v6.ltm", 6);
-    assert_eq!(crc, GOLDEN_LTM_V5);
+fn version_6_and_7_files_still_decode_to_the_current_files_matrix() {
+    for (name, version, golden) in [
+        ("golden-v6.ltm", 6, GOLDEN_LTM_V5),
+        ("golden-v7.ltm", 7, GOLDEN_LTM_V7),
+    ] {
+        let (old, crc) = old_fixture_decodes(name, version);
+        assert_eq!(crc, golden);
+        if version == 7 {
+            assert!(old.column_norms().is_some());
+            let encodings: Vec<_> = old.columns().iter().map(|c| c.encoding).collect();
+            assert!(encodings.contains(&ltm_codec::column::Encoding::Classed));
+        }
+        same_matrix_as_a_new_file(&old);
+    }
+}
+
+/// `old` decodes to the matrix of the current version's file of the golden
+/// matrix at [`fixture_options`], bit for bit, with the same empty rows.
+fn same_matrix_as_a_new_file(old: &LtmFile) {
     let dir = tempfile::tempdir().unwrap();
     let dims = Dims::image(24, 20, 4, 3);
     let raw = write_raw(
@@ -288,15 +303,19 @@ fn version_6_files_still_decode_to_the_current_files_matrix() {
     let new = LtmFile::open(&out).unwrap();
     let limits = Limits::default();
     let (a, b) = (
-        decode_matrix(&old, &limits).unwrap(),
+        decode_matrix(old, &limits).unwrap(),
         decode_matrix(&new, &limits).unwrap(),
     );
     assert!(a.iter().zip(&b).all(|(x, y)| x.to_bits() == y.to_bits()) && a.len() == b.len());
     assert_eq!(old.empty_rows(), new.empty_rows());
+    let encodings: Vec<_> = new.columns().iter().map(|c| c.encoding).collect();
+    assert!(encodings.contains(&ltm_codec::column::Encoding::Compact));
+    assert!(new.column_norms().is_none());
 }
 
 /// Version 7 packs the column table (chunk COLS, written after DATA) when
-/// its zstd frame is smaller, and the file decodes exactly as the same file
+/// its zstd frame is smaller, version 8 in planes when those are smaller
+/// still (packing 1 or 2), and the file decodes exactly as the same file
 /// with its chunks stored as is.
 #[test]
 fn the_column_table_is_packed_when_smaller_and_decodes_identically() {
@@ -314,10 +333,8 @@ fn the_column_table_is_packed_when_smaller_and_decodes_identically() {
     let u32_at = |b: &[u8], at: usize| u32::from_le_bytes(b[at..at + 4].try_into().unwrap());
     let table = 28 * dims.lights();
     let (entry, at, len) = chunk_entry(&packed, b"COLS");
-    assert_eq!(
-        (u32_at(&packed, entry + 4), u32_at(&packed, entry + 28)),
-        (1, table as u32)
-    );
+    assert!([1, 2].contains(&u32_at(&packed, entry + 4)));
+    assert_eq!(u32_at(&packed, entry + 28), table as u32);
     assert!(len < table, "{len} stored bytes for a {table}-byte table");
     // COLS follows DATA and ends the file.
     let (_, data_at, data_len) = chunk_entry(&packed, b"DATA");
@@ -339,12 +356,12 @@ fn the_column_table_is_packed_when_smaller_and_decodes_identically() {
     assert!(x.len() == y.len() && x.iter().zip(&y).all(|(p, q)| p.to_bits() == q.to_bits()));
 }
 
-/// Every wavelet file stores each column's priority norm (chunk NORM), and
-/// it is the norm of the column as the decoder reads it, bit for bit: in
-/// every wavelet mode, with either entropy coder, grey and RGB, with zero
-/// columns.
+/// A version-8 file stores no column norms (chunk NORM); the decoder's
+/// norms are those of the columns as it reads them, bit for bit, and a
+/// version-5 file's stored norms are exactly those: in every wavelet mode,
+/// with either entropy coder, grey and RGB, with zero columns.
 #[test]
-fn stored_column_norms_are_those_of_the_decoded_columns() {
+fn column_norms_are_those_of_the_decoded_columns() {
     let dir = tempfile::tempdir().unwrap();
     for (dims, entropy, mode) in [
         (Dims::image(40, 28, 4, 3), Entropy::Range, Mode::Adaptive),
@@ -371,17 +388,33 @@ fn stored_column_norms_are_those_of_the_decoded_columns() {
         .into();
         let (out, _) = run(dir.path(), &raw, &opts, "n.ltm");
         let file = LtmFile::open(&out).unwrap();
-        let norms = file.column_norms().expect("a NORM chunk");
-        assert_eq!(norms.len(), m);
+        assert!(file.column_norms().is_none());
         let decoder = ltm_codec::ColumnDecoder::for_file(&file, &Limits::default()).unwrap();
+        let norms = decoder.column_norms(&file).unwrap();
+        assert_eq!(norms.len(), m);
         for (j, &n) in norms.iter().enumerate() {
             let col = file.column(j).unwrap();
             assert_eq!(n, decoder.weighted_norm(&col) as f32, "{mode:?} column {j}");
+            if j < face {
+                assert_eq!(n, 0.0);
+            }
         }
         let zero = file.columns().iter().filter(|c| c.nnz == 0).count();
         assert!(zero >= face, "{zero} empty columns");
         assert_eq!(norms.iter().filter(|&&n| n == 0.0).count(), zero);
     }
+    let v5 = LtmFile::open(&fixture("golden-v5.ltm")).unwrap();
+    let decoder = ltm_codec::ColumnDecoder::for_file(&v5, &Limits::default()).unwrap();
+    let stored = v5.column_norms().expect("a NORM chunk");
+    assert_eq!(stored, &decoder.column_norms(&v5).unwrap()[..]);
+    decoder.check_stored_norms(&v5).unwrap();
+}
+
+/// The path of the committed fixture `tests/fixtures/NAME`.
+fn fixture(name: &str) -> std::path::PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("tests/fixtures")
+        .join(name)
 }
 
 /// `Entropy::Zstd` stores no range-coded column (the faster-opening
@@ -900,7 +933,7 @@ fn stages_run_per_column_range_give_the_same_file() {
                 surface: None,
                 mesh: None,
                 empty_rows: Some(t.empty_rows()),
-                column_norms: true,
+                column_norms: false,
             },
         )
         .unwrap();
@@ -1122,24 +1155,18 @@ fn chunk_entry(bytes: &[u8], tag: &[u8; 4]) -> (usize, usize, usize) {
         .expect("the chunk")
 }
 
-/// A NORM chunk that is not one finite norm ≥ 0 per column, or that
-/// disagrees with its feature flag or the file's version, is refused with a
-/// message naming it, even with every checksum repaired; the relighter
-/// refuses a column whose stored norm differs from its decoded one (see
-/// relight/tests/frames.rs).
+/// A NORM chunk (of a version-5 file: version 8 writes none) that is not
+/// one finite norm ≥ 0 per column, or that disagrees with its feature flag
+/// or the file's version, is refused with a message naming it, even with
+/// every checksum repaired; the relighter refuses a column whose stored
+/// norm differs from its decoded one (see relight/tests/lazy.rs).
 #[test]
 fn bad_column_norms_are_refused() {
-    let dir = tempfile::tempdir().unwrap();
-    let dims = Dims::image(8, 6, 2, 3);
-    let raw = write_raw(
-        &dir.path().join("x.raw"),
-        dims,
-        &scene(dims),
-        None,
-        64 << 10,
-    );
-    let (out, _) = run(dir.path(), &raw, &CompressOptions::default(), "x.ltm");
-    let good = std::fs::read(&out).unwrap();
+    let good = std::fs::read(fixture("golden-v5.ltm")).unwrap();
+    let dims = LtmFile::open(&fixture("golden-v5.ltm"))
+        .unwrap()
+        .meta()
+        .dims;
     let (_, norm_at, norm_len) = chunk_entry(&good, b"NORM");
     assert_eq!(norm_len, 4 * dims.lights());
     let parse = |mutate: &dyn Fn(&mut Vec<u8>)| {
@@ -1280,11 +1307,13 @@ const GOLDEN_LTM_V1: u32 = 0x5832_3993;
 
 const GOLDEN_RAW: u32 = 0xf20f_83f3;
 /// [`fixture_options`]: adaptive, the peak quantizer at 10 bits, 1 %
-/// target (version 7: the EMPT chunk packed, and the column table packed
-/// after DATA).
-const GOLDEN_LTM: u32 = 0xce3f_8a13;
+/// target (version 8: encoding 5, the column table in planes, no NORM).
+const GOLDEN_LTM: u32 = 0x871f_e682;
+/// The committed version-7 fixture `tests/fixtures/golden-v7.ltm`: the
+/// same options, written before version 8 (encoding 5, planes, no norms).
+const GOLDEN_LTM_V7: u32 = 0xce3f_8a13;
 /// The default options: adaptive, the uniform quantizer at 16 bits, 1 %.
-const GOLDEN_LTM_UNIFORM: u32 = 0xf577_c8f3;
+const GOLDEN_LTM_UNIFORM: u32 = 0x02b1_11e9;
 /// The committed version-5 fixture `tests/fixtures/golden-v5.ltm`: the
 /// same options, written before version 6 (the receiver mesh). A file
 /// without a mesh differs from version 6 only in its version field and

@@ -109,7 +109,8 @@ fn directory(b: &[u8]) -> Vec<([u8; 4], usize, usize)> {
 }
 
 /// Chunk `e` of the directory, unpacked when it is stored as a zstd frame
-/// (version 7: the entry's first reserved word is 1, its last the length).
+/// (version 7: the entry's first reserved word is 1, its last the length)
+/// or a zstd frame of planes (version 8: 2).
 fn unpacked(b: &[u8], e: usize, (off, len): (usize, usize)) -> Vec<u8> {
     let at = 24 + 32 * e;
     let word = |o: usize| u32::from_le_bytes(b[at + o..at + o + 4].try_into().unwrap());
@@ -117,8 +118,28 @@ fn unpacked(b: &[u8], e: usize, (off, len): (usize, usize)) -> Vec<u8> {
     match word(4) {
         0 => stored.to_vec(),
         1 => zstd::bulk::decompress(stored, word(28) as usize).unwrap(),
+        2 => unplane(&zstd::bulk::decompress(stored, word(28) as usize).unwrap()),
         e => panic!("encoding {e}"),
     }
+}
+
+/// docs/FORMAT.md "Planes", undone: a head of `len mod 28` bytes, then per
+/// word of the 28-byte records and per byte, a plane of the words' deltas.
+fn unplane(p: &[u8]) -> Vec<u8> {
+    let (h, n) = (p.len() % 28, p.len() / 28);
+    let mut out = p[..h].to_vec();
+    out.resize(p.len(), 0);
+    for w in 0..7 {
+        let mut word = 0u32;
+        for r in 0..n {
+            let delta = (0..4).fold(0u32, |d, b| {
+                d | (p[h + (4 * w + b) * n + r] as u32) << (8 * b)
+            });
+            word = word.wrapping_add(delta);
+            out[h + 28 * r + 4 * w..][..4].copy_from_slice(&word.to_le_bytes());
+        }
+    }
+    out
 }
 
 /// Chunk `tag`, unpacked.
@@ -199,7 +220,10 @@ fn the_mesh_carries_through_both_compressors_bit_for_bit() {
     for pca in [false, true] {
         let out = compressed(dir.path(), Some(&m), pca);
         let bytes = std::fs::read(&out).unwrap();
-        assert_eq!(u32::from_le_bytes(bytes[8..12].try_into().unwrap()), 7);
+        assert_eq!(
+            u32::from_le_bytes(bytes[8..12].try_into().unwrap()),
+            ltm_codec::container::VERSION
+        );
         assert_eq!(features(&bytes) & 16, 16);
         assert_eq!(chunk(&bytes, b"MESH"), Some(m.encode()));
         let tags: Vec<_> = directory(&bytes).into_iter().map(|c| c.0).collect();

@@ -439,12 +439,22 @@ fn version_1_wavelet_files_still_open_and_pca_needs_version_2() {
         let e = v1.err().unwrap().to_string();
         assert!(e.contains("version 1"), "{e}");
     }
-    // Column norms (feature 8) are refused in a file that claims version
-    // 4, and encoding 4 in a version-4 file without them that claims
-    // version 3.
-    b[8..12].copy_from_slice(&4u32.to_le_bytes());
+    // A version-8 file's planes or encoding 5 are refused in a file that
+    // claims version 7, column norms (feature 8, a version-5 file's) in one
+    // that claims version 4, and encoding 4 in a version-4 file that
+    // claims version 3.
+    b[8..12].copy_from_slice(&7u32.to_le_bytes());
     fix_crcs(&mut b);
     let e = LtmFile::from_bytes(b.clone(), &Limits::default())
+        .err()
+        .unwrap()
+        .to_string();
+    assert!(e.contains("version-7") || e.contains("version 7"), "{e}");
+    let fixtures = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/fixtures");
+    let mut v5 = std::fs::read(fixtures.join("golden-v5.ltm")).unwrap();
+    v5[8..12].copy_from_slice(&4u32.to_le_bytes());
+    fix_crcs(&mut v5);
+    let e = LtmFile::from_bytes(v5, &Limits::default())
         .err()
         .unwrap()
         .to_string();
@@ -452,9 +462,7 @@ fn version_1_wavelet_files_still_open_and_pca_needs_version_2() {
         e.contains("feature flags") && e.contains("version 4"),
         "{e}"
     );
-    let fixture =
-        std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/fixtures/golden-v4.ltm");
-    let mut v4 = std::fs::read(fixture).unwrap();
+    let mut v4 = std::fs::read(fixtures.join("golden-v4.ltm")).unwrap();
     let classed = LtmFile::from_bytes(v4.clone(), &Limits::default())
         .unwrap()
         .columns()

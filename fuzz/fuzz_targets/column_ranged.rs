@@ -1,5 +1,5 @@
-//! Any byte string given to the range-coded column decoder (encodings 3
-//! and 4) must give a valid column or an error, never a panic. The first 8
+//! Any byte string given to the range-coded column decoder (encodings 3,
+//! 4 and 5) must give a valid column or an error, never a panic. The first 8
 //! bytes pick the shape (width, height 1..=64, channels 1 or 3, bits
 //! 2..=16, depth, nonzero count) and the encoding; the rest is the payload.
 #![no_main]
@@ -21,10 +21,10 @@ fuzz_target!(|data: &[u8]| {
     };
     let depth = head[4] as u32 % (max_levels(shape.width, shape.height) + 2);
     let nnz = u16::from_le_bytes([head[5], head[6]]) as usize;
-    let coding = if head[7] & 1 == 0 {
-        ValueCoding::ExpGolomb
-    } else {
-        ValueCoding::Classes
+    let coding = match head[7] % 3 {
+        0 => ValueCoding::ExpGolomb,
+        1 => ValueCoding::Classes,
+        _ => ValueCoding::Compact,
     };
     if let Ok(col) = decode(payload, nnz, &shape, depth, coding) {
         let pixels = shape.width * shape.height;

@@ -117,7 +117,6 @@ pub(crate) struct ArenaColumn<'a> {
     /// Offsets of the block boundaries within the column's coefficients.
     offsets: &'a [u32],
     factors: &'a [[f32; 4]],
-    norm: f32,
 }
 
 impl<'a> ArenaColumn<'a> {
@@ -209,7 +208,6 @@ impl Arena {
             entries,
             offsets,
             factors: &info.factors,
-            norm: info.norm,
         })
     }
 
@@ -279,10 +277,11 @@ impl Arena {
         })
     }
 
-    /// Every column's priority norm: the file's (chunk NORM), each checked
-    /// against its decoded column before the first use (so no light is
-    /// ranked by an unchecked norm), else those of the decoded columns;
-    /// either way every column is decoded the first time.
+    /// Every column's priority norm: the file's (chunk NORM, versions 5 to
+    /// 7), each checked against its decoded column before the first use
+    /// (so no light is ranked by an unchecked norm), else those of the
+    /// decoded columns; either way every column is decoded once, and not
+    /// kept, the first time.
     pub fn norms<'a>(&'a self, file: &'a LtmFile, decoder: &ColumnDecoder) -> Result<&'a [f32]> {
         if let Some(n) = file.column_norms() {
             if self.norms_checked.get().is_none() {
@@ -294,10 +293,7 @@ impl Arena {
         if let Some(n) = self.decoded_norms.get() {
             return Ok(n);
         }
-        self.decode_all(file, decoder)?;
-        let norms = (0..self.depths.len())
-            .map(|j| self.column(j).map_or(0.0, |c| c.norm))
-            .collect();
+        let norms = decoder.column_norms(file)?;
         Ok(self.decoded_norms.get_or_init(|| norms))
     }
 
@@ -547,14 +543,15 @@ mod file_tests {
                     );
                     assert_eq!(ac.offsets.len(), l.blocks + 1);
                     // The norm, from scales decoded once per group, is the
-                    // per-value dequantization's, exactly, and the file
-                    // stores it.
+                    // per-value dequantization's, exactly, and the one the
+                    // relighter ranks by.
                     let per_value: f64 = (0..col.indices.len())
                         .flat_map(|k| (0..channels as usize).map(move |c| (k, c)))
                         .map(|(k, c)| (decoder.dequantize(&col, k, c) as f64).powi(2))
                         .sum();
-                    assert_eq!(ac.norm, per_value.sqrt() as f32);
-                    assert_eq!(norm, ac.norm);
+                    let info_norm = arena.info[j].get().unwrap().norm;
+                    assert_eq!(info_norm, per_value.sqrt() as f32);
+                    assert_eq!(norm, info_norm);
                     for (k, &i) in col.indices.iter().enumerate() {
                         let i = i as usize;
                         let e = &ac.entries[(channels as usize + 1) * k..];

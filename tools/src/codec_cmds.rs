@@ -131,7 +131,7 @@ pub struct CompressArgs {
     #[arg(long, default_value_t = 0x6c74_6d00)]
     pub seed: u64,
     /// Column payloads: `range` (context-modelled range coding, column
-    /// encoding 4: the smallest files) or `zstd` (about 1.5× larger files
+    /// encoding 5: the smallest files) or `zstd` (about 1.5× larger files
     /// whose columns decode about 3× faster; what format versions 1 and 2
     /// wrote). The relighter decodes a column when a frame first needs it,
     /// so either opens without decoding. Wavelet modes only [default: range].

@@ -22,10 +22,18 @@ Usage:
   python3 tools/validate/peers.py /tmp/corpus/NAME.raw -o /tmp/corpus/peers-NAME.json
   python3 tools/validate/codec_corpus.py --out /tmp/corpus --table-only
 
-Writes OUT/corpus.json (every file: bytes, bits, nonzeros, error, coding
-passes, seconds) and
-prints a markdown table; a peer column shows the smallest stream of that
-compressor at an error at most the target.
+Writes OUT/corpus.json (every file: bytes, side bytes, bits, nonzeros,
+error, coding passes, seconds) and prints a markdown table; a peer column
+shows the smallest stream of that compressor at an error at most the
+target. `--variants adaptive` recodes only those variants, keeping the
+others' results.
+
+The peers store the matrix T alone. An .ltm file also stores side data a
+relighter needs and the peers do not: the albedo image (ALBD), the surface
+records (SURF) and the receiving mesh (MESH). "side bytes" are those
+chunks' stored lengths; the table gives adaptive's ratio for the whole
+file and for T alone (the file less its side bytes), and both against the
+best peer.
 """
 
 import argparse
@@ -35,6 +43,8 @@ import re
 import subprocess
 import sys
 import time
+
+import struct
 
 import numpy as np
 
@@ -166,9 +176,25 @@ def compress(ltm, raw, target, args):
     line = next(l for l in run.stdout.splitlines() + run.stderr.splitlines() if l.startswith("wrote"))
     m = re.search(r": (\d+) bytes .*?, (\d+) bits, (\d+) nonzeros, relative L2 error ([0-9.]+), "
                   r"(\d+) coding pass", line)
+    side = side_bytes(out)
     os.remove(out)
-    return {"bytes": int(m[1]), "bits": int(m[2]), "nonzeros": int(m[3]),
+    return {"bytes": int(m[1]), "side_bytes": side, "bits": int(m[2]), "nonzeros": int(m[3]),
             "error": float(m[4]), "codings": int(m[5]), "seconds": seconds}
+
+
+def side_bytes(path):
+    """Stored bytes of the chunks ALBD, SURF and MESH (docs/FORMAT.md's chunk
+    directory: 32-byte entries from byte 24, the count at byte 16)."""
+    with open(path, "rb") as f:
+        head = f.read(24 + 32 * 16)
+    count, = struct.unpack_from("<I", head, 16)
+    total = 0
+    for e in range(count):
+        tag = head[24 + 32 * e:28 + 32 * e]
+        length, = struct.unpack_from("<Q", head, 24 + 32 * e + 16)
+        if tag in (b"ALBD", b"SURF", b"MESH"):
+            total += length
+    return total
 
 
 def peers(out, name):
@@ -187,24 +213,28 @@ def peers(out, name):
 def table(out, results):
     names = list(results)
     raw_bytes = {n: os.path.getsize(os.path.join(out, f"{n}.raw")) for n in names}
-    cols = list(VARIANTS) + ["sz3", "zfp", "sperr"]
-    print("| matrix | target | " + " | ".join(cols) + " | adaptive / best peer |")
-    print("|" + "---|" * (len(cols) + 3))
+    cols = list(VARIANTS) + ["adaptive, T alone", "sz3", "zfp", "sperr"]
+    print("| matrix | target | " + " | ".join(cols) + " | adaptive / best peer | T alone / best peer |")
+    print("|" + "---|" * (len(cols) + 4))
     for n in names:
         best = peers(out, n)
         for e in TARGETS:
             row, sizes = [], {}
             for v in VARIANTS:
-                r = results[n][v][str(e)]
-                sizes[v] = r["bytes"]
-                row.append(f"{raw_bytes[n] / r['bytes']:.1f}×")
+                r = results[n].get(v, {}).get(str(e))
+                sizes[v] = r and r["bytes"]
+                row.append(f"{raw_bytes[n] / r['bytes']:.1f}×" if r else "")
+            r = results[n].get("adaptive", {}).get(str(e))
+            alone = r and "side_bytes" in r and r["bytes"] - r["side_bytes"]
+            row.append(f"{raw_bytes[n] / alone:.1f}×" if alone else "")
             for p in ["sz3", "zfp", "sperr"]:
                 b = best.get((p, e))
                 sizes[p] = b
                 row.append(f"{raw_bytes[n] / b:.1f}×" if b else "")
             peer = [sizes[p] for p in ["sz3", "zfp", "sperr"] if sizes[p]]
-            ratio = f"{sizes['adaptive'] / min(peer):.2f}" if peer else ""
-            print(f"| {n} | {e * 100:g} % | " + " | ".join(row) + f" | {ratio} |")
+            ratio = f"{sizes['adaptive'] / min(peer):.2f}" if peer and sizes["adaptive"] else ""
+            ratio_alone = f"{alone / min(peer):.2f}" if peer and alone else ""
+            print(f"| {n} | {e * 100:g} % | " + " | ".join(row) + f" | {ratio} | {ratio_alone} |")
 
 
 def main():
@@ -213,6 +243,8 @@ def main():
     ap.add_argument("--ltm", default=os.path.join(ROOT, "target/release/ltm"))
     ap.add_argument("--only", nargs="*", help="matrix names (default: all)")
     ap.add_argument("--table-only", action="store_true", help="print the table of OUT/corpus.json")
+    ap.add_argument("--variants", nargs="*", choices=list(VARIANTS),
+                    help="variants to (re)code (default: all); the others' results are kept")
     a = ap.parse_args()
     os.makedirs(a.out, exist_ok=True)
     path = os.path.join(a.out, "corpus.json")
@@ -225,8 +257,11 @@ def main():
             if a.only and name not in a.only:
                 continue
             raw = bake(a.ltm, a.out, name, text, extra)
-            results[name] = {v: {str(e): compress(a.ltm, raw, e, args) for e in TARGETS}
-                             for v, args in VARIANTS.items()}
+            kept = results.get(name, {})
+            for v, args in VARIANTS.items():
+                if not a.variants or v in a.variants:
+                    kept[v] = {str(e): compress(a.ltm, raw, e, args) for e in TARGETS}
+            results[name] = kept
             with open(path, "w") as f:
                 json.dump(results, f, indent=1)
     table(a.out, results)

@@ -5,9 +5,9 @@ This file was written only from the specification in docs/FORMAT.md (no Rust sou
 was consulted). It checks that the specification is complete: it decodes a `.ltm`
 file of mode 2d, 4d or adaptive to the dense transport matrix exactly as
 `ltm export` writes it (float32, shape (P, M, C), or (P, M) when C = 1).
-`pca` files (mode 3) are refused. Format versions 1 to 7 are read (version 7 stores
-side chunks and the column table as zstd frames: pip `zstandard`), with column
-encodings 0 to 4; a version-5 file's column norms (chunk NORM) are checked against
+`pca` files (mode 3) are refused. Format versions 1 to 8 are read (version 7 stores
+side chunks and the column table as zstd frames: pip `zstandard`; version 8 may
+store SURF and COLS as zstd frames of their planes), with column encodings 0 to 5; a version-5 file's column norms (chunk NORM) are checked against
 the decoded columns; the row layout (chunk SURF) and a version-6 file's receiving
 mesh (chunk MESH) are decoded and checked. Given a raw transport store (magic
 LTMRAW) instead, it reads its header (versions 1 to 5; version 5 is one part of a
@@ -43,8 +43,9 @@ Stages (one function each):
   parse_mesh          MESH chunk / the raw store's mesh region (receiver mesh)
   read_raw_store      a raw store's header, surface records and mesh
   parse_column_table  COLS chunk
-  decode_payload_plain / decode_payload_range / decode_payload_range4
-                      column payload (encodings 1-2 / 3 / 4) -> sparse column
+  unplane             a version-8 chunk stored in planes (packing 2)
+  decode_payload_plain / decode_payload_range / decode_payload_range4 / decode_payload_range5
+                      column payload (encodings 1-2 / 3 / 4 / 5) -> sparse column
   RangeDecoder        "The binary coder" and encoding 4's 17-symbol contexts
   RawBitReader        encoding 4's raw bit stream
   walk_column         bands, blocks and significance bits (encodings 3 and 4)
@@ -108,7 +109,7 @@ def read_container(buf):
     if len(buf) < 28 or buf[:8] != MAGIC:
         raise FormatError("not an .ltm file (bad magic)")
     version, features, k, reserved = struct.unpack_from("<4I", buf, 8)
-    if version not in (1, 2, 3, 4, 5, 6, 7):
+    if version not in (1, 2, 3, 4, 5, 6, 7, 8):
         raise FormatError(f"unsupported format version {version}")
     if reserved != 0:
         raise FormatError("reserved header field is not 0")
@@ -120,7 +121,7 @@ def read_container(buf):
         raise FormatError(f"feature bit 3 in a version-{version} file")
     if version < 6 and features & 16:
         raise FormatError(f"feature bit 4 in a version-{version} file")
-    if not 3 <= k <= {1: 4, 5: 8, 6: 9, 7: 9}.get(version, 7):
+    if not 3 <= k <= {1: 4, 5: 8, 6: 9, 7: 9, 8: 9}.get(version, 7):
         raise FormatError(f"bad chunk count {k}")
     end = 24 + 32 * k
     if len(buf) < end + 4:
@@ -136,7 +137,8 @@ def read_container(buf):
         if version < 7:
             enc, unpacked = 0, 0
         if (enc, unpacked == 0) != (0, True) and not (
-                enc == 1 and unpacked > 0 and tag in (b"ALBD", b"EMPT", b"SURF", b"MESH", b"COLS")):
+                enc == 1 and unpacked > 0 and tag in (b"ALBD", b"EMPT", b"SURF", b"MESH", b"COLS")) \
+                and not (enc == 2 and version >= 8 and unpacked > 0 and tag in (b"SURF", b"COLS")):
             raise FormatError(f"chunk {tag!r}: encoding {enc} with unpacked length {unpacked}")
         if tag in chunks:
             raise FormatError(f"duplicate chunk {tag!r}")
@@ -146,11 +148,13 @@ def read_container(buf):
         data = buf[off:off + ln]
         if tag != b"DATA" and crc32(data) != ccrc:
             raise FormatError(f"chunk {tag!r} CRC mismatch")
-        if enc == 1:
+        if enc in (1, 2):
             import zstandard
             data = zstandard.ZstdDecompressor().decompress(bytes(data), max_output_size=unpacked)
             if len(data) != unpacked:
                 raise FormatError(f"chunk {tag!r} unpacks to {len(data)} bytes, not {unpacked}")
+            if enc == 2:
+                data = unplane(data)
         chunks[tag] = data
     want = {b"META"}
     if features & 1:
@@ -169,6 +173,23 @@ def read_container(buf):
     if set(chunks) != want:
         raise FormatError(f"chunks {sorted(chunks)} do not match feature bits {features}")
     return chunks, version, features
+
+
+def unplane(planar):
+    """FORMAT.md "Planes": the head as is, then per word w and byte b the plane of
+    byte b of each record's delta of word w; undone by summing the deltas mod 2^32."""
+    L = len(planar)
+    h, N = L % 28, L // 28
+    out = bytearray(planar[:h])
+    words = np.zeros((N, 7), np.uint32)
+    for w in range(7):
+        delta = np.zeros(N, np.uint32)
+        for b in range(4):
+            start = h + (4 * w + b) * N
+            delta |= np.frombuffer(planar, np.uint8, N, start).astype(np.uint32) << np.uint32(8 * b)
+        words[:, w] = np.cumsum(delta, dtype=np.uint64).astype(np.uint32)  # mod 2^32
+    out += words.astype("<u4").tobytes()
+    return bytes(out)
 
 
 def parse_meta(meta):
@@ -367,8 +388,9 @@ def parse_column_table(cols, M, P, W, H, version):
     table = []
     for j in range(M):
         off, slen, ulen, k, ccrc, d, enc, z = struct.unpack_from("<QIIIIBBH", cols, 28 * j)
-        if (z != 0 or k > P or d > full_depth(W, H) or enc > 4
-                or (enc == 3 and version < 3) or (enc == 4 and version < 4)):
+        if (z != 0 or k > P or d > full_depth(W, H)
+                or (enc == 3 and version < 3) or (enc == 4 and version < 4)
+                or enc > 5 or (enc == 5 and version < 8)):
             raise FormatError(f"bad column table entry {j}")
         table.append(dict(off=off, slen=slen, ulen=ulen, k=k, crc=ccrc, d=d, enc=enc))
     return table
@@ -845,6 +867,48 @@ def decode_payload_range4(payload, W, H, d, C, B, k):
     return codes, positions, values
 
 
+def decode_payload_range5(payload, W, H, d, C, B, k):
+    """Encoding 5: varint R, R bytes of range-coded stream, raw bits; the scale codes
+    come first in the streams (contexts `same` and `zero`), then encoding 4's walk."""
+    R, at = 0, 0
+    while True:
+        if at >= len(payload):
+            raise FormatError("encoding-5 length varint runs past the payload")
+        b = payload[at]
+        R |= (b & 0x7F) << (7 * at)
+        at += 1
+        if not b & 0x80:
+            if at > 1 and b == 0:
+                raise FormatError("encoding-5 length varint ends in a zero byte")
+            break
+        if at == 5:
+            raise FormatError("encoding-5 length varint longer than 5 bytes")
+    if R > len(payload) - at:
+        raise FormatError("encoding-5 range-coded stream longer than the payload")
+    dec = RangeDecoder(payload[at:at + R])
+    raw = RawBitReader(payload[at + R:])
+    SP, SN = [16384, 16384], [0, 0]  # contexts `same` (0) and `zero` (1)
+    codes, last = [], None  # last: the last nonzero code
+    for i in range((d + 1) * C):
+        if last is not None and dec.bit(SP, SN, 0):
+            e = last
+        elif dec.bit(SP, SN, 1):
+            e = 0
+        else:
+            e = 0
+            for _ in range(16):
+                e = (e << 1) | raw.bit()
+        codes.append(e)
+        if e:
+            last = e
+    codes = np.asarray(codes, np.uint16).reshape(d + 1, C)
+    P = [16384] * CTX4_TOTAL
+    N = [0] * CTX4_TOTAL
+    values = Values4(dec, raw, P, N, C, B, d)
+    positions, vals = walk_column(dec, P, N, W, H, d, C, k, values)
+    return codes, positions, vals
+
+
 # ----------------------------------------------------------------------------
 # Inverse transforms
 
@@ -1034,6 +1098,10 @@ def decode_matrix(path, verbose=False, dt=np.float32, info=None):
             if k < 1 or ent["slen"] != ent["ulen"]:
                 raise FormatError(f"column {j}: bad encoding-4 entry")
             codes, positions, values = decode_payload_range4(payload, W, H, d, C, B, k)
+        elif enc == 5:
+            if k < 1 or ent["slen"] != ent["ulen"] or ent["slen"] < 3:
+                raise FormatError(f"column {j}: bad encoding-5 entry")
+            codes, positions, values = decode_payload_range5(payload, W, H, d, C, B, k)
         else:
             codes, positions, values = decode_payload_plain(payload, d, C, k, Q)
         if len(positions) and (positions[-1] >= P or positions[0] < 0):

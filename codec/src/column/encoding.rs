@@ -3,7 +3,7 @@
 //! column-table entry. Each encoding is one file of this module that
 //! implements [`Codec`], and one line of [`encodings!`].
 
-use super::{classed, empty, plain, ranged, zstd};
+use super::{classed, compact, empty, plain, ranged, zstd};
 use super::{ColumnEntry, SparseColumn};
 use crate::entropy::{ColumnShape, ValueCoding};
 use crate::error::{Error, Result};
@@ -85,6 +85,9 @@ encodings! {
     /// Scale codes, then the coefficients range-coded with magnitude
     /// classes and raw low bits (version 4; `crate::entropy`).
     Classed = 4 => classed::Classed,
+    /// Encoding 4's coefficients with the scale codes in the streams and a
+    /// varint stream length (version 8; `crate::entropy`).
+    Compact = 5 => compact::Compact,
 }
 
 impl Encoding {
@@ -93,7 +96,7 @@ impl Encoding {
         self.codec().value_coding()
     }
 
-    /// Whether the payload is range-coded (encodings 3 and 4).
+    /// Whether the payload is range-coded (encodings 3, 4 and 5).
     pub fn is_range_coded(self) -> bool {
         self.value_coding().is_some()
     }

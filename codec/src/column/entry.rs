@@ -45,7 +45,7 @@ pub struct EncodedColumn {
 
 impl EncodedColumn {
     /// Encodes a column of a `width` × `height` column image quantized to
-    /// `bits` bits: with [`Entropy::Range`], range-coded (encoding 4) when
+    /// `bits` bits: with [`Entropy::Range`], range-coded (encoding 5) when
     /// that is no larger than the plain payload (zstd is then not tried: on
     /// these payloads it gains less than range coding), else (and always
     /// with [`Entropy::Zstd`]) as [`EncodedColumn::new`]. This is the
@@ -57,10 +57,10 @@ impl EncodedColumn {
         zstd_level: i32,
     ) -> EncodedColumn {
         if !col.indices.is_empty() && entropy == Entropy::Range {
-            let classed = Encoding::Classed.codec().encode(col, shape, zstd_level);
-            if let Some((bytes, raw_len)) = classed {
+            let compact = Encoding::Compact.codec().encode(col, shape, zstd_level);
+            if let Some((bytes, raw_len)) = compact {
                 if bytes.len() <= col.to_payload(shape.channels).len() {
-                    return EncodedColumn::stored(col, Encoding::Classed, bytes, raw_len);
+                    return EncodedColumn::stored(col, Encoding::Compact, bytes, raw_len);
                 }
             }
         }

@@ -1,11 +1,13 @@
 //! Column payloads: a column as stored ([`SparseColumn`]), its table entry
 //! ([`ColumnEntry`]), the writer's choice of encoding
 //! ([`EncodedColumn::coded`]) and the encodings themselves, one file each
-//! (`empty.rs`, `plain.rs`, `zstd.rs`, `ranged.rs`, `classed.rs`), listed
+//! (`empty.rs`, `plain.rs`, `zstd.rs`, `ranged.rs`, `classed.rs`,
+//! `compact.rs`), listed
 //! once in [`Encoding`] (`encoding.rs`), which dispatches decoding and the
 //! column table's checks to them. Layout in docs/FORMAT.md.
 
 mod classed;
+mod compact;
 mod empty;
 mod encoding;
 mod entry;

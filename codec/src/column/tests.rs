@@ -80,7 +80,7 @@ fn every_encoding_round_trips() {
 fn a_damaged_payload_fails_its_crc() {
     let col = column();
     let coded = EncodedColumn::coded(&col, &SHAPE, Entropy::Range, 3);
-    assert_eq!(coded.entry.encoding, Encoding::Classed);
+    assert_eq!(coded.entry.encoding, Encoding::Compact);
     let mut bytes = coded.bytes.clone();
     bytes[0] ^= 1;
     let err = read_column(&bytes, &SHAPE, 7, &coded.entry).unwrap_err();
@@ -92,7 +92,7 @@ fn the_writer_chooses_by_size() {
     let col = column();
     let range = EncodedColumn::coded(&col, &SHAPE, Entropy::Range, 3);
     let plain = EncodedColumn::coded(&col, &SHAPE, Entropy::Zstd, 3);
-    assert_eq!(range.entry.encoding, Encoding::Classed);
+    assert_eq!(range.entry.encoding, Encoding::Compact);
     assert!(matches!(
         plain.entry.encoding,
         Encoding::Plain | Encoding::Zstd
@@ -124,6 +124,11 @@ fn codes_by_version() {
     assert_eq!(
         Encoding::from_code(9, 5).unwrap_err(),
         "encoding 9 in a file of version 5 (valid: 0 empty, 1 plain, 2 zstd, 3 range-coded, 4 classed)"
+    );
+    assert_eq!(Encoding::from_code(5, 8), Ok(Encoding::Compact));
+    assert_eq!(
+        Encoding::from_code(5, 7).unwrap_err(),
+        "encoding 5 in a file of version 7 (valid: 0 empty, 1 plain, 2 zstd, 3 range-coded, 4 classed)"
     );
     for (k, &e) in Encoding::ALL.iter().enumerate() {
         assert_eq!(e as usize, k);

@@ -374,7 +374,7 @@ fn write_columns(
             surface: t.raw().surface(),
             mesh: t.raw().mesh(),
             empty_rows: Some(t.empty_rows()),
-            column_norms: true,
+            column_norms: false,
         },
     )?;
     let mut stats = CompressStats {

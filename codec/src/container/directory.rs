@@ -9,15 +9,17 @@ use std::borrow::Cow;
 
 /// File magic: `\x89LTM\r\n\x1a\n`.
 pub const MAGIC: [u8; 8] = *b"\x89LTM\r\n\x1a\n";
-/// Format version this build writes. It reads versions 1 to 6; version 2
+/// Format version this build writes. It reads versions 1 to 8; version 2
 /// adds the empty-row mask ([`FEATURE_EMPTY_ROWS`]) and the row layout with
 /// per-row surface data ([`FEATURE_SURFACE`]). A version-1 file has neither.
 /// Version 3 adds column encoding 3 ([`Encoding::Ranged`](crate::column::Encoding::Ranged)), version 4 column
 /// encoding 4 ([`Encoding::Classed`](crate::column::Encoding::Classed)), version 5 the column norms
 /// ([`FEATURE_COLUMN_NORMS`]), version 6 the receiver mesh
 /// ([`FEATURE_RECEIVER_MESH`]), version 7 zstd-packed side chunks (a
-/// directory entry's unpacked length).
-pub const VERSION: u32 = 7;
+/// directory entry's unpacked length), version 8 the planar packing of
+/// SURF and COLS (chunk packing 2) and column encoding 5
+/// ([`Encoding::Compact`](crate::column::Encoding::Compact)).
+pub const VERSION: u32 = 8;
 /// The oldest format version this build reads.
 pub const MIN_VERSION: u32 = 1;
 /// Feature flag: an RGB albedo image is stored (chunk ALBD).
@@ -55,11 +57,44 @@ const KNOWN_FEATURES: [u32; VERSION as usize] = [
         | FEATURE_SURFACE
         | FEATURE_COLUMN_NORMS
         | FEATURE_RECEIVER_MESH,
+    FEATURE_ALBEDO
+        | FEATURE_EMPTY_ROWS
+        | FEATURE_SURFACE
+        | FEATURE_COLUMN_NORMS
+        | FEATURE_RECEIVER_MESH,
 ];
 /// The chunks a version-7 file may store zstd-packed: the side data known
 /// when the file is started, and the column table (which ltm writes after
 /// DATA, once every column is known).
 pub(super) const PACKABLE: [&[u8; 4]; 5] = [b"ALBD", b"EMPT", b"SURF", b"MESH", b"COLS"];
+/// The chunks a version-8 file may store in planes ([`Packing::Planes`]):
+/// those made of 28-byte records.
+pub(super) const PLANAR: [&[u8; 4]; 2] = [b"SURF", b"COLS"];
+
+/// How a chunk's bytes are stored (the directory entry's encoding, version
+/// 7 and later).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub(super) enum Packing {
+    /// As they are (encoding 0).
+    #[default]
+    Stored,
+    /// One zstd frame of the `unpacked` bytes (encoding 1, version 7).
+    Zstd { unpacked: u32 },
+    /// One zstd frame of the planar form of the `unpacked` bytes (encoding
+    /// 2, version 8; [`planes`](super::planes)).
+    Planes { unpacked: u32 },
+}
+
+impl Packing {
+    /// The directory's encoding code and unpacked length.
+    fn fields(self) -> (u32, u32) {
+        match self {
+            Packing::Stored => (0, 0),
+            Packing::Zstd { unpacked } => (1, unpacked),
+            Packing::Planes { unpacked } => (2, unpacked),
+        }
+    }
+}
 /// The most chunks a file of any version holds: 4 required (a `pca`
 /// file's) plus one per feature bit.
 pub const MAX_CHUNKS: usize = 4 + KNOWN_FEATURES[VERSION as usize - 1].count_ones() as usize;
@@ -74,9 +109,8 @@ pub(super) struct DirEntry {
     pub len: u64,
     /// CRC-32 of the stored bytes.
     pub crc: u32,
-    /// Version 7: the chunk's length once unpacked when it is stored as one
-    /// zstd frame (encoding 1), else 0 (stored as is, encoding 0).
-    pub unpacked: u32,
+    /// Version 7: how the chunk is stored.
+    pub packing: Packing,
 }
 
 /// Reads and checks the header and the chunk directory: magic, version,
@@ -119,17 +153,17 @@ pub(super) fn read_directory(bytes: &[u8]) -> Result<(u32, u32, Vec<DirEntry>)> 
         let encoding = r.u32()?;
         let (offset, len, crc) = (r.u64()?, r.u64()?, r.u32()?);
         let unpacked = r.u32()?;
-        let unpacked = if version >= 7 {
-            check_packing(&tag, encoding, unpacked)?
+        let packing = if version >= 7 {
+            check_packing(&tag, encoding, unpacked, version)?
         } else {
-            0
+            Packing::Stored
         };
         dir.push(DirEntry {
             tag,
             offset,
             len,
             crc,
-            unpacked,
+            packing,
         });
     }
     let dir_end = r.pos();
@@ -146,18 +180,21 @@ pub(super) fn read_directory(bytes: &[u8]) -> Result<(u32, u32, Vec<DirEntry>)> 
     Ok((version, features, dir))
 }
 
-/// A version-7 entry's encoding (0 stored, 1 zstd; only [`PACKABLE`]
-/// chunks are packed) and unpacked length (0 when stored, else at least
-/// 1): the unpacked length, 0 for a stored chunk.
-fn check_packing(tag: &[u8; 4], encoding: u32, unpacked: u32) -> Result<u32> {
+/// A version-7 or later entry's encoding (0 stored, 1 zstd, 2 planes from
+/// version 8; only [`PACKABLE`] chunks are packed, only [`PLANAR`] ones
+/// in planes) and unpacked length (0 when stored, else at least 1).
+fn check_packing(tag: &[u8; 4], encoding: u32, unpacked: u32, version: u32) -> Result<Packing> {
     let name = String::from_utf8_lossy(tag);
     match (encoding, unpacked) {
-        (0, 0) => Ok(0),
-        (1, n) if n > 0 && PACKABLE.contains(&tag) => Ok(n),
+        (0, 0) => Ok(Packing::Stored),
+        (1, n) if n > 0 && PACKABLE.contains(&tag) => Ok(Packing::Zstd { unpacked: n }),
+        (2, n) if n > 0 && version >= 8 && PLANAR.contains(&tag) => {
+            Ok(Packing::Planes { unpacked: n })
+        }
         _ => Err(Error::corrupt(
             "chunk directory",
             format!(
-                "chunk {name}: encoding {encoding} with unpacked length {unpacked} (valid: 0 with 0, or 1 (zstd) with a length >= 1 for ALBD, EMPT, SURF, MESH or COLS)"
+                "chunk {name}: encoding {encoding} with unpacked length {unpacked} in a version-{version} file (valid: 0 with 0; 1 (zstd) with a length >= 1 for ALBD, EMPT, SURF, MESH or COLS; from version 8, 2 (planes) with a length >= 1 for SURF or COLS)"
             ),
         )),
     }
@@ -255,7 +292,7 @@ impl std::ops::Deref for ChunkBytes<'_> {
 /// The bytes of chunk `tag` as [`stored_chunk`] reads them, unpacked when
 /// packed: the unpacked length is charged to `limits` first (and stays
 /// charged while the copy lives), and must be exactly what the zstd frame
-/// holds.
+/// holds. A chunk in planes charges a second copy while it is joined.
 pub(super) fn chunk<'a>(
     bytes: &'a [u8],
     dir: &[DirEntry],
@@ -265,47 +302,66 @@ pub(super) fn chunk<'a>(
     let Some((s, d)) = stored_chunk(bytes, dir, tag)? else {
         return Ok(None);
     };
-    if d.unpacked == 0 {
-        return Ok(Some(ChunkBytes {
-            bytes: Cow::Borrowed(s),
-            _charge: Charge::default(),
-        }));
-    }
+    let (unpacked, planar) = match d.packing {
+        Packing::Stored => {
+            return Ok(Some(ChunkBytes {
+                bytes: Cow::Borrowed(s),
+                _charge: Charge::default(),
+            }))
+        }
+        Packing::Zstd { unpacked } => (unpacked as usize, false),
+        Packing::Planes { unpacked } => (unpacked as usize, true),
+    };
     let name = String::from_utf8_lossy(tag);
-    let charge = limits.check_alloc("packed chunk", d.unpacked as u64, 1)?;
-    let unpacked = zstd::bulk::decompress(s, d.unpacked as usize).map_err(|e| {
+    let charge = limits.check_alloc("packed chunk", unpacked as u64, 1)?;
+    let frame = zstd::bulk::decompress(s, unpacked).map_err(|e| {
         Error::corrupt(
             "chunk",
-            format!("{name}: is not a zstd frame of {} bytes ({e})", d.unpacked),
+            format!("{name}: is not a zstd frame of {unpacked} bytes ({e})"),
         )
     })?;
-    if unpacked.len() != d.unpacked as usize {
+    if frame.len() != unpacked {
         return Err(Error::corrupt(
             "chunk",
             format!(
-                "{name}: unpacks to {} bytes, the directory says {}",
-                unpacked.len(),
-                d.unpacked
+                "{name}: unpacks to {} bytes, the directory says {unpacked}",
+                frame.len()
             ),
         ));
     }
+    let bytes = if planar {
+        let _joining = limits.check_alloc("chunk in planes", unpacked as u64, 1)?;
+        super::planes::join(&frame)
+    } else {
+        frame
+    };
     Ok(Some(ChunkBytes {
-        bytes: Cow::Owned(unpacked),
+        bytes: Cow::Owned(bytes),
         _charge: charge,
     }))
 }
 
-/// `raw` as a packable chunk is stored: one zstd frame when that is smaller
-/// (version 7), else as is. Returns the stored bytes and the unpacked
-/// length (0 when stored as is).
-pub(super) fn pack(raw: Vec<u8>) -> (Vec<u8>, u32) {
-    let Ok(len) = u32::try_from(raw.len()) else {
-        return (raw, 0);
+/// `raw` as packable chunk `tag` is stored: the smallest of the bytes as
+/// they are, one zstd frame of them (version 7) and, for a [`PLANAR`]
+/// chunk, one zstd frame of their planes (version 8).
+pub(super) fn pack(raw: Vec<u8>, tag: &[u8; 4]) -> (Vec<u8>, Packing) {
+    let unpacked = match u32::try_from(raw.len()) {
+        Ok(n) if n > 0 => n,
+        _ => return (raw, Packing::Stored),
     };
-    match zstd::bulk::compress(&raw, PACK_LEVEL) {
-        Ok(z) if len > 0 && z.len() < raw.len() => (z, len),
-        _ => (raw, 0),
+    let mut best: Option<(Vec<u8>, Packing)> = None;
+    let mut consider = |bytes: &[u8], packing: Packing| {
+        let smallest = best.as_ref().map_or(raw.len(), |b| b.0.len());
+        match zstd::bulk::compress(bytes, PACK_LEVEL) {
+            Ok(z) if z.len() < smallest => best = Some((z, packing)),
+            _ => {}
+        }
+    };
+    consider(&raw, Packing::Zstd { unpacked });
+    if PLANAR.contains(&tag) {
+        consider(&super::planes::split(&raw), Packing::Planes { unpacked });
     }
+    best.unwrap_or((raw, Packing::Stored))
 }
 
 /// zstd level of packed side chunks.
@@ -321,11 +377,12 @@ pub(super) fn encode_head(features: u32, dir: &[DirEntry]) -> Vec<u8> {
     head.u32(0);
     for d in dir {
         head.bytes.extend_from_slice(&d.tag);
-        head.u32(u32::from(d.unpacked > 0));
+        let (encoding, unpacked) = d.packing.fields();
+        head.u32(encoding);
         head.u64(d.offset);
         head.u64(d.len);
         head.u32(d.crc);
-        head.u32(d.unpacked);
+        head.u32(unpacked);
     }
     let crc = crc32fast::hash(&head.bytes);
     head.u32(crc);
@@ -342,17 +399,17 @@ mod tests {
             offset,
             len,
             crc: 0,
-            unpacked: 0,
+            packing: Packing::Stored,
         }
     }
 
-    /// A file of a META, a SURF chunk holding `stored` with the directory's
-    /// unpacked length `unpacked`, and an empty DATA.
-    fn packed_file(stored: &[u8], unpacked: u32) -> (Vec<u8>, Vec<DirEntry>) {
+    /// A file of a META, a SURF chunk holding `stored` packed as
+    /// `packing`, and an empty DATA.
+    fn packed_file(stored: &[u8], packing: Packing) -> (Vec<u8>, Vec<DirEntry>) {
         let start = (HEADER_LEN + DIR_ENTRY_LEN * 3 + 4) as u64;
         let surf = DirEntry {
             crc: crc32fast::hash(stored),
-            unpacked,
+            packing,
             ..entry(b"SURF", start + 64, stored.len() as u64)
         };
         let meta = DirEntry {
@@ -367,27 +424,49 @@ mod tests {
         (file, dir)
     }
 
+    /// 16 head bytes and 300 surface-like records: slowly moving words.
+    fn records() -> Vec<u8> {
+        let mut raw = vec![3u8; 16];
+        for i in 0..300u32 {
+            for w in 0..7u32 {
+                let v = 0x3F00_0000u32 + i * 37 + w * 1000 + (i * w) % 5;
+                raw.extend_from_slice(&v.to_le_bytes());
+            }
+        }
+        raw
+    }
+
     #[test]
     fn packed_chunks_unpack_and_bad_packing_is_an_error() {
-        let raw: Vec<u8> = (0..5000u32).flat_map(|i| (i / 100).to_le_bytes()).collect();
-        let (stored, unpacked) = pack(raw.clone());
-        assert!(unpacked as usize == raw.len() && stored.len() < raw.len() / 4);
+        let raw = records();
+        let (stored, packing) = pack(raw.clone(), b"SURF");
+        // Planes pack these records smaller than plain zstd does.
+        let unpacked = match packing {
+            Packing::Planes { unpacked } => unpacked,
+            other => panic!("{other:?}"),
+        };
+        let (zstd_only, _) = pack(raw.clone(), b"ALBD");
+        assert!(unpacked as usize == raw.len() && stored.len() < zstd_only.len());
         let limits = Limits::default();
-        let (file, _) = packed_file(&stored, unpacked);
-        let (_, _, dir) = read_directory(&file).unwrap();
-        let unpacked_chunk = chunk(&file, &dir, b"SURF", &limits).unwrap().unwrap();
-        assert_eq!(*unpacked_chunk, raw[..]);
-        // The unpacked copy stays charged while it lives.
-        assert_eq!(limits.used_bytes(), raw.len() as u64);
-        drop(unpacked_chunk);
-        assert_eq!(limits.used_bytes(), 0);
-        // The stored bytes of a chunk stored as is come back as they are.
-        let (file, _) = packed_file(&raw, 0);
-        let (_, _, dir) = read_directory(&file).unwrap();
-        assert_eq!(
-            *chunk(&file, &dir, b"SURF", &limits).unwrap().unwrap(),
-            raw[..]
-        );
+        for (bytes, packing) in [
+            (&stored, packing),
+            (&zstd_only, Packing::Zstd { unpacked }),
+            (&raw, Packing::Stored),
+        ] {
+            let (file, _) = packed_file(bytes, packing);
+            let (_, _, dir) = read_directory(&file).unwrap();
+            let unpacked_chunk = chunk(&file, &dir, b"SURF", &limits).unwrap().unwrap();
+            assert_eq!(*unpacked_chunk, raw[..]);
+            // The unpacked copy stays charged while it lives.
+            let held = if packing == Packing::Stored {
+                0
+            } else {
+                raw.len()
+            };
+            assert_eq!(limits.used_bytes(), held as u64);
+            drop(unpacked_chunk);
+            assert_eq!(limits.used_bytes(), 0);
+        }
         // A wrong unpacked length, a frame that unpacks to more than the
         // budget allows, and bytes that are no zstd frame.
         for (bytes, claimed, expect) in [
@@ -395,42 +474,49 @@ mod tests {
             (&stored[..], unpacked + 1, "unpacks to"),
             (&raw[..], 100, "is not a zstd frame of"),
         ] {
-            let (file, _) = packed_file(bytes, claimed);
+            let (file, _) = packed_file(bytes, Packing::Planes { unpacked: claimed });
             let (_, _, dir) = read_directory(&file).unwrap();
             let e = chunk(&file, &dir, b"SURF", &limits)
                 .unwrap_err()
                 .to_string();
             assert!(e.contains(expect), "{e}");
         }
-        let (file, _) = packed_file(&stored, u32::MAX);
+        let (file, _) = packed_file(&stored, Packing::Zstd { unpacked: u32::MAX });
         let (_, _, dir) = read_directory(&file).unwrap();
         let small = Limits::with_max_alloc(1 << 20);
         assert!(matches!(
             chunk(&file, &dir, b"SURF", &small),
             Err(Error::Limit { .. })
         ));
-        // Packing is known for side chunks only, and as encoding 1 only.
-        let (mut file, dir) = packed_file(&stored, unpacked);
-        let packed_meta = DirEntry {
-            unpacked: 7,
-            ..dir[0]
-        };
-        let head = encode_head(FEATURE_SURFACE, &[packed_meta, dir[1], dir[2]]);
-        file[..head.len()].copy_from_slice(&head);
-        assert!(read_directory(&file)
-            .unwrap_err()
-            .to_string()
-            .contains("META"));
-        let (mut file, _) = packed_file(&stored, unpacked);
-        let at = HEADER_LEN + DIR_ENTRY_LEN + 4;
-        file[at] = 2;
-        let end = HEADER_LEN + DIR_ENTRY_LEN * 3;
-        let crc = crc32fast::hash(&file[..end]);
-        file[end..end + 4].copy_from_slice(&crc.to_le_bytes());
-        assert!(read_directory(&file)
-            .unwrap_err()
-            .to_string()
-            .contains("encoding 2"));
+        // Packing is known for side chunks only, planes for SURF and COLS
+        // only, and no other encoding.
+        for (which, packing) in [
+            (0, Packing::Zstd { unpacked: 7 }),
+            (0, Packing::Planes { unpacked: 7 }),
+        ] {
+            let (mut file, mut dir) = packed_file(&stored, packing);
+            dir[which].packing = packing;
+            let head = encode_head(FEATURE_SURFACE, &dir);
+            file[..head.len()].copy_from_slice(&head);
+            let e = read_directory(&file).unwrap_err().to_string();
+            assert!(e.contains("valid: 0 with 0"), "{e}");
+        }
+        let (mut file, _) = packed_file(&stored, packing);
+        file[HEADER_LEN + DIR_ENTRY_LEN + 4] = 3;
+        let crc = crc32fast::hash(&file[..HEADER_LEN + 3 * DIR_ENTRY_LEN]);
+        file[HEADER_LEN + 3 * DIR_ENTRY_LEN..][..4].copy_from_slice(&crc.to_le_bytes());
+        let e = read_directory(&file).unwrap_err().to_string();
+        assert!(e.contains("encoding 3"), "{e}");
+        // Planes are new in version 8: a version-7 file may not hold them.
+        let (mut file, _) = packed_file(&stored, packing);
+        file[8..12].copy_from_slice(&7u32.to_le_bytes());
+        let crc = crc32fast::hash(&file[..HEADER_LEN + 3 * DIR_ENTRY_LEN]);
+        file[HEADER_LEN + 3 * DIR_ENTRY_LEN..][..4].copy_from_slice(&crc.to_le_bytes());
+        let e = read_directory(&file).unwrap_err().to_string();
+        assert!(
+            e.contains("encoding 2 with") && e.contains("version-7"),
+            "{e}"
+        );
     }
 
     #[test]

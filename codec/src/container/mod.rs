@@ -17,7 +17,8 @@
 //! adds feature 16 and chunk `MESH`: the receiving mesh of a texture-space
 //! file ([`ReceiverMesh`](crate::ReceiverMesh)). Version 7 stores ALBD,
 //! EMPT, SURF, MESH and COLS as zstd frames when that is smaller, and
-//! writes COLS after DATA.
+//! writes COLS after DATA. Version 8 may store SURF and COLS in delta-coded
+//! byte planes before zstd (`planes.rs`), and adds column encoding 5.
 //!
 //! Every chunk has a CRC-32 in the directory, except DATA whose columns
 //! each have their own CRC in the column table. The directory is validated
@@ -27,6 +28,7 @@
 
 mod directory;
 mod meta;
+mod planes;
 mod read;
 #[cfg(feature = "fuzzing")]
 mod repair;

@@ -75,7 +75,7 @@ pub fn repair_checksums(b: &mut [u8]) {
 /// feature.
 pub fn unpack_chunks(b: &[u8]) -> crate::Result<Vec<u8>> {
     use super::directory::DIR_ENTRY_LEN;
-    use super::directory::{chunk, encode_head, read_directory, DirEntry, HEADER_LEN};
+    use super::directory::{chunk, encode_head, read_directory, DirEntry, Packing, HEADER_LEN};
     let (_, features, dir) = read_directory(b)?;
     let limits = crate::Limits::default();
     let mut bodies = Vec::with_capacity(dir.len());
@@ -98,7 +98,7 @@ pub fn unpack_chunks(b: &[u8]) -> crate::Result<Vec<u8>> {
             offset,
             len: body.len() as u64,
             crc,
-            unpacked: 0,
+            packing: Packing::Stored,
             ..*d
         });
         offset += body.len() as u64;

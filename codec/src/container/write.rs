@@ -2,7 +2,7 @@
 //! [`write_pca_file`] writes a `pca` file at once.
 
 use super::directory::{
-    encode_head, pack, DirEntry, DIR_ENTRY_LEN, FEATURE_ALBEDO, FEATURE_COLUMN_NORMS,
+    encode_head, pack, DirEntry, Packing, DIR_ENTRY_LEN, FEATURE_ALBEDO, FEATURE_COLUMN_NORMS,
     FEATURE_EMPTY_ROWS, FEATURE_RECEIVER_MESH, FEATURE_SURFACE, HEADER_LEN,
 };
 use super::meta::{Meta, META_LEN};
@@ -32,9 +32,8 @@ pub struct OptionalChunks<'a> {
     pub column_norms: bool,
 }
 
-/// A chunk as stored and its unpacked length (0: stored as is; see
-/// [`pack`]).
-type Stored = (Vec<u8>, u32);
+/// A chunk as stored and how ([`pack`]).
+type Stored = (Vec<u8>, Packing);
 
 /// Streams a `.ltm` file to a unique temporary file beside `PATH`, then
 /// renames it into place ([`AtomicFile`]).
@@ -43,7 +42,7 @@ pub struct LtmWriter {
     tmp: PathBuf,
     meta: Meta,
     /// The side chunks known at the start, as stored (packed when smaller)
-    /// with their unpacked length (0: stored as is).
+    /// and how.
     albedo: Option<Stored>,
     surface: Option<Stored>,
     mesh: Option<Stored>,
@@ -112,8 +111,13 @@ impl LtmWriter {
             }
             None => None,
         };
-        let [albedo, empty_rows, surface, mesh] =
-            [albedo, empty_rows, surface, mesh].map(|c| c.map(pack));
+        let [albedo, empty_rows, surface, mesh] = [
+            (albedo, b"ALBD"),
+            (empty_rows, b"EMPT"),
+            (surface, b"SURF"),
+            (mesh, b"MESH"),
+        ]
+        .map(|(c, tag)| c.map(|c| pack(c, tag)));
         let file = AtomicFile::create(path)?;
         let tmp = file.tmp_path().to_path_buf();
         let chunks = 3
@@ -225,7 +229,7 @@ impl LtmWriter {
             cols.u16(0);
         }
         let meta = self.meta.encode();
-        let mut chunks: Vec<(&[u8; 4], Stored)> = vec![(b"META", (meta, 0))];
+        let mut chunks: Vec<(&[u8; 4], Stored)> = vec![(b"META", (meta, Packing::Stored))];
         let mut features = 0;
         if let Some(a) = self.albedo.take() {
             chunks.push((b"ALBD", a));
@@ -244,22 +248,28 @@ impl LtmWriter {
             features |= FEATURE_RECEIVER_MESH;
         }
         if let Some(n) = self.norms.take() {
-            chunks.push((b"NORM", (bytemuck::cast_slice::<f32, u8>(&n).to_vec(), 0)));
+            chunks.push((
+                b"NORM",
+                (
+                    bytemuck::cast_slice::<f32, u8>(&n).to_vec(),
+                    Packing::Stored,
+                ),
+            ));
             features |= FEATURE_COLUMN_NORMS;
         }
         // The column table follows DATA: it is known only now, and packed
         // when smaller.
-        let (cols, cols_unpacked) = pack(cols.bytes);
+        let (cols, cols_packing) = pack(cols.bytes, b"COLS");
         let head_len = HEADER_LEN + DIR_ENTRY_LEN * (chunks.len() + 2) + 4;
         let mut dir = Vec::new();
         let mut offset = head_len as u64;
-        for (tag, (bytes, unpacked)) in &chunks {
+        for (tag, (bytes, packing)) in &chunks {
             dir.push(DirEntry {
                 tag: **tag,
                 offset,
                 len: bytes.len() as u64,
                 crc: crc32fast::hash(bytes),
-                unpacked: *unpacked,
+                packing: *packing,
             });
             offset += bytes.len() as u64;
         }
@@ -269,7 +279,7 @@ impl LtmWriter {
             offset,
             len: self.data_len,
             crc: 0,
-            unpacked: 0,
+            packing: Packing::Stored,
         });
         let cols_offset = offset + self.data_len;
         dir.push(DirEntry {
@@ -277,7 +287,7 @@ impl LtmWriter {
             offset: cols_offset,
             len: cols.len() as u64,
             crc: crc32fast::hash(&cols),
-            unpacked: cols_unpacked,
+            packing: cols_packing,
         });
         let head = encode_head(features, &dir);
         let io = |e| Error::io(&self.tmp, e);
@@ -370,7 +380,7 @@ pub(crate) fn write_pca_file(
             offset,
             len: bytes.len() as u64,
             crc: crc32fast::hash(bytes),
-            unpacked: 0,
+            packing: Packing::Stored,
         });
         offset += bytes.len() as u64;
     }

@@ -445,7 +445,7 @@ pub(super) fn assemble(paths: &[PathBuf], out: &Path, limits: &Limits) -> Result
             surface: raw.surface(),
             mesh: raw.mesh(),
             empty_rows: Some(&empty),
-            column_norms: true,
+            column_norms: false,
         },
     )?;
     let mut stats = CompressStats {

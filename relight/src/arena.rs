@@ -280,21 +280,39 @@ impl Arena {
     /// Every column's priority norm: the file's (chunk NORM, versions 5 to
     /// 7), each checked against its decoded column before the first use
     /// (so no light is ranked by an unchecked norm), else those of the
-    /// decoded columns; either way every column is decoded once, and not
-    /// kept, the first time.
+    /// decoded columns. Either way, the first time, each column not yet in
+    /// the arena is decoded once for its norm and not kept; a column in the
+    /// arena gives the norm it was decoded with (and checked against the
+    /// file's, if any, when it was decoded).
     pub fn norms<'a>(&'a self, file: &'a LtmFile, decoder: &ColumnDecoder) -> Result<&'a [f32]> {
-        if let Some(n) = file.column_norms() {
+        if let Some(stored) = file.column_norms() {
             if self.norms_checked.get().is_none() {
-                decoder.check_stored_norms(file)?;
+                let decoded = self.column_norms(file, decoder)?;
+                for (j, (&s, &d)) in stored.iter().zip(&decoded).enumerate() {
+                    ColumnDecoder::check_norm(j, s, d)?;
+                }
                 let _ = self.norms_checked.set(());
             }
-            return Ok(n);
+            return Ok(stored);
         }
         if let Some(n) = self.decoded_norms.get() {
             return Ok(n);
         }
-        let norms = decoder.column_norms(file)?;
+        let norms = self.column_norms(file, decoder)?;
         Ok(self.decoded_norms.get_or_init(|| norms))
+    }
+
+    /// The norm of every column as decoded: from the arena where it holds
+    /// the column, else decoded in parallel ([`ColumnDecoder::weighted_norm`]),
+    /// not kept.
+    fn column_norms(&self, file: &LtmFile, decoder: &ColumnDecoder) -> Result<Vec<f32>> {
+        (0..self.depths.len())
+            .into_par_iter()
+            .map(|j| match self.info[j].get() {
+                Some(info) => Ok(info.norm),
+                None => Ok(decoder.weighted_norm(&file.column(j)?) as f32),
+            })
+            .collect()
     }
 
     /// Coefficients of all columns, decoded or not.

@@ -63,7 +63,7 @@ const KNOWN_FEATURES: [u32; VERSION as usize] = [
         | FEATURE_COLUMN_NORMS
         | FEATURE_RECEIVER_MESH,
 ];
-/// The chunks a version-7 file may store zstd-packed: the side data known
+/// The chunks a file of version 7 or later may store zstd-packed: the side data known
 /// when the file is started, and the column table (which ltm writes after
 /// DATA, once every column is known).
 pub(super) const PACKABLE: [&[u8; 4]; 5] = [b"ALBD", b"EMPT", b"SURF", b"MESH", b"COLS"];
@@ -109,7 +109,7 @@ pub(super) struct DirEntry {
     pub len: u64,
     /// CRC-32 of the stored bytes.
     pub crc: u32,
-    /// Version 7: how the chunk is stored.
+    /// How the chunk is stored (as is in versions 1 to 6).
     pub packing: Packing,
 }
 

@@ -182,8 +182,8 @@ impl ColumnDecoder {
 
     /// Every column's priority norm, [`ColumnDecoder::weighted_norm`] of
     /// the decoded column rounded to `f32`: each column is decoded once, in
-    /// parallel, and not kept. The first column (in column order) that
-    /// fails to decode is the error.
+    /// parallel, and not kept. A column that fails to decode is the error
+    /// (which one, when several fail, is not specified).
     pub fn column_norms(&self, file: &LtmFile) -> Result<Vec<f32>> {
         (0..file.meta().dims.lights())
             .into_par_iter()

@@ -258,7 +258,7 @@ fn quantize(c: &mut Criterion) {
         });
         let id = format!("range_decode/encoding{encoding}/nnz{nnz}_{}B", bytes.len());
         g.bench_function(id, |b| {
-            b.iter(|| entropy::decode(&bytes, nnz, &shape, DEPTH, coding).unwrap())
+            b.iter(|| entropy::decode(&bytes, nnz, &shape, DEPTH, coding, None).unwrap())
         });
     }
     g.throughput(Throughput::Elements(P as u64));

@@ -1,18 +1,25 @@
 //! Re-encodes every range-codable column of an `.ltm` file with column
-//! encodings 3 and 4 and prints, for each, the payload bytes per kept
-//! coefficient and the single-threaded decode time (the fastest of
-//! `ROUNDS` rounds, default 5, alternating the encodings).
+//! encodings 3, 4, 5 and 6 and prints, for each, the payload bytes per
+//! kept coefficient and the single-threaded decode time (the fastest of
+//! `ROUNDS` rounds, default 5, alternating the encodings). Encoding 6
+//! starts from priors tallied from the file's own columns in encoding 5,
+//! as `LtmWriter::finish` does; the time of that tally and of coding
+//! encoding 6 (one thread) is printed once.
 //!
 //! ```sh
 //! cargo run --release -p ltm-codec --example recode -- FILE.ltm
 //! ```
 //!
-//! `ONLY=3` or `ONLY=4` decodes one encoding only (for a profiler), and
+//! `ONLY=3` (or 4, 5, 6) decodes one encoding only (for a profiler), and
 //! `COLS=K` takes the first `K` columns.
 
-use ltm_codec::entropy::{decode, encode, ColumnShape, ValueCoding};
+use ltm_codec::entropy::{
+    decode, encode, encode_primed, ColumnShape, PriorTally, Priors, ValueCoding,
+};
 use ltm_codec::{LtmFile, SparseColumn};
 use std::time::Instant;
+
+type Payloads = Vec<Option<Vec<u8>>>;
 
 fn main() -> Result<(), Box<dyn std::error::Error>> {
     let path = std::env::args().nth(1).ok_or("usage: recode FILE.ltm")?;
@@ -24,24 +31,26 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         .map(|j| file.column(j))
         .collect::<Result<Vec<_>, _>>()?;
     let nnz: usize = cols.iter().map(|c| c.indices.len()).sum();
-    let codings = [(3, ValueCoding::ExpGolomb), (4, ValueCoding::Classes)];
-    let mut best = [f64::INFINITY; 2];
+    let (priors, primed) = prime(&cols, &shape)?;
+    let codings = [
+        (3, ValueCoding::ExpGolomb),
+        (4, ValueCoding::Classes),
+        (5, ValueCoding::Compact),
+        (6, ValueCoding::Primed),
+    ];
+    let mut best = [f64::INFINITY; 4];
     let rounds = env("ROUNDS").map_or(Ok(5), |r| r.parse())?;
     for _ in 0..rounds {
         for (k, &(encoding, coding)) in codings.iter().enumerate() {
             if env("ONLY").is_some_and(|o| o != encoding.to_string()) {
                 continue;
             }
-            let payloads: Vec<Option<Vec<u8>>> = cols
-                .iter()
-                .map(|c| {
-                    (!c.indices.is_empty())
-                        .then(|| encode(c, &shape, coding))
-                        .flatten()
-                })
-                .collect();
+            let payloads = match coding {
+                ValueCoding::Primed => primed.clone(),
+                _ => encode_each(&cols, |c| encode(c, &shape, coding)),
+            };
             let start = Instant::now();
-            decode_all(&cols, &payloads, &shape, coding)?;
+            decode_all(&cols, &payloads, &shape, coding, &priors)?;
             best[k] = best[k].min(start.elapsed().as_secs_f64());
             let bytes: usize = payloads.iter().flatten().map(Vec::len).sum();
             println!(
@@ -55,6 +64,37 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     Ok(())
 }
 
+/// Each nonempty column's payload by `code`.
+fn encode_each(cols: &[SparseColumn], code: impl Fn(&SparseColumn) -> Option<Vec<u8>>) -> Payloads {
+    cols.iter()
+        .map(|c| (!c.indices.is_empty()).then(|| code(c)).flatten())
+        .collect()
+}
+
+/// The priors of the columns coded in encoding 5, and the columns in
+/// encoding 6; prints the time of both steps (one thread).
+fn prime(
+    cols: &[SparseColumn],
+    shape: &ColumnShape,
+) -> Result<(Priors, Payloads), Box<dyn std::error::Error>> {
+    let compact = encode_each(cols, |c| encode(c, shape, ValueCoding::Compact));
+    let start = Instant::now();
+    let mut tally = PriorTally::default();
+    for (c, p) in cols.iter().zip(&compact) {
+        if let Some(p) = p {
+            tally.add_column(p, c.indices.len(), shape, c.depth)?;
+        }
+    }
+    let priors = tally.priors();
+    let tallied = start.elapsed().as_secs_f64();
+    let primed = encode_each(cols, |c| encode_primed(c, shape, &priors));
+    println!(
+        "priors: tally {tallied:.3} s, encoding 6 {:.3} s (one thread)",
+        start.elapsed().as_secs_f64() - tallied
+    );
+    Ok((priors, primed))
+}
+
 /// Decodes every payload and checks it against its column.
 #[inline(never)]
 fn decode_all(
@@ -62,10 +102,11 @@ fn decode_all(
     payloads: &[Option<Vec<u8>>],
     shape: &ColumnShape,
     coding: ValueCoding,
+    priors: &Priors,
 ) -> Result<(), Box<dyn std::error::Error>> {
     for (c, p) in cols.iter().zip(payloads) {
         if let Some(p) = p {
-            let back = decode(p, c.indices.len(), shape, c.depth, coding)?;
+            let back = decode(p, c.indices.len(), shape, c.depth, coding, Some(priors))?;
             if &back != c {
                 return Err("a column decoded differently".into());
             }

@@ -275,6 +275,7 @@ fn version_6_and_7_files_still_decode_to_the_current_files_matrix() {
     for (name, version, golden) in [
         ("golden-v6.ltm", 6, GOLDEN_LTM_V5),
         ("golden-v7.ltm", 7, GOLDEN_LTM_V7),
+        ("golden-v8.ltm", 8, GOLDEN_LTM_V8),
     ] {
         let (old, crc) = old_fixture_decodes(name, version);
         assert_eq!(crc, golden);
@@ -291,15 +292,7 @@ fn version_6_and_7_files_still_decode_to_the_current_files_matrix() {
 /// matrix at [`fixture_options`], bit for bit, with the same empty rows.
 fn same_matrix_as_a_new_file(old: &LtmFile) {
     let dir = tempfile::tempdir().unwrap();
-    let dims = Dims::image(24, 20, 4, 3);
-    let raw = write_raw(
-        &dir.path().join("g.raw"),
-        dims,
-        &golden_matrix(dims),
-        None,
-        64 << 10,
-    );
-    let (out, _) = run(dir.path(), &raw, &fixture_options(), "g.ltm");
+    let out = golden_file(dir.path(), &fixture_options());
     let new = LtmFile::open(&out).unwrap();
     let limits = Limits::default();
     let (a, b) = (
@@ -309,8 +302,56 @@ fn same_matrix_as_a_new_file(old: &LtmFile) {
     assert!(a.iter().zip(&b).all(|(x, y)| x.to_bits() == y.to_bits()) && a.len() == b.len());
     assert_eq!(old.empty_rows(), new.empty_rows());
     let encodings: Vec<_> = new.columns().iter().map(|c| c.encoding).collect();
-    assert!(encodings.contains(&ltm_codec::column::Encoding::Compact));
-    assert!(new.column_norms().is_none());
+    assert!(encodings.contains(&ltm_codec::column::Encoding::Primed));
+    assert!(new.column_norms().is_none() && new.priors().is_some());
+    assert!(new.file_bytes() < old.file_bytes());
+}
+
+/// A PRIO chunk that disagrees with its feature flag or the file's
+/// version, holds a state no context reaches, or is missing where a column
+/// has encoding 6, is refused with a message naming it, even with every
+/// checksum repaired.
+#[test]
+fn bad_priors_are_refused() {
+    let dir = tempfile::tempdir().unwrap();
+    let dims = Dims::image(24, 20, 4, 3);
+    let out = golden_file(dir.path(), &fixture_options());
+    let good = ltm_codec::container::unpack_chunks(&std::fs::read(&out).unwrap()).unwrap();
+    let parse = parse_repaired;
+    assert_eq!(parse(&good, &|_| {}), "");
+    let (_, prio_at, prio_len) = chunk_entry(&good, b"PRIO");
+    assert_eq!(prio_len, ltm_codec::entropy::PRIO_LEN);
+    let err = parse(&good, &|b| b[12] &= !32);
+    assert!(err.contains("PRIO"), "{err}");
+    let err = parse(&good, &|b| b[8] = 8);
+    assert!(
+        err.contains("feature flags") && err.contains("version 8"),
+        "{err}"
+    );
+    // Binary context 0 at p = 0; symbol context 0 with a[1] > a[2].
+    let err = parse(&good, &|b| b[prio_at + 4..prio_at + 6].fill(0));
+    assert!(err.contains("binary context 0"), "{err}");
+    let class0 = prio_at + 4 + 4 * ltm_codec::entropy::PRIOR_BINARY;
+    let err = parse(&good, &|b| {
+        b[class0..class0 + 2].copy_from_slice(&u16::MAX.to_le_bytes())
+    });
+    assert!(err.contains("class context 0"), "{err}");
+    // An encoding-6 column in a version-9 file without priors.
+    let old =
+        ltm_codec::container::unpack_chunks(&std::fs::read(fixture("golden-v8.ltm")).unwrap())
+            .unwrap();
+    let (_, cols_at, _) = chunk_entry(&old, b"COLS");
+    let j = (0..dims.lights())
+        .find(|j| old[cols_at + 28 * j + 25] == 5)
+        .unwrap();
+    let err = parse(&old, &|b| {
+        b[8] = 9;
+        b[cols_at + 28 * j + 25] = 6;
+    });
+    assert!(err.contains(&format!("column {j} has encoding 6")), "{err}");
+    // In a version-8 file, encoding 6 is unknown.
+    let err = parse(&old, &|b| b[cols_at + 28 * j + 25] = 6);
+    assert!(err.contains("encoding 6"), "{err}");
 }
 
 /// Version 7 packs the column table (chunk COLS, written after DATA) when
@@ -321,14 +362,7 @@ fn same_matrix_as_a_new_file(old: &LtmFile) {
 fn the_column_table_is_packed_when_smaller_and_decodes_identically() {
     let dir = tempfile::tempdir().unwrap();
     let dims = Dims::image(24, 20, 4, 3);
-    let raw = write_raw(
-        &dir.path().join("g.raw"),
-        dims,
-        &golden_matrix(dims),
-        None,
-        64 << 10,
-    );
-    let (out, _) = run(dir.path(), &raw, &CompressOptions::default(), "g.ltm");
+    let out = golden_file(dir.path(), &CompressOptions::default());
     let packed = std::fs::read(&out).unwrap();
     let u32_at = |b: &[u8], at: usize| u32::from_le_bytes(b[at..at + 4].try_into().unwrap());
     let table = 28 * dims.lights();
@@ -336,9 +370,12 @@ fn the_column_table_is_packed_when_smaller_and_decodes_identically() {
     assert!([1, 2].contains(&u32_at(&packed, entry + 4)));
     assert_eq!(u32_at(&packed, entry + 28), table as u32);
     assert!(len < table, "{len} stored bytes for a {table}-byte table");
-    // COLS follows DATA and ends the file.
+    // DATA, the priors (version 9; the golden matrix's pay for theirs),
+    // then COLS, which ends the file.
     let (_, data_at, data_len) = chunk_entry(&packed, b"DATA");
-    assert_eq!((at, at + len), (data_at + data_len, packed.len()));
+    let (_, prio_at, prio_len) = chunk_entry(&packed, b"PRIO");
+    assert_eq!(prio_at, data_at + data_len);
+    assert_eq!((at, at + len), (prio_at + prio_len, packed.len()));
     let stored = ltm_codec::container::unpack_chunks(&packed).unwrap();
     let (entry, _, len) = chunk_entry(&stored, b"COLS");
     assert_eq!((u32_at(&stored, entry + 4), len), (0, table));
@@ -934,6 +971,7 @@ fn stages_run_per_column_range_give_the_same_file() {
                 mesh: None,
                 empty_rows: Some(t.empty_rows()),
                 column_norms: false,
+                priors: true,
             },
         )
         .unwrap();
@@ -1137,11 +1175,23 @@ fn hostile_files_error_and_never_panic() {
     }
     // A header that claims a newer version is refused with a clear message.
     let mut newer = packed.clone();
-    newer[8] = 9;
+    newer[8] = 10;
     let err = LtmFile::parse(&newer, &ltm_codec::Limits::default())
         .unwrap_err()
         .to_string();
-    assert!(err.contains("version 9"), "{err}");
+    assert!(err.contains("version 10"), "{err}");
+}
+
+/// The message `LtmFile::parse` gives for `good` mutated by `mutate`, with
+/// every checksum repaired ("" when it parses).
+fn parse_repaired(good: &[u8], mutate: &dyn Fn(&mut Vec<u8>)) -> String {
+    let mut b = good.to_vec();
+    mutate(&mut b);
+    ltm_codec::container::repair_checksums(&mut b);
+    LtmFile::parse(&b, &Limits::default())
+        .err()
+        .map(|e| e.to_string())
+        .unwrap_or_default()
 }
 
 /// The directory entry of chunk `tag`: (entry offset, chunk offset, length).
@@ -1169,15 +1219,7 @@ fn bad_column_norms_are_refused() {
         .dims;
     let (_, norm_at, norm_len) = chunk_entry(&good, b"NORM");
     assert_eq!(norm_len, 4 * dims.lights());
-    let parse = |mutate: &dyn Fn(&mut Vec<u8>)| {
-        let mut b = good.clone();
-        mutate(&mut b);
-        ltm_codec::container::repair_checksums(&mut b);
-        LtmFile::parse(&b, &Limits::default())
-            .err()
-            .map(|e| e.to_string())
-            .unwrap_or_default()
-    };
+    let parse = |mutate: &dyn Fn(&mut Vec<u8>)| parse_repaired(&good, mutate);
     for bad in [f32::NAN, f32::INFINITY, -1.0, -f32::MIN_POSITIVE] {
         let err = parse(&|b| b[norm_at + 12..norm_at + 16].copy_from_slice(&bad.to_le_bytes()));
         assert!(
@@ -1287,6 +1329,19 @@ fn fixture_options() -> CompressOptions {
     .into()
 }
 
+/// The golden matrix's raw store and its `.ltm` file at `opts`, in `dir`.
+fn golden_file(dir: &Path, opts: &CompressOptions) -> PathBuf {
+    let dims = Dims::image(24, 20, 4, 3);
+    let raw = write_raw(
+        &dir.join("g.raw"),
+        dims,
+        &golden_matrix(dims),
+        None,
+        64 << 10,
+    );
+    run(dir, &raw, opts, "g.ltm").0
+}
+
 /// The matrix of the golden hashes (24 × 20 pixels, n = 4, RGB).
 fn golden_matrix(dims: Dims) -> Vec<f32> {
     let m = dims.lights();
@@ -1307,13 +1362,17 @@ const GOLDEN_LTM_V1: u32 = 0x5832_3993;
 
 const GOLDEN_RAW: u32 = 0xf20f_83f3;
 /// [`fixture_options`]: adaptive, the peak quantizer at 10 bits, 1 %
-/// target (version 8: encoding 5, the column table in planes, no NORM).
-const GOLDEN_LTM: u32 = 0x871f_e682;
+/// target (version 9: encoding 6 from the file's priors, the column table
+/// in planes, no NORM).
+const GOLDEN_LTM: u32 = 0xdec3_6952;
+/// The committed version-8 fixture `tests/fixtures/golden-v8.ltm`: the
+/// same options, written before version 9 (encoding 5, no priors).
+const GOLDEN_LTM_V8: u32 = 0x871f_e682;
 /// The committed version-7 fixture `tests/fixtures/golden-v7.ltm`: the
 /// same options, written before version 8 (encoding 5, planes, no norms).
 const GOLDEN_LTM_V7: u32 = 0xce3f_8a13;
 /// The default options: adaptive, the uniform quantizer at 16 bits, 1 %.
-const GOLDEN_LTM_UNIFORM: u32 = 0x02b1_11e9;
+const GOLDEN_LTM_UNIFORM: u32 = 0xb608_e547;
 /// The committed version-5 fixture `tests/fixtures/golden-v5.ltm`: the
 /// same options, written before version 6 (the receiver mesh). A file
 /// without a mesh differs from version 6 only in its version field and

@@ -131,7 +131,8 @@ pub struct CompressArgs {
     #[arg(long, default_value_t = 0x6c74_6d00)]
     pub seed: u64,
     /// Column payloads: `range` (context-modelled range coding, column
-    /// encoding 5: the smallest files) or `zstd` (about 1.5× larger files
+    /// encodings 5 and 6, the latter starting from priors measured on the
+    /// file's own columns: the smallest files) or `zstd` (about 1.5× larger files
     /// whose columns decode about 3× faster; what format versions 1 and 2
     /// wrote). The relighter decodes a column when a frame first needs it,
     /// so either opens without decoding. Wavelet modes only [default: range].
@@ -361,6 +362,9 @@ pub struct Inspection {
     pub has_albedo: bool,
     /// Columns per transform depth (index = depth).
     pub depth_histogram: Vec<u64>,
+    /// Columns per column encoding, by the encoding's number and name
+    /// (`"5 compact"`, `"6 primed"`: docs/FORMAT.md).
+    pub columns_by_encoding: std::collections::BTreeMap<String, u64>,
     /// Average column depth per row-wavelet level (index = level, 0 = scaling
     /// functions): the paper's Fig. 8.
     pub average_depth_by_row_level: Vec<f64>,
@@ -379,8 +383,11 @@ pub fn inspect(file: &LtmFile) -> Inspection {
     let levels = row_level(n, n * n - 1) as usize + 1;
     let mut by_level = vec![(0.0f64, 0u64); levels];
     let mut nnz = 0;
+    let mut encodings = std::collections::BTreeMap::new();
     for (j, c) in file.columns().iter().enumerate() {
         hist[c.depth as usize] += 1;
+        let e = format!("{} {}", c.encoding as u8, c.encoding.name());
+        *encodings.entry(e).or_insert(0) += 1;
         let l = &mut by_level[row_level(n, j) as usize];
         l.0 += c.depth as f64;
         l.1 += 1;
@@ -410,6 +417,7 @@ pub fn inspect(file: &LtmFile) -> Inspection {
         achieved_error: meta.achieved_error,
         has_albedo: file.albedo().is_some(),
         depth_histogram: hist,
+        columns_by_encoding: encodings,
         average_depth_by_row_level: by_level
             .iter()
             .map(|(s, c)| if *c > 0 { s / *c as f64 } else { 0.0 })
@@ -486,6 +494,15 @@ pub fn inspect_cmd(a: InspectArgs, ctx: &Ctx) -> Result<()> {
     println!(
         "  columns by depth {:?} (columns whose image is transformed to column-wavelet depth 0, 1, ...; 2d keeps every column at 0)",
         i.depth_histogram
+    );
+    let by_encoding: Vec<String> = i
+        .columns_by_encoding
+        .iter()
+        .map(|(e, n)| format!("{e} {n}"))
+        .collect();
+    println!(
+        "  columns by encoding {} (docs/FORMAT.md; 6 primed: coded from the file's priors)",
+        by_encoding.join(", ")
     );
     let avg: Vec<String> = i
         .average_depth_by_row_level

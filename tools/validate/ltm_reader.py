@@ -5,9 +5,10 @@ This file was written only from the specification in docs/FORMAT.md (no Rust sou
 was consulted). It checks that the specification is complete: it decodes a `.ltm`
 file of mode 2d, 4d or adaptive to the dense transport matrix exactly as
 `ltm export` writes it (float32, shape (P, M, C), or (P, M) when C = 1).
-`pca` files (mode 3) are refused. Format versions 1 to 8 are read (version 7 stores
+`pca` files (mode 3) are refused. Format versions 1 to 9 are read (version 7 stores
 side chunks and the column table as zstd frames: pip `zstandard`; version 8 may
-store SURF and COLS as zstd frames of their planes), with column encodings 0 to 5; a version-5 file's column norms (chunk NORM) are checked against
+store SURF and COLS as zstd frames of their planes), with column encodings 0 to 6
+(encoding 6 starts its contexts from the PRIO chunk's states); a version-5 file's column norms (chunk NORM) are checked against
 the decoded columns; the row layout (chunk SURF) and a version-6 file's receiving
 mesh (chunk MESH) are decoded and checked. Given a raw transport store (magic
 LTMRAW) instead, it reads its header (versions 1 to 5; version 5 is one part of a
@@ -39,13 +40,14 @@ Stages (one function each):
   parse_meta          META chunk
   parse_empty_rows    EMPT chunk
   parse_norms         NORM chunk (checked against the decoded columns: column_norm)
+  parse_priors        PRIO chunk (encoding 6's starting context states)
   parse_surf          SURF chunk (row layout and surface records)
   parse_mesh          MESH chunk / the raw store's mesh region (receiver mesh)
   read_raw_store      a raw store's header, surface records and mesh
   parse_column_table  COLS chunk
   unplane             a version-8 chunk stored in planes (packing 2)
   decode_payload_plain / decode_payload_range / decode_payload_range4 / decode_payload_range5
-                      column payload (encodings 1-2 / 3 / 4 / 5) -> sparse column
+                      column payload (encodings 1-2 / 3 / 4 / 5 and 6) -> sparse column
   RangeDecoder        "The binary coder" and encoding 4's 17-symbol contexts
   RawBitReader        encoding 4's raw bit stream
   walk_column         bands, blocks and significance bits (encodings 3 and 4)
@@ -109,11 +111,11 @@ def read_container(buf):
     if len(buf) < 28 or buf[:8] != MAGIC:
         raise FormatError("not an .ltm file (bad magic)")
     version, features, k, reserved = struct.unpack_from("<4I", buf, 8)
-    if version not in (1, 2, 3, 4, 5, 6, 7, 8):
+    if version not in (1, 2, 3, 4, 5, 6, 7, 8, 9):
         raise FormatError(f"unsupported format version {version}")
     if reserved != 0:
         raise FormatError("reserved header field is not 0")
-    if features & ~31:
+    if features & ~63:
         raise FormatError(f"unknown feature bits {features:#x}")
     if version == 1 and features & ~1:
         raise FormatError("feature bits 1/2 in a version-1 file")
@@ -121,7 +123,9 @@ def read_container(buf):
         raise FormatError(f"feature bit 3 in a version-{version} file")
     if version < 6 and features & 16:
         raise FormatError(f"feature bit 4 in a version-{version} file")
-    if not 3 <= k <= {1: 4, 5: 8, 6: 9, 7: 9, 8: 9}.get(version, 7):
+    if version < 9 and features & 32:
+        raise FormatError(f"feature bit 5 in a version-{version} file")
+    if not 3 <= k <= {1: 4, 5: 8, 6: 9, 7: 9, 8: 9, 9: 10}.get(version, 7):
         raise FormatError(f"bad chunk count {k}")
     end = 24 + 32 * k
     if len(buf) < end + 4:
@@ -137,7 +141,7 @@ def read_container(buf):
         if version < 7:
             enc, unpacked = 0, 0
         if (enc, unpacked == 0) != (0, True) and not (
-                enc == 1 and unpacked > 0 and tag in (b"ALBD", b"EMPT", b"SURF", b"MESH", b"COLS")) \
+                enc == 1 and unpacked > 0 and tag in (b"ALBD", b"EMPT", b"SURF", b"MESH", b"COLS", b"PRIO")) \
                 and not (enc == 2 and version >= 8 and unpacked > 0 and tag in (b"SURF", b"COLS")):
             raise FormatError(f"chunk {tag!r}: encoding {enc} with unpacked length {unpacked}")
         if tag in chunks:
@@ -167,6 +171,8 @@ def read_container(buf):
         want.add(b"NORM")
     if features & 16:
         want.add(b"MESH")
+    if features & 32:
+        want.add(b"PRIO")
     if b"PCAM" in chunks or b"PCAB" in chunks or b"PCAC" in chunks:
         raise FormatError("this is a pca file (mode 3): not supported by this reader")
     want |= {b"COLS", b"DATA"}
@@ -382,6 +388,31 @@ def full_depth(W, H):
     return (m - 1).bit_length()  # ceil(log2(m)), 0 for m = 1
 
 
+def parse_priors(b):
+    """FORMAT.md "Encoding 6": the PRIO chunk's starting states, as
+    (SP, SN) for `same` and `zero`, (P, N) for the walk's binary contexts in
+    encoding 4's flat layout, and (CUM, NS) for the 80 symbol contexts."""
+    if len(b) != 3732:
+        raise FormatError(f"PRIO has {len(b)} bytes, not 3732")
+    u = struct.unpack_from("<1866H", b, 0)
+    if u[0] != 252 or u[1] != 80:
+        raise FormatError(f"PRIO counts {u[0]}, {u[1]} (not 252, 80)")
+    p, n = list(u[2:2 + 504:2]), list(u[3:2 + 504:2])
+    if any(not 31 <= x <= 32737 for x in p) or any(x > 32 for x in n):
+        raise FormatError("PRIO holds a binary state no context reaches")
+    cum, ns = [], []
+    for c in range(80):
+        s = u[506 + 17 * c:506 + 17 * c + 17]
+        a, cn = s[:16], s[16]
+        if any(a[i] > a[i + 1] for i in range(15)) or a[15] > 32751 or cn > 32:
+            raise FormatError("PRIO holds a symbol state no context reaches")
+        cum.append([0] + [i + 1 + a[i] for i in range(16)] + [32768])
+        ns.append(cn)
+    # same, zero, then encoding 4's block, sig, sign, top, second (CTX4 layout).
+    assert 250 == CTX4_TOTAL
+    return dict(SP=p[:2], SN=n[:2], P=p[2:], N=n[2:], CUM=cum, NS=ns)
+
+
 def parse_column_table(cols, M, P, W, H, version):
     if len(cols) != 28 * M:
         raise FormatError("COLS has the wrong length")
@@ -390,7 +421,7 @@ def parse_column_table(cols, M, P, W, H, version):
         off, slen, ulen, k, ccrc, d, enc, z = struct.unpack_from("<QIIIIBBH", cols, 28 * j)
         if (z != 0 or k > P or d > full_depth(W, H)
                 or (enc == 3 and version < 3) or (enc == 4 and version < 4)
-                or enc > 5 or (enc == 5 and version < 8)):
+                or enc > 6 or (enc == 5 and version < 8) or (enc == 6 and version < 9)):
             raise FormatError(f"bad column table entry {j}")
         table.append(dict(off=off, slen=slen, ulen=ulen, k=k, crc=ccrc, d=d, enc=enc))
     return table
@@ -867,9 +898,10 @@ def decode_payload_range4(payload, W, H, d, C, B, k):
     return codes, positions, values
 
 
-def decode_payload_range5(payload, W, H, d, C, B, k):
+def decode_payload_range5(payload, W, H, d, C, B, k, priors=None):
     """Encoding 5: varint R, R bytes of range-coded stream, raw bits; the scale codes
-    come first in the streams (contexts `same` and `zero`), then encoding 4's walk."""
+    come first in the streams (contexts `same` and `zero`), then encoding 4's walk.
+    Encoding 6 is the same with every context starting in `priors` (parse_priors)."""
     R, at = 0, 0
     while True:
         if at >= len(payload):
@@ -888,6 +920,8 @@ def decode_payload_range5(payload, W, H, d, C, B, k):
     dec = RangeDecoder(payload[at:at + R])
     raw = RawBitReader(payload[at + R:])
     SP, SN = [16384, 16384], [0, 0]  # contexts `same` (0) and `zero` (1)
+    if priors is not None:
+        SP, SN = list(priors["SP"]), list(priors["SN"])
     codes, last = [], None  # last: the last nonzero code
     for i in range((d + 1) * C):
         if last is not None and dec.bit(SP, SN, 0):
@@ -905,6 +939,10 @@ def decode_payload_range5(payload, W, H, d, C, B, k):
     P = [16384] * CTX4_TOTAL
     N = [0] * CTX4_TOTAL
     values = Values4(dec, raw, P, N, C, B, d)
+    if priors is not None:
+        P[:], N[:] = priors["P"], priors["N"]
+        values.CUM = [list(c) for c in priors["CUM"]]
+        values.NS = list(priors["NS"])
     positions, vals = walk_column(dec, P, N, W, H, d, C, k, values)
     return codes, positions, vals
 
@@ -1053,6 +1091,7 @@ def decode_matrix(path, verbose=False, dt=np.float32, info=None):
     Q = (1 << (B - 1)) - 1
     empty = parse_empty_rows(chunks[b"EMPT"], P) if b"EMPT" in chunks else None
     norms = parse_norms(chunks[b"NORM"], M) if b"NORM" in chunks else None
+    priors = parse_priors(chunks[b"PRIO"]) if b"PRIO" in chunks else None
     layout = parse_surf(chunks[b"SURF"], W, H)[0] if b"SURF" in chunks else 0
     mesh = None
     if b"MESH" in chunks:
@@ -1098,10 +1137,13 @@ def decode_matrix(path, verbose=False, dt=np.float32, info=None):
             if k < 1 or ent["slen"] != ent["ulen"]:
                 raise FormatError(f"column {j}: bad encoding-4 entry")
             codes, positions, values = decode_payload_range4(payload, W, H, d, C, B, k)
-        elif enc == 5:
+        elif enc in (5, 6):
             if k < 1 or ent["slen"] != ent["ulen"] or ent["slen"] < 3:
-                raise FormatError(f"column {j}: bad encoding-5 entry")
-            codes, positions, values = decode_payload_range5(payload, W, H, d, C, B, k)
+                raise FormatError(f"column {j}: bad encoding-{enc} entry")
+            if enc == 6 and priors is None:
+                raise FormatError(f"column {j}: encoding 6 in a file without PRIO")
+            codes, positions, values = decode_payload_range5(
+                payload, W, H, d, C, B, k, priors if enc == 6 else None)
         else:
             codes, positions, values = decode_payload_plain(payload, d, C, k, Q)
         if len(positions) and (positions[-1] >= P or positions[0] < 0):

@@ -5,7 +5,7 @@
 
 use super::ranged::{check_range_coded, decode_range_coded, encode_range_coded};
 use super::{Codec, ColumnEntry, SparseColumn};
-use crate::entropy::{ColumnShape, ValueCoding};
+use crate::entropy::{ColumnShape, Priors, ValueCoding};
 use crate::error::Result;
 
 /// Encoding 4.
@@ -39,7 +39,8 @@ impl Codec for Classed {
         stored: &[u8],
         e: &ColumnEntry,
         shape: &ColumnShape,
+        _: Option<&Priors>,
     ) -> Result<SparseColumn> {
-        decode_range_coded(j, stored, e, shape, ValueCoding::Classes)
+        decode_range_coded(j, stored, e, shape, ValueCoding::Classes, None)
     }
 }

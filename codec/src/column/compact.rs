@@ -7,15 +7,28 @@
 
 use super::ranged::{decode_range_coded, encode_range_coded};
 use super::{Codec, ColumnEntry, SparseColumn};
-use crate::entropy::{ColumnShape, ValueCoding};
+use crate::entropy::{ColumnShape, Priors, ValueCoding};
 use crate::error::Result;
 
 /// Encoding 5.
 pub(crate) struct Compact;
 
-/// The shortest encoding-5 payload: a 1-byte varint and the first scale
-/// code's 16 raw bits.
+/// The shortest encoding-5 or 6 payload: a 1-byte varint and the first
+/// nonzero scale code's 16 raw bits.
 const LEAST: u32 = 3;
+
+/// The lengths of an encoding-5 or 6 entry: at least one nonzero, equal
+/// stored and payload lengths of at least [`LEAST`].
+pub(super) fn check_compact_entry(e: &ColumnEntry) -> std::result::Result<(), String> {
+    let (nnz, raw_len, stored_len) = (e.nnz, e.raw_len, e.stored_len);
+    if nnz == 0 || raw_len != stored_len || stored_len < LEAST {
+        return Err(format!(
+            "{nnz} nonzeros with encoding {}, stored length {stored_len} and payload length {raw_len} (valid: k ≥ 1, equal lengths ≥ {LEAST})",
+            e.encoding as u8
+        ));
+    }
+    Ok(())
+}
 
 impl Codec for Compact {
     fn name(&self) -> &'static str {
@@ -35,13 +48,7 @@ impl Codec for Compact {
     }
 
     fn check_entry(&self, e: &ColumnEntry, _: &ColumnShape) -> std::result::Result<(), String> {
-        let (nnz, raw_len, stored_len) = (e.nnz, e.raw_len, e.stored_len);
-        if nnz == 0 || raw_len != stored_len || stored_len < LEAST {
-            return Err(format!(
-                "{nnz} nonzeros with encoding 5, stored length {stored_len} and payload length {raw_len} (valid: k ≥ 1, equal lengths ≥ {LEAST})"
-            ));
-        }
-        Ok(())
+        check_compact_entry(e)
     }
 
     fn decode(
@@ -50,7 +57,8 @@ impl Codec for Compact {
         stored: &[u8],
         e: &ColumnEntry,
         shape: &ColumnShape,
+        _: Option<&Priors>,
     ) -> Result<SparseColumn> {
-        decode_range_coded(j, stored, e, shape, ValueCoding::Compact)
+        decode_range_coded(j, stored, e, shape, ValueCoding::Compact, None)
     }
 }

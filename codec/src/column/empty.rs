@@ -2,7 +2,7 @@
 
 use super::plain::{check_payload_len, stored_len_problem};
 use super::{Codec, ColumnEntry, SparseColumn};
-use crate::entropy::ColumnShape;
+use crate::entropy::{ColumnShape, Priors};
 use crate::error::Result;
 
 /// Encoding 0.
@@ -29,7 +29,14 @@ impl Codec for Empty {
         Ok(())
     }
 
-    fn decode(&self, _: usize, _: &[u8], e: &ColumnEntry, _: &ColumnShape) -> Result<SparseColumn> {
+    fn decode(
+        &self,
+        _: usize,
+        _: &[u8],
+        e: &ColumnEntry,
+        _: &ColumnShape,
+        _: Option<&Priors>,
+    ) -> Result<SparseColumn> {
         Ok(SparseColumn {
             depth: e.depth as u32,
             ..Default::default()

@@ -3,9 +3,9 @@
 //! column-table entry. Each encoding is one file of this module that
 //! implements [`Codec`], and one line of [`encodings!`].
 
-use super::{classed, compact, empty, plain, ranged, zstd};
+use super::{classed, compact, empty, plain, primed, ranged, zstd};
 use super::{ColumnEntry, SparseColumn};
-use crate::entropy::{ColumnShape, ValueCoding};
+use crate::entropy::{ColumnShape, Priors, ValueCoding};
 use crate::error::{Error, Result};
 
 /// What a column encoding provides: one implementation per file.
@@ -37,13 +37,14 @@ pub(crate) trait Codec: Sync {
     fn check_entry(&self, e: &ColumnEntry, shape: &ColumnShape) -> std::result::Result<(), String>;
 
     /// Decodes column `j`'s stored payload (CRC checked) and checks every
-    /// position and value.
+    /// position and value; encoding 6 needs the file's `priors`.
     fn decode(
         &self,
         j: usize,
         stored: &[u8],
         e: &ColumnEntry,
         shape: &ColumnShape,
+        priors: Option<&Priors>,
     ) -> Result<SparseColumn>;
 }
 
@@ -88,9 +89,17 @@ encodings! {
     /// Encoding 4's coefficients with the scale codes in the streams and a
     /// varint stream length (version 8; `crate::entropy`).
     Compact = 5 => compact::Compact,
+    /// Encoding 5 with every context starting in the file's priors (chunk
+    /// PRIO; version 9; `crate::entropy`).
+    Primed = 6 => primed::Primed,
 }
 
 impl Encoding {
+    /// The encoding's name in messages and reports (`plain`, `compact`).
+    pub fn name(self) -> &'static str {
+        self.codec().name()
+    }
+
     /// How a range-coded payload codes its values; `None` for the others.
     pub fn value_coding(self) -> Option<ValueCoding> {
         self.codec().value_coding()
@@ -125,6 +134,7 @@ impl Encoding {
 pub(crate) fn read_column(
     data: &[u8],
     shape: &ColumnShape,
+    priors: Option<&Priors>,
     j: usize,
     e: &ColumnEntry,
 ) -> Result<SparseColumn> {
@@ -132,7 +142,7 @@ pub(crate) fn read_column(
     if e.encoding != Encoding::Empty {
         check_column_crc(j, e, stored)?;
     }
-    e.encoding.codec().decode(j, stored, e, shape)
+    e.encoding.codec().decode(j, stored, e, shape, priors)
 }
 
 /// Column `j`'s stored payload against the CRC of its table entry.

@@ -49,7 +49,9 @@ impl EncodedColumn {
     /// that is no larger than the plain payload (zstd is then not tried: on
     /// these payloads it gains less than range coding), else (and always
     /// with [`Entropy::Zstd`]) as [`EncodedColumn::new`]. This is the
-    /// writer's one choice of encoding.
+    /// writer's one choice of encoding per column; `LtmWriter::finish`
+    /// may then recode encoding-5 columns in encoding 6, from the file's
+    /// priors.
     pub fn coded(
         col: &SparseColumn,
         shape: &ColumnShape,

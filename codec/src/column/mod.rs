@@ -2,7 +2,7 @@
 //! ([`ColumnEntry`]), the writer's choice of encoding
 //! ([`EncodedColumn::coded`]) and the encodings themselves, one file each
 //! (`empty.rs`, `plain.rs`, `zstd.rs`, `ranged.rs`, `classed.rs`,
-//! `compact.rs`), listed
+//! `compact.rs`, `primed.rs`), listed
 //! once in [`Encoding`] (`encoding.rs`), which dispatches decoding and the
 //! column table's checks to them. Layout in docs/FORMAT.md.
 
@@ -12,6 +12,7 @@ mod empty;
 mod encoding;
 mod entry;
 mod plain;
+mod primed;
 mod ranged;
 mod sparse;
 #[cfg(test)]

@@ -3,7 +3,7 @@
 
 use super::{Codec, ColumnEntry, SparseColumn};
 use crate::bytes::Reader;
-use crate::entropy::ColumnShape;
+use crate::entropy::{ColumnShape, Priors};
 use crate::error::{Error, Result};
 
 fn put_varint(out: &mut Vec<u8>, mut v: u64) {
@@ -142,6 +142,7 @@ impl Codec for Plain {
         stored: &[u8],
         e: &ColumnEntry,
         shape: &ColumnShape,
+        _: Option<&Priors>,
     ) -> Result<SparseColumn> {
         decode_payload(stored, e, shape)
     }

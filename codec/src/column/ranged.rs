@@ -4,7 +4,7 @@
 //! writer no longer chooses it.
 
 use super::{Codec, ColumnEntry, SparseColumn};
-use crate::entropy::{self, ColumnShape, ValueCoding};
+use crate::entropy::{self, ColumnShape, Priors, ValueCoding};
 use crate::error::{Error, Result};
 
 /// Encoding 3.
@@ -37,8 +37,9 @@ impl Codec for Ranged {
         stored: &[u8],
         e: &ColumnEntry,
         shape: &ColumnShape,
+        _: Option<&Priors>,
     ) -> Result<SparseColumn> {
-        decode_range_coded(j, stored, e, shape, ValueCoding::ExpGolomb)
+        decode_range_coded(j, stored, e, shape, ValueCoding::ExpGolomb, None)
     }
 }
 
@@ -82,14 +83,21 @@ pub(super) fn decode_range_coded(
     e: &ColumnEntry,
     shape: &ColumnShape,
     coding: ValueCoding,
+    priors: Option<&Priors>,
 ) -> Result<SparseColumn> {
-    entropy::decode(stored, e.nnz as usize, shape, e.depth as u32, coding).map_err(
-        |err| match err {
-            Error::Corrupt { what, detail } => Error::Corrupt {
-                what,
-                detail: format!("column {j}: {detail}"),
-            },
-            other => other,
-        },
+    entropy::decode(
+        stored,
+        e.nnz as usize,
+        shape,
+        e.depth as u32,
+        coding,
+        priors,
     )
+    .map_err(|err| match err {
+        Error::Corrupt { what, detail } => Error::Corrupt {
+            what,
+            detail: format!("column {j}: {detail}"),
+        },
+        other => other,
+    })
 }

@@ -3,7 +3,7 @@
 
 use super::{read_column, ColumnEntry, EncodedColumn, Encoding, SparseColumn};
 use crate::compress::Entropy;
-use crate::entropy::ColumnShape;
+use crate::entropy::{encode_primed, ColumnShape, PriorTally};
 
 const SHAPE: ColumnShape = ColumnShape {
     width: 16,
@@ -62,12 +62,19 @@ fn every_encoding_round_trips() {
         } else {
             source
         };
-        let (bytes, raw_len) = codec
-            .encode(&source, &SHAPE, 3)
-            .unwrap_or_else(|| panic!("{encoding:?} stores the column"));
+        // Encoding 6 needs a file's priors: the writer codes it.
+        let priors = PriorTally::default().priors();
+        let coded = match encoding {
+            Encoding::Primed => {
+                assert!(codec.encode(&source, &SHAPE, 3).is_none());
+                encode_primed(&source, &SHAPE, &priors).map(|b| (b.len() as u32, b))
+            }
+            _ => codec.encode(&source, &SHAPE, 3).map(|(b, n)| (n, b)),
+        };
+        let (raw_len, bytes) = coded.unwrap_or_else(|| panic!("{encoding:?} stores the column"));
         let e = entry(&source, encoding, &bytes, raw_len);
         codec.check_entry(&e, &SHAPE).unwrap();
-        let back = read_column(&bytes, &SHAPE, 0, &e).unwrap();
+        let back = read_column(&bytes, &SHAPE, Some(&priors), 0, &e).unwrap();
         if encoding == Encoding::Empty {
             assert_eq!((back.depth, back.indices.len()), (1, 0));
         } else {
@@ -83,7 +90,7 @@ fn a_damaged_payload_fails_its_crc() {
     assert_eq!(coded.entry.encoding, Encoding::Compact);
     let mut bytes = coded.bytes.clone();
     bytes[0] ^= 1;
-    let err = read_column(&bytes, &SHAPE, 7, &coded.entry).unwrap_err();
+    let err = read_column(&bytes, &SHAPE, None, 7, &coded.entry).unwrap_err();
     assert!(err.to_string().contains("column 7"), "{err}");
 }
 

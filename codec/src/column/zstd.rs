@@ -2,7 +2,7 @@
 
 use super::plain::{check_payload_len, decode_payload};
 use super::{Codec, ColumnEntry, SparseColumn};
-use crate::entropy::ColumnShape;
+use crate::entropy::{ColumnShape, Priors};
 use crate::error::{Error, Result};
 
 /// Encoding 2.
@@ -41,6 +41,7 @@ impl Codec for Zstd {
         stored: &[u8],
         e: &ColumnEntry,
         shape: &ColumnShape,
+        _: Option<&Priors>,
     ) -> Result<SparseColumn> {
         let payload = ::zstd::bulk::decompress(stored, e.raw_len as usize)
             .map_err(|err| Error::corrupt("column payload", format!("column {j}: zstd: {err}")))?;

@@ -375,6 +375,8 @@ fn write_columns(
             mesh: t.raw().mesh(),
             empty_rows: Some(t.empty_rows()),
             column_norms: false,
+            // Encoding-5 columns coded again from the file's priors.
+            priors: true,
         },
     )?;
     let mut stats = CompressStats {

@@ -120,6 +120,7 @@ pub fn compress_pca(
                     mesh: raw.mesh(),
                     empty_rows: model.empty_rows(),
                     column_norms: false,
+                    priors: false,
                 },
                 &model,
                 opts.zstd_level,

@@ -18,8 +18,10 @@ pub const MAGIC: [u8; 8] = *b"\x89LTM\r\n\x1a\n";
 /// ([`FEATURE_RECEIVER_MESH`]), version 7 zstd-packed side chunks (a
 /// directory entry's unpacked length), version 8 the planar packing of
 /// SURF and COLS (chunk packing 2) and column encoding 5
-/// ([`Encoding::Compact`](crate::column::Encoding::Compact)).
-pub const VERSION: u32 = 8;
+/// ([`Encoding::Compact`](crate::column::Encoding::Compact)), version 9
+/// the per-file priors ([`FEATURE_PRIORS`]) and column encoding 6
+/// ([`Encoding::Primed`](crate::column::Encoding::Primed)).
+pub const VERSION: u32 = 9;
 /// The oldest format version this build reads.
 pub const MIN_VERSION: u32 = 1;
 /// Feature flag: an RGB albedo image is stored (chunk ALBD).
@@ -40,6 +42,10 @@ pub const FEATURE_COLUMN_NORMS: u32 = 8;
 /// stored (chunk MESH, [`ReceiverMesh`](crate::ReceiverMesh)); only with
 /// [`FEATURE_SURFACE`] and texture rows.
 pub const FEATURE_RECEIVER_MESH: u32 = 16;
+/// Feature flag (version 9): the starting states of column encoding 6's
+/// contexts are stored (chunk PRIO, [`Priors`](crate::entropy::Priors));
+/// wavelet modes only.
+pub const FEATURE_PRIORS: u32 = 32;
 /// The feature flags a reader of each version knows, by version − 1.
 const KNOWN_FEATURES: [u32; VERSION as usize] = [
     FEATURE_ALBEDO,
@@ -62,11 +68,17 @@ const KNOWN_FEATURES: [u32; VERSION as usize] = [
         | FEATURE_SURFACE
         | FEATURE_COLUMN_NORMS
         | FEATURE_RECEIVER_MESH,
+    FEATURE_ALBEDO
+        | FEATURE_EMPTY_ROWS
+        | FEATURE_SURFACE
+        | FEATURE_COLUMN_NORMS
+        | FEATURE_RECEIVER_MESH
+        | FEATURE_PRIORS,
 ];
 /// The chunks a file of version 7 or later may store zstd-packed: the side data known
-/// when the file is started, and the column table (which ltm writes after
-/// DATA, once every column is known).
-pub(super) const PACKABLE: [&[u8; 4]; 5] = [b"ALBD", b"EMPT", b"SURF", b"MESH", b"COLS"];
+/// when the file is started, the column table and the priors (which ltm
+/// writes after DATA, once every column is known).
+pub(super) const PACKABLE: [&[u8; 4]; 6] = [b"ALBD", b"EMPT", b"SURF", b"MESH", b"COLS", b"PRIO"];
 /// The chunks a version-8 file may store in planes ([`Packing::Planes`]):
 /// those made of 28-byte records.
 pub(super) const PLANAR: [&[u8; 4]; 2] = [b"SURF", b"COLS"];
@@ -194,7 +206,7 @@ fn check_packing(tag: &[u8; 4], encoding: u32, unpacked: u32, version: u32) -> R
         _ => Err(Error::corrupt(
             "chunk directory",
             format!(
-                "chunk {name}: encoding {encoding} with unpacked length {unpacked} in a version-{version} file (valid: 0 with 0; 1 (zstd) with a length >= 1 for ALBD, EMPT, SURF, MESH or COLS; from version 8, 2 (planes) with a length >= 1 for SURF or COLS)"
+                "chunk {name}: encoding {encoding} with unpacked length {unpacked} in a version-{version} file (valid: 0 with 0; 1 (zstd) with a length >= 1 for ALBD, EMPT, SURF, MESH, COLS or PRIO; from version 8, 2 (planes) with a length >= 1 for SURF or COLS)"
             ),
         )),
     }
@@ -214,6 +226,7 @@ fn check_directory(dir: &[DirEntry], start: u64, file_len: usize) -> Result<()> 
                 | b"SURF"
                 | b"MESH"
                 | b"NORM"
+                | b"PRIO"
                 | b"COLS"
                 | b"DATA"
                 | b"PCAM"

@@ -29,14 +29,15 @@
 mod directory;
 mod meta;
 mod planes;
+mod prime;
 mod read;
 #[cfg(feature = "fuzzing")]
 mod repair;
 mod write;
 
 pub use directory::{
-    FEATURE_ALBEDO, FEATURE_COLUMN_NORMS, FEATURE_EMPTY_ROWS, FEATURE_RECEIVER_MESH,
-    FEATURE_SURFACE, MAGIC, MAX_CHUNKS, MIN_VERSION, VERSION,
+    FEATURE_ALBEDO, FEATURE_COLUMN_NORMS, FEATURE_EMPTY_ROWS, FEATURE_PRIORS,
+    FEATURE_RECEIVER_MESH, FEATURE_SURFACE, MAGIC, MAX_CHUNKS, MIN_VERSION, VERSION,
 };
 pub use meta::Meta;
 pub(crate) use read::check_column_entry;

@@ -4,7 +4,7 @@
 
 use super::directory::{
     chunk, read_directory, stored_chunk, DirEntry, FEATURE_ALBEDO, FEATURE_COLUMN_NORMS,
-    FEATURE_EMPTY_ROWS, FEATURE_RECEIVER_MESH, FEATURE_SURFACE, MAGIC,
+    FEATURE_EMPTY_ROWS, FEATURE_PRIORS, FEATURE_RECEIVER_MESH, FEATURE_SURFACE, MAGIC,
 };
 use super::Meta;
 use crate::bytes::Reader;
@@ -14,7 +14,7 @@ use crate::column::{
 use crate::compress::Mode;
 use crate::dims::Dims;
 use crate::empty::EmptyRows;
-use crate::entropy::ColumnShape;
+use crate::entropy::{ColumnShape, Priors, PRIO_LEN};
 use crate::error::{Error, Result};
 use crate::fileio::{check_regular, read_at, Stamp};
 use crate::limits::{Charge, Limits};
@@ -66,6 +66,8 @@ pub struct LtmIndex {
     pub empty_rows: Option<EmptyRows>,
     /// Every column's priority norm (chunk NORM), if stored.
     pub column_norms: Option<Vec<f32>>,
+    /// The starting states of column encoding 6 (chunk PRIO), if stored.
+    pub priors: Option<Priors>,
     /// Where the column payloads (chunk DATA) lie in the file (empty in
     /// PCA files).
     pub data: std::ops::Range<usize>,
@@ -84,7 +86,9 @@ fn index_charge(
     columns: &[ColumnEntry],
     pca: Option<&PcaModel>,
 ) -> Result<Charge> {
+    // Room for a PRIO chunk's priors (about the chunk's size).
     let bytes = 4 * (albedo.as_ref().map_or(0, Vec::len) + norms.as_ref().map_or(0, Vec::len))
+        + PRIO_LEN
         + surface.as_ref().map_or(0, Surface::heap_bytes)
         + mesh.as_ref().map_or(0, ReceiverMesh::heap_bytes)
         + std::mem::size_of_val(columns)
@@ -224,6 +228,7 @@ impl LtmFile {
                 mesh,
                 empty_rows,
                 column_norms,
+                priors: None,
                 data: 0..0,
                 pca: Some(pca),
             });
@@ -235,6 +240,11 @@ impl LtmFile {
             .ok_or_else(|| missing("DATA"))?;
         let data = data_dir.offset as usize..(data_dir.offset + data_dir.len) as usize;
         let columns = read_column_table(&cols, &meta, version, data.len() as u64, limits)?;
+        let priors = read_priors(
+            chunk(bytes, &dir, b"PRIO", limits)?.as_deref(),
+            features & FEATURE_PRIORS != 0,
+            &columns,
+        )?;
         let charge = index_charge(
             limits,
             &albedo,
@@ -252,6 +262,7 @@ impl LtmFile {
             mesh,
             empty_rows,
             column_norms,
+            priors,
             data,
             pca: None,
         })
@@ -325,6 +336,11 @@ impl LtmFile {
         self.bytes.len() as u64
     }
 
+    /// The starting states of column encoding 6 (chunk PRIO), if stored.
+    pub fn priors(&self) -> Option<&Priors> {
+        self.index.priors.as_ref()
+    }
+
     /// Column `j` as stored (checked: CRC, positions, value range).
     pub fn column(&self, j: usize) -> Result<SparseColumn> {
         let Some(e) = self.index.columns.get(j) else {
@@ -337,6 +353,7 @@ impl LtmFile {
         read_column(
             &self.bytes[self.index.data.clone()],
             &ColumnShape::of(&self.index.meta),
+            self.index.priors.as_ref(),
             j,
             e,
         )
@@ -414,6 +431,33 @@ fn read_empty_rows(chunk: Option<&[u8]>, flagged: bool, dims: &Dims) -> Result<O
             "chunk directory",
             "EMPT chunk and empty-row feature flag disagree",
         )),
+    }
+}
+
+/// The PRIO chunk's priors: present exactly when the feature flag says so,
+/// and when a column has encoding 6.
+fn read_priors(
+    chunk: Option<&[u8]>,
+    flagged: bool,
+    columns: &[ColumnEntry],
+) -> Result<Option<Priors>> {
+    let priors = match (chunk, flagged) {
+        (Some(b), true) => Some(Priors::from_bytes(b)?),
+        (None, false) => None,
+        _ => {
+            return Err(Error::corrupt(
+                "chunk directory",
+                "PRIO chunk and priors feature flag disagree",
+            ))
+        }
+    };
+    let primed = columns.iter().position(|e| e.encoding == Encoding::Primed);
+    match (primed, &priors) {
+        (Some(j), None) => Err(Error::corrupt(
+            "column table",
+            format!("column {j} has encoding 6 (primed) in a file without priors (chunk PRIO)"),
+        )),
+        _ => Ok(priors),
     }
 }
 
@@ -594,7 +638,10 @@ fn check_mode_chunks(version: u32, meta: &Meta, dir: &[DirEntry]) -> Result<()> 
         ));
     }
     let (need, refuse): (&[&[u8; 4]], &[&[u8; 4]]) = if pca {
-        (&[b"PCAM", b"PCAB", b"PCAC"], &[b"COLS", b"DATA", b"NORM"])
+        (
+            &[b"PCAM", b"PCAB", b"PCAC"],
+            &[b"COLS", b"DATA", b"NORM", b"PRIO"],
+        )
     } else {
         (&[b"COLS", b"DATA"], &[b"PCAM", b"PCAB", b"PCAC"])
     };

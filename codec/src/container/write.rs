@@ -3,12 +3,14 @@
 
 use super::directory::{
     encode_head, pack, DirEntry, Packing, DIR_ENTRY_LEN, FEATURE_ALBEDO, FEATURE_COLUMN_NORMS,
-    FEATURE_EMPTY_ROWS, FEATURE_RECEIVER_MESH, FEATURE_SURFACE, HEADER_LEN,
+    FEATURE_EMPTY_ROWS, FEATURE_PRIORS, FEATURE_RECEIVER_MESH, FEATURE_SURFACE, HEADER_LEN,
 };
 use super::meta::{Meta, META_LEN};
+use super::prime::{prime, Data, BATCH_BYTES};
 use crate::bytes::Writer;
 use crate::column::{ColumnEntry, EncodedColumn};
 use crate::empty::EmptyRows;
+use crate::entropy::ColumnShape;
 use crate::error::{Error, Result};
 use crate::mesh::ReceiverMesh;
 use crate::output::AtomicFile;
@@ -30,6 +32,10 @@ pub struct OptionalChunks<'a> {
     /// Store every column's priority norm (chunk NORM): each pushed
     /// column must then carry one ([`EncodedColumn::with_norm`]).
     pub column_norms: bool,
+    /// Once every column is written, measure the file's priors (chunk
+    /// PRIO) from its encoding-5 columns and code each again in encoding 6
+    /// where that is smaller; kept only when the saving exceeds the chunk.
+    pub priors: bool,
 }
 
 /// A chunk as stored and how ([`pack`]).
@@ -50,6 +56,8 @@ pub struct LtmWriter {
     entries: Vec<ColumnEntry>,
     /// The columns' norms, when the file stores them.
     norms: Option<Vec<f32>>,
+    /// Whether [`OptionalChunks::priors`] was asked for.
+    priors: bool,
     data_start: u64,
     data_len: u64,
 }
@@ -125,7 +133,8 @@ impl LtmWriter {
             + empty_rows.is_some() as u64
             + surface.is_some() as u64
             + mesh.is_some() as u64
-            + extra.column_norms as u64;
+            + extra.column_norms as u64
+            + extra.priors as u64;
         let head_len = HEADER_LEN as u64 + DIR_ENTRY_LEN as u64 * chunks + 4;
         let norms_len = 4 * meta.dims.lights() as u64 * extra.column_norms as u64;
         let optional = |c: &Option<Stored>| c.as_ref().map_or(0, |a| a.0.len() as u64);
@@ -146,6 +155,7 @@ impl LtmWriter {
             empty_rows,
             entries: Vec::new(),
             norms: extra.column_norms.then(Vec::new),
+            priors: extra.priors,
             data_start,
             data_len: 0,
         };
@@ -217,17 +227,85 @@ impl LtmWriter {
             )));
         }
         self.meta.achieved_error = achieved_error;
-        let mut cols = Writer::default();
-        for e in &self.entries {
-            cols.u64(e.offset);
-            cols.u32(e.stored_len);
-            cols.u32(e.raw_len);
-            cols.u32(e.nnz);
-            cols.u32(e.crc);
-            cols.u8(e.depth);
-            cols.u8(e.encoding as u8);
-            cols.u16(0);
+        let prio = self.prime()?;
+        let (chunks, mut features) = self.side_chunks();
+        // The column table (and the priors) follow DATA: they are known
+        // only now, and packed when smaller.
+        let (cols, cols_packing) = pack(column_table(&self.entries), b"COLS");
+        // A PRIO entry is reserved when priors are asked for: without the
+        // chunk, its 32 bytes stay unused (zero) before the first chunk.
+        let head_len = HEADER_LEN + DIR_ENTRY_LEN * (chunks.len() + 2 + self.priors as usize) + 4;
+        let mut dir = Vec::new();
+        let mut offset = head_len as u64;
+        for (tag, (bytes, packing)) in &chunks {
+            dir.push(DirEntry {
+                tag: **tag,
+                offset,
+                len: bytes.len() as u64,
+                crc: crc32fast::hash(bytes),
+                packing: *packing,
+            });
+            offset += bytes.len() as u64;
         }
+        debug_assert_eq!(offset, self.data_start);
+        dir.push(DirEntry {
+            tag: *b"DATA",
+            offset,
+            len: self.data_len,
+            crc: 0,
+            packing: Packing::Stored,
+        });
+        let mut cols_offset = offset + self.data_len;
+        if let Some((bytes, packing)) = &prio {
+            dir.push(DirEntry {
+                tag: *b"PRIO",
+                offset: cols_offset,
+                len: bytes.len() as u64,
+                crc: crc32fast::hash(bytes),
+                packing: *packing,
+            });
+            cols_offset += bytes.len() as u64;
+            features |= FEATURE_PRIORS;
+        }
+        dir.push(DirEntry {
+            tag: *b"COLS",
+            offset: cols_offset,
+            len: cols.len() as u64,
+            crc: crc32fast::hash(&cols),
+            packing: cols_packing,
+        });
+        let mut head = encode_head(features, &dir);
+        head.resize(head_len, 0);
+        let io = |e| Error::io(&self.tmp, e);
+        let end = cols_offset + cols.len() as u64;
+        self.file
+            .seek(SeekFrom::Start(offset + self.data_len))
+            .map_err(io)?;
+        if let Some((bytes, _)) = &prio {
+            self.file.write_all(bytes).map_err(io)?;
+        }
+        self.file.write_all(&cols).map_err(io)?;
+        self.file.seek(SeekFrom::Start(0)).map_err(io)?;
+        self.file.write_all(&head).map_err(io)?;
+        for (_, (bytes, _)) in &chunks {
+            self.file.write_all(bytes).map_err(io)?;
+        }
+        let file = self
+            .file
+            .into_inner()
+            .map_err(|e| Error::io(&self.tmp, e.into_error()))?;
+        // Priming shortened DATA: drop what is left of the old columns.
+        let mut file = file;
+        file.file()
+            .set_len(end)
+            .map_err(|e| Error::io(&self.tmp, e))?;
+        file.commit()?;
+        Ok(end)
+    }
+
+    /// Moves the side chunks written before DATA out of the writer, META
+    /// first, with their feature flags.
+    fn side_chunks(&mut self) -> (Vec<(&'static [u8; 4], Stored)>, u32) {
         let meta = self.meta.encode();
         let mut chunks: Vec<(&[u8; 4], Stored)> = vec![(b"META", (meta, Packing::Stored))];
         let mut features = 0;
@@ -257,53 +335,46 @@ impl LtmWriter {
             ));
             features |= FEATURE_COLUMN_NORMS;
         }
-        // The column table follows DATA: it is known only now, and packed
-        // when smaller.
-        let (cols, cols_packing) = pack(cols.bytes, b"COLS");
-        let head_len = HEADER_LEN + DIR_ENTRY_LEN * (chunks.len() + 2) + 4;
-        let mut dir = Vec::new();
-        let mut offset = head_len as u64;
-        for (tag, (bytes, packing)) in &chunks {
-            dir.push(DirEntry {
-                tag: **tag,
-                offset,
-                len: bytes.len() as u64,
-                crc: crc32fast::hash(bytes),
-                packing: *packing,
-            });
-            offset += bytes.len() as u64;
-        }
-        debug_assert_eq!(offset, self.data_start);
-        dir.push(DirEntry {
-            tag: *b"DATA",
-            offset,
-            len: self.data_len,
-            crc: 0,
-            packing: Packing::Stored,
-        });
-        let cols_offset = offset + self.data_len;
-        dir.push(DirEntry {
-            tag: *b"COLS",
-            offset: cols_offset,
-            len: cols.len() as u64,
-            crc: crc32fast::hash(&cols),
-            packing: cols_packing,
-        });
-        let head = encode_head(features, &dir);
-        let io = |e| Error::io(&self.tmp, e);
-        self.file.write_all(&cols).map_err(io)?;
-        self.file.seek(SeekFrom::Start(0)).map_err(io)?;
-        self.file.write_all(&head).map_err(io)?;
-        for (_, (bytes, _)) in &chunks {
-            self.file.write_all(bytes).map_err(io)?;
-        }
-        let file = self
-            .file
-            .into_inner()
-            .map_err(|e| Error::io(&self.tmp, e.into_error()))?;
-        file.commit()?;
-        Ok(cols_offset + cols.len() as u64)
+        (chunks, features)
     }
+
+    /// Primes the file's columns when asked ([`OptionalChunks::priors`]):
+    /// the PRIO chunk as stored when the file keeps it (DATA and the
+    /// column table then hold the recoded columns).
+    fn prime(&mut self) -> Result<Option<Stored>> {
+        if !self.priors {
+            return Ok(None);
+        }
+        self.file.flush().map_err(|e| Error::io(&self.tmp, e))?;
+        let mut data = Data {
+            file: self.file.get_mut().file(),
+            path: &self.tmp,
+            start: self.data_start,
+            entries: &mut self.entries,
+            shape: ColumnShape::of(&self.meta),
+            batch_bytes: BATCH_BYTES,
+        };
+        Ok(prime(&mut data)?.map(|p| {
+            self.data_len = p.data_len;
+            p.prio
+        }))
+    }
+}
+
+/// The column table's bytes (chunk COLS, unpacked).
+fn column_table(entries: &[ColumnEntry]) -> Vec<u8> {
+    let mut cols = Writer::default();
+    for e in entries {
+        cols.u64(e.offset);
+        cols.u32(e.stored_len);
+        cols.u32(e.raw_len);
+        cols.u32(e.nnz);
+        cols.u32(e.crc);
+        cols.u8(e.depth);
+        cols.u8(e.encoding as u8);
+        cols.u16(0);
+    }
+    cols.bytes
 }
 
 /// The MESH chunk of a file with `meta`, if `extra` has a mesh: only

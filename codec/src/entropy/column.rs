@@ -1,4 +1,4 @@
-//! Column encodings 3, 4 and 5: a column's sparse coefficients range-coded
+//! Column encodings 3 to 6: a column's sparse coefficients range-coded
 //! with context modelling. The bands of the column image are visited coarse
 //! to fine, each in 4 × 4 blocks: a block flag says whether the block holds
 //! a kept coefficient, then each of its pixels a significance bit, then
@@ -10,11 +10,12 @@
 //! small. Contexts come from
 //! the band's level, the already coded neighbours and the parent in the
 //! next coarser band. Encoding 5 codes encoding 4's values, with the scale
-//! codes and the stream's length coded compactly. docs/FORMAT.md
-//! ("Encoding 3", "Encoding 4", "Encoding 5") is the
-//! specification.
+//! codes and the stream's length coded compactly; encoding 6 codes encoding
+//! 5 with the contexts starting in the file's priors (`priors.rs`).
+//! docs/FORMAT.md ("Encoding 3" to "Encoding 6") is the specification.
 
 use super::bits::{BitReader, BitWriter};
+use super::priors::Priors;
 use super::range::{Cdf, Context, Decoder, Encoder};
 use crate::column::SparseColumn;
 use crate::error::{Error, Result};
@@ -139,6 +140,16 @@ pub enum ValueCoding {
     /// stream's length as a varint: about 4 bytes a column where encoding 4
     /// spends `2·(d + 1)·C + 4`.
     Compact,
+    /// Encoding 6: encoding 5 with every context starting in the file's
+    /// [`Priors`] rather than at p = 1/2.
+    Primed,
+}
+
+impl ValueCoding {
+    /// Encodings 5 and 6: scale codes in the streams, a varint length.
+    fn compact(self) -> bool {
+        matches!(self, ValueCoding::Compact | ValueCoding::Primed)
+    }
 }
 
 /// Reads or writes symbols: the encoder codes the symbol given, the
@@ -208,8 +219,12 @@ impl BitIo for Reader<'_> {
     }
 }
 
-/// The adaptive contexts of one column, all starting at p = 1/2.
-struct Model {
+/// The adaptive contexts of one column: all starting at p = 1/2, or
+/// (encoding 6) in the file's [`Priors`].
+pub(super) struct Model {
+    /// Encoding 5's scale codes: "the same as the last nonzero code",
+    /// "zero".
+    scale: [Context; 2],
     /// Block flags: class × (left + up block flags, 0..=2) × parent.
     block: [Context; CLASSES * 3 * 2],
     /// Significance: class × (left + up, 0..=2) × (up-left + up-right,
@@ -235,7 +250,7 @@ struct Model {
 }
 
 /// Encoding 4's magnitude-class contexts.
-const CLASS_CONTEXTS: usize = MAG_CONTEXTS + 16;
+pub(super) const CLASS_CONTEXTS: usize = MAG_CONTEXTS + 16;
 
 /// Scale groups a column has at most (depth ≤ 15).
 const MAX_GROUPS: usize = 16;
@@ -245,9 +260,25 @@ const MAX_GROUPS: usize = 16;
 const MAG_CONTEXTS: usize = CLASSES * 4 + 2 * 16;
 
 impl Model {
-    fn new() -> Box<Model> {
+    /// The contexts encodings 5 and 6 use, in the order of the PRIO
+    /// chunk: the scale codes', block flags, significance, signs, the bits
+    /// below the leading one; then the magnitude classes.
+    pub(super) fn compact(&mut self) -> (impl Iterator<Item = &mut Context>, &mut [Cdf]) {
+        let binary = self
+            .scale
+            .iter_mut()
+            .chain(self.block.iter_mut())
+            .chain(self.sig.iter_mut())
+            .chain(self.sign.iter_mut())
+            .chain(self.top.iter_mut())
+            .chain(self.second.iter_mut().flatten());
+        (binary, &mut self.class[..])
+    }
+
+    pub(super) fn new() -> Box<Model> {
         let c = Context::default();
         Box::new(Model {
+            scale: [c; 2],
             block: [c; CLASSES * 3 * 2],
             sig: [c; CLASSES * 3 * 3 * 2],
             zero: [c; 7],
@@ -644,7 +675,29 @@ fn representable(col: &SparseColumn, shape: &ColumnShape) -> bool {
 /// (`u32`, little-endian), the stream and the raw bit stream (encoding 4).
 /// `None` when the column cannot be represented (see `representable`);
 /// the caller then stores it otherwise.
+/// Encoding 6 ([`ValueCoding::Primed`]) needs the file's priors: see
+/// [`encode_primed`]; `encode` refuses it.
 pub fn encode(col: &SparseColumn, shape: &ColumnShape, coding: ValueCoding) -> Option<Vec<u8>> {
+    if coding == ValueCoding::Primed {
+        return None;
+    }
+    encode_from(col, shape, coding, Model::new()).map(|(bytes, _)| bytes)
+}
+
+/// Encodes a column in encoding 6: encoding 5 with the contexts starting
+/// in `priors`.
+pub fn encode_primed(col: &SparseColumn, shape: &ColumnShape, priors: &Priors) -> Option<Vec<u8>> {
+    encode_from(col, shape, ValueCoding::Primed, priors.model()).map(|(bytes, _)| bytes)
+}
+
+/// [`encode`] with the contexts starting in `model`'s states; also returns
+/// their states at the end.
+pub(super) fn encode_from(
+    col: &SparseColumn,
+    shape: &ColumnShape,
+    coding: ValueCoding,
+    model: Box<Model>,
+) -> Option<(Vec<u8>, Box<Model>)> {
     if !representable(col, shape) {
         return None;
     }
@@ -662,19 +715,20 @@ pub fn encode(col: &SparseColumn, shape: &ColumnShape, coding: ValueCoding) -> O
         })
     };
     let mut enc = Writer::default();
-    if coding == ValueCoding::Compact {
+    let mut model = model;
+    if coding.compact() {
         let mut codes = col.scale_codes.clone();
         if codes.len() != (col.depth as usize + 1) * c {
             return None;
         }
-        scale_codes(&mut enc, &mut codes);
+        scale_codes(&mut enc, &mut codes, &mut model.scale);
     }
     let mut walk = Walk {
         io: &mut enc,
         truth,
         shape: *shape,
         coding,
-        model: Model::new(),
+        model,
         mag: vec![0; shape.width * shape.height],
         blocks: Vec::new(),
         left: col.indices.len(),
@@ -687,13 +741,14 @@ pub fn encode(col: &SparseColumn, shape: &ColumnShape, coding: ValueCoding) -> O
     if walk.left != 0 {
         return None;
     }
+    let model = walk.model;
     let range = enc.range.finish();
-    if coding == ValueCoding::Compact {
+    if coding.compact() {
         let mut out = Vec::with_capacity(range.len() + 8);
         put_varint(&mut out, u32::try_from(range.len()).ok()?);
         out.extend_from_slice(&range);
         out.extend_from_slice(&enc.raw.finish());
-        return Some(out);
+        return Some((out, model));
     }
     let mut out = Vec::with_capacity(2 * col.scale_codes.len());
     for e in &col.scale_codes {
@@ -706,17 +761,43 @@ pub fn encode(col: &SparseColumn, shape: &ColumnShape, coding: ValueCoding) -> O
         out.extend_from_slice(&range);
         out.extend_from_slice(&enc.raw.finish());
     }
-    Some(out)
+    Some((out, model))
 }
 
 /// Decodes a column of `nnz` kept positions at `depth` from `bytes`.
+/// Encoding 6 ([`ValueCoding::Primed`]) needs the file's `priors`; the
+/// others ignore them.
 pub fn decode(
     bytes: &[u8],
     nnz: usize,
     shape: &ColumnShape,
     depth: u32,
     coding: ValueCoding,
+    priors: Option<&Priors>,
 ) -> Result<SparseColumn> {
+    let model = match (coding, priors) {
+        (ValueCoding::Primed, Some(p)) => p.model(),
+        (ValueCoding::Primed, None) => {
+            return Err(Error::corrupt(
+                "column payload",
+                "encoding 6 in a file without priors (chunk PRIO)",
+            ))
+        }
+        _ => Model::new(),
+    };
+    decode_from(bytes, nnz, shape, depth, coding, model).map(|(col, _)| col)
+}
+
+/// [`decode`] with the contexts starting in `model`'s states; also returns
+/// their states at the end.
+pub(super) fn decode_from(
+    bytes: &[u8],
+    nnz: usize,
+    shape: &ColumnShape,
+    depth: u32,
+    coding: ValueCoding,
+    mut model: Box<Model>,
+) -> Result<(SparseColumn, Box<Model>)> {
     let c = shape.channels;
     if !(1..=MAX_CHANNELS).contains(&c) || !(2..=16).contains(&shape.bits) {
         return Err(Error::range("channels", c, "1..=3"));
@@ -736,14 +817,14 @@ pub fn decode(
         ));
     }
     let groups = (depth as usize + 1) * c;
-    let (mut dec, scale_codes) = if coding == ValueCoding::Compact {
+    let (mut dec, scale_codes) = if coding.compact() {
         let (range, raw) = split_compact(bytes)?;
         let mut dec = Reader {
             range: Decoder::new(range)?,
             raw: BitReader::new(raw),
         };
         let mut codes = vec![0u16; groups];
-        scale_codes(&mut dec, &mut codes);
+        scale_codes(&mut dec, &mut codes, &mut model.scale);
         (dec, codes)
     } else {
         fixed_streams(bytes, groups, coding)?
@@ -756,7 +837,7 @@ pub fn decode(
         truth: |_| None,
         shape: *shape,
         coding,
-        model: Model::new(),
+        model,
         mag: vec![0; pixels],
         blocks: Vec::new(),
         left: nnz,
@@ -769,7 +850,9 @@ pub fn decode(
         },
     };
     walk.run(depth)?;
-    let Walk { left, mag, .. } = walk;
+    let Walk {
+        left, mag, model, ..
+    } = walk;
     if left != 0 {
         return Err(Error::corrupt(
             "column payload",
@@ -799,7 +882,7 @@ pub fn decode(
             }
         }
     }
-    Ok(col)
+    Ok((col, model))
 }
 
 /// The scale codes (2 bytes each) and the streams of encodings 3 and 4,
@@ -834,13 +917,13 @@ fn fixed_streams(
 /// Codes a column's scale codes (encoding 5), in place: after a nonzero
 /// code, a modelled bit "the same as the last nonzero code"; else a
 /// modelled bit "zero"; else 16 raw bits.
-fn scale_codes<IO: BitIo>(io: &mut IO, codes: &mut [u16]) {
-    let (mut same, mut zero) = (Context::default(), Context::default());
+fn scale_codes<IO: BitIo>(io: &mut IO, codes: &mut [u16], contexts: &mut [Context; 2]) {
+    let [same, zero] = contexts;
     let mut last = None;
     for code in codes.iter_mut() {
         *code = match last {
-            Some(l) if io.bit(&mut same, *code == l) => l,
-            _ if io.bit(&mut zero, *code == 0) => 0,
+            Some(l) if io.bit(same, *code == l) => l,
+            _ if io.bit(zero, *code == 0) => 0,
             _ => io.raw(16, u32::from(*code)) as u16,
         };
         if *code != 0 {
@@ -918,13 +1001,13 @@ fn split_streams(stream: &[u8]) -> Result<(&[u8], &[u8])> {
 }
 
 #[cfg(test)]
-mod tests {
+pub(super) mod tests {
     use super::*;
     use proptest::prelude::*;
 
     /// A random column: shape, depth, and about `density` of its positions
     /// kept with values whose bit lengths follow `spread`.
-    fn column(
+    pub(in crate::entropy) fn column(
         (w, h, channels, bits): (usize, usize, usize, u32),
         depth_pick: u32,
         density: f64,
@@ -999,7 +1082,7 @@ mod tests {
         fn columns_round_trip(shape in shapes(), d in 0u32..8, density in 0.0f64..1.0, seed in any::<u64>(), coding in codings()) {
             let (col, shape) = column(shape, d, density, seed);
             let bytes = encode(&col, &shape, coding).unwrap();
-            let back = decode(&bytes, col.indices.len(), &shape, col.depth, coding).unwrap();
+            let back = decode(&bytes, col.indices.len(), &shape, col.depth, coding, None).unwrap();
             prop_assert_eq!(back, col);
         }
 
@@ -1008,13 +1091,13 @@ mod tests {
             let (col, shape) = column(shape, d, density, seed);
             let bytes = encode(&col, &shape, coding).unwrap();
             let n = col.indices.len();
-            let _ = decode(&bytes[..cut.index(bytes.len() + 1)], n, &shape, col.depth, coding);
+            let _ = decode(&bytes[..cut.index(bytes.len() + 1)], n, &shape, col.depth, coding, None);
             let mut altered = bytes.clone();
             if !altered.is_empty() {
                 let k = flip.index(altered.len());
                 altered[k] ^= 0x5A;
             }
-            if let Ok(back) = decode(&altered, n, &shape, col.depth, coding) {
+            if let Ok(back) = decode(&altered, n, &shape, col.depth, coding, None) {
                 // Whatever decodes is a valid column of the shape.
                 prop_assert_eq!(back.indices.len(), n);
                 prop_assert!(back.indices.windows(2).all(|p| p[0] < p[1]));
@@ -1028,7 +1111,7 @@ mod tests {
         fn random_bytes_never_panic(bytes in prop::collection::vec(any::<u8>(), 0..200), shape in shapes(), d in 0u32..8, nnz in 0usize..2000, coding in codings()) {
             let depth = d % (max_levels(shape.0, shape.1) + 1);
             let shape = ColumnShape { width: shape.0, height: shape.1, channels: shape.2, bits: shape.3 };
-            let _ = decode(&bytes, nnz, &shape, depth, coding);
+            let _ = decode(&bytes, nnz, &shape, depth, coding, None);
         }
     }
 
@@ -1042,11 +1125,19 @@ mod tests {
         ] {
             let bytes = encode(&col, &shape, coding).unwrap();
             let n = col.indices.len();
-            assert!(decode(&bytes, n + 1, &shape, 3, coding).is_err());
-            assert!(decode(&bytes, shape.width * shape.height + 1, &shape, 3, coding).is_err());
+            assert!(decode(&bytes, n + 1, &shape, 3, coding, None).is_err());
+            assert!(decode(
+                &bytes,
+                shape.width * shape.height + 1,
+                &shape,
+                3,
+                coding,
+                None
+            )
+            .is_err());
             // Shorter than its scale codes; far too short for its nonzeros.
-            assert!(decode(&bytes[..4 * 3 * 2 - 1], n, &shape, 3, coding).is_err());
-            assert!(decode(&bytes[..4 * 3 * 2 + 2], n, &shape, 3, coding).is_err());
+            assert!(decode(&bytes[..4 * 3 * 2 - 1], n, &shape, 3, coding, None).is_err());
+            assert!(decode(&bytes[..4 * 3 * 2 + 2], n, &shape, 3, coding, None).is_err());
         }
     }
 
@@ -1070,11 +1161,11 @@ mod tests {
         let len = u32::from_le_bytes(bad[scales..scales + 4].try_into().unwrap());
         bad[scales..scales + 4].copy_from_slice(&(len + (v4.len() - scales) as u32).to_le_bytes());
         let n = col.indices.len();
-        assert!(decode(&bad, n, &shape, 4, ValueCoding::Classes).is_err());
+        assert!(decode(&bad, n, &shape, 4, ValueCoding::Classes, None).is_err());
         // A payload of one encoding read as the other fails or decodes
         // something else; it never panics.
-        let _ = decode(&v3, n, &shape, 4, ValueCoding::Classes);
-        let _ = decode(&v4, n, &shape, 4, ValueCoding::ExpGolomb);
+        let _ = decode(&v3, n, &shape, 4, ValueCoding::Classes, None);
+        let _ = decode(&v4, n, &shape, 4, ValueCoding::ExpGolomb, None);
     }
 
     /// Encoding 5 is encoding 4 less the scale codes' and the length's
@@ -1096,7 +1187,7 @@ mod tests {
         );
         let n = col.indices.len();
         assert_eq!(
-            decode(&v5, n, &shape, 5, ValueCoding::Compact).unwrap(),
+            decode(&v5, n, &shape, 5, ValueCoding::Compact, None).unwrap(),
             col
         );
         let rest = |v: &[u8]| -> Vec<u8> {
@@ -1117,7 +1208,7 @@ mod tests {
             if !says.contains("runs past") {
                 bad.extend_from_slice(&r);
             }
-            let e = decode(&bad, n, &shape, 5, ValueCoding::Compact).unwrap_err();
+            let e = decode(&bad, n, &shape, 5, ValueCoding::Compact, None).unwrap_err();
             assert!(e.to_string().contains(says), "{len}: {e}");
         }
     }
@@ -1142,7 +1233,7 @@ mod tests {
             ValueCoding::Compact,
         ] {
             let bytes = encode(&col, &shape, coding).unwrap();
-            assert_eq!(decode(&bytes, 1, &shape, 0, coding).unwrap(), col);
+            assert_eq!(decode(&bytes, 1, &shape, 0, coding, None).unwrap(), col);
         }
     }
 

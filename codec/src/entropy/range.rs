@@ -50,6 +50,19 @@ impl Default for Context {
 }
 
 impl Context {
+    /// The probability of a 0 (in units of 2^−15) and the count of bits
+    /// seen (capped at 32).
+    pub(crate) fn state(&self) -> (u16, u16) {
+        (self.p, self.n)
+    }
+
+    /// A context in state `(p, n)`, if it is one a context can reach: `p`
+    /// within `[31, 2^15 − 31]`, `n ≤ 32`.
+    pub(crate) fn from_state(p: u16, n: u16) -> Option<Context> {
+        ((PROB_MIN..=PROB_ONE - PROB_MIN).contains(&(p as u32)) && n <= 1 << MAX_SHIFT)
+            .then_some(Context { p, n })
+    }
+
     /// Scaled bound of the 0 interval of a `range`.
     #[inline]
     fn bound(&self, range: u32) -> u32 {
@@ -127,6 +140,25 @@ impl Default for Cdf {
 }
 
 impl Cdf {
+    /// The free parts `a[i] = b[i] − i` (`i = 1..=16`) of the cumulative
+    /// frequencies and the count of symbols seen (capped at 32).
+    pub(crate) fn state(&self) -> ([u16; SYMBOLS - 1], u16) {
+        (
+            std::array::from_fn(|k| (self.inner[k] - INDEX[k]) as u16),
+            self.n,
+        )
+    }
+
+    /// A context in state `(a, n)`, if it is one a context can reach:
+    /// `0 ≤ a[1] ≤ … ≤ a[16] ≤ 2^15 − 17`, `n ≤ 32`.
+    pub(crate) fn from_state(a: [u16; SYMBOLS - 1], n: u16) -> Option<Cdf> {
+        let ordered = a.windows(2).all(|w| w[0] <= w[1]);
+        (ordered && a[SYMBOLS - 2] as i32 <= CDF_FREE && n <= 1 << MAX_SHIFT).then(|| Cdf {
+            inner: std::array::from_fn(|k| a[k] as i16 + INDEX[k]),
+            n,
+        })
+    }
+
     /// `b[s]`, `s = 0..=17`.
     #[cfg(test)]
     fn b(&self, s: usize) -> u32 {

@@ -446,6 +446,8 @@ pub(super) fn assemble(paths: &[PathBuf], out: &Path, limits: &Limits) -> Result
             mesh: raw.mesh(),
             empty_rows: Some(&empty),
             column_norms: false,
+            // Encoding-5 columns coded again from the file's priors.
+            priors: true,
         },
     )?;
     let mut stats = CompressStats {

@@ -46,35 +46,28 @@ pub const FEATURE_RECEIVER_MESH: u32 = 16;
 /// contexts are stored (chunk PRIO, [`Priors`](crate::entropy::Priors));
 /// wavelet modes only.
 pub const FEATURE_PRIORS: u32 = 32;
-/// The feature flags a reader of each version knows, by version − 1.
-const KNOWN_FEATURES: [u32; VERSION as usize] = [
-    FEATURE_ALBEDO,
-    FEATURE_ALBEDO | FEATURE_EMPTY_ROWS | FEATURE_SURFACE,
-    FEATURE_ALBEDO | FEATURE_EMPTY_ROWS | FEATURE_SURFACE,
-    FEATURE_ALBEDO | FEATURE_EMPTY_ROWS | FEATURE_SURFACE,
-    FEATURE_ALBEDO | FEATURE_EMPTY_ROWS | FEATURE_SURFACE | FEATURE_COLUMN_NORMS,
-    FEATURE_ALBEDO
-        | FEATURE_EMPTY_ROWS
-        | FEATURE_SURFACE
-        | FEATURE_COLUMN_NORMS
-        | FEATURE_RECEIVER_MESH,
-    FEATURE_ALBEDO
-        | FEATURE_EMPTY_ROWS
-        | FEATURE_SURFACE
-        | FEATURE_COLUMN_NORMS
-        | FEATURE_RECEIVER_MESH,
-    FEATURE_ALBEDO
-        | FEATURE_EMPTY_ROWS
-        | FEATURE_SURFACE
-        | FEATURE_COLUMN_NORMS
-        | FEATURE_RECEIVER_MESH,
-    FEATURE_ALBEDO
-        | FEATURE_EMPTY_ROWS
-        | FEATURE_SURFACE
-        | FEATURE_COLUMN_NORMS
-        | FEATURE_RECEIVER_MESH
-        | FEATURE_PRIORS,
+/// Each feature flag and the first version that knows it.
+const FEATURE_SINCE: [(u32, u32); 6] = [
+    (FEATURE_ALBEDO, 1),
+    (FEATURE_EMPTY_ROWS, 2),
+    (FEATURE_SURFACE, 2),
+    (FEATURE_COLUMN_NORMS, 5),
+    (FEATURE_RECEIVER_MESH, 6),
+    (FEATURE_PRIORS, 9),
 ];
+
+/// The feature flags a reader of `version` knows.
+const fn known_features(version: u32) -> u32 {
+    let mut known = 0;
+    let mut k = 0;
+    while k < FEATURE_SINCE.len() {
+        if FEATURE_SINCE[k].1 <= version {
+            known |= FEATURE_SINCE[k].0;
+        }
+        k += 1;
+    }
+    known
+}
 /// The chunks a file of version 7 or later may store zstd-packed: the side data known
 /// when the file is started, the column table and the priors (which ltm
 /// writes after DATA, once every column is known).
@@ -109,7 +102,7 @@ impl Packing {
 }
 /// The most chunks a file of any version holds: 4 required (a `pca`
 /// file's) plus one per feature bit.
-pub const MAX_CHUNKS: usize = 4 + KNOWN_FEATURES[VERSION as usize - 1].count_ones() as usize;
+pub const MAX_CHUNKS: usize = 4 + known_features(VERSION).count_ones() as usize;
 pub(super) const HEADER_LEN: usize = 24;
 pub(super) const DIR_ENTRY_LEN: usize = 32;
 
@@ -143,7 +136,7 @@ pub(super) fn read_directory(bytes: &[u8]) -> Result<(u32, u32, Vec<DirEntry>)> 
         });
     }
     let features = r.u32()?;
-    let known = KNOWN_FEATURES[version as usize - 1];
+    let known = known_features(version);
     if features & !known != 0 {
         return Err(Error::range(
             "feature flags",

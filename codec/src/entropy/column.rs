@@ -675,6 +675,7 @@ fn representable(col: &SparseColumn, shape: &ColumnShape) -> bool {
 /// (`u32`, little-endian), the stream and the raw bit stream (encoding 4).
 /// `None` when the column cannot be represented (see `representable`);
 /// the caller then stores it otherwise.
+///
 /// Encoding 6 ([`ValueCoding::Primed`]) needs the file's priors: see
 /// [`encode_primed`]; `encode` refuses it.
 pub fn encode(col: &SparseColumn, shape: &ColumnShape, coding: ValueCoding) -> Option<Vec<u8>> {
@@ -696,7 +697,7 @@ pub(super) fn encode_from(
     col: &SparseColumn,
     shape: &ColumnShape,
     coding: ValueCoding,
-    model: Box<Model>,
+    mut model: Box<Model>,
 ) -> Option<(Vec<u8>, Box<Model>)> {
     if !representable(col, shape) {
         return None;
@@ -715,7 +716,6 @@ pub(super) fn encode_from(
         })
     };
     let mut enc = Writer::default();
-    let mut model = model;
     if coding.compact() {
         let mut codes = col.scale_codes.clone();
         if codes.len() != (col.depth as usize + 1) * c {

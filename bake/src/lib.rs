@@ -31,6 +31,7 @@ pub mod inside;
 mod intersect;
 pub mod material;
 mod mesh;
+mod packet;
 pub mod plane;
 mod ply;
 mod rows;

@@ -123,8 +123,7 @@ impl Scene {
         let tables = Tables::new(self);
         let grid = Grid::face(order, side, plane.x_axis, plane.y_axis, -plane.normal());
         let mut scratch = Scratch::with_texels(self, texels);
-        let mut occluded = |o, d| self.occluded(o, d);
-        let stats = self.row_traced(&tables, &grid, &mut scratch, p, row, albedo, &mut occluded);
+        let stats = self.row_on(&tables, &grid, &mut scratch, p, row, albedo);
         Ok(PlaneRow {
             stats,
             point: self.mean_point(&tables, p),

@@ -66,9 +66,13 @@
 //!
 //! Shadow rays start at `x + ε·n_g` with ε = 10⁻⁵ × max(bounding-box
 //! diagonal, largest coordinate magnitude, 10⁻³) of the scene, and use the
-//! BVH's any-hit query.
+//! BVH's any-hit query. The rays of a square tile of texels (at most 256)
+//! are traced together as packets (`crate::packet`), with the answers each
+//! would get alone; each texel's sum still runs over its samples in order,
+//! so the values do not depend on the tiling.
 
 use crate::material::Material;
+use crate::packet::Packet;
 use crate::rows::RowSample;
 use crate::sampling::{hammersley, mix64, rotation, wrap};
 use crate::world::Scene;
@@ -214,6 +218,64 @@ impl Grid {
 /// Per-thread working memory.
 pub(crate) struct Scratch {
     acc: Vec<f64>,
+    tile: Tile,
+    packet: Packet,
+}
+
+/// Rays a tile of texels aims at: the bake traces each tile's rays
+/// together ([`Scene::occluded_packet`]), in packets of up to 64.
+const TILE_RAYS: usize = 256;
+
+/// Side, in texels, of the square tiles of a cubemap face whose rays are
+/// traced together: the largest of 8, 4, 2, 1 whose tile holds at most
+/// [`TILE_RAYS`] rays of `samples` each (8 for the default 4 samples).
+fn tile_side(samples: usize) -> usize {
+    [8, 4, 2, 1]
+        .into_iter()
+        .find(|&t| t * t * samples <= TILE_RAYS)
+        .unwrap_or(1)
+}
+
+/// The rays of one tile of texels, gathered to be traced together.
+#[derive(Default)]
+struct Tile {
+    /// Unit directions, texel by texel, each texel's in its sample order.
+    dirs: Vec<DVec3>,
+    /// Per ray: `jac · cos` and the BRDF term (the first C values).
+    terms: Vec<(f64, [f64; 3])>,
+    hits: Vec<bool>,
+    /// Per texel with rays: its index, its rays' range in `dirs`, and
+    /// `Ω_j / Σ jac`.
+    texels: Vec<(usize, std::ops::Range<usize>, f64)>,
+}
+
+impl Tile {
+    fn clear(&mut self) {
+        self.dirs.clear();
+        self.terms.clear();
+        self.hits.clear();
+        self.texels.clear();
+    }
+
+    /// Adds each texel's `Σ jac·cos·f` over its unoccluded rays, in sample
+    /// order, times `Ω_j / Σ jac`, into `acc` (C values per texel).
+    fn accumulate<const C: usize>(&self, acc: &mut [f64]) {
+        for (j, range, scale) in &self.texels {
+            let mut sum = [0.0f64; C];
+            for k in range.clone() {
+                if self.hits[k] {
+                    continue;
+                }
+                let (w, fr) = self.terms[k];
+                for ch in 0..C {
+                    sum[ch] += w * fr[ch];
+                }
+            }
+            for ch in 0..C {
+                acc[j * C + ch] += sum[ch] * scale;
+            }
+        }
+    }
 }
 
 impl Scratch {
@@ -225,6 +287,8 @@ impl Scratch {
     pub(crate) fn with_texels(scene: &Scene, texels: usize) -> Scratch {
         Scratch {
             acc: vec![0.0; texels * scene.channels as usize],
+            tile: Tile::default(),
+            packet: Packet::default(),
         }
     }
 }
@@ -249,22 +313,38 @@ impl Scene {
         row: &mut [f32],
         albedo_out: &mut [f32; 3],
     ) -> RowStats {
-        let mut occluded = |o, d| self.occluded(o, d);
-        let grid = &tables.grid;
-        self.row_traced(tables, grid, scratch, p, row, albedo_out, &mut occluded)
+        self.row_on(tables, &tables.grid, scratch, p, row, albedo_out)
     }
 
-    /// Every shadow ray row `p` traces, in the bake's order, as world-space
-    /// (origin, unit direction), and whether it was occluded: the rays a
-    /// ray tracer is measured on (`examples/shadow_rays.rs`).
-    pub fn shadow_rays(&self, p: usize, visit: &mut impl FnMut(DVec3, DVec3, bool)) {
+    /// [`Scene::row_into`] over the texels of `grid`.
+    pub(crate) fn row_on(
+        &self,
+        tables: &Tables,
+        grid: &Grid,
+        scratch: &mut Scratch,
+        p: usize,
+        row: &mut [f32],
+        albedo_out: &mut [f32; 3],
+    ) -> RowStats {
+        let mut packet = std::mem::take(&mut scratch.packet);
+        let mut occluded =
+            |o, d: &[DVec3], out: &mut [bool]| self.occluded_with(&mut packet, o, d, out);
+        let stats = self.row_traced(tables, grid, scratch, p, row, albedo_out, &mut occluded);
+        scratch.packet = packet;
+        stats
+    }
+
+    /// Every shadow ray row `p` traces, in the bake's order and in its
+    /// packets, as world-space origin, unit directions and whether each
+    /// was occluded: the rays a ray tracer is measured on
+    /// (`examples/shadow_rays.rs`).
+    pub fn shadow_rays(&self, p: usize, visit: &mut impl FnMut(DVec3, &[DVec3], &[bool])) {
         let tables = Tables::new(self);
         let mut scratch = Scratch::new(self);
         let mut row = vec![0.0; self.dims().row_len()];
-        let mut trace = |o, d| {
-            let hit = self.occluded(o, d);
-            visit(o, d, hit);
-            hit
+        let mut trace = |o, d: &[DVec3], out: &mut [bool]| {
+            self.occluded_packet(o, d, out);
+            visit(o, d, out);
         };
         self.row_traced(
             &tables,
@@ -278,7 +358,7 @@ impl Scene {
     }
 
     /// [`Scene::row_into`] over the texels of `grid`, with the shadow
-    /// query `occluded`.
+    /// query `occluded` (rays from one origin, one answer per direction).
     #[allow(clippy::too_many_arguments)]
     pub(crate) fn row_traced(
         &self,
@@ -288,10 +368,10 @@ impl Scene {
         p: usize,
         row: &mut [f32],
         albedo_out: &mut [f32; 3],
-        occluded: &mut impl FnMut(DVec3, DVec3) -> bool,
+        occluded: &mut impl FnMut(DVec3, &[DVec3], &mut [bool]),
     ) -> RowStats {
         let k_count = self.rows.samples_per_row() as usize;
-        let acc = &mut scratch.acc;
+        let (acc, tile) = (&mut scratch.acc, &mut scratch.tile);
         acc.iter_mut().for_each(|v| *v = 0.0);
         let mut stats = RowStats::default();
         let mut albedo_sum = [0.0f64; 3];
@@ -316,7 +396,8 @@ impl Scene {
                 }
                 lum_sum += lum;
                 let f = |_: &Material, _| [lum * FRAC_1_PI; 1];
-                stats.shadow_rays += self.integrate(tables, grid, &hit, seed, f, acc, occluded);
+                stats.shadow_rays +=
+                    self.integrate(tables, grid, &hit, seed, f, acc, tile, occluded);
             } else {
                 let w = 1.0 / k_count as f64;
                 stats.shadow_rays += self.integrate(
@@ -326,6 +407,7 @@ impl Scene {
                     seed,
                     |m: &Material, d| m.eval(hit.ns, d, wo).map(|v| v * w),
                     acc,
+                    tile,
                     occluded,
                 );
             }
@@ -349,7 +431,9 @@ impl Scene {
 
     /// Adds `∫_{texel j} V · f(ω) · max(0, n_s·ω) dω` for every texel into
     /// `acc` (C values per texel), with visibility V from `occluded`;
-    /// returns the shadow rays traced.
+    /// returns the shadow rays traced. The rays of each square tile of
+    /// texels ([`tile_side`]) are traced together; each texel's sum runs
+    /// over its samples in order, as it would one ray at a time.
     #[allow(clippy::too_many_arguments)]
     fn integrate<const C: usize>(
         &self,
@@ -359,68 +443,88 @@ impl Scene {
         seed: u64,
         f: impl Fn(&Material, DVec3) -> [f64; C],
         acc: &mut [f64],
-        occluded: &mut impl FnMut(DVec3, DVec3) -> bool,
+        tile: &mut Tile,
+        occluded: &mut impl FnMut(DVec3, &[DVec3], &mut [bool]),
     ) -> u64 {
         let n = grid.n;
-        let nf = n as f64;
-        let (ns, ng) = (hit.ns, hit.ng);
-        let origin = hit.point + self.epsilon * ng;
-        let material = &self.materials[hit.material];
-        let stride = n + 1;
+        let origin = hit.point + self.epsilon * hit.ng;
         let mut rays = 0;
+        let side = tile_side(tables.texel_pts.len());
         for face in 0..grid.faces.len() {
-            let cbase = face * stride * stride;
-            for r in 0..n {
-                for c in 0..n {
-                    let i0 = cbase + r * stride + c;
-                    let quad = [
-                        grid.corners[i0],
-                        grid.corners[i0 + 1],
-                        grid.corners[i0 + stride],
-                        grid.corners[i0 + stride + 1],
-                    ];
-                    if quad.iter().all(|d| ns.dot(*d) <= 0.0)
-                        || quad.iter().all(|d| ng.dot(*d) <= 0.0)
-                    {
-                        continue;
-                    }
-                    let j = (face * n + r) * n + c;
-                    let rot = rotation(seed ^ (j as u64).wrapping_mul(0x9E37_79B9_7F4A_7C15));
-                    let mut sum_j = 0.0;
-                    let mut sum = [0.0f64; C];
-                    for &[u, v] in &tables.texel_pts {
-                        let s = (c as f64 + wrap(u, rot[0])) / nf;
-                        let t = (r as f64 + wrap(v, rot[1])) / nf;
-                        let (a, b) = (2.0 * s - 1.0, 2.0 * t - 1.0);
-                        let (a, b) = (grid.half * a, grid.half * b);
-                        let q = 1.0 + a * a + b * b;
-                        let jac = 1.0 / (q * q.sqrt());
-                        sum_j += jac;
-                        let d = grid.direction(face, s, t);
-                        let cos = ns.dot(d);
-                        if cos <= 0.0 || ng.dot(d) <= 0.0 {
-                            continue;
-                        }
-                        let fr = f(material, d);
-                        if fr.iter().all(|&v| v == 0.0) {
-                            continue;
-                        }
-                        rays += 1;
-                        if occluded(origin, d) {
-                            continue;
-                        }
-                        let w = jac * cos;
-                        for ch in 0..C {
-                            sum[ch] += w * fr[ch];
+            for r0 in (0..n).step_by(side) {
+                for c0 in (0..n).step_by(side) {
+                    tile.clear();
+                    for r in r0..(r0 + side).min(n) {
+                        for c in c0..(c0 + side).min(n) {
+                            self.texel_rays(tables, grid, hit, seed, &f, [face, r, c], tile);
                         }
                     }
-                    let scale = grid.omega[r * n + c] / sum_j;
-                    for ch in 0..C {
-                        acc[j * C + ch] += sum[ch] * scale;
-                    }
+                    tile.hits.resize(tile.dirs.len(), false);
+                    occluded(origin, &tile.dirs, &mut tile.hits);
+                    rays += tile.dirs.len() as u64;
+                    tile.accumulate::<C>(acc);
                 }
             }
         }
         rays
+    }
+
+    /// Appends to `tile` the shadow rays of texel `(face, r, c)` of `grid`
+    /// from `hit` (those below either normal, or of zero BRDF, skipped) and
+    /// the texel's record; nothing for a texel wholly below either normal.
+    #[allow(clippy::too_many_arguments)]
+    fn texel_rays<const C: usize>(
+        &self,
+        tables: &Tables,
+        grid: &Grid,
+        hit: &crate::world::Hit,
+        seed: u64,
+        f: &impl Fn(&Material, DVec3) -> [f64; C],
+        [face, r, c]: [usize; 3],
+        tile: &mut Tile,
+    ) {
+        let n = grid.n;
+        let nf = n as f64;
+        let (ns, ng) = (hit.ns, hit.ng);
+        let material = &self.materials[hit.material];
+        let stride = n + 1;
+        let i0 = face * stride * stride + r * stride + c;
+        let quad = [
+            grid.corners[i0],
+            grid.corners[i0 + 1],
+            grid.corners[i0 + stride],
+            grid.corners[i0 + stride + 1],
+        ];
+        if quad.iter().all(|d| ns.dot(*d) <= 0.0) || quad.iter().all(|d| ng.dot(*d) <= 0.0) {
+            return;
+        }
+        let j = (face * n + r) * n + c;
+        let rot = rotation(seed ^ (j as u64).wrapping_mul(0x9E37_79B9_7F4A_7C15));
+        let first = tile.dirs.len();
+        let mut sum_j = 0.0;
+        for &[u, v] in &tables.texel_pts {
+            let s = (c as f64 + wrap(u, rot[0])) / nf;
+            let t = (r as f64 + wrap(v, rot[1])) / nf;
+            let (a, b) = (2.0 * s - 1.0, 2.0 * t - 1.0);
+            let (a, b) = (grid.half * a, grid.half * b);
+            let q = 1.0 + a * a + b * b;
+            let jac = 1.0 / (q * q.sqrt());
+            sum_j += jac;
+            let d = grid.direction(face, s, t);
+            let cos = ns.dot(d);
+            if cos <= 0.0 || ng.dot(d) <= 0.0 {
+                continue;
+            }
+            let fr = f(material, d);
+            if fr.iter().all(|&v| v == 0.0) {
+                continue;
+            }
+            let mut term = [0.0; 3];
+            term[..C].copy_from_slice(&fr);
+            tile.dirs.push(d);
+            tile.terms.push((jac * cos, term));
+        }
+        let scale = grid.omega[r * n + c] / sum_j;
+        tile.texels.push((j, first..tile.dirs.len(), scale));
     }
 }

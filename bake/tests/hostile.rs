@@ -263,6 +263,39 @@ fn escapes(scene: &Scene, m: &Mesh, c: DVec3) -> Vec<String> {
             bad.push(format!("from outside at {t}"));
         }
     }
+    // The bake traces its rays as packets: the same answers, ray by ray.
+    for o in insides.into_iter().chain(goals.iter().step_by(7).copied()) {
+        let dirs: Vec<DVec3> = goals
+            .iter()
+            .map(|&t| (t - o).normalize())
+            .filter(|d| d.is_finite())
+            .chain(sphere_dirs(200))
+            .collect();
+        bad.extend(packet_disagreements(scene, o, &dirs));
+    }
+    bad
+}
+
+/// The rays from `o` along `dirs` whose packet answer
+/// (`Scene::occluded_packet`, in packets of 1, 7 and all of them) differs
+/// from the single ray's.
+fn packet_disagreements(scene: &Scene, o: DVec3, dirs: &[DVec3]) -> Vec<String> {
+    let single: Vec<bool> = dirs.iter().map(|&d| scene.occluded(o, d)).collect();
+    let mut bad = Vec::new();
+    for size in [1, 7, dirs.len().max(1)] {
+        for (k, chunk) in dirs.chunks(size).enumerate() {
+            let mut out = vec![!single[k * size]; chunk.len()];
+            scene.occluded_packet(o, chunk, &mut out);
+            for (i, (&got, &want)) in out.iter().zip(&single[k * size..]).enumerate() {
+                if got != want {
+                    bad.push(format!(
+                        "packet of {size} from {o} along {}: {got}, one ray {want}",
+                        chunk[i]
+                    ));
+                }
+            }
+        }
+    }
     bad
 }
 
@@ -581,6 +614,79 @@ fn degenerate_geometry_bakes() {
             assert!(rows == single, "{name} × {n}: differs from one copy");
         }
     }
+}
+
+/// Packets of rays answer as the rays one at a time in degenerate and
+/// thin geometry: a comb of slivers a thousandth wide, coincident and
+/// nested triangles, from origins inside, on and outside the scene's box,
+/// along directions with zero and negative-zero components and nearly
+/// parallel ones.
+#[test]
+fn packets_answer_as_single_rays() {
+    let mut obj = String::new();
+    let face = |obj: &mut String, p: [[f64; 3]; 3]| {
+        for v in p {
+            *obj += &format!("v {} {} {}\n", v[0], v[1], v[2]);
+        }
+        let k = obj.lines().filter(|l| l.starts_with('v')).count();
+        *obj += &format!("f {} {} {}\n", k - 2, k - 1, k);
+    };
+    for i in 0..40 {
+        let x = -1.0 + i as f64 * 0.05;
+        face(
+            &mut obj,
+            [[x, 0.0, -1.0], [x + 1e-3, 0.0, -1.0], [x, 1.5, 1.0]],
+        );
+    }
+    for i in 0..50 {
+        let s = 0.3 + (i % 5) as f64 * 1e-3;
+        face(&mut obj, [[-s, 0.8, -s], [-s, 0.8, s], [s, 0.8, 0.0]]);
+    }
+    let toml = scene_toml(
+        FAR_CAMERA,
+        LIGHTING,
+        "[[meshes]]\npath = \"m.obj\"\nmaterial = \"grey\"\n\
+         [[quads]]\ncenter = [0.0, -0.2, 0.0]\nsize = [4.0, 4.0]\nmaterial = \"grey\"\n",
+    );
+    let (_d, r) = build(&toml, &[("m.obj", obj.as_bytes())]);
+    let scene = r.expect("comb scene");
+    let mut dirs = sphere_dirs(500);
+    for axis in [DVec3::X, DVec3::Y, DVec3::Z] {
+        for s in [1.0, -1.0] {
+            dirs.push(axis * s);
+            // Negative zeros in the other components.
+            dirs.push(axis * s + DVec3::splat(-0.0));
+        }
+    }
+    let up = DVec3::new(0.01, 1.0, 0.02).normalize();
+    dirs.extend(
+        (0..64).map(|i| (up + DVec3::new(i as f64 * 1e-4, 0.0, -(i as f64) * 1e-4)).normalize()),
+    );
+    let origins = [
+        DVec3::new(0.0, -0.19, 0.0),
+        DVec3::new(0.01, 0.5, 0.0),
+        DVec3::new(0.0, 0.8, 0.0),
+        DVec3::new(-0.95, 0.0, -1.0),
+        DVec3::new(3.0, 2.0, 5.0),
+        DVec3::new(0.0, 40.0, 0.0),
+    ];
+    let mut bad = Vec::new();
+    let mut occluded = 0;
+    for o in origins {
+        occluded += dirs.iter().filter(|&&d| scene.occluded(o, d)).count();
+        bad.extend(packet_disagreements(&scene, o, &dirs));
+    }
+    assert!(
+        bad.is_empty(),
+        "{} disagree, e.g. {:?}",
+        bad.len(),
+        &bad[..bad.len().min(4)]
+    );
+    let total = origins.len() * dirs.len();
+    assert!(
+        occluded > total / 10 && occluded < total * 9 / 10,
+        "{occluded} of {total}"
+    );
 }
 
 // ---------------------------------------------------------------------------

@@ -230,11 +230,14 @@ fn shadow_rays_are_the_rows_rays() {
         let mut row = vec![0.0; scene.dims().row_len()];
         let stats = scene.transport_row(p, &mut row, &mut [0.0; 3]);
         let mut count = 0u64;
-        scene.shadow_rays(p, &mut |o, d, hit| {
-            assert!(o.is_finite() && (d.length() - 1.0).abs() < 1e-9, "{o} {d}");
-            assert_eq!(hit, scene.occluded(o, d));
-            occluded += hit as u64;
-            count += 1;
+        scene.shadow_rays(p, &mut |o, dirs, hits| {
+            assert_eq!(dirs.len(), hits.len());
+            for (&d, &hit) in dirs.iter().zip(hits) {
+                assert!(o.is_finite() && (d.length() - 1.0).abs() < 1e-9, "{o} {d}");
+                assert_eq!(hit, scene.occluded(o, d));
+                occluded += hit as u64;
+                count += 1;
+            }
         });
         assert_eq!(count, stats.shadow_rays, "pixel {p}");
         total += count;

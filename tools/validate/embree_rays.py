@@ -3,9 +3,10 @@
 
 For each scene, `bake/examples/shadow_rays.rs` takes the shadow rays that
 `ltm bake` traces for evenly spaced rows (exactly those rays, in the bake's
-order), replays them through ltm's tracer (`Scene::occluded`, obvhs) on one
-thread and on all threads, and writes the rays, its answers and the traced
-triangles (world units). This script loads the same triangles into Mitsuba 3
+order), replays them through ltm's tracer as the bake does
+(`Scene::occluded_packet`, packets over obvhs's BVH) on one thread and on
+all threads, and one at a time (`Scene::occluded`) on one thread, and
+writes the rays, its answers and the traced triangles (world units). This script loads the same triangles into Mitsuba 3
 (llvm variant, whose ray tracing is Embree), traces the same rays with
 `Scene.ray_test` on one thread and on all threads, and reports both rates
 (median of 5 runs after a warm-up), their ratio, and the fraction of rays
@@ -133,9 +134,10 @@ def main():
         scenes = [("default", os.path.join(ROOT, "assets/scenes/default.toml"))]
         scenes += own_scenes(tmp)
         print(f"| scene ({args.size}x{args.size * 3 // 4}, n = {args.face_res}) | rays | triangles "
-              f"| ltm 1 thread | Embree 1 thread | ltm {cores} threads | Embree {cores} threads "
-              f"| Embree/ltm (1 thread) | answers equal |")
-        print("|---|---|---|---|---|---|---|---|---|")
+              f"| ltm 1 thread (one ray at a time) | ltm 1 thread (packets) | Embree 1 thread "
+              f"| ltm {cores} threads (packets) | Embree {cores} threads "
+              f"| Embree/ltm (1 thread, packets) | answers equal |")
+        print("|---|---|---|---|---|---|---|---|---|---|")
         for name, scene in scenes:
             out = os.path.join(tmp, name)
             r = ltm_rays(scene, args, out)
@@ -143,6 +145,7 @@ def main():
             all_, _ = embree_rays(mi, dr, out, cores)
             m = 1e6
             print(f"| {name} | {r['rays']} | {r['triangles']} "
+                  f"| {r['single_rays_per_s_one_thread'] / m:.2f} M/s "
                   f"| {r['ltm_rays_per_s_one_thread'] / m:.2f} M/s | {one / m:.2f} M/s "
                   f"| {r['ltm_rays_per_s_all_threads'] / m:.2f} M/s | {all_ / m:.2f} M/s "
                   f"| {one / r['ltm_rays_per_s_one_thread']:.2f} | {100 * one_agree:.3f} % |",

@@ -450,8 +450,9 @@ impl Scene {
     }
 
     /// [`Scene::occluded`] for rays from one `origin` along `dirs`, traced
-    /// as packets ([`crate::packet`]): `out[i]` for `dirs[i]`, the same
-    /// answers, faster when the directions are close.
+    /// together in packets of up to 64 (masked packet traversal): `out[i]`
+    /// for `dirs[i]`, the same answers, faster when the directions are
+    /// close.
     pub fn occluded_packet(&self, origin: DVec3, dirs: &[DVec3], out: &mut [bool]) {
         self.occluded_with(&mut Packet::default(), origin, dirs, out);
     }

@@ -357,6 +357,27 @@ impl Scene {
         })
     }
 
+    /// Whether `origin` is finite and strictly inside the scene's box.
+    #[inline(always)]
+    fn strictly_inside(&self, origin: DVec3) -> bool {
+        let [lo, hi] = self.bounds;
+        origin.is_finite() && origin.cmpgt(lo).all() && origin.cmplt(hi).all()
+    }
+
+    /// [`Scene::clipped`] for an `origin` strictly inside the scene's box,
+    /// without the slab test: every axis then puts the box's near face
+    /// strictly behind the origin, so the entry distance is exactly `+0.0`
+    /// and the ray never misses the box.
+    #[inline(always)]
+    fn clipped_inside(&self, origin: DVec3, dir: DVec3) -> Option<(Vec3A, Vec3A, f64)> {
+        if !dir.is_finite() || dir == DVec3::ZERO {
+            return None;
+        }
+        let near = 0.0;
+        let start = ((origin + dir * near) * self.scale).as_vec3a();
+        Some((start, dir.as_vec3a() + Vec3A::ZERO, near))
+    }
+
     /// Where the ray from `origin` along unit `dir` enters the scene's box,
     /// in trace space, its direction there, and the world distance to the
     /// entry; `None` when it misses the box.
@@ -467,10 +488,17 @@ impl Scene {
     ) {
         assert_eq!(dirs.len(), out.len(), "one answer per direction");
         out.fill(false);
+        let inside = self.strictly_inside(origin);
         for (start, chunk) in dirs.chunks(PACKET).enumerate() {
             packet.clear();
             for (i, &d) in chunk.iter().enumerate() {
-                if let Some((start, d, _)) = self.clipped(origin, d) {
+                let clipped = if inside {
+                    self.clipped_inside(origin, d)
+                } else {
+                    self.clipped(origin, d)
+                };
+                debug_assert_eq!(bits(clipped), bits(self.clipped(origin, d)));
+                if let Some((start, d, _)) = clipped {
                     packet.push(i, start, d);
                 }
             }
@@ -491,6 +519,18 @@ impl Scene {
             .bvh
             .ray_traverse_miss(t.ray, |r, id| t.wt.hit(&self.tris[id], r.tmin, r.tmax))
     }
+}
+
+/// A clipped ray's start, direction and entry distance as bits (so that
+/// `-0.0` and `+0.0` differ).
+fn bits(c: Option<(Vec3A, Vec3A, f64)>) -> Option<([u32; 3], [u32; 3], u64)> {
+    c.map(|(s, d, near)| {
+        (
+            s.to_array().map(f32::to_bits),
+            d.to_array().map(f32::to_bits),
+            near.to_bits(),
+        )
+    })
 }
 
 /// Loads every mesh and quad of `desc` into world-space triangles.

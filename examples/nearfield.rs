@@ -1,8 +1,10 @@
 //! A near-field image: every pixel of a scene's camera baked over a light
 //! plane's face (`Scene::plane_row`) and lit by a textured area light
 //! (`ltm::relight::nearfield`). The input of the Mitsuba check
-//! `tools/validate/mitsuba_nearfield.py`; not yet a CLI command (the file
-//! format does not yet store plane-basis rows).
+//! `tools/validate/mitsuba_nearfield.py`, which bakes with the scene's own
+//! direction samples and the rows' mean hit points. The command line does
+//! the same from a file: a `[light_plane]` in the scene, `ltm bake`, `ltm
+//! compress`, `ltm relight --area-light`.
 //!
 //! ```text
 //! cargo run --release --example nearfield -- SCENE.toml \

@@ -391,3 +391,161 @@ fn sees_whole_light(
                 && placement.center[a] + half <= position[a] + reach
         })
 }
+
+/// The point scene with a `[light_plane]` at `height` (lit side down),
+/// baked at face resolution 4 (the distant matrix is not what is checked
+/// here) and compressed: the `.ltm` file's path.
+fn stored_bake(dir: &Path, height: f64) -> std::path::PathBuf {
+    let base = Path::new(env!("CARGO_MANIFEST_DIR")).join("tools/validate/point");
+    let text = std::fs::read_to_string(base.join("scene.toml")).unwrap()
+        + &format!(
+            "\n[light_plane]\norigin = [0.0, {height}, 0.0]\nx_axis = [1.0, 0.0, 0.0]\ny_axis = [0.0, 0.0, 1.0]\n"
+        );
+    let mut desc = SceneDesc::parse(&text, &base, &base.join("scene.toml")).unwrap();
+    desc.apply(&ltm::bake::Overrides {
+        face_res: Some(4),
+        ..Default::default()
+    })
+    .unwrap();
+    let scene = Scene::build(&desc).unwrap();
+    let raw = dir.join(format!("p{height}.raw"));
+    let progress = ltm::codec::Progress::NONE;
+    ltm::bake(&scene, &raw, &ltm::BakeOptions::default(), progress).unwrap();
+    let out = dir.join(format!("p{height}.ltm"));
+    let store = ltm::RawStore::open(&raw).unwrap();
+    ltm::compress(&store, &out, &ltm::CompressOptions::default(), progress).unwrap();
+    out
+}
+
+/// The stored path end to end: `[light_plane]` in the scene, the bake's
+/// near-field rows (raw store version 6), the `.ltm` file's NEAR chunk and
+/// [`NearField`](ltm::relight::nearfield::NearField), each row lit at its
+/// stored surface point. It must equal the library's rows
+/// (`Scene::plane_row`) lit at the same points, and meet the same bounds
+/// against Mitsuba 3 as `near_and_far_lights_against_mitsuba` (measured:
+/// near 3.5 %, far 2.3 %).
+#[test]
+fn stored_near_field_rows_against_mitsuba_and_the_library() {
+    use ltm::relight::nearfield::{AreaLight, NearField, NearFieldTerms};
+    let dir = tempfile::tempdir().unwrap();
+    let eye = DVec3::new(0.3, 1.3, 3.0);
+    let (tw, th, texels) = read_npy("nearfield_light.npy");
+    let texture = LightTexture::new(tw, th, texels).unwrap();
+    let face = PlaneFace {
+        order: 32,
+        side: 4.0,
+    };
+    let cases = [
+        ("near", 1.5, [0.15, 0.25], [0.8, 0.6], 0.045),
+        ("far", 4.0, [0.3, 0.5], [2.4, 1.8], 0.035),
+    ];
+    for (name, height, center, size, bound) in cases {
+        let path = stored_bake(dir.path(), height);
+        let mut file = ltm::LtmFile::open(&path).unwrap();
+        assert!(file.near_field().is_some(), "the NEAR chunk is stored");
+        let near = NearField::take(&mut file).unwrap();
+        assert!(file.near_field().is_none(), "taken out of the file");
+        let placement = Placement {
+            center,
+            size,
+            intensity: 4.0,
+        };
+        let light = AreaLight {
+            texture: texture.clone(),
+            placement,
+        };
+        let image = near.render(&[light], NearFieldTerms::ALL).unwrap();
+        let (w, h, reference) = read_npy(&format!("nearfield_mitsuba_{name}.npy"));
+        assert_eq!(image.len(), w * h);
+        // Rows at their stored surface points (SURF).
+        let points: Vec<Option<DVec3>> = file
+            .surface()
+            .unwrap()
+            .points()
+            .iter()
+            .map(|s| {
+                s.valid
+                    .then(|| DVec3::from_array(s.position.map(f64::from)))
+            })
+            .collect();
+        let plane = LightPlane::new(DVec3::new(0.0, height, 0.0), DVec3::X, DVec3::Z).unwrap();
+        library_rows_agree(&path, &image, &points, (&plane, &placement, &texture, face));
+        let edge = silhouettes(&points, eye, w, h);
+        let (mut num, mut den, mut count) = (0.0, 0.0, 0usize);
+        for p in 0..w * h {
+            let Some(point) = points[p] else { continue };
+            let row = FloorRow {
+                point,
+                albedo: [0.0; 3],
+                transport: Vec::new(),
+            };
+            if edge[p] || !sees_whole_light(&row, &plane, &placement, &face) {
+                continue;
+            }
+            count += 1;
+            for c in 0..3 {
+                num += (f64::from(image[p][c]) - f64::from(reference[p][c])).powi(2);
+                den += f64::from(reference[p][c]).powi(2);
+            }
+        }
+        let error = (num / den).sqrt();
+        eprintln!("stored {name}: {count} pixels, relative L2 {error:.4}");
+        assert!(count > w * h * 45 / 100, "{name}: {count} pixels");
+        assert!(error < bound, "{name}: relative L2 {error} (bound {bound})");
+    }
+}
+
+/// The library's row of every pixel (`Scene::plane_row`, the bake's own
+/// computation) lit at the stored surface point equals the stored path's
+/// image within float rounding.
+fn library_rows_agree(
+    ltm_path: &Path,
+    image: &[[f32; 3]],
+    points: &[Option<DVec3>],
+    (plane, placement, texture, face): (&LightPlane, &Placement, &LightTexture, PlaneFace),
+) {
+    let base = Path::new(env!("CARGO_MANIFEST_DIR")).join("tools/validate/point");
+    let height = plane.point([0.0, 0.0]).y;
+    let text = std::fs::read_to_string(base.join("scene.toml")).unwrap();
+    let scene =
+        Scene::build(&SceneDesc::parse(&text, &base, &base.join("scene.toml")).unwrap()).unwrap();
+    let albedo = ltm::LtmFile::open(ltm_path)
+        .unwrap()
+        .albedo()
+        .unwrap()
+        .to_vec();
+    let source = SourceCoefficients::new(texture, placement, face.order, usize::MAX).unwrap();
+    let mut propagator = Propagator::new(face).unwrap();
+    let mut row = vec![0.0f32; face.order * face.order];
+    let mut worst = 0.0f64;
+    for (p, point) in points.iter().enumerate().step_by(7) {
+        let mut a = [0.0f32; 3];
+        scene
+            .plane_row(p, plane, face.order, face.side, &mut row, &mut a)
+            .unwrap();
+        let want = match point {
+            Some(x) => {
+                let (depth, position) = plane.locate(*x);
+                let receiver = Receiver { depth, position };
+                if propagator
+                    .prepare(&source, placement, &receiver, Targets::All)
+                    .unwrap()
+                {
+                    let b = propagator.shade(&transport_coefficients(&row, face.order).unwrap());
+                    [0, 1, 2].map(|c| (b[c] * f64::from(albedo[3 * p + c])).max(0.0))
+                } else {
+                    [0.0; 3]
+                }
+            }
+            None => [0.0; 3],
+        };
+        for c in 0..3 {
+            let d = (want[c] - f64::from(image[p][c])).abs();
+            worst = worst.max(d / want[c].abs().max(1e-3));
+        }
+    }
+    eprintln!(
+        "plane at {height}: stored against library rows, worst relative difference {worst:.2e}"
+    );
+    assert!(worst < 1e-6, "{worst}");
+}

@@ -21,7 +21,7 @@
 //! is renamed to `PATH` only when every block is complete.
 
 use crate::error::{BakeError, Result};
-use crate::transport::{RowStats, Scratch, Tables};
+use crate::transport::{Grid, RowStats, Scratch, Tables};
 use crate::world::Scene;
 use ltm_codec::raw::ResumeState;
 use ltm_codec::{Progress, RawHeader, RawWriter, RowSpan, Stage, Surface, SurfacePoint};
@@ -74,11 +74,16 @@ pub struct BakeReport {
 
 /// The raw store header for a scene: grey transport with an albedo image,
 /// or 3 channels, per-row surface data, the receiver mesh of an `atlas` or
-/// `uv` texture, and the scene's input identity.
+/// `uv` texture, the face of its light plane, and the scene's input
+/// identity.
 pub fn raw_header(scene: &Scene, block_bytes: u64) -> RawHeader {
     let header = RawHeader::new(scene.dims(), scene.channels() == 1, block_bytes)
         .with_input_id(scene.input_id())
         .with_surface();
+    let header = match scene.light_plane() {
+        Some((_, basis)) => header.with_plane(*basis),
+        None => header,
+    };
     match receiver_mesh(scene) {
         Some(mesh) => header.with_mesh(&mesh),
         None => header,
@@ -108,6 +113,8 @@ pub struct BlockBaker<'a> {
     scene: &'a Scene,
     tables: Tables,
     header: RawHeader,
+    /// The light plane's face, when rows are also baked over it.
+    plane: Option<Grid>,
 }
 
 impl<'a> BlockBaker<'a> {
@@ -126,11 +133,51 @@ impl<'a> BlockBaker<'a> {
                 "raw store header carries the input identity of another scene".into(),
             )));
         }
+        let plane = scene.light_plane().map(|(plane, basis)| {
+            let (order, side) = (basis.order as usize, basis.side);
+            Grid::face(order, side, plane.x_axis(), plane.y_axis(), -plane.normal())
+        });
+        if header.plane.as_ref() != scene.light_plane().map(|(_, b)| b) {
+            return Err(BakeError::Store(ltm_codec::Error::Invalid(
+                "raw store header and scene disagree about the light plane".into(),
+            )));
+        }
         Ok(BlockBaker {
             scene,
             tables: Tables::new(scene),
             header,
+            plane,
         })
+    }
+
+    /// Computes block `b`'s rows over the light plane's face into `plane`
+    /// (resized to its rows × `order²·C`, [`RawHeader::plane_row_len`]), as
+    /// [`Scene::plane_row`] computes each; empty without a light plane.
+    pub fn compute_plane(&self, b: usize, plane: &mut Vec<f32>) -> RowStats {
+        plane.clear();
+        let Some(grid) = &self.plane else {
+            return RowStats::default();
+        };
+        let range = self.header.block_range(b);
+        let len = self.header.plane_row_len();
+        plane.resize(range.len() * len, 0.0);
+        let start = self.header.first_row() + range.start;
+        let texels = len / self.scene.channels() as usize;
+        plane
+            .par_chunks_mut(len)
+            .enumerate()
+            .map_init(
+                || Scratch::with_texels(self.scene, texels),
+                |scratch, (i, row)| {
+                    let mut albedo = [0.0f32; 3];
+                    self.scene
+                        .row_on(&self.tables, grid, scratch, start + i, row, &mut albedo)
+                },
+            )
+            .reduce(RowStats::default, |mut a, b| {
+                a += b;
+                a
+            })
     }
 
     /// The header blocks are computed for.
@@ -267,19 +314,23 @@ fn bake_blocks(
     on_row: &(dyn Fn(RowStats) + Sync),
 ) -> Result<RowStats> {
     let has_albedo = baker.header().has_albedo;
+    let has_plane = baker.header().plane.is_some();
     let mut rays = RowStats::default();
     let written: Result<()> = std::thread::scope(|s| {
-        let (tx, rx) = sync_channel::<(usize, Vec<f32>, Vec<f32>)>(1);
+        let (tx, rx) = sync_channel::<(usize, Vec<f32>, Vec<f32>, Vec<f32>)>(1);
         let handle = s.spawn(move || -> Result<()> {
-            for (b, rows, albedo) in rx {
-                writer.write_block(b, &rows, has_albedo.then_some(albedo.as_slice()))?;
+            for (b, rows, albedo, plane) in rx {
+                let albedo = has_albedo.then_some(albedo.as_slice());
+                let plane = has_plane.then_some(plane.as_slice());
+                writer.write_block_with_plane(b, &rows, albedo, plane)?;
             }
             Ok(())
         });
         for &b in pending {
-            let (mut rows, mut albedo) = (Vec::new(), Vec::new());
+            let (mut rows, mut albedo, mut plane) = (Vec::new(), Vec::new(), Vec::new());
             rays += baker.compute(b, &mut rows, &mut albedo, on_row);
-            if tx.send((b, rows, albedo)).is_err() {
+            rays += baker.compute_plane(b, &mut plane);
+            if tx.send((b, rows, albedo, plane)).is_err() {
                 break; // the writer failed; its error is returned below
             }
         }

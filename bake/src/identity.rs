@@ -114,6 +114,13 @@ pub(crate) fn scene_identity(desc: &SceneDesc, meshes: &[([u8; 32], &str)]) -> [
             f.f64s(&[t.texels_per_unit.unwrap_or(0.0)]);
         }
     }
+    if let Some(p) = &desc.light_plane {
+        // Absent without a light plane, whose identities are unchanged.
+        f.str("light_plane");
+        f.f64s(&[p.origin, p.x_axis, p.y_axis].concat());
+        f.u32(p.order);
+        f.f64s(&[p.side]);
+    }
     f.0.finalize().into()
 }
 

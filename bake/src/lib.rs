@@ -52,7 +52,7 @@ pub use inside::INSIDE_LIMIT;
 pub use ltm_codec::raw::{RestartReason, ResumeState};
 pub use plane::{LightPlane, PlaneRow};
 pub use rows::{RowSample, RowSource};
-pub use scene::{Overrides, Receivers, SceneDesc, DEFAULT_SCENE_TOML};
+pub use scene::{LightPlaneDesc, Overrides, Receivers, SceneDesc, DEFAULT_SCENE_TOML};
 pub use texture::{TexelMap, TexelStats};
 pub use transport::RowStats;
 pub use world::{Camera, Hit, MeshStats, Scene, SceneStats};

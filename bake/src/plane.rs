@@ -64,6 +64,28 @@ impl LightPlane {
         })
     }
 
+    /// The unit x axis.
+    pub fn x_axis(&self) -> DVec3 {
+        self.x_axis
+    }
+
+    /// The unit y axis, orthogonal to x.
+    pub fn y_axis(&self) -> DVec3 {
+        self.y_axis
+    }
+
+    /// The plane as the face the codec stores (`order`, `side`
+    /// unchecked here; [`ltm_codec::PlaneBasis::validate`] checks them).
+    pub fn basis(&self, order: u32, side: f64) -> ltm_codec::PlaneBasis {
+        ltm_codec::PlaneBasis {
+            origin: self.origin.to_array(),
+            x_axis: self.x_axis.to_array(),
+            y_axis: self.y_axis.to_array(),
+            order,
+            side,
+        }
+    }
+
     /// The unit normal towards the lit side, `x × y`.
     pub fn normal(&self) -> DVec3 {
         self.x_axis.cross(self.y_axis)

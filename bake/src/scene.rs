@@ -48,6 +48,13 @@
 //! spp = 4                   # optional, sub-samples per texel over its footprint, default 4
 //! dilate = 1                # optional, texels charts are grown by, 0..=8 (uv: 2, atlas: 1)
 //! diffuse_only = false      # optional: bake a glossy receiver's Lambertian base
+//!
+//! [light_plane]             # optional: also bake every row over a light plane's face
+//! origin = [0.0, 1.5, 0.0]  # a point of the plane
+//! x_axis = [1.0, 0.0, 0.0]  # the plane's axes (normalized; y made orthogonal to x);
+//! y_axis = [0.0, 0.0, 1.0]  # area lights shine from the side x × y (here −Y, down)
+//! order = 32                # optional, face texels per side, a power of two in 1..=256
+//! side = 4.0                # optional, face side in tangent units, (0, 1000], default 4
 //! ```
 //!
 //! With `[texture]`, row `k` is texel `k` of an `S × S` texture over the
@@ -109,6 +116,9 @@ pub struct SceneDesc {
     /// `[texture]`: bake the texels of a mesh instead of the camera's
     /// pixels.
     pub texture: Option<TextureDesc>,
+    /// `[light_plane]`: also bake every row over the face of a plane that
+    /// near-field area lights lie in.
+    pub light_plane: Option<LightPlaneDesc>,
     /// Directory that relative mesh paths are resolved against.
     pub base_dir: PathBuf,
     /// Where the description came from, for messages.
@@ -127,6 +137,52 @@ struct SceneFile {
     #[serde(default)]
     quads: Vec<QuadDesc>,
     texture: Option<TextureDesc>,
+    light_plane: Option<LightPlaneDesc>,
+}
+
+/// The plane near-field area lights lie in (Sun and Ramamoorthi 2009,
+/// §5.2.1): every row is also baked over its expanded top face.
+#[derive(Clone, Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct LightPlaneDesc {
+    /// A point of the plane.
+    pub origin: [f64; 3],
+    /// The plane's x axis (normalized when baked).
+    pub x_axis: [f64; 3],
+    /// The plane's y axis (made orthogonal to x and normalized); lights
+    /// shine from the side `x × y`.
+    pub y_axis: [f64; 3],
+    /// Face texels per side, a power of two in 1..=256.
+    #[serde(default = "default_plane_order")]
+    pub order: u32,
+    /// Face side in tangent units, (0, 1000].
+    #[serde(default = "default_plane_side")]
+    pub side: f64,
+}
+
+fn default_plane_order() -> u32 {
+    32
+}
+
+fn default_plane_side() -> f64 {
+    4.0
+}
+
+impl LightPlaneDesc {
+    /// The plane, its axes orthonormalized: finite, axes nonzero and not
+    /// parallel.
+    pub fn plane(&self) -> Result<crate::plane::LightPlane> {
+        let v = DVec3::from_array;
+        crate::plane::LightPlane::new(v(self.origin), v(self.x_axis), v(self.y_axis))
+    }
+
+    /// The face as stored (the axes of [`LightPlaneDesc::plane`]), checked:
+    /// order and side in range.
+    pub fn basis(&self) -> Result<ltm_codec::PlaneBasis> {
+        let basis = self.plane()?.basis(self.order, self.side);
+        basis.validate().map_err(BakeError::Store)?;
+        Ok(basis)
+    }
 }
 
 /// A texture-space bake: the rows are the texels of a texture over the
@@ -480,6 +536,7 @@ impl SceneDesc {
             meshes: file.meshes,
             quads: file.quads,
             texture: file.texture,
+            light_plane: file.light_plane,
             base_dir: base_dir.to_path_buf(),
             origin: name.display().to_string(),
         };
@@ -621,7 +678,12 @@ impl SceneDesc {
         self.validate_lighting()?;
         self.validate_materials()?;
         self.validate_geometry()?;
-        self.validate_texture()
+        self.validate_texture()?;
+        if let Some(p) = &self.light_plane {
+            p.basis()
+                .map_err(|e| BakeError::invalid(o, "light_plane", format!("{e}")))?;
+        }
+        Ok(())
     }
 
     fn validate_lighting(&self) -> Result<()> {

@@ -32,6 +32,7 @@ use crate::intersect::{Tri, WtRay};
 use crate::material::Material;
 use crate::mesh::{self, RawMesh};
 use crate::packet::{Packet, PACKET};
+use crate::plane::LightPlane;
 use crate::rows::RowSource;
 use crate::scene::{CameraDesc, Receivers, SceneDesc};
 use crate::texture::{SurfaceMesh, TexelMap};
@@ -192,6 +193,9 @@ pub struct Scene {
     pub(crate) epsilon: f64,
     stats: SceneStats,
     input_id: [u8; 32],
+    /// The light plane every row is also baked over, as the codec stores
+    /// its face.
+    light_plane: Option<(LightPlane, ltm_codec::PlaneBasis)>,
 }
 
 impl Scene {
@@ -280,7 +284,12 @@ impl Scene {
                 spp: desc.camera.spp,
             },
         };
+        let light_plane = match &desc.light_plane {
+            Some(p) => Some((p.plane()?, p.basis()?)),
+            None => None,
+        };
         Ok(Scene {
+            light_plane,
             rows,
             face_res: desc.lighting.face_res,
             texel_samples: desc.lighting.texel_samples,
@@ -307,6 +316,12 @@ impl Scene {
     /// header so that only a bake of the same inputs is resumed.
     pub fn input_id(&self) -> [u8; 32] {
         self.input_id
+    }
+
+    /// The face of the scene's `[light_plane]`, which every row is also
+    /// baked over (`None` without one).
+    pub fn light_plane(&self) -> Option<(&LightPlane, &ltm_codec::PlaneBasis)> {
+        self.light_plane.as_ref().map(|(p, b)| (p, b))
     }
 
     /// What the rows are.

@@ -82,6 +82,11 @@ material = "shiny"
 [texture]
 mesh = 0
 size = 8
+
+[light_plane]
+origin = [0.0, 1.0, 0.0]
+x_axis = [1.0, 0.0, 0.0]
+y_axis = [0.0, 0.0, 1.0]
 "#;
 
 /// The parser's message for `text`, which must be a syntax error.
@@ -158,6 +163,7 @@ fn every_key_is_documented() {
         "[[meshes]]",
         "[[quads]]",
         "[texture]",
+        "[light_plane]",
     ] {
         let keys = accepted_keys(header);
         assert!(!keys.is_empty(), "{header}: no keys");

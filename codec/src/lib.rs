@@ -26,6 +26,7 @@ mod error;
 mod fileio;
 mod limits;
 mod mesh;
+pub mod nearfield;
 pub mod npy;
 pub mod output;
 pub mod pca;
@@ -59,6 +60,7 @@ pub use limits::{Charge, Limits};
 pub use mesh::{
     ReceiverMesh, MAX_MESH_ELEMENTS, MESH_HEADER_LEN, MESH_TRIANGLE_LEN, MESH_VERTEX_LEN,
 };
+pub use nearfield::{PlaneBasis, PlaneRows};
 pub use output::{AtomicFile, Claim, OutputLock, RunFiles};
 pub use pca::PcaModel;
 pub use progress::{Progress, Stage, Step};

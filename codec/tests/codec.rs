@@ -970,6 +970,7 @@ fn stages_run_per_column_range_give_the_same_file() {
                 surface: None,
                 mesh: None,
                 empty_rows: Some(t.empty_rows()),
+                near_field: None,
                 column_norms: false,
                 priors: true,
             },
@@ -1175,11 +1176,12 @@ fn hostile_files_error_and_never_panic() {
     }
     // A header that claims a newer version is refused with a clear message.
     let mut newer = packed.clone();
-    newer[8] = 10;
+    let next = ltm_codec::container::VERSION + 1;
+    newer[8..12].copy_from_slice(&next.to_le_bytes());
     let err = LtmFile::parse(&newer, &ltm_codec::Limits::default())
         .unwrap_err()
         .to_string();
-    assert!(err.contains("version 10"), "{err}");
+    assert!(err.contains(&format!("version {next}")), "{err}");
 }
 
 /// The message `LtmFile::parse` gives for `good` mutated by `mutate`, with

@@ -643,7 +643,7 @@ impl TexturedMesh {
             .limits
             .check_alloc("view sample buffers", band * threads, 32)?;
         let projected = self.project(&f, sw as f64, sh as f64);
-        let bins = Bins::new(&projected, BAND * ssz, sh);
+        let bins = Bins::new(&projected, BAND * ssz, sh, &self.limits)?;
         let mut out = Image::new(w, h);
         out.data
             .par_chunks_mut(w * BAND)
@@ -844,18 +844,23 @@ impl Projected {
 
 /// Triangles listed per band of `rows` sample rows (CSR).
 struct Bins {
-    start: Vec<u32>,
+    start: Vec<usize>,
     items: Vec<u32>,
+    /// `items`' bytes, charged.
+    _charge: ltm_codec::Charge,
 }
 
 impl Bins {
-    fn new(tris: &[Projected], rows: usize, sh: usize) -> Bins {
+    /// The bins of `tris`; their entries (one per triangle and band it
+    /// spans, which a mesh of huge triangles makes many) are charged to
+    /// `limits` before they are allocated.
+    fn new(tris: &[Projected], rows: usize, sh: usize, limits: &Limits) -> Result<Bins> {
         let bands = sh.div_ceil(rows);
         let spans: Vec<Option<(usize, usize)>> = tris
             .iter()
             .map(|t| t.rows(sh).map(|(lo, hi)| (lo / rows, hi / rows)))
             .collect();
-        let mut start = vec![0u32; bands + 1];
+        let mut start = vec![0usize; bands + 1];
         for &(a, b) in spans.iter().flatten() {
             for band in a..=b {
                 start[band + 1] += 1;
@@ -864,21 +869,26 @@ impl Bins {
         for k in 1..start.len() {
             start[k] += start[k - 1];
         }
+        let charge = limits.check_alloc("view triangle bins", start[bands] as u64, 4)?;
         let mut fill = start.clone();
-        let mut items = vec![0u32; start[bands] as usize];
+        let mut items = vec![0u32; start[bands]];
         for (t, span) in spans.iter().enumerate() {
             if let Some((a, b)) = *span {
                 for band in a..=b {
-                    items[fill[band] as usize] = t as u32;
+                    items[fill[band]] = t as u32;
                     fill[band] += 1;
                 }
             }
         }
-        Bins { start, items }
+        Ok(Bins {
+            start,
+            items,
+            _charge: charge,
+        })
     }
 
     fn band(&self, k: usize) -> &[u32] {
-        &self.items[self.start[k] as usize..self.start[k + 1] as usize]
+        &self.items[self.start[k]..self.start[k + 1]]
     }
 }
 

@@ -160,13 +160,22 @@ fn describe(scene: &Scene, desc: &SceneDesc) {
     let rows = scene
         .texel_map()
         .map_or(dims.pixels(), |m| m.stats().valid_texels) as f64;
-    let rays = rows
-        * scene.rows().samples_per_row() as f64
-        * dims.lights() as f64
-        * desc.lighting.texel_samples as f64;
+    let per_light =
+        rows * scene.rows().samples_per_row() as f64 * desc.lighting.texel_samples as f64;
+    let mut rays = per_light * dims.lights() as f64;
+    let mut bytes = dims.raw_bytes() as f64;
+    if let Some((_, face)) = scene.light_plane() {
+        let texels = face.texels() as f64;
+        rays += per_light * texels;
+        bytes += 4.0 * dims.pixels() as f64 * texels * dims.channels as f64;
+        eprintln!(
+            "and every row over the light plane's face: {0} × {0} texels of side {1} (near-field rows)",
+            face.order, face.side
+        );
+    }
     eprintln!(
         "estimate: {:.2} GB on disk, {} MiB of row blocks in memory (three in flight), at most {:.3e} shadow rays",
-        dims.raw_bytes() as f64 / 1e9,
+        bytes / 1e9,
         3 * (ltm_bake::DEFAULT_BLOCK_BYTES >> 20),
         rays
     );

@@ -248,6 +248,12 @@ pub fn compress_cmd(a: CompressArgs, ctx: &Ctx) -> Result<()> {
         stats.raw_bytes as f64 / 1e6 / secs,
         if stats.out_of_core { ", out of core" } else { "" }
     );
+    if stats.near_field_bytes > 0 {
+        eprintln!(
+            "of which {} bytes are the near-field rows (the scene's [light_plane], stored losslessly as Haar coefficients)",
+            stats.near_field_bytes
+        );
+    }
     if stats.codings > 1 {
         if let Target::MaxError(e) = opts.code.target {
             eprintln!(
@@ -373,6 +379,20 @@ pub struct Inspection {
     /// Rows with a surface point in the file's surface data (chunk SURF;
     /// `None` without it). pca files need it for point lights.
     pub surface_rows: Option<usize>,
+    /// Near-field rows (chunk NEAR, a scene's `[light_plane]`): the face's
+    /// order and side and the coefficients stored (`None` without).
+    pub near_field: Option<NearFieldInfo>,
+}
+
+/// What `ltm inspect` reports of a file's near-field rows.
+#[derive(Serialize)]
+pub struct NearFieldInfo {
+    pub order: u32,
+    pub side: f64,
+    pub origin: [f64; 3],
+    pub x_axis: [f64; 3],
+    pub y_axis: [f64; 3],
+    pub nonzeros: usize,
 }
 
 pub fn inspect(file: &LtmFile) -> Inspection {
@@ -424,6 +444,17 @@ pub fn inspect(file: &LtmFile) -> Inspection {
             .collect(),
         pca_rank: file.pca().map_or(0, |m| m.rank()),
         surface_rows: file.surface().map(|s| s.valid_count()),
+        near_field: file.near_field().map(|r| {
+            let b = r.basis();
+            NearFieldInfo {
+                order: b.order,
+                side: b.side,
+                origin: b.origin,
+                x_axis: b.x_axis,
+                y_axis: b.y_axis,
+                nonzeros: r.nonzeros(),
+            }
+        }),
     }
 }
 
@@ -465,6 +496,12 @@ pub fn inspect_cmd(a: InspectArgs, ctx: &Ctx) -> Result<()> {
         i.file_bytes, i.raw_bytes, i.compression_ratio, i.bits_per_element
     );
     println!("  nonzeros       {}", i.nonzeros);
+    if let Some(n) = &i.near_field {
+        println!(
+            "  near field     {0} x {0} face of side {1} on the plane at {2:?} (x {3:?}, y {4:?}), {5} coefficients (relight --area-light works)",
+            n.order, n.side, n.origin, n.x_axis, n.y_axis, n.nonzeros
+        );
+    }
     match (i.surface_rows, i.pca_rank > 0) {
         (Some(v), true) => {
             println!("  surface data   {v} rows with a surface point (relight --point works)")

@@ -1,5 +1,6 @@
 //! `ltm`: bake, compress, inspect and relight light-transport matrices.
 
+mod area_light;
 mod bake;
 mod codec_cmds;
 mod common;

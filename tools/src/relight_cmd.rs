@@ -1,5 +1,6 @@
 //! `ltm relight`.
 
+use crate::area_light::AreaArgs;
 use crate::common::{claim_files, describe_terms, Ctx, ImageOutput, TermsArgs};
 use anyhow::{bail, Context, Result};
 use clap::Args;
@@ -19,7 +20,7 @@ pub struct RelightArgs {
     /// Environment map: lat-long (width = 2·height) EXR or Radiance .hdr.
     /// May be left out when point lights are given: the image is then
     /// theirs alone.
-    #[arg(long, required_unless_present = "point")]
+    #[arg(long, required_unless_present_any = ["point", "area_light"])]
     pub env: Option<PathBuf>,
     /// A point light at world position X,Y,Z (the scene's units), added to
     /// the environment's image; repeatable, paired in order with
@@ -43,6 +44,8 @@ pub struct RelightArgs {
     /// texel it falls in) or `bilinear` (the four nearest texel centres).
     #[arg(long, default_value = "bilinear")]
     pub point_lookup: Lookup,
+    #[command(flatten)]
+    pub area: AreaArgs,
     #[command(flatten)]
     pub terms: TermsArgs,
     /// Rotate the lighting: yaw,pitch,roll in degrees.
@@ -242,6 +245,16 @@ fn time_frames(scene: &Scene, bufs: &mut Frame, frames: usize) -> Result<Timing>
     })
 }
 
+/// The image of the `--area-light`s, if any, and its time.
+fn area_image(a: &RelightArgs, ctx: &Ctx) -> Result<Option<(Vec<[f32; 3]>, Duration)>> {
+    if !a.area.any() {
+        return Ok(None);
+    }
+    let lights = a.area.lights(ctx.limits())?;
+    let (image, time) = crate::area_light::render(&a.file, &lights, a.area.terms(), ctx.limits())?;
+    Ok(Some((image, time)))
+}
+
 /// The relit image's relative L2 error against `--reference`, if given.
 fn reference_error(image: &Image, reference: Option<&Path>) -> Result<Option<f64>> {
     let Some(path) = reference else {
@@ -262,7 +275,16 @@ pub fn run(a: RelightArgs, ctx: &Ctx) -> Result<()> {
     if let Some(r) = &a.reference {
         inputs.push(("--reference", r.as_path()));
     }
+    let textures: Vec<&Path> = a
+        .area
+        .area_light
+        .iter()
+        .filter(|s| s.as_str() != "uniform")
+        .map(Path::new)
+        .collect();
+    inputs.extend(textures.iter().map(|p| ("--area-light", *p)));
     let _claim = claim_files(&inputs, &a.out.roles())?;
+    let near = area_image(&a, ctx)?;
     let opened_at = Instant::now();
     let opened = Opened::open(&a, !points.is_empty(), ctx)?;
     let relighter = opened.relighter();
@@ -286,6 +308,21 @@ pub fn run(a: RelightArgs, ctx: &Ctx) -> Result<()> {
     };
     let mut bufs = relighter.frame()?;
     let timing = time_frames(&scene, &mut bufs, a.frames)?;
+    if let Some((lit, time)) = &near {
+        for (o, v) in bufs.image.data.iter_mut().zip(lit) {
+            for (oc, vc) in o.iter_mut().zip(v) {
+                *oc += vc;
+            }
+        }
+        eprintln!(
+            "{} area light(s): {} rows shaded in {:.1} ms ({:.0} % of the source terms, {:.0} % of the target terms)",
+            a.area.area_light.len(),
+            lit.len(),
+            time.as_secs_f64() * 1e3,
+            a.area.area_source_terms * 100.0,
+            a.area.area_target_terms * 100.0
+        );
+    }
     a.out.write(&bufs.image)?;
     let error = reference_error(&bufs.image, a.reference.as_deref())?;
     report(&a, &scene, &timing, open_time, error);
@@ -334,6 +371,10 @@ fn report(
         1 => " and 1 point light".into(),
         n => format!(" and {n} point lights"),
     };
+    if scene.light.is_none() && scene.points.is_empty() {
+        eprintln!("wrote {}: the area lights alone", a.out.output.display());
+        return;
+    }
     eprintln!(
         "wrote {}: {}{points}, {} nonzeros, frame {:.3} ms (median of {}; light transform {:.3}, selection {:.3}, multiply {:.3}, inverse {:.3} ms)",
         a.out.output.display(),

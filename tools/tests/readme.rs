@@ -51,6 +51,15 @@ const SMALL_SCENES: &[(&str, &[Setting])] = &[
         ],
     ),
     (
+        "area_light.toml",
+        &[
+            ("camera", "width", "32"),
+            ("camera", "height", "24"),
+            ("lighting", "face_res", "4"),
+            ("light_plane", "order", "16"),
+        ],
+    ),
+    (
         "bunny_texture.toml",
         &[
             ("lighting", "face_res", "4"),

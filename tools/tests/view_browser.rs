@@ -166,16 +166,22 @@ fn check_pixels_of(tab: &Tab, file: usize, path: &Path, at: &Settings, exposure:
 }
 
 fn drag(tab: &Tab, id: &str, dx: f64) {
+    drag_with(tab, id, (dx, 0.0), None);
+}
+
+/// A drag by `(dx, dy)` pixels on element `id`, with the keyboard
+/// `modifiers` of CDP (8: shift) held.
+fn drag_with(tab: &Tab, id: &str, (dx, dy): (f64, f64), modifiers: Option<u32>) {
     let p = tab
         .find_element(&format!("#{id}"))
         .unwrap()
         .get_midpoint()
         .unwrap();
-    let event = |kind, x: f64, buttons| Input::DispatchMouseEvent {
+    let event = |kind, x: f64, y: f64, buttons| Input::DispatchMouseEvent {
         Type: kind,
         x,
-        y: p.y,
-        modifiers: None,
+        y,
+        modifiers,
         timestamp: None,
         button: Some(Input::MouseButton::Left),
         buttons: Some(buttons),
@@ -190,9 +196,11 @@ fn drag(tab: &Tab, id: &str, dx: f64) {
         pointer_Type: None,
     };
     use Input::DispatchMouseEventTypeOption as T;
-    tab.call_method(event(T::MousePressed, p.x, 1)).unwrap();
-    tab.call_method(event(T::MouseMoved, p.x + dx, 1)).unwrap();
-    tab.call_method(event(T::MouseReleased, p.x + dx, 0))
+    tab.call_method(event(T::MousePressed, p.x, p.y, 1))
+        .unwrap();
+    tab.call_method(event(T::MouseMoved, p.x + dx, p.y + dy, 1))
+        .unwrap();
+    tab.call_method(event(T::MouseReleased, p.x + dx, p.y + dy, 0))
         .unwrap();
 }
 
@@ -1037,4 +1045,156 @@ fn screenshot_for_readme() {
         .capture_screenshot(Page::CaptureScreenshotFormatOption::Png, None, None, true)
         .unwrap();
     std::fs::write(out, png).unwrap();
+}
+
+/// A file baked with a `[light_plane]` gets the page's area-light fields;
+/// with the light on, the panel shows what `ltm relight --env
+/// --area-light` computes at the same settings (within a level), a
+/// shift-drag moves the light (not the map), and the readout gives the
+/// light's time.
+#[test]
+fn area_light_in_the_page_matches_ltm_relight() {
+    let Some(browser) = browser() else { return };
+    let dir = tempfile::tempdir().unwrap();
+    let s = |p: &Path| p.to_str().unwrap().to_string();
+    let (raw, file) = (dir.path().join("a.raw"), dir.path().join("a.ltm"));
+    let scene = assets().join("scenes/area_light.toml");
+    ltm(&[
+        "bake",
+        &s(&scene),
+        "-o",
+        &s(&raw),
+        "--width",
+        "32",
+        "--height",
+        "24",
+        "--face-res",
+        "4",
+    ]);
+    ltm(&["compress", &s(&raw), "-o", &s(&file)]);
+    let env = map("interior.exr");
+    let srv = Server::start(&[&s(&file), "--env", &s(&env)]);
+    let tab = open_page(&browser, &srv, "#view0[data-shown]");
+    assert_eq!(
+        eval(&tab, "document.getElementById('area-row').hidden"),
+        json!(false)
+    );
+    set(&tab, "exposure", "0", "input");
+    for (id, v) in [
+        ("area-x", "0.15"),
+        ("area-y", "0.25"),
+        ("area-w", "0.8"),
+        ("area-h", "0.6"),
+        ("area-i", "4"),
+    ] {
+        set(&tab, id, v, "change");
+    }
+    eval(&tab, "(() => { const a = document.getElementById('area'); a.checked = true; a.dispatchEvent(new Event('change')); return true; })()");
+    let n = text(&tab, "document.getElementById('n-number').value");
+    let area = |x: &str, y: &str| format!("&ax={x}&ay={y}&aw=0.8&ah=0.6&ai=4&aq=0&at=0");
+    let q = format!(
+        "file=0&map=0&yaw=0&pitch=0&roll=0&n={n}&weighting=transport{}",
+        area("0.15", "0.25")
+    );
+    wait_shown(&tab, "view0", &q);
+    let compare = |center: &str| {
+        let out = dir.path().join("want.exr");
+        ltm(&[
+            "relight",
+            &s(&file),
+            "--env",
+            &s(&env),
+            "--terms",
+            &n,
+            "--weighting",
+            "transport",
+            "--area-light",
+            "uniform",
+            "--area-center",
+            center,
+            "--area-size",
+            "0.8,0.6",
+            "--area-intensity",
+            "4",
+            "-o",
+            &s(&out),
+        ]);
+        let want = ltm_relight::Image::read_exr(&out).unwrap();
+        let got = pixels(&tab, "view0");
+        let mut lit = 0;
+        for (i, (g, w)) in got.iter().zip(want.data.iter().flatten()).enumerate() {
+            let w8 = srgb8(*w, 0.0);
+            assert!(
+                g.abs_diff(w8) <= 1,
+                "value {i}: shown {g}, ltm relight {w8} (centre {center})"
+            );
+            lit += usize::from(w8 > 0);
+        }
+        assert!(lit > got.len() / 10, "nearly black");
+        want
+    };
+    let before = compare("0.15,0.25");
+    assert!(text(&tab, "document.getElementById('readouts').textContent").contains("area light"));
+    // A shift-drag of 20 px right and 10 px down moves the light by
+    // (0.2, 0.1) in the plane and leaves the map where it was.
+    drag_with(&tab, "view0", (20.0, 10.0), Some(8));
+    assert_eq!(
+        eval(&tab, "document.getElementById('yaw').value"),
+        json!("0")
+    );
+    let q = q.replace(&area("0.15", "0.25"), &area("0.35", "0.35"));
+    wait_shown(&tab, "view0", &q);
+    let after = compare("0.35,0.35");
+    let moved = ltm_relight::relative_l2(&after, &before).unwrap();
+    assert!(moved > 0.01, "moving the light changes the image: {moved}");
+    let png = tab
+        .capture_screenshot(Page::CaptureScreenshotFormatOption::Png, None, None, true)
+        .unwrap();
+    let out = PathBuf::from(env!("CARGO_TARGET_TMPDIR")).join("view-area.png");
+    std::fs::write(&out, png).unwrap();
+    eprintln!("screenshot: {}", out.display());
+}
+
+/// Screenshots of an area light moved and resized in the page (for
+/// docs/, not a test of correctness): `LTM_VIEW_AREA_FILE` (a file with
+/// near-field rows) lit by `LTM_VIEW_AREA_ENV`, with a uniform light of
+/// intensity 60 and 0.3 × 0.3 at (−0.5, 0.1), then moved to (0.5, 0.6) and
+/// grown to 1.5 × 1.2, written to `LTM_VIEW_AREA_OUT`-1.png and -2.png.
+///
+/// `LTM_VIEW_AREA_FILE=s128.ltm LTM_VIEW_AREA_ENV=map.exr LTM_VIEW_AREA_OUT=docs/view-area
+/// cargo test --release -p ltm-tools --test view_browser area_light_screenshots -- --ignored`
+#[test]
+#[ignore = "writes screenshots for docs/; run by hand"]
+fn area_light_screenshots() {
+    let Some(browser) = browser() else { return };
+    let var = |k: &str| std::env::var(k).unwrap_or_else(|_| panic!("{k} is not set"));
+    let (file, env, out) = (
+        var("LTM_VIEW_AREA_FILE"),
+        var("LTM_VIEW_AREA_ENV"),
+        var("LTM_VIEW_AREA_OUT"),
+    );
+    let srv = Server::start(&[&file, "--env", &env]);
+    let tab = open_page(&browser, &srv, "#view0[data-shown]");
+    let n = text(&tab, "document.getElementById('n-number').value");
+    let shots = [("-0.5", "0.1", "0.3", "0.3"), ("0.5", "0.6", "1.5", "1.2")];
+    for (k, (x, y, w, h)) in shots.into_iter().enumerate() {
+        for (id, v) in [
+            ("area-x", x),
+            ("area-y", y),
+            ("area-w", w),
+            ("area-h", h),
+            ("area-i", "60"),
+        ] {
+            set(&tab, id, v, "change");
+        }
+        eval(&tab, "(() => { const a = document.getElementById('area'); a.checked = true; a.dispatchEvent(new Event('change')); return true; })()");
+        let q = format!(
+            "file=0&map=0&yaw=0&pitch=0&roll=0&n={n}&weighting=transport&ax={x}&ay={y}&aw={w}&ah={h}&ai=60&aq=0&at=0"
+        );
+        wait_shown(&tab, "view0", &q);
+        let png = tab
+            .capture_screenshot(Page::CaptureScreenshotFormatOption::Png, None, None, true)
+            .unwrap();
+        std::fs::write(format!("{out}-{}.png", k + 1), png).unwrap();
+    }
 }

@@ -5,16 +5,17 @@ This file was written only from the specification in docs/FORMAT.md (no Rust sou
 was consulted). It checks that the specification is complete: it decodes a `.ltm`
 file of mode 2d, 4d or adaptive to the dense transport matrix exactly as
 `ltm export` writes it (float32, shape (P, M, C), or (P, M) when C = 1).
-`pca` files (mode 3) are refused. Format versions 1 to 9 are read (version 7 stores
+`pca` files (mode 3) are refused. Format versions 1 to 10 are read (version 7 stores
 side chunks and the column table as zstd frames: pip `zstandard`; version 8 may
 store SURF and COLS as zstd frames of their planes), with column encodings 0 to 6
 (encoding 6 starts its contexts from the PRIO chunk's states); a version-5 file's column norms (chunk NORM) are checked against
 the decoded columns; the row layout (chunk SURF) and a version-6 file's receiving
-mesh (chunk MESH) are decoded and checked. Given a raw transport store (magic
-LTMRAW) instead, it reads its header (versions 1 to 5; version 5 is one part of a
-sharded bake, with its row range), its surface records and its receiving mesh
-(version 4, or version 5 with flag bit 2), and prints them; the matrix itself is not
-read.
+mesh (chunk MESH) are decoded and checked, and a version-10 file's near-field rows
+(chunk NEAR) are decoded and checked. Given a raw transport store (magic
+LTMRAW) instead, it reads its header (versions 1 to 6; version 5 is one part of a
+sharded bake, with its row range; version 6 adds a light plane), its surface records
+and its receiving mesh (version 4, or versions 5 and 6 with flag bit 2), and prints
+them; the matrix itself is not read.
 
 Usage:
     python3 tools/validate/ltm_reader.py FILE.ltm [--compare EXPORT.npy] [--out OUT.npy] [--f64]
@@ -61,6 +62,7 @@ Only numpy, the standard library and (for encoding 2) `zstandard` are used.
 """
 
 import argparse
+import math
 import struct
 import sys
 import zlib
@@ -111,11 +113,11 @@ def read_container(buf):
     if len(buf) < 28 or buf[:8] != MAGIC:
         raise FormatError("not an .ltm file (bad magic)")
     version, features, k, reserved = struct.unpack_from("<4I", buf, 8)
-    if version not in (1, 2, 3, 4, 5, 6, 7, 8, 9):
+    if version not in (1, 2, 3, 4, 5, 6, 7, 8, 9, 10):
         raise FormatError(f"unsupported format version {version}")
     if reserved != 0:
         raise FormatError("reserved header field is not 0")
-    if features & ~63:
+    if features & ~127:
         raise FormatError(f"unknown feature bits {features:#x}")
     if version == 1 and features & ~1:
         raise FormatError("feature bits 1/2 in a version-1 file")
@@ -125,7 +127,11 @@ def read_container(buf):
         raise FormatError(f"feature bit 4 in a version-{version} file")
     if version < 9 and features & 32:
         raise FormatError(f"feature bit 5 in a version-{version} file")
-    if not 3 <= k <= {1: 4, 5: 8, 6: 9, 7: 9, 8: 9, 9: 10}.get(version, 7):
+    if version < 10 and features & 64:
+        raise FormatError(f"feature bit 6 in a version-{version} file")
+    if features & 64 and not features & 4:
+        raise FormatError("feature bit 6 (NEAR) without bit 2 (SURF)")
+    if not 3 <= k <= {1: 4, 5: 8, 6: 9, 7: 9, 8: 9, 9: 10, 10: 11}.get(version, 7):
         raise FormatError(f"bad chunk count {k}")
     end = 24 + 32 * k
     if len(buf) < end + 4:
@@ -141,7 +147,7 @@ def read_container(buf):
         if version < 7:
             enc, unpacked = 0, 0
         if (enc, unpacked == 0) != (0, True) and not (
-                enc == 1 and unpacked > 0 and tag in (b"ALBD", b"EMPT", b"SURF", b"MESH", b"COLS", b"PRIO")) \
+                enc == 1 and unpacked > 0 and tag in (b"ALBD", b"EMPT", b"SURF", b"MESH", b"NEAR", b"COLS", b"PRIO")) \
                 and not (enc == 2 and version >= 8 and unpacked > 0 and tag in (b"SURF", b"COLS")):
             raise FormatError(f"chunk {tag!r}: encoding {enc} with unpacked length {unpacked}")
         if tag in chunks:
@@ -173,6 +179,8 @@ def read_container(buf):
         want.add(b"MESH")
     if features & 32:
         want.add(b"PRIO")
+    if features & 64:
+        want.add(b"NEAR")
     if b"PCAM" in chunks or b"PCAB" in chunks or b"PCAC" in chunks:
         raise FormatError("this is a pca file (mode 3): not supported by this reader")
     want |= {b"COLS", b"DATA"}
@@ -283,6 +291,66 @@ def parse_mesh(b, S):
 RAW_MAGIC = b"LTMRAW\0\x01"
 
 
+def parse_plane(b):
+    """FORMAT.md "Near-field rows": the 88-byte plane record, checked."""
+    order, reserved, side = struct.unpack_from("<IId", b, 0)
+    origin, x, y = (struct.unpack_from("<3d", b, 16 + 24 * i) for i in range(3))
+    finite = all(math.isfinite(v) for v in (side, *origin, *x, *y))
+    dot = lambda a, c: sum(u * v for u, v in zip(a, c))
+    if (reserved or not finite or order == 0 or order & (order - 1) or order > 256
+            or not 0 < side <= 1000 or abs(dot(x, x) - 1) > 1e-9 or abs(dot(y, y) - 1) > 1e-9
+            or abs(dot(x, y)) > 1e-9):
+        raise FormatError("bad light plane record")
+    return dict(order=order, side=side, origin=origin, x=x, y=y)
+
+
+def parse_near(b, P, C):
+    """FORMAT.md "Near-field rows", chunk NEAR: the plane and, per row and
+    channel, the (index, value) lists of its nonzero Haar coefficients."""
+    if len(b) < 96:
+        raise FormatError("NEAR truncated")
+    channels, reserved = struct.unpack_from("<II", b, 0)
+    if channels != C or reserved:
+        raise FormatError("NEAR channels or reserved field is wrong")
+    plane = parse_plane(b[8:96])
+    n2 = plane["order"] ** 2
+    if len(b) < 96 + 4 * P * C:
+        raise FormatError("NEAR truncated")
+    counts = np.frombuffer(bytes(b[96:96 + 4 * P * C]), "<u4")
+    if counts.size and counts.max() > n2:
+        raise FormatError("NEAR entry count past order^2")
+    E = int(counts.sum())
+    at = 96 + 4 * P * C
+    idx = np.frombuffer(bytes(b[at:at + 2 * E]), "<u2")
+    at = -(-(at + 2 * E) // 4) * 4
+    val = np.frombuffer(bytes(b[at:at + 4 * E]), "<f4")
+    if idx.size != E or val.size != E or len(b) != at + 4 * E:
+        raise FormatError("NEAR length is wrong")
+    if E and (idx.max() >= n2 or not np.all(np.isfinite(val)) or np.any(val == 0)):
+        raise FormatError("NEAR index or value out of range")
+    starts = np.concatenate([[0], np.cumsum(counts, dtype=np.int64)])
+    rows = []
+    for i in range(P * C):
+        k = idx[starts[i]:starts[i + 1]]
+        if k.size > 1 and np.any(np.diff(k.astype(np.int64)) <= 0):
+            raise FormatError("NEAR indices do not increase")
+        rows.append((k, val[starts[i]:starts[i + 1]]))
+    return plane, rows
+
+
+def near_json(near):
+    """The near-field rows as plain JSON: the plane (f64 as their IEEE-754 bits,
+    u64) and, per row and channel, [indices, value bits (u32)]."""
+    if near is None:
+        return None
+    plane, rows = near
+    bits = lambda v: struct.unpack("<Q", struct.pack("<d", v))[0]
+    return dict(order=plane["order"], side=bits(plane["side"]),
+                origin=[bits(v) for v in plane["origin"]], x=[bits(v) for v in plane["x"]],
+                y=[bits(v) for v in plane["y"]],
+                rows=[[k.tolist(), v.view("<u4").tolist()] for k, v in rows])
+
+
 def read_raw_store(buf):
     """FORMAT.md "Raw transport store": the header of any version (1 to 5), the
     surface records (versions 3 to 5) and the receiving mesh (version 4, or 5 with
@@ -291,15 +359,16 @@ def read_raw_store(buf):
     if buf[:8] != RAW_MAGIC or len(buf) < 64:
         raise FormatError("not a raw store")
     version, flags, W, H, n, C, block_rows, block_count = struct.unpack_from("<8I", buf, 8)
-    hlen = {1: 64, 2: 96, 3: 112, 4: 128, 5: 144}.get(version)
+    hlen = {1: 64, 2: 96, 3: 112, 4: 128, 5: 144, 6: 240}.get(version)
     if hlen is None or len(buf) < hlen:
         raise FormatError(f"raw store version {version} or truncated header")
     if crc32(buf[:hlen - 4]) != struct.unpack_from("<I", buf, hlen - 4)[0]:
         raise FormatError("raw store header CRC mismatch")
-    allowed = {1: 1, 2: 1, 3: 3, 4: 7, 5: 15}[version]
+    allowed = {1: 1, 2: 1, 3: 3, 4: 7, 5: 15, 6: 23}[version]
     has_mesh = bool(flags & 4)
     if (flags & ~allowed or bool(flags & 2) != (version >= 3)
-            or (version == 4 and not has_mesh) or bool(flags & 8) != (version == 5)):
+            or (version == 4 and not has_mesh) or bool(flags & 8) != (version == 5)
+            or bool(flags & 16) != (version == 6)):
         raise FormatError(f"raw store flags {flags:#x} in version {version}")
     data_offset, albedo_offset, reserved = struct.unpack_from("<QQI", buf, 40)
     if reserved:
@@ -329,7 +398,7 @@ def read_raw_store(buf):
         check_surface_records(recs[:-4], P)
         end = surface_offset + 28 * P + 4
         out.update(layout=layout, parameterization=param)
-    if version == 5 and not has_mesh and struct.unpack_from("<QQ", buf, 108) != (0, 0):
+    if version >= 5 and not has_mesh and struct.unpack_from("<QQ", buf, 108) != (0, 0):
         raise FormatError("raw store mesh_offset or mesh_len is not 0 without a mesh")
     if has_mesh:
         mesh_offset, mesh_len = struct.unpack_from("<QQ", buf, 108)
@@ -340,7 +409,16 @@ def read_raw_store(buf):
             raise FormatError("raw store mesh truncated or CRC mismatch")
         out["mesh"] = parse_mesh(region[:-4], W)
         end = mesh_offset + mesh_len + 4
-    if data_offset != -(-end // 4096) * 4096 or len(buf) != data_offset + 4 * R * 6 * n * n * C:
+    data_end = data_offset + 4 * R * 6 * n * n * C
+    if version == 6:
+        if struct.unpack_from("<QQ", buf, 124) != (0, 0):
+            raise FormatError("raw store bytes 124..140 are not 0 in version 6")
+        plane_offset, = struct.unpack_from("<Q", buf, 140)
+        out["plane"] = parse_plane(buf[148:236])
+        if plane_offset != -(-data_end // 4096) * 4096:
+            raise FormatError("raw store plane_offset is wrong")
+        data_end = plane_offset + 4 * R * out["plane"]["order"] ** 2 * C
+    if data_offset != -(-end // 4096) * 4096 or len(buf) != data_end:
         raise FormatError("raw store data_offset or file length is wrong")
     return out
 
@@ -1098,10 +1176,11 @@ def decode_matrix(path, verbose=False, dt=np.float32, info=None):
         if layout != 1:
             raise FormatError("a MESH chunk in an image-space file")
         mesh = parse_mesh(chunks[b"MESH"], W)
+    near = parse_near(chunks[b"NEAR"], P, C) if b"NEAR" in chunks else None
     table = parse_column_table(chunks[b"COLS"], M, P, W, H, version)
     data = chunks[b"DATA"]
     if info is not None:
-        info.update(meta, version=version, features=features, mesh=mesh,
+        info.update(meta, version=version, features=features, mesh=mesh, near=near,
                     encodings={e: sum(1 for t in table if t["enc"] == e)
                                for e in sorted({t["enc"] for t in table})})
     if verbose:
@@ -1186,6 +1265,7 @@ def main(argv=None):
     ap.add_argument("--f64", action="store_true",
                     help="compute in float64 (default: float32, as ltm does)")
     ap.add_argument("--mesh-json", help="write the receiving mesh (or null) as JSON")
+    ap.add_argument("--near-json", help="write the near-field rows (or null) as JSON")
     ap.add_argument("-v", "--verbose", action="store_true")
     args = ap.parse_args(argv)
     info = {}
@@ -1223,6 +1303,14 @@ def main(argv=None):
     if args.mesh_json:
         import json
         json.dump(mesh_json(mesh), open(args.mesh_json, "w"))
+    near = info["near"]
+    if near is not None:
+        plane, rows = near
+        print(f"near-field rows: order {plane['order']}, side {plane['side']}, "
+              f"{sum(len(k) for k, _ in rows)} coefficients")
+    if args.near_json:
+        import json
+        json.dump(near_json(near), open(args.near_json, "w"))
     if args.out:
         np.save(args.out, T)
     if args.compare:

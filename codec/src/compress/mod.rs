@@ -50,6 +50,8 @@ pub use transpose::{Transposed, MAX_NORM, MIN_NONZERO_RMS};
 
 use crate::container::{LtmWriter, OptionalChunks};
 use crate::error::{Error, Result};
+use crate::limits::Limits;
+use crate::nearfield::PlaneRows;
 use crate::progress::{Progress, Stage};
 use crate::raw::RawStore;
 use crate::wavelet::Filter;
@@ -264,6 +266,9 @@ impl From<CodeOptions> for CompressOptions {
 pub struct CompressStats {
     /// Size of the written file.
     pub file_bytes: u64,
+    /// Of which the near-field rows (chunk NEAR, stored losslessly; 0
+    /// without a light plane).
+    pub near_field_bytes: u64,
     /// Size of the dense f32 matrix.
     pub raw_bytes: u64,
     /// Coefficients stored (positions, over all columns).
@@ -330,12 +335,15 @@ impl Transposed<'_> {
             Target::Keep(_) => None,
         };
         let feedback = Feedback::new(opts, coder.budget(), analysis.as_ref())?;
+        let channels = self.dims().channels as usize;
+        let near = crate::nearfield::plane_rows_of(self.raw(), channels, &Limits::default())?;
         let mut step = feedback.first()?;
         loop {
             if coder.options().bits != step.bits {
                 coder = Coder::new(self, &opts.with_bits(step.bits))?;
             }
-            let (writer, mut stats, coded) = write_columns(&coder, out, &step.plan, progress)?;
+            let (writer, mut stats, coded) =
+                write_columns(&coder, out, (&step.plan, near.as_ref()), progress)?;
             match feedback.next(&step, &coded)? {
                 Next::Code(next) => {
                     writer.abandon();
@@ -361,7 +369,7 @@ impl Transposed<'_> {
 fn write_columns(
     coder: &Coder,
     out: &Path,
-    plan: &Plan,
+    (plan, near_field): (&Plan, Option<&PlaneRows>),
     progress: Progress<'_>,
 ) -> Result<(LtmWriter, CompressStats, Coding)> {
     let t = coder.transposed();
@@ -374,6 +382,7 @@ fn write_columns(
             surface: t.raw().surface(),
             mesh: t.raw().mesh(),
             empty_rows: Some(t.empty_rows()),
+            near_field,
             column_norms: false,
             // Encoding-5 columns coded again from the file's priors.
             priors: true,
@@ -385,6 +394,7 @@ fn write_columns(
         depth_histogram: vec![0; coder.meta().max_depth() as usize + 1],
         bits: coder.options().bits,
         out_of_core: t.out_of_core(),
+        near_field_bytes: writer.near_field_bytes(),
         ..Default::default()
     };
     let mut coding = Coding::default();

@@ -90,8 +90,13 @@ pub fn compress_pca(
     opts: &PcaOptions,
     progress: Progress<'_>,
 ) -> Result<PcaStats> {
+    crate::nearfield::refuse_plane_rows(raw, "the pca mode")?;
     let dims = raw.dims();
-    let block_values = ((opts.mem_budget / 64) as usize).clamp(dims.row_len(), 1 << 23);
+    // At least one row, however long (`clamp` would panic when a row is
+    // longer than the usual cap).
+    let block_values = ((opts.mem_budget / 64) as usize)
+        .min(1 << 23)
+        .max(dims.row_len());
     let Fitted {
         fit: f,
         rank_errors,
@@ -119,6 +124,7 @@ pub fn compress_pca(
                     surface: raw.surface(),
                     mesh: raw.mesh(),
                     empty_rows: model.empty_rows(),
+                    near_field: None,
                     column_norms: false,
                     priors: false,
                 },

@@ -20,8 +20,9 @@ pub const MAGIC: [u8; 8] = *b"\x89LTM\r\n\x1a\n";
 /// SURF and COLS (chunk packing 2) and column encoding 5
 /// ([`Encoding::Compact`](crate::column::Encoding::Compact)), version 9
 /// the per-file priors ([`FEATURE_PRIORS`]) and column encoding 6
-/// ([`Encoding::Primed`](crate::column::Encoding::Primed)).
-pub const VERSION: u32 = 9;
+/// ([`Encoding::Primed`](crate::column::Encoding::Primed)), version 10 the
+/// near-field rows ([`FEATURE_NEAR_FIELD`]).
+pub const VERSION: u32 = 10;
 /// The oldest format version this build reads.
 pub const MIN_VERSION: u32 = 1;
 /// Feature flag: an RGB albedo image is stored (chunk ALBD).
@@ -46,14 +47,19 @@ pub const FEATURE_RECEIVER_MESH: u32 = 16;
 /// contexts are stored (chunk PRIO, [`Priors`](crate::entropy::Priors));
 /// wavelet modes only.
 pub const FEATURE_PRIORS: u32 = 32;
+/// Feature flag (version 10): every row's transport over a light plane's
+/// face is stored (chunk NEAR, [`PlaneRows`](crate::PlaneRows)); wavelet
+/// modes only, with [`FEATURE_SURFACE`].
+pub const FEATURE_NEAR_FIELD: u32 = 64;
 /// Each feature flag and the first version that knows it.
-const FEATURE_SINCE: [(u32, u32); 6] = [
+const FEATURE_SINCE: [(u32, u32); 7] = [
     (FEATURE_ALBEDO, 1),
     (FEATURE_EMPTY_ROWS, 2),
     (FEATURE_SURFACE, 2),
     (FEATURE_COLUMN_NORMS, 5),
     (FEATURE_RECEIVER_MESH, 6),
     (FEATURE_PRIORS, 9),
+    (FEATURE_NEAR_FIELD, 10),
 ];
 
 /// The feature flags a reader of `version` knows.
@@ -71,7 +77,9 @@ const fn known_features(version: u32) -> u32 {
 /// The chunks a file of version 7 or later may store zstd-packed: the side data known
 /// when the file is started, the column table and the priors (which ltm
 /// writes after DATA, once every column is known).
-pub(super) const PACKABLE: [&[u8; 4]; 6] = [b"ALBD", b"EMPT", b"SURF", b"MESH", b"COLS", b"PRIO"];
+pub(super) const PACKABLE: [&[u8; 4]; 7] = [
+    b"ALBD", b"EMPT", b"SURF", b"MESH", b"NEAR", b"COLS", b"PRIO",
+];
 /// The chunks a version-8 file may store in planes ([`Packing::Planes`]):
 /// those made of 28-byte records.
 pub(super) const PLANAR: [&[u8; 4]; 2] = [b"SURF", b"COLS"];
@@ -199,7 +207,7 @@ fn check_packing(tag: &[u8; 4], encoding: u32, unpacked: u32, version: u32) -> R
         _ => Err(Error::corrupt(
             "chunk directory",
             format!(
-                "chunk {name}: encoding {encoding} with unpacked length {unpacked} in a version-{version} file (valid: 0 with 0; 1 (zstd) with a length >= 1 for ALBD, EMPT, SURF, MESH, COLS or PRIO; from version 8, 2 (planes) with a length >= 1 for SURF or COLS)"
+                "chunk {name}: encoding {encoding} with unpacked length {unpacked} in a version-{version} file (valid: 0 with 0; 1 (zstd) with a length >= 1 for ALBD, EMPT, SURF, MESH, NEAR, COLS or PRIO; from version 8, 2 (planes) with a length >= 1 for SURF or COLS)"
             ),
         )),
     }
@@ -218,6 +226,7 @@ fn check_directory(dir: &[DirEntry], start: u64, file_len: usize) -> Result<()> 
                 | b"EMPT"
                 | b"SURF"
                 | b"MESH"
+                | b"NEAR"
                 | b"NORM"
                 | b"PRIO"
                 | b"COLS"

@@ -3,7 +3,7 @@
 //!
 //! ```text
 //! header (24 bytes) | chunk directory (32 bytes × count) | directory CRC
-//! META | ALBD | EMPT | SURF | MESH | NORM (each optional) | DATA (column payloads) | COLS (column table)
+//! META | ALBD | EMPT | SURF | MESH | NEAR | NORM (each optional) | DATA | PRIO (optional) | COLS
 //! ```
 //!
 //! (Files of versions 1 to 6 hold COLS before DATA; readers find chunks by
@@ -19,6 +19,9 @@
 //! EMPT, SURF, MESH and COLS as zstd frames when that is smaller, and
 //! writes COLS after DATA. Version 8 may store SURF and COLS in delta-coded
 //! byte planes before zstd (`planes.rs`), and adds column encoding 5.
+//! Version 9 adds the priors (PRIO) and column encoding 6; version 10
+//! adds feature 64 and chunk `NEAR`: near-field rows
+//! ([`PlaneRows`](crate::PlaneRows)), after MESH.
 //!
 //! Every chunk has a CRC-32 in the directory, except DATA whose columns
 //! each have their own CRC in the column table. The directory is validated
@@ -36,7 +39,7 @@ mod repair;
 mod write;
 
 pub use directory::{
-    FEATURE_ALBEDO, FEATURE_COLUMN_NORMS, FEATURE_EMPTY_ROWS, FEATURE_PRIORS,
+    FEATURE_ALBEDO, FEATURE_COLUMN_NORMS, FEATURE_EMPTY_ROWS, FEATURE_NEAR_FIELD, FEATURE_PRIORS,
     FEATURE_RECEIVER_MESH, FEATURE_SURFACE, MAGIC, MAX_CHUNKS, MIN_VERSION, VERSION,
 };
 pub use meta::Meta;

@@ -4,7 +4,8 @@
 
 use super::directory::{
     chunk, read_directory, stored_chunk, DirEntry, FEATURE_ALBEDO, FEATURE_COLUMN_NORMS,
-    FEATURE_EMPTY_ROWS, FEATURE_PRIORS, FEATURE_RECEIVER_MESH, FEATURE_SURFACE, MAGIC,
+    FEATURE_EMPTY_ROWS, FEATURE_NEAR_FIELD, FEATURE_PRIORS, FEATURE_RECEIVER_MESH, FEATURE_SURFACE,
+    MAGIC,
 };
 use super::Meta;
 use crate::bytes::Reader;
@@ -19,6 +20,7 @@ use crate::error::{Error, Result};
 use crate::fileio::{check_regular, read_at, Stamp};
 use crate::limits::{Charge, Limits};
 use crate::mesh::ReceiverMesh;
+use crate::nearfield::PlaneRows;
 use crate::pca::PcaModel;
 use crate::surface::Surface;
 use std::fs::File;
@@ -62,6 +64,9 @@ pub struct LtmIndex {
     pub surface: Option<Surface>,
     /// The receiving mesh of a texture-space file (chunk MESH), if stored.
     pub mesh: Option<ReceiverMesh>,
+    /// Every row's transport over a light plane's face (chunk NEAR), if
+    /// stored.
+    pub near_field: Option<PlaneRows>,
     /// The mask of all-zero rows (chunk EMPT), if stored.
     pub empty_rows: Option<EmptyRows>,
     /// Every column's priority norm (chunk NORM), if stored.
@@ -172,24 +177,12 @@ impl LtmFile {
             features & FEATURE_ALBEDO != 0,
             &meta.dims,
         )?;
-        let surface = match (
+        let surface = read_surface(
             chunk(bytes, &dir, b"SURF", limits)?.as_deref(),
             features & FEATURE_SURFACE != 0,
-        ) {
-            (Some(c), true) => {
-                let (rows, surface) = Surface::decode_chunk(c, &meta.dims, limits)?;
-                meta.dims.rows = rows;
-                meta.dims.validate()?;
-                Some(surface)
-            }
-            (None, false) => None,
-            _ => {
-                return Err(Error::corrupt(
-                    "chunk directory",
-                    "SURF chunk and surface feature flag disagree",
-                ))
-            }
-        };
+            &mut meta,
+            limits,
+        )?;
         let mesh = read_mesh(
             chunk(bytes, &dir, b"MESH", limits)?.as_deref(),
             features & FEATURE_RECEIVER_MESH != 0,
@@ -227,12 +220,19 @@ impl LtmFile {
                 surface,
                 mesh,
                 empty_rows,
+                near_field: None,
                 column_norms,
                 priors: None,
                 data: 0..0,
                 pca: Some(pca),
             });
         }
+        let near_field = read_near_field(
+            chunk(bytes, &dir, b"NEAR", limits)?.as_deref(),
+            features & FEATURE_NEAR_FIELD != 0,
+            (&meta.dims, surface.is_some()),
+            limits,
+        )?;
         let cols = chunk(bytes, &dir, b"COLS", limits)?.ok_or_else(|| missing("COLS"))?;
         let data_dir = dir
             .iter()
@@ -261,6 +261,7 @@ impl LtmFile {
             surface,
             mesh,
             empty_rows,
+            near_field,
             column_norms,
             priors,
             data,
@@ -294,6 +295,18 @@ impl LtmFile {
     /// mask), for an image-space one each pixel's first hit.
     pub fn surface(&self) -> Option<&Surface> {
         self.index.surface.as_ref()
+    }
+
+    /// Every row's transport over a light plane's face (chunk NEAR,
+    /// version 10), if stored.
+    pub fn near_field(&self) -> Option<&PlaneRows> {
+        self.index.near_field.as_ref()
+    }
+
+    /// Moves the near-field rows out of the file (which then has none), so
+    /// that a relighter of them and one of the matrix share one read.
+    pub fn take_near_field(&mut self) -> Option<PlaneRows> {
+        self.index.near_field.take()
     }
 
     /// The receiving mesh of a texture-space file (chunk MESH, version 6),
@@ -417,6 +430,54 @@ fn read_mesh(
         _ => Err(Error::corrupt(
             "chunk directory",
             "MESH chunk and receiver-mesh feature flag disagree",
+        )),
+    }
+}
+
+/// The SURF chunk's surface data, present exactly when the feature flag
+/// says so; its row layout goes into `meta`.
+fn read_surface(
+    chunk: Option<&[u8]>,
+    flagged: bool,
+    meta: &mut Meta,
+    limits: &Limits,
+) -> Result<Option<Surface>> {
+    match (chunk, flagged) {
+        (Some(c), true) => {
+            let (rows, surface) = Surface::decode_chunk(c, &meta.dims, limits)?;
+            meta.dims.rows = rows;
+            meta.dims.validate()?;
+            Ok(Some(surface))
+        }
+        (None, false) => Ok(None),
+        _ => Err(Error::corrupt(
+            "chunk directory",
+            "SURF chunk and surface feature flag disagree",
+        )),
+    }
+}
+
+/// The NEAR chunk's near-field rows: present exactly when the feature flag
+/// says so, and only beside surface data (whose points the rows are lit
+/// at).
+fn read_near_field(
+    chunk: Option<&[u8]>,
+    flagged: bool,
+    (dims, has_surface): (&Dims, bool),
+    limits: &Limits,
+) -> Result<Option<PlaneRows>> {
+    match (chunk, flagged) {
+        (Some(_), true) if !has_surface => Err(Error::corrupt(
+            "NEAR chunk",
+            "near-field rows without surface data (valid: only with chunk SURF)",
+        )),
+        (Some(c), true) => {
+            PlaneRows::decode(c, dims.pixels(), dims.channels as usize, limits).map(Some)
+        }
+        (None, false) => Ok(None),
+        _ => Err(Error::corrupt(
+            "chunk directory",
+            "NEAR chunk and near-field feature flag disagree",
         )),
     }
 }
@@ -640,7 +701,7 @@ fn check_mode_chunks(version: u32, meta: &Meta, dir: &[DirEntry]) -> Result<()> 
     let (need, refuse): (&[&[u8; 4]], &[&[u8; 4]]) = if pca {
         (
             &[b"PCAM", b"PCAB", b"PCAC"],
-            &[b"COLS", b"DATA", b"NORM", b"PRIO"],
+            &[b"COLS", b"DATA", b"NORM", b"PRIO", b"NEAR"],
         )
     } else {
         (&[b"COLS", b"DATA"], &[b"PCAM", b"PCAB", b"PCAC"])

@@ -3,7 +3,8 @@
 
 use super::directory::{
     encode_head, pack, DirEntry, Packing, DIR_ENTRY_LEN, FEATURE_ALBEDO, FEATURE_COLUMN_NORMS,
-    FEATURE_EMPTY_ROWS, FEATURE_PRIORS, FEATURE_RECEIVER_MESH, FEATURE_SURFACE, HEADER_LEN,
+    FEATURE_EMPTY_ROWS, FEATURE_NEAR_FIELD, FEATURE_PRIORS, FEATURE_RECEIVER_MESH, FEATURE_SURFACE,
+    HEADER_LEN,
 };
 use super::meta::{Meta, META_LEN};
 use super::prime::{prime, Data, BATCH_BYTES};
@@ -13,6 +14,7 @@ use crate::empty::EmptyRows;
 use crate::entropy::ColumnShape;
 use crate::error::{Error, Result};
 use crate::mesh::ReceiverMesh;
+use crate::nearfield::PlaneRows;
 use crate::output::AtomicFile;
 use crate::pca::PcaModel;
 use crate::surface::Surface;
@@ -29,6 +31,9 @@ pub struct OptionalChunks<'a> {
     pub mesh: Option<&'a ReceiverMesh>,
     /// The mask of all-zero rows (chunk EMPT); stored when it has any.
     pub empty_rows: Option<&'a EmptyRows>,
+    /// Every row's transport over a light plane's face (chunk NEAR); only
+    /// with `surface`, one row per matrix row, the matrix's channels.
+    pub near_field: Option<&'a PlaneRows>,
     /// Store every column's priority norm (chunk NORM): each pushed
     /// column must then carry one ([`EncodedColumn::with_norm`]).
     pub column_norms: bool,
@@ -52,6 +57,7 @@ pub struct LtmWriter {
     albedo: Option<Stored>,
     surface: Option<Stored>,
     mesh: Option<Stored>,
+    near: Option<Stored>,
     empty_rows: Option<Stored>,
     entries: Vec<ColumnEntry>,
     /// The columns' norms, when the file stores them.
@@ -95,6 +101,7 @@ impl LtmWriter {
         }
         let surface = extra.surface.map(|s| s.encode_chunk(&meta.dims.rows));
         let mesh = mesh_chunk(&extra, &meta)?;
+        let near = near_chunk(&extra, &meta)?;
         let empty_rows = match extra.empty_rows {
             Some(e) if e.rows() != meta.dims.pixels() => {
                 return Err(Error::BufferTooSmall {
@@ -119,11 +126,12 @@ impl LtmWriter {
             }
             None => None,
         };
-        let [albedo, empty_rows, surface, mesh] = [
+        let [albedo, empty_rows, surface, mesh, near] = [
             (albedo, b"ALBD"),
             (empty_rows, b"EMPT"),
             (surface, b"SURF"),
             (mesh, b"MESH"),
+            (near, b"NEAR"),
         ]
         .map(|(c, tag)| c.map(|c| pack(c, tag)));
         let file = AtomicFile::create(path)?;
@@ -133,6 +141,7 @@ impl LtmWriter {
             + empty_rows.is_some() as u64
             + surface.is_some() as u64
             + mesh.is_some() as u64
+            + near.is_some() as u64
             + extra.column_norms as u64
             + extra.priors as u64;
         let head_len = HEADER_LEN as u64 + DIR_ENTRY_LEN as u64 * chunks + 4;
@@ -144,6 +153,7 @@ impl LtmWriter {
             + optional(&empty_rows)
             + optional(&surface)
             + optional(&mesh)
+            + optional(&near)
             + norms_len;
         let mut w = LtmWriter {
             file: BufWriter::with_capacity(1 << 20, file),
@@ -152,6 +162,7 @@ impl LtmWriter {
             albedo,
             surface,
             mesh,
+            near,
             empty_rows,
             entries: Vec::new(),
             norms: extra.column_norms.then(Vec::new),
@@ -163,6 +174,11 @@ impl LtmWriter {
             .seek(SeekFrom::Start(data_start))
             .map_err(|e| Error::io(&w.tmp, e))?;
         Ok(w)
+    }
+
+    /// Bytes of the NEAR chunk as stored (0 without near-field rows).
+    pub fn near_field_bytes(&self) -> u64 {
+        self.near.as_ref().map_or(0, |c| c.0.len() as u64)
     }
 
     /// Appends the next column (columns are written in order `0..M`).
@@ -325,6 +341,10 @@ impl LtmWriter {
             chunks.push((b"MESH", m));
             features |= FEATURE_RECEIVER_MESH;
         }
+        if let Some(n) = self.near.take() {
+            chunks.push((b"NEAR", n));
+            features |= FEATURE_NEAR_FIELD;
+        }
         if let Some(n) = self.norms.take() {
             chunks.push((
                 b"NORM",
@@ -396,6 +416,28 @@ fn mesh_chunk(extra: &OptionalChunks<'_>, meta: &Meta) -> Result<Option<Vec<u8>>
     }
 }
 
+/// The NEAR chunk of a file with `meta`, if `extra` has near-field rows:
+/// only beside surface data, one row per matrix row, the matrix's channels.
+fn near_chunk(extra: &OptionalChunks<'_>, meta: &Meta) -> Result<Option<Vec<u8>>> {
+    let Some(near) = extra.near_field else {
+        return Ok(None);
+    };
+    if extra.surface.is_none() {
+        return Err(Error::Invalid(
+            "near-field rows are stored only with their rows' surface data".into(),
+        ));
+    }
+    let (rows, channels) = (meta.dims.pixels(), meta.dims.channels as usize);
+    if near.rows() != rows || near.channels() != channels {
+        return Err(Error::Invalid(format!(
+            "near-field rows: {} rows of {} channels, the matrix has {rows} of {channels}",
+            near.rows(),
+            near.channels()
+        )));
+    }
+    Ok(Some(near.encode()))
+}
+
 /// Writes a `pca` file: META, ALBD, EMPT (when it has a row), SURF, MESH
 /// (each when given), PCAM, PCAB, PCAC, atomically. `extra` may not ask
 /// for column norms. Returns the file size.
@@ -410,6 +452,11 @@ pub(crate) fn write_pca_file(
     let (surface, empty_rows) = (extra.surface, extra.empty_rows);
     if extra.column_norms {
         return Err(Error::Invalid("a pca file stores no column norms".into()));
+    }
+    if extra.near_field.is_some() {
+        return Err(Error::Invalid(
+            "a pca file stores no near-field rows (compress the store in a wavelet mode)".into(),
+        ));
     }
     let mut chunks: Vec<([u8; 4], Vec<u8>)> = vec![(*b"META", meta.encode())];
     let mut features = 0;

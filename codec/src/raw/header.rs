@@ -6,28 +6,31 @@ use crate::error::{Error, Result};
 use crate::mesh::{
     ReceiverMesh, MAX_MESH_ELEMENTS, MESH_HEADER_LEN, MESH_TRIANGLE_LEN, MESH_VERTEX_LEN,
 };
+use crate::nearfield::{PlaneBasis, PLANE_BASIS_LEN};
 use crate::surface::SURFACE_RECORD_LEN;
 use std::path::Path;
 
 pub(crate) const MAGIC: [u8; 8] = *b"LTMRAW\0\x01";
-/// The newest version; versions 1 to 4 are still read and written (the
-/// version of a header is the oldest that holds what it stores; version 5
-/// is a part of a sharded bake).
-pub(super) const VERSION: u32 = 5;
-/// Header bytes of versions 1, 2, 3, 4 and 5.
+/// The newest version; every version from 1 is still read and written
+/// (the version of a header is the oldest that holds what it stores;
+/// version 5 is a part of a sharded bake, version 6 adds near-field rows).
+pub(super) const VERSION: u32 = 6;
+/// Header bytes of versions 1 to 6.
 pub(super) const HEADER_LEN_V1: u64 = 64;
 pub(super) const HEADER_LEN_V2: u64 = 96;
 pub(super) const HEADER_LEN_V3: u64 = 112;
 pub(super) const HEADER_LEN_V4: u64 = 128;
 pub(super) const HEADER_LEN_V5: u64 = 144;
+pub(super) const HEADER_LEN_V6: u64 = 240;
 /// The longest header: the bytes a reader reads before decoding.
-pub(super) const HEADER_LEN_MAX: u64 = HEADER_LEN_V5;
+pub(super) const HEADER_LEN_MAX: u64 = HEADER_LEN_V6;
 /// Bytes of an input identity.
 pub const INPUT_ID_LEN: usize = 32;
 pub(super) const FLAG_ALBEDO: u32 = 1;
 pub(super) const FLAG_SURFACE: u32 = 2;
 pub(super) const FLAG_MESH: u32 = 4;
 pub(super) const FLAG_PART: u32 = 8;
+pub(super) const FLAG_PLANE: u32 = 16;
 pub(super) const DATA_ALIGN: u64 = 4096;
 /// Bytes read at a time when a block's CRC is checked.
 pub(super) const CRC_CHUNK: u64 = 8 << 20;
@@ -59,6 +62,9 @@ pub struct RawHeader {
     /// The rows this file holds when it is one part of a sharded bake
     /// (version 5; see [`RawHeader::with_part`]); `None` for a whole store.
     pub part: Option<RowSpan>,
+    /// The face of near-field rows, when each row's transport over a light
+    /// plane is stored too (version 6; see [`RawHeader::with_plane`]).
+    pub plane: Option<PlaneBasis>,
 }
 
 /// A range of rows `start..end` of the whole matrix: the rows one part of a
@@ -112,6 +118,8 @@ pub(super) struct Layout {
     pub(super) surface_offset: u64,
     /// Start of the receiving mesh (0 when absent).
     pub(super) mesh_offset: u64,
+    /// Start of the near-field rows (0 when absent).
+    pub(super) plane_offset: u64,
     pub(super) data_offset: u64,
     pub(super) file_len: u64,
 }
@@ -129,6 +137,7 @@ impl RawHeader {
             has_surface: dims.rows.is_texture(),
             mesh_len: None,
             part: None,
+            plane: None,
         }
     }
 
@@ -172,6 +181,24 @@ impl RawHeader {
         }
     }
 
+    /// The same header with near-field rows over `plane`'s face (written as
+    /// version 6, which always has surface data): each row's `order²·C`
+    /// per-texel values, after the matrix ([`RawWriter::write_block_with_plane`](crate::RawWriter::write_block_with_plane)).
+    pub fn with_plane(self, plane: PlaneBasis) -> RawHeader {
+        RawHeader {
+            has_surface: true,
+            plane: Some(plane),
+            ..self
+        }
+    }
+
+    /// Values of one row's near-field transport (`order²·C`; 0 without).
+    pub fn plane_row_len(&self) -> usize {
+        self.plane.map_or(0, |b| {
+            b.texels().saturating_mul(self.dims.channels as usize)
+        })
+    }
+
     /// The same header with per-row surface data (written as version 3).
     pub fn with_surface(self) -> RawHeader {
         RawHeader {
@@ -188,11 +215,13 @@ impl RawHeader {
         }
     }
 
-    /// The format version this header is written as: 5 for a part of a
-    /// sharded bake, else 4 with a receiving mesh, else 3 with surface data,
-    /// else 2 with an input identity, else 1.
+    /// The format version this header is written as: 6 with near-field
+    /// rows, else 5 for a part of a sharded bake, else 4 with a receiving
+    /// mesh, else 3 with surface data, else 2 with an input identity, else 1.
     pub fn version(&self) -> u32 {
-        if self.part.is_some() {
+        if self.plane.is_some() {
+            6
+        } else if self.part.is_some() {
             5
         } else if self.mesh_len.is_some() {
             4
@@ -207,6 +236,7 @@ impl RawHeader {
 
     pub(super) fn header_len(&self) -> u64 {
         match self.version() {
+            6 => HEADER_LEN_V6,
             5 => HEADER_LEN_V5,
             4 => HEADER_LEN_V4,
             3 => HEADER_LEN_V3,
@@ -230,6 +260,9 @@ impl RawHeader {
             ));
         }
         let mesh_len = self.checked_mesh_len()?;
+        if let Some(basis) = &self.plane {
+            basis.validate()?;
+        }
         let all = self.dims.pixels() as u64;
         self.check_part(all)?;
         let p = self.stored_rows() as u64;
@@ -256,9 +289,14 @@ impl RawHeader {
         let mesh_end = mesh_len.map_or(surface_end, |len| mesh_offset + len + 4);
         let data_offset = mesh_end.next_multiple_of(DATA_ALIGN);
         let data_len = (self.dims.row_len() as u64 * 4).saturating_mul(p);
-        let file_len = data_offset
-            .checked_add(data_len)
-            .ok_or_else(|| Error::range("raw store size", data_len, "below 2^64 bytes"))?;
+        let plane_len = (self.plane_row_len() as u64 * 4).saturating_mul(p);
+        let too_large = || Error::range("raw store size", data_len, "below 2^64 bytes");
+        let data_end = data_offset.checked_add(data_len).ok_or_else(too_large)?;
+        let plane_offset = data_end.next_multiple_of(DATA_ALIGN);
+        let file_len = match self.plane {
+            Some(_) => plane_offset.checked_add(plane_len).ok_or_else(too_large)?,
+            None => data_end,
+        };
         Ok(Layout {
             table_offset,
             block_count,
@@ -266,6 +304,11 @@ impl RawHeader {
             albedo_offset: if self.has_albedo { albedo_offset } else { 0 },
             surface_offset: if self.has_surface { surface_offset } else { 0 },
             mesh_offset: if mesh_len.is_some() { mesh_offset } else { 0 },
+            plane_offset: if self.plane.is_some() {
+                plane_offset
+            } else {
+                0
+            },
             data_offset,
             file_len,
         })
@@ -287,6 +330,11 @@ impl RawHeader {
         if !self.has_surface {
             return Err(Error::Invalid(
                 "a part of a sharded bake must carry surface data".into(),
+            ));
+        }
+        if self.plane.is_some() {
+            return Err(Error::Invalid(
+                "a part of a sharded bake holds no near-field rows: bake a scene with a light plane on one machine".into(),
             ));
         }
         Ok(())
@@ -339,7 +387,8 @@ impl RawHeader {
                 } else {
                     0
                 }
-                | if self.part.is_some() { FLAG_PART } else { 0 },
+                | if self.part.is_some() { FLAG_PART } else { 0 }
+                | if self.plane.is_some() { FLAG_PLANE } else { 0 },
         );
         for v in self.dims.to_fields() {
             w.u32(v);
@@ -364,13 +413,19 @@ impl RawHeader {
                 _ => 0,
             });
         }
-        if self.mesh_len.is_some() || self.part.is_some() {
+        if self.mesh_len.is_some() || self.part.is_some() || self.plane.is_some() {
             w.u64(layout.mesh_offset);
             w.u64(self.mesh_len.unwrap_or(0));
         }
         if let Some(span) = self.part {
             w.u64(span.start);
             w.u64(span.len());
+        }
+        if let Some(basis) = &self.plane {
+            w.u64(0);
+            w.u64(0);
+            w.u64(layout.plane_offset);
+            basis.write(&mut w);
         }
         let crc = crc32fast::hash(&w.bytes);
         w.u32(crc);
@@ -389,6 +444,7 @@ impl RawHeader {
             3 => HEADER_LEN_V3,
             4 => HEADER_LEN_V4,
             5 => HEADER_LEN_V5,
+            6 => HEADER_LEN_V6,
             _ => {
                 return Err(Error::Version {
                     what: "raw store",
@@ -436,8 +492,15 @@ impl RawHeader {
                 start: long(124),
                 end: long(124).saturating_add(long(132)),
             }),
+            plane: if version == 6 {
+                let mut r =
+                    Reader::new(&bytes[148..148 + PLANE_BASIS_LEN], "raw store light plane");
+                Some(PlaneBasis::read(&mut r)?)
+            } else {
+                None
+            },
         };
-        if version == 5 && flags & FLAG_MESH == 0 && long(116) != 0 {
+        if version >= 5 && flags & FLAG_MESH == 0 && long(116) != 0 {
             return Err(Error::range(
                 "raw store mesh_len (header offset 116) without a mesh",
                 long(116),
@@ -456,8 +519,34 @@ impl RawHeader {
         let surface_offset = if version >= 3 { long(92) } else { 0 };
         let mesh_offset = if version >= 4 { long(108) } else { 0 };
         check_offsets(&layout, offsets, (surface_offset, mesh_offset))?;
+        if version == 6 {
+            check_plane_fields(&long, &layout)?;
+        }
         Ok((header, layout))
     }
+}
+
+/// A version-6 header's bytes 124..140 (a version-5 part's fields) are 0
+/// and its `plane_offset` (offset 140) is the layout's.
+fn check_plane_fields(long: &dyn Fn(usize) -> u64, layout: &Layout) -> Result<()> {
+    if long(124) != 0 || long(132) != 0 {
+        return Err(Error::range(
+            "raw store header bytes 124..140 (part fields) in version 6",
+            format!("{}, {}", long(124), long(132)),
+            "0, 0",
+        ));
+    }
+    if long(140) != layout.plane_offset {
+        return Err(Error::corrupt(
+            "raw store header",
+            format!(
+                "plane_offset {} disagrees with the dimensions (expected {})",
+                long(140),
+                layout.plane_offset
+            ),
+        ));
+    }
+    Ok(())
 }
 
 /// The header's CRC (over its first `len − 4` bytes), its flags (bit 0,
@@ -474,21 +563,22 @@ pub(super) fn check_fixed_fields(bytes: &[u8], len: usize, version: u32, flags: 
             computed: crc,
         });
     }
-    let allowed = FLAG_ALBEDO | FLAG_SURFACE | FLAG_MESH | FLAG_PART;
+    let allowed = FLAG_ALBEDO | FLAG_SURFACE | FLAG_MESH | FLAG_PART | FLAG_PLANE;
     let mesh_ok = match version {
         4 => flags & FLAG_MESH != 0,
-        5 => true,
+        5 | 6 => true,
         _ => flags & FLAG_MESH == 0,
     };
     if flags & !allowed != 0
         || (version >= 3) != (flags & FLAG_SURFACE != 0)
         || !mesh_ok
         || (version == 5) != (flags & FLAG_PART != 0)
+        || (version == 6) != (flags & FLAG_PLANE != 0)
     {
         return Err(Error::range(
             "raw store flags",
             format!("{flags:#x} (version {version})"),
-            "bit 0, bit 1 exactly in versions 3 to 5, bit 2 exactly in version 4 (optional in 5), bit 3 exactly in version 5",
+            "bit 0, bit 1 exactly in versions 3 to 6, bit 2 exactly in version 4 (optional in 5 and 6), bit 3 exactly in version 5, bit 4 exactly in version 6",
         ));
     }
     let reserved = u32::from_le_bytes(bytes[56..60].try_into().expect("4 bytes"));

@@ -193,6 +193,37 @@ impl RawStore {
         )
     }
 
+    /// The near-field rows `range` (`order²·C` values each, channel-
+    /// interleaved; [`RawHeader::plane_row_len`]) into `out` (resized), with
+    /// positioned reads. Like row data, they are trusted only once their
+    /// block is verified (the block CRC covers them; [`BlockVerifier`]
+    /// checks them when a block ends). An error without a light plane.
+    pub fn read_plane_rows(&self, range: Range<usize>, out: &mut Vec<f32>) -> Result<()> {
+        let (p, len) = (self.header.stored_rows(), self.header.plane_row_len());
+        if self.header.plane.is_none() {
+            return Err(Error::Invalid(format!(
+                "{}: holds no near-field rows (its scene has no [light_plane])",
+                self.path.display()
+            )));
+        }
+        if range.start > range.end || range.end > p {
+            return Err(Error::range(
+                "raw store near-field rows",
+                format!("{}..{}", range.start, range.end),
+                format!("a range within 0..{p}"),
+            ));
+        }
+        out.truncate(range.len() * len);
+        out.resize(range.len() * len, 0.0);
+        let offset = self.layout.plane_offset + (range.start * len) as u64 * 4;
+        read_at(
+            &self.file,
+            &self.path,
+            bytemuck::cast_slice_mut(out),
+            offset,
+        )
+    }
+
     /// Row `p` (`M·C` values, channel-interleaved) as stored, read with a
     /// positioned read ([`RawStore::read_rows`]).
     pub fn read_row(&self, p: usize) -> Result<Vec<f32>> {

@@ -1,5 +1,6 @@
 //! Checks raw blocks as their rows are read.
 
+use super::header::CRC_CHUNK;
 use super::store::RawStore;
 use crate::error::{Error, Result};
 use std::ops::Range;
@@ -89,6 +90,9 @@ impl<'a> BlockVerifier<'a> {
     }
 
     pub(super) fn end_block(&mut self, b: usize, rows: Range<usize>) -> Result<()> {
+        if self.store.header().plane.is_some() {
+            self.feed_plane(rows.clone())?;
+        }
         let computed = std::mem::replace(&mut self.hasher, crc32fast::Hasher::new()).finalize();
         let stored = self.store.block_crcs[b];
         if stored != computed {
@@ -99,5 +103,26 @@ impl<'a> BlockVerifier<'a> {
             });
         }
         self.problem.take().map_or(Ok(()), Err)
+    }
+
+    /// Adds block `rows`' near-field rows to its CRC (read from the file,
+    /// 8 MiB at a time) and notes the first non-finite value.
+    fn feed_plane(&mut self, rows: Range<usize>) -> Result<()> {
+        let len = self.store.header().plane_row_len().max(1);
+        let step = (CRC_CHUNK as usize / (4 * len)).max(1);
+        let mut buf = Vec::new();
+        for start in rows.clone().step_by(step) {
+            let part = start..(start + step).min(rows.end);
+            self.store.read_plane_rows(part.clone(), &mut buf)?;
+            self.hasher.update(bytemuck::cast_slice(&buf));
+            if let (None, Some(i)) = (&self.problem, buf.iter().position(|v| !v.is_finite())) {
+                self.problem = Some(Error::range(
+                    "raw store near-field value",
+                    format!("{} (row {})", buf[i], part.start + i / len),
+                    "finite",
+                ));
+            }
+        }
+        Ok(())
     }
 }

@@ -373,20 +373,42 @@ impl RawWriter {
             self.layout.data_offset + rows.start as u64 * row_bytes,
             self.layout.data_offset + rows.end as u64 * row_bytes,
         );
-        buf.resize((end - start).min(CRC_CHUNK) as usize, 0);
-        let mut at = start;
-        while at < end {
-            let len = (end - at).min(CRC_CHUNK) as usize;
-            self.file.read_exact_at(&mut buf[..len], at).map_err(io)?;
-            h.update(&buf[..len]);
-            at += len as u64;
+        let plane_bytes = self.header.plane_row_len() as u64 * 4;
+        let plane = (
+            self.layout.plane_offset + rows.start as u64 * plane_bytes,
+            self.layout.plane_offset + rows.end as u64 * plane_bytes,
+        );
+        for (start, end) in [(start, end), plane] {
+            buf.resize((end - start).min(CRC_CHUNK) as usize, 0);
+            let mut at = start;
+            while at < end {
+                let len = (end - at).min(CRC_CHUNK) as usize;
+                self.file.read_exact_at(&mut buf[..len], at).map_err(io)?;
+                h.update(&buf[..len]);
+                at += len as u64;
+            }
         }
         Ok(h.finalize())
     }
 
     /// Writes block `b`: `rows` holds its rows (M·C values each) and
     /// `albedo` its RGB albedo values when the store has an albedo image.
+    /// A store with near-field rows takes [`RawWriter::write_block_with_plane`].
     pub fn write_block(&mut self, b: usize, rows: &[f32], albedo: Option<&[f32]>) -> Result<()> {
+        self.write_block_with_plane(b, rows, albedo, None)
+    }
+
+    /// [`RawWriter::write_block`] with the block's near-field rows
+    /// (`order²·C` values each, [`RawHeader::plane_row_len`]), given exactly
+    /// when the header has a light plane; they are covered by the block's
+    /// CRC after its data.
+    pub fn write_block_with_plane(
+        &mut self,
+        b: usize,
+        rows: &[f32],
+        albedo: Option<&[f32]>,
+        plane: Option<&[f32]>,
+    ) -> Result<()> {
         if b >= self.done.len() {
             return Err(Error::range(
                 "block index",
@@ -403,9 +425,20 @@ impl RawWriter {
                 need: range.len() * row_len,
             });
         }
-        if rows.iter().any(|v| !v.is_finite()) {
+        if rows
+            .iter()
+            .chain(plane.into_iter().flatten())
+            .any(|v| !v.is_finite())
+        {
             return Err(Error::Invalid(format!(
                 "block {b} holds NaN or infinite values"
+            )));
+        }
+        let plane_len = range.len() * self.header.plane_row_len();
+        if plane.map(<[f32]>::len) != self.header.plane.map(|_| plane_len) {
+            return Err(Error::Invalid(format!(
+                "near-field rows for block {b} must be given exactly when the store has a light plane, {plane_len} values (given {:?})",
+                plane.map(<[f32]>::len)
             )));
         }
         if let Some((i, v)) = albedo
@@ -446,6 +479,13 @@ impl RawWriter {
             )
             .map_err(io)?;
         h.update(bytes);
+        if let Some(plane) = plane {
+            let bytes: &[u8] = bytemuck::cast_slice(plane);
+            let at =
+                self.layout.plane_offset + (range.start * self.header.plane_row_len()) as u64 * 4;
+            self.file.write_all_at(bytes, at).map_err(io)?;
+            h.update(bytes);
+        }
         let mut entry = 1u32.to_le_bytes().to_vec();
         entry.extend_from_slice(&h.finalize().to_le_bytes());
         self.file

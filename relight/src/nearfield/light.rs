@@ -2,8 +2,6 @@
 //! truncation (§5.3.3).
 
 use crate::error::{RelightError, Result};
-use ltm_codec::wavelet;
-use ltm_codec::Filter;
 
 /// The largest light texture side accepted, in pixels.
 pub const MAX_TEXTURE_SIDE: usize = 16384;
@@ -57,6 +55,22 @@ impl LightTexture {
     /// A texture of one radiance.
     pub fn constant(rgb: [f32; 3]) -> Result<LightTexture> {
         LightTexture::new(1, 1, vec![rgb])
+    }
+
+    /// Texels along x.
+    pub fn width(&self) -> usize {
+        self.width
+    }
+
+    /// Texels along y.
+    pub fn height(&self) -> usize {
+        self.height
+    }
+
+    /// The texel in column `x` (from the `−x` edge) and row `y` (from the
+    /// `−y` edge); `x < width`, `y < height`.
+    pub fn texel(&self, x: usize, y: usize) -> [f32; 3] {
+        self.texels[y * self.width + x]
     }
 
     /// The area average of the texture over each texel of an
@@ -261,25 +275,14 @@ impl SourceCoefficients {
 /// (`order` per axis, `1/√order` each). The result is scaled by `scale`.
 pub fn haar_2d(averages: &[[f64; 3]], order: usize, scale: f64) -> Result<Vec<[f64; 3]>> {
     let mut out = vec![[0.0f64; 3]; order * order];
-    let levels = order.trailing_zeros();
     let mut plane = vec![0.0f32; order * order];
-    let mut column = vec![0.0f32; order];
-    let mut work = vec![0.0f32; order];
     for c in 0..3 {
         for (p, a) in plane.iter_mut().zip(averages) {
             *p = (a[c] * scale / order as f64) as f32;
         }
-        for row in plane.chunks_exact_mut(order) {
-            wavelet::forward_1d(Filter::Haar, row, levels, &mut work)?;
-        }
-        for x in 0..order {
-            for y in 0..order {
-                column[y] = plane[y * order + x];
-            }
-            wavelet::forward_1d(Filter::Haar, &mut column, levels, &mut work)?;
-            for y in 0..order {
-                out[y * order + x][c] = f64::from(column[y]);
-            }
+        ltm_codec::nearfield::standard_haar_2d(&mut plane, order)?;
+        for (o, v) in out.iter_mut().zip(&plane) {
+            o[c] = f64::from(*v);
         }
     }
     Ok(out)

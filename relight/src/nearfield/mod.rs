@@ -20,12 +20,16 @@
 //! ([`Targets::Share`], eq. 32). A transport row over the face
 //! ([`transport_coefficients`]) then shades as `B = Σ_k L_k·T_k`.
 //!
+//! [`NearField`] relights a file's stored near-field rows (chunk NEAR)
+//! under [`AreaLight`]s, each row at its stored surface point.
+//!
 //! The couplings are evaluated exactly per point from the closed form of
 //! two piecewise-constant functions, not looked up in a quantized table.
 
 pub mod acc;
 mod light;
 mod propagate;
+mod stored;
 #[cfg(test)]
 mod tests;
 
@@ -34,3 +38,4 @@ pub use propagate::{
     affine, transport_coefficients, PlaneFace, Propagator, Receiver, Targets, DEFAULT_FACE_SIDE,
     MIN_SCALE,
 };
+pub use stored::{AreaLight, NearField, NearFieldTerms};

@@ -256,9 +256,19 @@ impl Propagator {
     /// `B = Σ_k L_k·T_k` over a transport row's nonzero Haar coefficients
     /// `(k, T_k)` (see [`transport_coefficients`]).
     pub fn shade(&self, transport: &[(u32, f32)]) -> [f64; 3] {
+        self.shade_terms(transport.iter().map(|&(k, t)| (k as usize, t)))
+    }
+
+    /// [`Propagator::shade`] of a row held as parallel lists of indices and
+    /// values (as [`ltm_codec::PlaneRows::row`] gives them).
+    pub fn shade_indexed(&self, indices: &[u16], values: &[f32]) -> [f64; 3] {
+        self.shade_terms(indices.iter().zip(values).map(|(&k, &t)| (k as usize, t)))
+    }
+
+    fn shade_terms(&self, terms: impl Iterator<Item = (usize, f32)>) -> [f64; 3] {
         let mut sum = [0.0f64; 3];
-        for &(k, t) in transport {
-            let l = self.coefficient(k as usize);
+        for (k, t) in terms {
+            let l = self.coefficient(k);
             for c in 0..3 {
                 sum[c] += l[c] * f64::from(t);
             }
@@ -279,15 +289,7 @@ pub fn transport_coefficients(per_texel: &[f32], order: usize) -> Result<Vec<(u3
             per_texel.len()
         )));
     }
-    let grey: Vec<[f64; 3]> = per_texel
-        .iter()
-        .map(|&t| [f64::from(t) * (order * order) as f64; 3])
-        .collect();
-    let coefficients = super::light::haar_2d(&grey, order, 1.0)?;
-    Ok(coefficients
-        .iter()
-        .enumerate()
-        .filter(|(_, c)| c[0] != 0.0)
-        .map(|(k, c)| (k as u32, c[0] as f32))
-        .collect())
+    let mut out = Vec::new();
+    ltm_codec::nearfield::plane_coefficients(per_texel, order, &mut out)?;
+    Ok(out)
 }

@@ -69,6 +69,30 @@ pub fn intensity(s: &str) -> Result<[f32; 3], String> {
     }
 }
 
+/// `--area-center X,Y`, `--area-size W,H`: two finite numbers.
+pub fn pair(s: &str) -> Result<[f64; 2], String> {
+    let v: Vec<f64> = s
+        .split(',')
+        .map(|t| t.trim().parse::<f64>())
+        .collect::<Result<_, _>>()
+        .map_err(|_| format!("'{s}' is not two numbers X,Y"))?;
+    match v[..] {
+        [x, y] if x.is_finite() && y.is_finite() => Ok([x, y]),
+        [_, _] => Err(format!("'{s}' is not finite (valid: two finite numbers)")),
+        _ => Err(format!("'{s}' has {} numbers (valid: two, X,Y)", v.len())),
+    }
+}
+
+/// `--area-source-terms`, `--area-target-terms`: a share in (0, 1].
+pub fn share(s: &str) -> Result<f64, String> {
+    match s.parse::<f64>() {
+        Ok(v) if v > 0.0 && v <= 1.0 => Ok(v),
+        _ => Err(format!(
+            "'{s}' is out of range (valid: a share in (0, 1], e.g. 0.05)"
+        )),
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -96,6 +120,18 @@ mod tests {
         assert_eq!(intensity("0,1,2"), Ok([0.0, 1.0, 2.0]));
         for bad in ["-1", "nan", "inf", "1,2", "1,-2,3", "x", "1e39"] {
             assert!(intensity(bad).is_err(), "{bad}");
+        }
+    }
+
+    #[test]
+    fn area_light_values_are_checked() {
+        assert_eq!(pair("-0.5, 2"), Ok([-0.5, 2.0]));
+        for bad in ["1", "1,2,3", "nan,0", "0,inf", "a,b"] {
+            assert!(pair(bad).is_err(), "{bad}");
+        }
+        assert_eq!(share("1"), Ok(1.0));
+        for bad in ["0", "-0.1", "1.5", "nan", "x"] {
+            assert!(share(bad).is_err(), "{bad}");
         }
     }
 }

@@ -761,7 +761,9 @@ fn code_and_relight(
         mode,
         bits,
         target_error: err,
-        file_bytes: stats.file_bytes,
+        // The matrix's bytes: near-field rows (a [light_plane]) are not
+        // what the report compares.
+        file_bytes: stats.file_bytes - stats.near_field_bytes,
         matrix_error: stats.achieved_error,
         target_met: stats.target_met,
         nonzeros: stats.nonzeros,
@@ -795,6 +797,10 @@ fn code_and_relight_pca(
     envs: &[Env],
     files: &Files,
 ) -> Result<Option<Coding>> {
+    if raw.header().plane.is_some() {
+        eprintln!("{label} pca {err}: left out: the store has near-field rows (a [light_plane]), which pca files do not hold");
+        return Ok(None);
+    }
     let dims = raw.dims();
     let full = dims.pixels().min(dims.row_len());
     let max_rank = s.pca_ranks.iter().copied().max().unwrap_or(256).min(full);

@@ -184,6 +184,7 @@ pub fn route(
     let b = Bounds {
         files: viewer.files.len(),
         maps: viewer.map_count(),
+        textures: viewer.area_textures().count(),
     };
     let terms = |f: usize| viewer.files[f].info.max_terms;
     Routed::Reply(match path {
@@ -232,6 +233,7 @@ fn info(viewer: &Viewer) -> Reply {
         "files": viewer.files.iter().map(|f| &f.info).collect::<Vec<_>>(),
         "maps": viewer.maps().collect::<Vec<_>>(),
         "reference": viewer.reference_name(),
+        "area_textures": viewer.area_textures().collect::<Vec<_>>(),
         "weightings": ["unweighted", "transport", "area"],
         "max_angle": params::MAX_ANGLE,
     });
@@ -271,6 +273,9 @@ fn frame_reply(f: &FrameOut, image: &Image) -> Reply {
     let mut r = body(encode_frame(image), "application/octet-stream");
     r = with_header(r, "X-Frame-Ms", &ms(f.frame_time));
     r = with_header(r, "X-Resample-Ms", &ms(f.resample_time));
+    if let Some(t) = f.area_time {
+        r = with_header(r, "X-Area-Ms", &ms(t));
+    }
     r = with_header(r, "X-Light", if f.draft { "draft" } else { "exact" });
     r = with_header(r, "X-Lights", &f.stats.lights.to_string());
     r = with_header(r, "X-Nonzeros", &f.stats.nonzeros.to_string());
@@ -294,9 +299,11 @@ fn exact(viewer: &Viewer, p: &FrameParams) -> Reply {
         Err(e) => return frame_error(e),
     };
     let took = t.elapsed();
+    // The exact view is the map's T·L: its frame is the map's alone.
     let p = FrameParams {
         client: None,
         resampling: Resampling::Exact,
+        area: None,
         ..p.clone()
     };
     match viewer.frame(&p) {

@@ -8,8 +8,10 @@
 //! # API (all `GET`; any other method gets 405, a bad parameter 400)
 //!
 //! - `/api/info`: JSON with `files` (name, bytes, mode, matrix_error, width,
-//!   height, lights, max_terms, layout `image` or `texture`), `maps` (name,
-//!   width, height), `reference` (the raw store's name or null).
+//!   height, lights, max_terms, layout `image` or `texture`, `near_field`:
+//!   the light plane's `order` and `side` of a file with near-field rows,
+//!   else null), `maps` (name, width, height), `reference` (the raw store's
+//!   name or null), `area_textures` (names; index 0 is `uniform`).
 //! - `/api/frame?file=F&map=M&yaw=Y&pitch=P&roll=R&n=N&weighting=W&light=L&client=C&seq=S`:
 //!   one frame. `yaw`, `pitch`, `roll` (degrees, finite, |a| ≤ 36000),
 //!   `weighting` (unweighted, transport, area) and `light` are optional.
@@ -20,7 +22,13 @@
 //!   file's `max_terms`; `client` (1–32 letters and digits) and `seq` go
 //!   together: a request older than the newest seen from the same client
 //!   is dropped with 204 (latest request wins). Frames run in a fixed number
-//!   of slots; when all are busy the answer is 503.
+//!   of slots; when all are busy the answer is 503. An area light
+//!   (files with near-field rows only; a scene's `[light_plane]`) is added
+//!   with `ax`, `ay` (centre in the plane), `aw`, `ah` (sides, > 0), `ai`
+//!   (intensity, >= 0), all five or none (finite, |v| ≤ 10⁶), and optionally
+//!   `aq` (quarter turns, 0..=3) and `at` (texture index); it is lit at 5 %
+//!   of its terms and 30 % of each row's, `X-Area-Ms` gives its time, and
+//!   such a frame carries no `X-Error` (the exact image is the map's).
 //! - `/api/exact?…` (same parameters): the exact image `T·L` from the
 //!   `--reference` store, computed on demand and cached per map and
 //!   rotation; `X-Error` gives the frame's relative L2 error against it.
@@ -90,7 +98,9 @@ the weighting, exposure and tone mapping, and readouts of the server's frame tim
 round trip, lights used and nonzeros touched. With two files they are shown side by side \
 (or under a split slider). With --reference, the exact image T·L can be shown and the \
 frame's error against it is read out. Texture-space files are drawn as their mesh in WebGL \
-with an orbit camera.
+with an orbit camera. A file baked with a [light_plane] also takes an area light: its \
+texture, centre, size, intensity and quarter turn are fields of the page, and a \
+shift-drag on an image moves it.
 
 Limits: at most 4096 connections at once (fewer where the open-file limit is lower: the \
 limit less 256; it is raised toward the hard limit first), one beyond gets 503; 5 s to send \
@@ -119,6 +129,11 @@ pub struct ViewArgs {
     /// itself; another answers any Host (0.0.0.0 prints the 127.0.0.1 URL).
     #[arg(long, value_name = "ADDR")]
     pub bind: Option<IpAddr>,
+    /// An area-light texture to offer in the page (EXR or PNG, as `ltm
+    /// relight --area-light` reads it); repeatable. `uniform` is always
+    /// offered. Only files baked with a `[light_plane]` take area lights.
+    #[arg(long = "area-light", value_name = "TEXTURE")]
+    pub area_light: Vec<PathBuf>,
     /// Frames computed at once (more concurrent frame requests get 503;
     /// at most slots + 4 frame requests are handled at once).
     #[arg(long, default_value_t = 2, value_parser = clap::value_parser!(u16).range(1..=64))]
@@ -148,12 +163,23 @@ pub fn run(a: ViewArgs, ctx: &Ctx) -> Result<()> {
     if let Some(r) = &a.reference {
         inputs.push(("--reference", r.as_path()));
     }
+    inputs.extend(a.area_light.iter().map(|t| ("--area-light", t.as_path())));
     claim_files(&inputs, &[])?;
     let maps = map_list(&a.env);
+    let mut textures = vec![(
+        "uniform".to_string(),
+        ltm_relight::nearfield::LightTexture::constant([1.0; 3])?,
+    )];
+    for t in &a.area_light {
+        let spec = t.to_string_lossy();
+        let texture = crate::area_light::read_texture(&spec, [1.0; 3], ctx.limits())
+            .with_context(|| format!("--area-light {spec}"))?;
+        textures.push((state::file_name(t), texture));
+    }
     let viewer = Arc::new(state::Viewer::open(
         &a.files,
         &maps,
-        a.reference.as_deref(),
+        (a.reference.as_deref(), textures),
         a.slots as usize,
         ctx.limits(),
     )?);

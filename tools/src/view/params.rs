@@ -30,6 +30,28 @@ pub struct Bounds {
     pub files: usize,
     /// Environment maps listed.
     pub maps: usize,
+    /// Area-light textures offered (`uniform` and each `--area-light`).
+    pub textures: usize,
+}
+
+/// Largest magnitude of an area light's centre coordinate, side or
+/// intensity.
+pub const MAX_AREA_VALUE: f64 = 1e6;
+
+/// An area light in the file's light plane (`ax`, `ay`, `aw`, `ah`, `ai`,
+/// and optionally `aq`, `at`).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct AreaParams {
+    /// Centre in the plane's coordinates (`ax`, `ay`).
+    pub center: [f64; 2],
+    /// Sides along the plane's axes before turning (`aw`, `ah`), > 0.
+    pub size: [f64; 2],
+    /// Radiance scale (`ai`), >= 0.
+    pub intensity: f64,
+    /// Quarter turns counter-clockwise seen from the lit side (`aq`, 0..=3).
+    pub quarter_turns: u32,
+    /// Index into the offered textures (`at`).
+    pub texture: usize,
 }
 
 /// Which client sent a frame request and where it is in its sequence.
@@ -65,6 +87,8 @@ pub struct FrameParams {
     pub client: Option<Client>,
     /// How a rotated light not yet cached is resampled.
     pub resampling: Resampling,
+    /// An area light added to the map's image (files with near-field rows).
+    pub area: Option<AreaParams>,
 }
 
 /// How a frame's rotated light is resampled when it is not cached
@@ -157,7 +181,85 @@ pub const FRAME_PARAMS: &[&str] = &[
     "client",
     "seq",
     "light",
+    "ax",
+    "ay",
+    "aw",
+    "ah",
+    "ai",
+    "aq",
+    "at",
 ];
+
+/// A finite number within ±[`MAX_AREA_VALUE`] above `low` (exclusive when
+/// `strict`).
+fn area_value(
+    q: &HashMap<String, String>,
+    name: &str,
+    low: f64,
+    strict: bool,
+) -> Result<f64, BadRequest> {
+    let s = &q[name];
+    match s.parse::<f64>() {
+        Ok(v)
+            if v.is_finite() && v.abs() <= MAX_AREA_VALUE && (v > low || (!strict && v == low)) =>
+        {
+            Ok(v)
+        }
+        _ => {
+            let lower = if strict { ">" } else { ">=" };
+            Err(BadRequest(format!(
+                "{name} '{}' is out of range (valid: finite, {lower} {low}, at most {MAX_AREA_VALUE:e} in magnitude)",
+                truncate(s)
+            )))
+        }
+    }
+}
+
+/// The area light of a frame request: `ax`, `ay`, `aw`, `ah`, `ai` all or
+/// none; `aq` (quarter turns, 0..=3) and `at` (texture) only with them.
+fn area(q: &HashMap<String, String>, b: &Bounds) -> Result<Option<AreaParams>, BadRequest> {
+    let given = ["ax", "ay", "aw", "ah", "ai"].map(|k| q.contains_key(k));
+    if !given.iter().any(|&g| g) {
+        if q.contains_key("aq") || q.contains_key("at") {
+            return Err(BadRequest(
+                "aq and at need an area light (ax, ay, aw, ah, ai)".into(),
+            ));
+        }
+        return Ok(None);
+    }
+    if !given.iter().all(|&g| g) {
+        return Err(BadRequest(
+            "an area light needs all of ax, ay, aw, ah and ai".into(),
+        ));
+    }
+    let quarter_turns = match q.get("aq").map(|s| s.parse::<u32>()) {
+        None => 0,
+        Some(Ok(t)) if t <= 3 => t,
+        Some(_) => {
+            return Err(BadRequest(format!(
+                "aq '{}' is out of range (valid: 0..=3 quarter turns)",
+                truncate(&q["aq"])
+            )))
+        }
+    };
+    let texture = match q.contains_key("at") {
+        true => index(q, "at", b.textures)?,
+        false => 0,
+    };
+    Ok(Some(AreaParams {
+        center: [
+            area_value(q, "ax", -MAX_AREA_VALUE, false)?,
+            area_value(q, "ay", -MAX_AREA_VALUE, false)?,
+        ],
+        size: [
+            area_value(q, "aw", 0.0, true)?,
+            area_value(q, "ah", 0.0, true)?,
+        ],
+        intensity: area_value(q, "ai", 0.0, false)?,
+        quarter_turns,
+        texture,
+    }))
+}
 
 /// Parses a frame request's query (`n` is checked against `max_terms`).
 pub fn frame(
@@ -202,6 +304,7 @@ pub fn frame(
         weighting,
         client: client(&q)?,
         resampling,
+        area: area(&q, b)?,
     })
 }
 
@@ -240,7 +343,11 @@ mod tests {
     use super::*;
     use proptest::prelude::*;
 
-    const B: Bounds = Bounds { files: 2, maps: 3 };
+    const B: Bounds = Bounds {
+        files: 2,
+        maps: 3,
+        textures: 2,
+    };
 
     fn parse(q: &str) -> Result<FrameParams, BadRequest> {
         frame(q, &B, &|_| 100)
@@ -256,6 +363,14 @@ mod tests {
         assert_eq!(p.terms, 100);
         assert_eq!(p.weighting, Weighting::Transport);
         assert_eq!(p.client.unwrap().seq, 7);
+        assert_eq!(p.area, None);
+        let p = parse("file=0&map=0&n=1&ax=-0.5&ay=0.25&aw=1&ah=0.5&ai=3&aq=1&at=1").unwrap();
+        let a = p.area.unwrap();
+        assert_eq!(
+            (a.center, a.size, a.intensity),
+            ([-0.5, 0.25], [1.0, 0.5], 3.0)
+        );
+        assert_eq!((a.quarter_turns, a.texture), (1, 1));
     }
 
     #[test]
@@ -282,6 +397,17 @@ mod tests {
             ("file=0&map=0&n=1&client=a", "go together"),
             ("file=-1&map=0&n=1", "file '-1'"),
             ("map=0&n=1", "missing parameter 'file'"),
+            (
+                "file=0&map=0&n=1&ax=0&ay=0&aw=1&ah=1",
+                "all of ax, ay, aw, ah and ai",
+            ),
+            ("file=0&map=0&n=1&ax=0&ay=0&aw=0&ah=1&ai=1", "aw '0'"),
+            ("file=0&map=0&n=1&ax=nan&ay=0&aw=1&ah=1&ai=1", "ax 'nan'"),
+            ("file=0&map=0&n=1&ax=0&ay=0&aw=1&ah=1&ai=-1", "ai '-1'"),
+            ("file=0&map=0&n=1&ax=0&ay=0&aw=1e7&ah=1&ai=1", "aw '1e7'"),
+            ("file=0&map=0&n=1&ax=0&ay=0&aw=1&ah=1&ai=1&aq=4", "aq '4'"),
+            ("file=0&map=0&n=1&ax=0&ay=0&aw=1&ah=1&ai=1&at=2", "at '2'"),
+            ("file=0&map=0&n=1&aq=1", "need an area light"),
         ] {
             let e = parse(q).unwrap_err().0;
             assert!(e.contains(needle), "{q}: {e}");

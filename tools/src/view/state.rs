@@ -2,11 +2,14 @@
 //! lights and of exact images, the frame slots that bound concurrent work,
 //! and each client's latest sequence number.
 
-use super::params::{Client, FrameParams, Lighting, Resampling};
+use super::params::{AreaParams, Client, FrameParams, Lighting, Resampling};
 use super::preview::Preview;
 use anyhow::{bail, Context, Result};
 use ltm_codec::container::LtmFile;
 use ltm_codec::{Limits, RawStore, RowLayout};
+use ltm_relight::nearfield::{
+    AreaLight, LightTexture, NearField, NearFieldTerms, Placement, Targets,
+};
 use ltm_relight::{
     reference, relative_l2, EnvMap, Frame, FrameStats, Image, PrefilteredMap, Relight, Request,
     TexturedMesh,
@@ -41,6 +44,24 @@ pub struct ViewFile {
     pub mesh: Option<TexturedMesh>,
     /// Frames to reuse (each holds a relighter's scratch buffers).
     frames: Mutex<Vec<Frame>>,
+    /// The file's near-field rows (a scene's `[light_plane]`), if any.
+    near: Option<NearField>,
+}
+
+/// The terms of an area light's frame: 5 % of the light's coefficients,
+/// 30 % of each row's (the defaults of `ltm relight --area-light`).
+const AREA_TERMS: NearFieldTerms = NearFieldTerms {
+    source: 0.05,
+    targets: Targets::Share(0.3),
+};
+
+/// A file's light plane, as `/api/info` gives it.
+#[derive(Serialize, Clone)]
+pub struct NearInfo {
+    /// Face texels per side.
+    pub order: u32,
+    /// Face side in tangent units.
+    pub side: f64,
 }
 
 /// A file's facts, as `/api/info` gives them.
@@ -67,6 +88,9 @@ pub struct FileInfo {
     /// A texture's parameterization (`uv` or `sphere`, whose square folds
     /// onto itself along its border).
     pub parameterization: Option<&'static str>,
+    /// The light plane of a file with near-field rows (area lights), or
+    /// null.
+    pub near_field: Option<NearInfo>,
 }
 
 /// A listed environment map.
@@ -92,8 +116,11 @@ pub struct FrameOut {
     pub resample_time: Duration,
     /// Whether the light was the draft resampling (not the exact one).
     pub draft: bool,
-    /// Relative L2 error against the exact image, when it is cached.
+    /// Relative L2 error against the exact image, when it is cached (and
+    /// no area light is added: the exact image is the map's).
     pub error: Option<f64>,
+    /// Time of the area light's near-field rows, when one was asked for.
+    pub area_time: Option<Duration>,
 }
 
 /// Why a frame was not made.
@@ -128,6 +155,8 @@ pub struct Viewer {
     /// The latest draft lights (two files turned together share one).
     drafts: Mutex<VecDeque<(LightKey, Light)>>,
     exact: Mutex<VecDeque<(ExactKey, Arc<Image>)>>,
+    /// Area-light textures: `uniform`, then each `--area-light`.
+    textures: Vec<(String, LightTexture)>,
     slots: Slots,
     clients: Mutex<HashMap<String, (u64, Instant)>>,
 }
@@ -137,7 +166,7 @@ fn key_of(l: &Lighting) -> [u64; 3] {
     [r.yaw.to_bits(), r.pitch.to_bits(), r.roll.to_bits()]
 }
 
-fn file_name(p: &Path) -> String {
+pub fn file_name(p: &Path) -> String {
     p.file_name()
         .map(|s| s.to_string_lossy().into_owned())
         .unwrap_or_else(|| p.display().to_string())
@@ -146,8 +175,15 @@ fn file_name(p: &Path) -> String {
 impl ViewFile {
     fn open(path: &Path, limits: &Limits) -> Result<ViewFile> {
         // One read of the file, whose relighter is made last (it takes it).
-        let file = LtmFile::open_with_limits(path, limits)
+        let mut file = LtmFile::open_with_limits(path, limits)
             .with_context(|| format!("opening {}", path.display()))?;
+        let near = match file.near_field() {
+            Some(_) => Some(
+                NearField::take(&mut file)
+                    .with_context(|| format!("opening {}", path.display()))?,
+            ),
+            None => None,
+        };
         let meta = file.meta().clone();
         let (width, height) = (meta.dims.width() as usize, meta.dims.height() as usize);
         let texture = meta.dims.rows.is_texture();
@@ -177,6 +213,10 @@ impl ViewFile {
                 } => Some(parameterization.name()),
                 _ => None,
             },
+            near_field: near.as_ref().map(|n| NearInfo {
+                order: n.basis().order,
+                side: n.basis().side,
+            }),
         };
         Ok(ViewFile {
             path: path.to_path_buf(),
@@ -184,6 +224,7 @@ impl ViewFile {
             info,
             mesh,
             frames: Mutex::new(Vec::new()),
+            near,
         })
     }
 
@@ -209,7 +250,7 @@ impl Viewer {
     pub fn open(
         files: &[PathBuf],
         maps: &[PathBuf],
-        raw: Option<&Path>,
+        (raw, textures): (Option<&Path>, Vec<(String, LightTexture)>),
         slots: usize,
         limits: &Limits,
     ) -> Result<Viewer> {
@@ -246,9 +287,53 @@ impl Viewer {
             raw,
             lights: Mutex::new(VecDeque::new()),
             exact: Mutex::new(VecDeque::new()),
+            textures,
             slots: Slots::new(slots),
             clients: Mutex::new(HashMap::new()),
         })
+    }
+
+    /// The names of the area-light textures offered.
+    pub fn area_textures(&self) -> impl Iterator<Item = &str> {
+        self.textures.iter().map(|(n, _)| n.as_str())
+    }
+
+    /// The near-field image of area light `a` on file `f`, added to
+    /// `image`, and its time.
+    fn add_area(
+        &self,
+        f: &ViewFile,
+        a: &AreaParams,
+        image: &mut Image,
+    ) -> Result<Duration, FrameError> {
+        let near = f.near.as_ref().ok_or_else(|| {
+            FrameError::Bad(format!(
+                "{} has no near-field rows (its scene has no [light_plane]): it takes no area light",
+                f.info.name
+            ))
+        })?;
+        let t = Instant::now();
+        let texture = self.textures[a.texture].1.clone();
+        let (texture, size) =
+            crate::area_light::turned(texture, a.size, 90.0 * f64::from(a.quarter_turns))
+                .map_err(|e| FrameError::Bad(format!("{e:#}")))?;
+        let light = AreaLight {
+            texture,
+            placement: Placement {
+                center: a.center,
+                size,
+                intensity: a.intensity,
+            },
+        };
+        let lit = near
+            .render(&[light], AREA_TERMS)
+            .map_err(|e| FrameError::Bad(e.to_string()))?;
+        for (o, v) in image.data.iter_mut().zip(&lit) {
+            for c in 0..3 {
+                o[c] += v[c];
+            }
+        }
+        Ok(t.elapsed())
     }
 
     /// The listed maps.
@@ -379,16 +464,29 @@ impl Viewer {
         let frame_time = t.elapsed();
         let out = match result {
             Ok(stats) => {
-                let error = self
-                    .cached_exact(&p.lighting)
-                    .and_then(|e| relative_l2(&frame.image, &e).ok());
+                let mut image = frame.image.clone();
+                let (error, area_time) = match &p.area {
+                    None => (
+                        self.cached_exact(&p.lighting)
+                            .and_then(|e| relative_l2(&image, &e).ok()),
+                        None,
+                    ),
+                    Some(a) => match self.add_area(f, a, &mut image) {
+                        Ok(t) => (None, Some(t)),
+                        Err(e) => {
+                            lock(&f.frames).push(frame);
+                            return Err(e);
+                        }
+                    },
+                };
                 Ok(FrameOut {
-                    image: frame.image.clone(),
+                    image,
                     stats,
                     frame_time,
                     resample_time,
                     draft,
                     error,
+                    area_time,
                 })
             }
             Err(e) => Err(FrameError::Bad(e.to_string())),

@@ -201,7 +201,16 @@ function normalizeAngles() {
 function rotationQuery() { return `map=${$("map").value}&yaw=${angle("yaw")}&pitch=${angle("pitch")}&roll=${angle("roll")}`; }
 
 function query(fileIndex) {
-  return `file=${fileIndex}&${rotationQuery()}&n=${terms(fileIndex)}&weighting=${$("weighting").value}`;
+  return `file=${fileIndex}&${rotationQuery()}&n=${terms(fileIndex)}&weighting=${$("weighting").value}${areaQuery(fileIndex)}`;
+}
+
+// The area light's part of a file's query: only when it is on and the file
+// has near-field rows (a [light_plane] in its scene).
+function areaQuery(fileIndex) {
+  if (!$("area").checked || !info.files[fileIndex]?.near_field) return "";
+  const v = (id) => Number($(id).value);
+  return `&ax=${v("area-x")}&ay=${v("area-y")}&aw=${v("area-w")}&ah=${v("area-h")}&ai=${v("area-i")}` +
+    `&aq=${$("area-turn").value}&at=${$("area-texture").value}`;
 }
 
 // The lighting part of a query (map and rotation): what the exact image depends on.
@@ -322,6 +331,7 @@ async function send(p) {
         lights: r.headers.get("X-Lights"),
         nonzeros: r.headers.get("X-Nonzeros"),
         error: r.headers.get("X-Error"),
+        areaMs: r.headers.has("X-Area-Ms") ? Number(r.headers.get("X-Area-Ms")) : null,
       });
       const received = performance.now();
       // A new exposure redraws every panel; otherwise only this one changed.
@@ -371,7 +381,7 @@ async function requestExact() {
       exactPanel.exactMs = r.headers.get("X-Exact-Ms");
       $("error").textContent = `computed in ${Number(exactPanel.exactMs).toFixed(1)} ms (0 when cached)`;
       // File 0's frame at this query: its error came with the exact image.
-      if (panels[0].shown === q && !panels[0].draft) panels[0].readout.error = r.headers.get("X-Error");
+      if (panels[0].shown === q && !panels[0].draft && !areaQuery(0)) panels[0].readout.error = r.headers.get("X-Error");
       drawAll();
       for (const p of panels) if (wantsError(p)) askError(p);
     } else if (r.status !== 503) {
@@ -389,8 +399,9 @@ async function requestExact() {
 // A frame that came without an error while the exact image of its lighting
 // is shown (it was made before the exact image was cached): asked for once
 // more, now with its error.
+// (Not with an area light: the exact image is the map's alone.)
 function wantsError(p) {
-  return !!info.reference && !!p.readout && !p.readout.error && !p.draft && p.shown === query(p.index) && p.retried !== p.shown &&
+  return !!info.reference && !areaQuery(p.index) && !!p.readout && !p.readout.error && !p.draft && p.shown === query(p.index) && p.retried !== p.shown &&
     !!exactPanel.shownQuery && lightingOf(exactPanel.shownQuery) === lightingOf(p.shown);
 }
 
@@ -484,7 +495,8 @@ function readouts() {
       (err ? `, image error ${err}` : "") +
       `\n  server ${r.serverMs?.toFixed(2) ?? "-"} ms (+ resample ${r.resampleMs?.toFixed(2) ?? "-"} ms${p.draft ? ", draft light" : ""}), ` +
       `round trip ${r.roundTripMs?.toFixed(1) ?? "-"} ms, input→screen ${r.latencyMs?.toFixed(1) ?? "-"} ms, ` +
-      `lights ${r.lights ?? "-"}, nonzeros ${r.nonzeros ?? "-"}`;
+      `lights ${r.lights ?? "-"}, nonzeros ${r.nonzeros ?? "-"}` +
+      (r.areaMs !== null && r.areaMs !== undefined ? `\n  area light ${r.areaMs.toFixed(1)} ms (5 % of its terms, 30 % of each row's; the error readouts are the map's)` : "");
   });
   $("readouts").textContent = lines.join("\n");
   layoutSplit();
@@ -527,6 +539,11 @@ function resetAll() {
 function wireControls() {
   for (const id of ["map", "weighting", "yaw", "pitch", "roll", "show-exact"]) $(id).addEventListener("change", requestFrames);
   for (const id of ["yaw", "pitch", "roll"]) $(id).addEventListener("input", requestFrames);
+  for (const id of ["area", "area-texture", "area-turn"]) $(id).addEventListener("change", requestFrames);
+  for (const id of ["area-x", "area-y", "area-w", "area-h", "area-i"]) {
+    $(id).addEventListener("input", requestFrames);
+    $(id).addEventListener("change", requestFrames);
+  }
   $("exposure").addEventListener("input", () => { $("auto-exposure").checked = false; drawAll(); });
   $("auto-exposure").addEventListener("change", drawAll);
   $("tonemap").addEventListener("change", drawAll);
@@ -543,14 +560,23 @@ function wireControls() {
 // Drag on an image rotates the lighting: x → yaw, y → pitch (0.5° a pixel).
 function dragRotates(el) {
   let last = null;
-  el.addEventListener("pointerdown", (e) => { if (!e.shiftKey) { last = [e.clientX, e.clientY]; el.setPointerCapture(e.pointerId); } });
+  let moving = false;
+  el.addEventListener("pointerdown", (e) => {
+    moving = e.shiftKey && $("area").checked;
+    if (!e.shiftKey || moving) { last = [e.clientX, e.clientY]; el.setPointerCapture(e.pointerId); }
+  });
   el.addEventListener("pointermove", (e) => {
     probe(el, e);
     if (!last) return;
     const dx = e.clientX - last[0], dy = e.clientY - last[1];
     last = [e.clientX, e.clientY];
-    $("yaw").value = +(angle("yaw") + dx * 0.5).toFixed(2);
-    $("pitch").value = +Math.max(-90, Math.min(90, angle("pitch") + dy * 0.5)).toFixed(2);
+    if (moving) { // shift-drag: the area light along the plane's x and y, 0.01 a pixel
+      $("area-x").value = +(Number($("area-x").value) + dx * 0.01).toFixed(3);
+      $("area-y").value = +(Number($("area-y").value) + dy * 0.01).toFixed(3);
+    } else {
+      $("yaw").value = +(angle("yaw") + dx * 0.5).toFixed(2);
+      $("pitch").value = +Math.max(-90, Math.min(90, angle("pitch") + dy * 0.5)).toFixed(2);
+    }
     requestFrames();
   });
   el.addEventListener("pointerup", () => { last = null; });
@@ -882,6 +908,10 @@ async function start() {
   if (panels.length >= 2) {
     $("layout-label").hidden = false;
     makeSplit();
+  }
+  if (info.files.some((f) => f.near_field)) {
+    $("area-row").hidden = false;
+    info.area_textures.forEach((t, i) => $("area-texture").add(new Option(t, i)));
   }
   if (info.reference) {
     $("exact-label").hidden = false;

@@ -445,6 +445,7 @@ pub(super) fn assemble(paths: &[PathBuf], out: &Path, limits: &Limits) -> Result
             surface: raw.surface(),
             mesh: raw.mesh(),
             empty_rows: Some(&empty),
+            near_field: None,
             column_norms: false,
             // Encoding-5 columns coded again from the file's priors.
             priors: true,

@@ -323,6 +323,7 @@ pub fn analyze_shard(
     progress: Progress<'_>,
 ) -> Result<AnalysisPart> {
     opts.validate()?;
+    crate::nearfield::refuse_plane_rows(raw, "sharded compression")?;
     let columns = shard_columns(raw.dims().lights(), index, count)?;
     let t = Transposed::with_columns(raw, transpose, columns.clone(), progress)?;
     let coder = Coder::new(&t, opts)?;
@@ -482,6 +483,7 @@ pub fn code_shard(
     let run = &plan.run;
     run.validate(out)?;
     run.check_raw(raw, out)?;
+    crate::nearfield::refuse_plane_rows(raw, "sharded compression")?;
     let columns = shard_columns(run.lights, index, run.shards)?;
     let transpose = TransposeOptions {
         row_filter: run.row_filter,

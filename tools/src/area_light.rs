@@ -28,19 +28,19 @@ pub struct AreaArgs {
     #[arg(long = "area-light", value_name = "TEXTURE")]
     pub area_light: Vec<String>,
     /// Centre of the light in the plane's coordinates (along its x and y
-    /// axes from its origin), finite.
+    /// axes from its origin), finite. Default 0,0.
     #[arg(long = "area-center", value_name = "X,Y", value_parser = crate::common::ranges::pair, allow_hyphen_values = true)]
     pub area_center: Vec<[f64; 2]>,
     /// Side lengths of the light along the plane's x and y axes (before
-    /// --area-angle), finite and > 0.
+    /// --area-angle), finite and > 0. Default 1,1.
     #[arg(long = "area-size", value_name = "W,H", value_parser = crate::common::ranges::pair)]
     pub area_size: Vec<[f64; 2]>,
     /// Turns the light about its centre in the plane, counter-clockwise
-    /// seen from the lit side: 0, 90, 180 or 270 degrees (the stored
-    /// rows are separable along the plane's axes only).
+    /// seen from the lit side, by a multiple of 90 degrees (the stored
+    /// rows are separable along the plane's axes only). Default 0.
     #[arg(long = "area-angle", value_name = "DEG", allow_hyphen_values = true)]
     pub area_angle: Vec<f64>,
-    /// Radiance scale of the light: I, or R,G,B; finite and >= 0.
+    /// Radiance scale of the light: I, or R,G,B; finite and >= 0. Default 1.
     #[arg(long = "area-intensity", value_name = "I", value_parser = crate::common::ranges::intensity)]
     pub area_intensity: Vec<[f32; 3]>,
     /// Share (0, 1] of each light's Haar coefficients kept (its largest):

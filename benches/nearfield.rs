@@ -4,11 +4,16 @@
 //! 4096 points at depths 0.1 to 3 light sizes, each with a transport row of
 //! 30 % nonzero Haar coefficients, at the paper's operating point (1 % of
 //! source and 20 % of target terms), at 5 % and 30 %, and at every term.
+//!
+//! Group `nearfield_rows` renders the same points as stored rows
+//! ([`NearField::render`], every thread) by the exact method and by the
+//! wavelet method at 1 % / 20 %, with the light 1 × 1 and 3 × 3 (it then
+//! covers most of each point's face), in rows per second.
 
 use criterion::{criterion_group, criterion_main, BenchmarkId, Criterion, Throughput};
 use ltm::relight::nearfield::{
-    transport_coefficients, LightTexture, Placement, PlaneFace, Propagator, Receiver,
-    SourceCoefficients, Targets,
+    transport_coefficients, AreaLight, LightTexture, NearField, NearFieldMethod, NearFieldTerms,
+    Placement, PlaneFace, Propagator, Receiver, SourceCoefficients, Targets,
 };
 
 const ORDER: usize = 32;
@@ -103,6 +108,50 @@ fn bench(c: &mut Criterion) {
                 sum
             })
         });
+    }
+    group.finish();
+    stored_rows(c, &light, &points);
+}
+
+/// The stored-row path, both methods.
+fn stored_rows(c: &mut Criterion, light: &LightTexture, points: &[Receiver]) {
+    let mut rng = Xorshift(0x5151_2e2e_7a7a_0303);
+    let basis = ltm::codec::PlaneBasis {
+        origin: [0.0; 3],
+        x_axis: [1.0, 0.0, 0.0],
+        y_axis: [0.0, 0.0, 1.0],
+        order: ORDER as u32,
+        side: 4.0,
+    };
+    let mut rows = ltm::codec::PlaneRows::new(basis, 1).unwrap();
+    for _ in points {
+        let t: Vec<f32> = (0..ORDER * ORDER).map(|_| rng.uniform() as f32).collect();
+        rows.push_texels(&t).unwrap();
+    }
+    let receivers = points.iter().copied().map(Some).collect();
+    let near = NearField::new(rows, receivers, None, &ltm::Limits::default()).unwrap();
+    let mut group = c.benchmark_group("nearfield_rows");
+    group.throughput(Throughput::Elements(points.len() as u64));
+    let wavelet = NearFieldMethod::Wavelet(NearFieldTerms {
+        source: 0.01,
+        targets: Targets::Share(0.2),
+    });
+    for side in [1.0, 3.0] {
+        let lights = [AreaLight {
+            texture: light.clone(),
+            placement: Placement {
+                center: [0.0; 2],
+                size: [side; 2],
+                intensity: 1.0,
+            },
+        }];
+        for (name, method) in [
+            ("exact", NearFieldMethod::Exact),
+            ("wavelet 1%/20%", wavelet),
+        ] {
+            let id = BenchmarkId::new(format!("light {side}x{side}"), name);
+            group.bench_function(id, |b| b.iter(|| near.render(&lights, method).unwrap()));
+        }
     }
     group.finish();
 }

@@ -197,6 +197,16 @@ pub fn plane_coefficients(
 /// (row-major), in place: every row fully, then every column fully
 /// ([`wavelet::forward_1d`] with the Haar filter, `log₂ order` levels).
 pub fn standard_haar_2d(plane: &mut [f32], order: usize) -> Result<()> {
+    standard_haar(plane, order, false)
+}
+
+/// The inverse of [`standard_haar_2d`], in place: every column, then every
+/// row ([`wavelet::inverse_1d`]).
+pub fn inverse_standard_haar_2d(plane: &mut [f32], order: usize) -> Result<()> {
+    standard_haar(plane, order, true)
+}
+
+fn standard_haar(plane: &mut [f32], order: usize, inverse: bool) -> Result<()> {
     if !order.is_power_of_two() || plane.len() != order * order {
         return Err(Error::range(
             "standard Haar grid",
@@ -207,17 +217,30 @@ pub fn standard_haar_2d(plane: &mut [f32], order: usize) -> Result<()> {
     let levels = order.trailing_zeros();
     let mut work = vec![0.0f32; order];
     let mut column = vec![0.0f32; order];
-    for row in plane.chunks_exact_mut(order) {
-        wavelet::forward_1d(Filter::Haar, row, levels, &mut work)?;
+    let step = |data: &mut [f32], work: &mut [f32]| match inverse {
+        false => wavelet::forward_1d(Filter::Haar, data, levels, work),
+        true => wavelet::inverse_1d(Filter::Haar, data, levels, work),
+    };
+    let rows = |plane: &mut [f32], work: &mut [f32]| -> Result<()> {
+        for row in plane.chunks_exact_mut(order) {
+            step(row, work)?;
+        }
+        Ok(())
+    };
+    if !inverse {
+        rows(plane, &mut work)?;
     }
     for x in 0..order {
         for y in 0..order {
             column[y] = plane[y * order + x];
         }
-        wavelet::forward_1d(Filter::Haar, &mut column, levels, &mut work)?;
+        step(&mut column, &mut work)?;
         for y in 0..order {
             plane[y * order + x] = column[y];
         }
+    }
+    if inverse {
+        rows(plane, &mut work)?;
     }
     Ok(())
 }
@@ -314,6 +337,24 @@ impl PlaneRows {
         let i = p * self.channels + c;
         let (a, b) = (self.starts[i] as usize, self.starts[i + 1] as usize);
         (&self.indices[a..b], &self.values[a..b])
+    }
+
+    /// Row `p`'s per-texel integrals of channel `c` (`order²`, `y` major),
+    /// the inverse of [`plane_coefficients`]: the coefficients scattered,
+    /// [`inverse_standard_haar_2d`], divided by `order`. `out` holds
+    /// `order²` values.
+    pub fn texels(&self, p: usize, c: usize, out: &mut [f32]) -> Result<()> {
+        let order = self.basis.order as usize;
+        out.fill(0.0);
+        let (index, value) = self.row(p, c);
+        for (&k, &v) in index.iter().zip(value) {
+            // Indices were checked against order² when decoded or pushed.
+            out[usize::from(k)] = v;
+        }
+        inverse_standard_haar_2d(out, order)?;
+        let scale = 1.0 / order as f32;
+        out.iter_mut().for_each(|t| *t *= scale);
+        Ok(())
     }
 
     /// The chunk's bytes (see docs/FORMAT.md, "Near-field rows").
@@ -556,6 +597,35 @@ mod tests {
         assert!(PlaneRows::decode(&bad_order, 2, 3, &limits).is_err());
         let tiny = Limits::with_max_alloc(16);
         assert!(PlaneRows::decode(&bytes, 2, 3, &tiny).is_err());
+    }
+
+    #[test]
+    fn texels_invert_the_coefficients() {
+        for order in [1usize, 2, 8, 32] {
+            let mut rows = PlaneRows::new(basis(order as u32), 1).unwrap();
+            let n = order * order;
+            let texels: Vec<f32> = (0..n)
+                .map(|i| ((i * 37 % 11) as f32 - 3.0) * 1e-3 + if i % 5 == 0 { 0.0 } else { 2.5 })
+                .collect();
+            rows.push_texels(&texels).unwrap();
+            let mut back = vec![7.0f32; n];
+            rows.texels(0, 0, &mut back).unwrap();
+            // f32 rounding through 2·log₂(order) steps, relative to the
+            // largest texel.
+            let largest = texels.iter().fold(0.0f32, |m, t| m.max(t.abs()));
+            for (a, b) in texels.iter().zip(&back) {
+                assert!((a - b).abs() <= 1e-6 * largest, "order {order}: {a} {b}");
+            }
+        }
+        let mut plane: Vec<f32> = (0..64).map(|i| i as f32).collect();
+        let original = plane.clone();
+        standard_haar_2d(&mut plane, 8).unwrap();
+        assert_ne!(plane, original);
+        inverse_standard_haar_2d(&mut plane, 8).unwrap();
+        for (a, b) in original.iter().zip(&plane) {
+            assert!((a - b).abs() < 1e-4, "{a} {b}");
+        }
+        assert!(inverse_standard_haar_2d(&mut plane[..63], 8).is_err());
     }
 
     #[test]

@@ -6,7 +6,8 @@ use anyhow::{bail, Context, Result};
 use clap::Args;
 use ltm_codec::{Limits, LtmFile};
 use ltm_relight::nearfield::{
-    AreaLight, LightTexture, NearField, NearFieldTerms, Placement, Targets, MAX_TEXTURE_SIDE,
+    AreaLight, LightTexture, NearField, NearFieldMethod, NearFieldTerms, Placement, Targets,
+    MAX_TEXTURE_SIDE,
 };
 use ltm_relight::Image;
 use std::path::Path;
@@ -43,15 +44,34 @@ pub struct AreaArgs {
     /// Radiance scale of the light: I, or R,G,B; finite and >= 0. Default 1.
     #[arg(long = "area-intensity", value_name = "I", value_parser = crate::common::ranges::intensity)]
     pub area_intensity: Vec<[f32; 3]>,
-    /// Share (0, 1] of each light's Haar coefficients kept (its largest):
-    /// the source-level truncation. The default keeps 5 %.
-    #[arg(long = "area-source-terms", value_name = "SHARE", default_value_t = 0.05, value_parser = crate::common::ranges::share)]
-    pub area_source_terms: f64,
-    /// Share (0, 1] of each row's incident coefficients computed (those a
-    /// constant light of the same rectangle predicts to be largest): the
-    /// target-level selection. The default computes 30 %.
-    #[arg(long = "area-target-terms", value_name = "SHARE", default_value_t = 0.3, value_parser = crate::common::ranges::share)]
-    pub area_target_terms: f64,
+    /// How each row's light is computed. `exact` (the default) integrates
+    /// the light's texture over every face texel it covers: nothing is
+    /// truncated, and the time grows with how much of the face the light
+    /// covers. `wavelet` is the affine wavelet propagation of Sun and
+    /// Ramamoorthi 2009 with the texture at the face's order and the terms
+    /// of --area-source-terms and --area-target-terms.
+    #[arg(long = "area-method", value_name = "METHOD", value_enum, default_value_t = AreaMethod::Exact)]
+    pub area_method: AreaMethod,
+    /// With --area-method wavelet: share (0, 1] of each light's Haar
+    /// coefficients kept (its largest), the source-level truncation.
+    /// Default 0.05 (5 %).
+    #[arg(long = "area-source-terms", value_name = "SHARE", value_parser = crate::common::ranges::share)]
+    pub area_source_terms: Option<f64>,
+    /// With --area-method wavelet: share (0, 1] of each row's incident
+    /// coefficients computed (those a constant light of the same rectangle
+    /// predicts to be largest), the target-level selection. Default 0.3
+    /// (30 %).
+    #[arg(long = "area-target-terms", value_name = "SHARE", value_parser = crate::common::ranges::share)]
+    pub area_target_terms: Option<f64>,
+}
+
+/// `--area-method`.
+#[derive(clap::ValueEnum, Clone, Copy, Debug, PartialEq, Eq)]
+pub enum AreaMethod {
+    /// Exact integrals of the light over each face texel.
+    Exact,
+    /// The truncated affine wavelet propagation.
+    Wavelet,
 }
 
 /// The `k`-th value of a repeatable setting: its only value, its `k`-th, or
@@ -98,16 +118,42 @@ impl AreaArgs {
             .collect()
     }
 
-    /// The terms of the command line.
-    pub fn terms(&self) -> NearFieldTerms {
-        NearFieldTerms {
-            source: self.area_source_terms,
-            targets: if self.area_target_terms >= 1.0 {
+    /// The method of the command line: an error when terms are given for
+    /// the exact method.
+    pub fn method(&self) -> Result<NearFieldMethod> {
+        if self.area_method == AreaMethod::Exact {
+            if self.area_source_terms.is_some() || self.area_target_terms.is_some() {
+                bail!("--area-source-terms and --area-target-terms apply to --area-method wavelet (the exact method truncates nothing)");
+            }
+            return Ok(NearFieldMethod::Exact);
+        }
+        let target = self.area_target_terms.unwrap_or(0.3);
+        Ok(NearFieldMethod::Wavelet(NearFieldTerms {
+            source: self.area_source_terms.unwrap_or(0.05),
+            targets: if target >= 1.0 {
                 Targets::All
             } else {
-                Targets::Share(self.area_target_terms)
+                Targets::Share(target)
             },
+        }))
+    }
+}
+
+/// How `method` is named in messages.
+pub fn method_name(method: NearFieldMethod) -> String {
+    match method {
+        NearFieldMethod::Wavelet(t) => {
+            let target = match t.targets {
+                Targets::Share(s) => s,
+                _ => 1.0,
+            };
+            format!(
+                "wavelet: {:.0} % of the source terms, {:.0} % of the target terms",
+                100.0 * t.source,
+                100.0 * target
+            )
         }
+        _ => "exact".into(),
     }
 }
 
@@ -203,14 +249,14 @@ fn quarter_turn(t: &LightTexture) -> Result<LightTexture> {
 pub fn render(
     path: &Path,
     lights: &[AreaLight],
-    terms: NearFieldTerms,
+    method: NearFieldMethod,
     limits: &Limits,
 ) -> Result<(Vec<[f32; 3]>, Duration)> {
     let mut file = LtmFile::open_with_limits(path, limits)
         .with_context(|| format!("opening {}", path.display()))?;
-    let near = NearField::take(&mut file).with_context(|| format!("{}", path.display()))?;
+    let near = NearField::take(&mut file, limits).with_context(|| format!("{}", path.display()))?;
     drop(file);
     let start = Instant::now();
-    let image = near.render(lights, terms)?;
+    let image = near.render(lights, method)?;
     Ok((image, start.elapsed()))
 }

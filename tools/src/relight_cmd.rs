@@ -250,8 +250,9 @@ fn area_image(a: &RelightArgs, ctx: &Ctx) -> Result<Option<(Vec<[f32; 3]>, Durat
     if !a.area.any() {
         return Ok(None);
     }
+    let method = a.area.method()?;
     let lights = a.area.lights(ctx.limits())?;
-    let (image, time) = crate::area_light::render(&a.file, &lights, a.area.terms(), ctx.limits())?;
+    let (image, time) = crate::area_light::render(&a.file, &lights, method, ctx.limits())?;
     Ok(Some((image, time)))
 }
 
@@ -315,12 +316,11 @@ pub fn run(a: RelightArgs, ctx: &Ctx) -> Result<()> {
             }
         }
         eprintln!(
-            "{} area light(s): {} rows shaded in {:.1} ms ({:.0} % of the source terms, {:.0} % of the target terms)",
+            "{} area light(s): {} rows shaded in {:.1} ms ({})",
             a.area.area_light.len(),
             lit.len(),
             time.as_secs_f64() * 1e3,
-            a.area.area_source_terms * 100.0,
-            a.area.area_target_terms * 100.0
+            crate::area_light::method_name(a.area.method()?),
         );
     }
     a.out.write(&bufs.image)?;

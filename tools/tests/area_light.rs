@@ -4,8 +4,10 @@
 //! conventions, added to a map's image, and the bad lights and files that
 //! must exit non-zero with a message.
 
-use ltm_codec::LtmFile;
-use ltm_relight::nearfield::{AreaLight, LightTexture, NearField, NearFieldTerms, Placement};
+use ltm_codec::{Limits, LtmFile};
+use ltm_relight::nearfield::{
+    AreaLight, LightTexture, NearField, NearFieldMethod, NearFieldTerms, Placement,
+};
 use ltm_relight::{relative_l2, Image};
 use std::path::Path;
 
@@ -102,10 +104,13 @@ fn texels(image: &Image, scale: f32) -> Vec<[f32; 3]> {
         .collect()
 }
 
-fn library(file: &Path, light: AreaLight) -> Image {
+/// Every term of the wavelet propagation.
+const ALL: NearFieldMethod = NearFieldMethod::Wavelet(NearFieldTerms::ALL);
+
+fn library(file: &Path, light: AreaLight, method: NearFieldMethod) -> Image {
     let mut f = LtmFile::open(file).unwrap();
-    let near = NearField::take(&mut f).unwrap();
-    let data = near.render(&[light], NearFieldTerms::ALL).unwrap();
+    let near = NearField::take(&mut f, &Limits::default()).unwrap();
+    let data = near.render(&[light], method).unwrap();
     let (w, h) = (
         f.meta().dims.width() as usize,
         f.meta().dims.height() as usize,
@@ -125,7 +130,14 @@ fn area_lights_from_the_cli_match_the_library() {
     let image = texture_image();
     image.write_exr(&tex).unwrap();
     let out = |n: &str| dir.path().join(n).to_str().unwrap().to_string();
-    let all = ["--area-source-terms", "1", "--area-target-terms", "1"];
+    let all = [
+        "--area-method",
+        "wavelet",
+        "--area-source-terms",
+        "1",
+        "--area-target-terms",
+        "1",
+    ];
     let light = |angle: &str, o: &str| {
         let mut args = vec![
             "relight",
@@ -159,15 +171,35 @@ fn area_lights_from_the_cli_match_the_library() {
         intensity: 1.0,
     };
     let texture = LightTexture::new(4, 2, texels(&image, 2.0)).unwrap();
-    let want = library(
-        Path::new(&file),
-        AreaLight {
-            texture: texture.clone(),
-            placement,
-        },
-    );
+    let light_of = |texture: &LightTexture| AreaLight {
+        texture: texture.clone(),
+        placement,
+    };
+    let want = library(Path::new(&file), light_of(&texture), ALL);
     let e = relative_l2(&cli, &want).unwrap();
     assert!(e < 1e-6, "CLI against the library: {e}");
+    // The default method is exact; this texture divides the face's order,
+    // so it is the same light as every wavelet term.
+    let o = out("exact.exr");
+    ok(&[
+        "relight",
+        &file,
+        "--area-light",
+        tex.to_str().unwrap(),
+        "--area-center",
+        "-0.1,0.2",
+        "--area-size",
+        "1,0.8",
+        "--area-intensity",
+        "2",
+        "-o",
+        &o,
+    ]);
+    let exact = Image::read_exr(Path::new(&o)).unwrap();
+    let library_exact = library(Path::new(&file), light_of(&texture), NearFieldMethod::Exact);
+    assert!(relative_l2(&exact, &library_exact).unwrap() < 1e-6);
+    let e = relative_l2(&exact, &want).unwrap();
+    assert!(e < 1e-5, "exact against every wavelet term: {e}");
     assert!(want.data.iter().any(|p| p[0] > 0.0), "the floor is lit");
     // Upside down is another picture: the orientation is seen.
     let flipped: Vec<[f32; 3]> = texels(&image, 2.0)
@@ -177,13 +209,7 @@ fn area_lights_from_the_cli_match_the_library() {
         .copied()
         .collect();
     let flipped = LightTexture::new(4, 2, flipped).unwrap();
-    let other = library(
-        Path::new(&file),
-        AreaLight {
-            texture: flipped,
-            placement,
-        },
-    );
+    let other = library(Path::new(&file), light_of(&flipped), ALL);
     assert!(relative_l2(&other, &want).unwrap() > 0.01);
     // A quarter turn counter-clockwise seen from the lit side (−Y): the
     // texel at column i, row j of the turned light is the old texel at
@@ -201,7 +227,7 @@ fn area_lights_from_the_cli_match_the_library() {
     };
     let e = relative_l2(
         &light("90", &out("b.exr")),
-        &library(Path::new(&file), turned),
+        &library(Path::new(&file), turned, ALL),
     )
     .unwrap();
     assert!(e < 1e-6, "turned: {e}");
@@ -343,6 +369,19 @@ fn bad_area_lights_and_files_are_refused() {
             o,
         ],
         "(0, 1]",
+    );
+    fails(
+        &[
+            "relight",
+            &file,
+            "--area-light",
+            u,
+            "--area-target-terms",
+            "0.5",
+            "-o",
+            o,
+        ],
+        "apply to --area-method wavelet",
     );
     fails(
         &["relight", &file, "--area-light", "light.jpg", "-o", o],

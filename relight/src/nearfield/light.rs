@@ -77,13 +77,20 @@ impl LightTexture {
     /// `order × order` grid (row-major, `y` major): the exact projection onto
     /// the grid's box functions.
     pub fn box_average(&self, order: usize) -> Vec<[f64; 3]> {
-        let wx = box_weights(self.width, order);
-        let wy = box_weights(self.height, order);
-        // One texture row at a time (width → order), added into the output
-        // rows it overlaps: memory O(order²) whatever the texture's size.
-        let mut row = vec![[0.0f64; 3]; order];
+        self.resampled(order, order)
+    }
+
+    /// The area average of the texture over each texel of a
+    /// `width × height` grid (row-major, `y` major; both >= 1).
+    pub fn resampled(&self, width: usize, height: usize) -> Vec<[f64; 3]> {
+        let wx = box_weights(self.width, width);
+        let wy = box_weights(self.height, height);
+        // One texture row at a time (resampled along x), added into the
+        // output rows it overlaps: memory O(width·height) whatever the
+        // texture's size.
+        let mut row = vec![[0.0f64; 3]; width];
         let mut row_of = usize::MAX;
-        let mut out = vec![[0.0f64; 3]; order * order];
+        let mut out = vec![[0.0f64; 3]; width * height];
         for &(j, p, w) in &wy {
             if p != row_of {
                 row.fill([0.0; 3]);
@@ -95,7 +102,7 @@ impl LightTexture {
                 }
                 row_of = p;
             }
-            for (dst, src) in out[j * order..(j + 1) * order].iter_mut().zip(&row) {
+            for (dst, src) in out[j * width..(j + 1) * width].iter_mut().zip(&row) {
                 for c in 0..3 {
                     dst[c] += w * src[c];
                 }

@@ -21,21 +21,26 @@
 //! ([`transport_coefficients`]) then shades as `B = Σ_k L_k·T_k`.
 //!
 //! [`NearField`] relights a file's stored near-field rows (chunk NEAR)
-//! under [`AreaLight`]s, each row at its stored surface point.
+//! under [`AreaLight`]s, each row at its stored surface point, by that
+//! propagation or by [`exact`] integrals of the light over each face texel
+//! ([`NearFieldMethod`]), which truncate nothing and cost less where a
+//! light covers part of the face.
 //!
 //! The couplings are evaluated exactly per point from the closed form of
 //! two piecewise-constant functions, not looked up in a quantized table.
 
 pub mod acc;
+pub mod exact;
 mod light;
 mod propagate;
 mod stored;
 #[cfg(test)]
 mod tests;
 
+pub use exact::{LightTable, MAX_TABLE_SIDE};
 pub use light::{haar_2d, LightTexture, Placement, SourceCoefficients, MAX_TEXTURE_SIDE};
 pub use propagate::{
     affine, transport_coefficients, PlaneFace, Propagator, Receiver, Targets, DEFAULT_FACE_SIDE,
     MIN_SCALE,
 };
-pub use stored::{AreaLight, NearField, NearFieldTerms};
+pub use stored::{AreaLight, NearField, NearFieldMethod, NearFieldTerms};

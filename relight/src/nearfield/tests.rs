@@ -520,3 +520,317 @@ fn a_constant_light_overhead_gives_the_lit_solid_angle_of_a_unit_transport() {
         );
     }
 }
+
+/// A texture of `w × h` texels with values spread over 1e-6..1e5 (and some
+/// zeros), for the summed-area table's precision.
+fn hdr_texture(rng: &mut Rng, w: usize, h: usize) -> LightTexture {
+    let texels = (0..w * h)
+        .map(|_| match rng.next_u64() % 7 {
+            0 => [0.0; 3],
+            _ => std::array::from_fn(|_| 10f64.powf(rng.uniform() * 11.0 - 6.0) as f32),
+        })
+        .collect();
+    LightTexture::new(w, h, texels).unwrap()
+}
+
+/// The integral over `[x0, x1] × [y0, y1]` (texture coordinates), texel by
+/// texel, in texel units.
+fn naive_mass(t: &LightTexture, x: [f64; 2], y: [f64; 2], intensity: f64) -> [f64; 3] {
+    let (w, h) = (t.width(), t.height());
+    let overlap = |a: [f64; 2], i: usize, n: usize| {
+        let lo = a[0].clamp(0.0, 1.0) * n as f64;
+        let hi = a[1].clamp(0.0, 1.0) * n as f64;
+        (hi.min(i as f64 + 1.0) - lo.max(i as f64)).max(0.0)
+    };
+    let mut sum = [0.0f64; 3];
+    for j in 0..h {
+        let wy = overlap(y, j, h);
+        if wy == 0.0 {
+            continue;
+        }
+        for i in 0..w {
+            let wx = overlap(x, i, w);
+            let texel = t.texel(i, j);
+            (0..3).for_each(|c| sum[c] += wx * wy * f64::from(texel[c]) * intensity);
+        }
+    }
+    sum
+}
+
+fn total(t: &LightTexture) -> f64 {
+    naive_mass(t, [0.0, 1.0], [0.0, 1.0], 1.0).iter().sum()
+}
+
+#[test]
+fn table_masses_equal_a_texel_by_texel_sum_from_slivers_to_the_whole_light() {
+    let mut rng = Rng::new(31);
+    for (w, h) in [(1, 1), (3, 7), (64, 48), (100, 37), (5, 200)] {
+        let texture = hdr_texture(&mut rng, w, h);
+        let table = LightTable::new(&texture, 2.5).unwrap();
+        let everything = 2.5 * total(&texture);
+        for k in 0..400 {
+            // Widths from 1e-9 of the light to twice it, anywhere near it.
+            let span = |rng: &mut Rng| {
+                let width = 10f64.powf(rng.uniform() * 9.3 - 9.0);
+                let start = rng.uniform() * 1.4 - 0.2 - if k % 5 == 0 { width } else { 0.0 };
+                [start, start + width]
+            };
+            let (x, y) = (span(&mut rng), span(&mut rng));
+            let got = table.mass(x, y);
+            let want = naive_mass(&texture, x, y, 2.5);
+            for c in 0..3 {
+                let bound = 1e-12 * want[c] + 1e-14 * everything;
+                assert!(
+                    (got[c] - want[c]).abs() <= bound,
+                    "{w}x{h}, box {x:?} × {y:?}: {} against {}",
+                    got[c],
+                    want[c]
+                );
+            }
+        }
+    }
+}
+
+#[test]
+fn face_masses_are_each_face_texels_mass_near_and_far() {
+    let mut rng = Rng::new(41);
+    let order = 16;
+    let texture = hdr_texture(&mut rng, 48, 20);
+    let table = LightTable::new(&texture, 1.0).unwrap();
+    let everything = total(&texture);
+    let mut masses = super::exact::FaceMasses::default();
+    let (mut wide, mut narrow) = (0, 0);
+    for k in 0..300 {
+        // Scales from a point touching the light (1e-7) to one far away.
+        let axes: [(f64, f64); 2] = std::array::from_fn(|_| {
+            let s = match k % 2 {
+                0 => 10f64.powf(rng.uniform() * 7.0 - 7.0),
+                _ => 1.5 + rng.uniform() * 30.0,
+            };
+            (s, rng.uniform() * 1.6 - 0.3 - 0.5 * s)
+        });
+        if !masses.compute(&table, axes, order) {
+            // Nothing covered: every face texel's box misses the light.
+            let face = table.mass(
+                [axes[0].1, axes[0].0 + axes[0].1],
+                [axes[1].1, axes[1].0 + axes[1].1],
+            );
+            assert!(face.iter().all(|&m| m == 0.0), "{axes:?}: {face:?}");
+            continue;
+        }
+        let is_wide =
+            axes[0].0 * 48.0 >= 2.0 * order as f64 && axes[1].0 * 20.0 >= 2.0 * order as f64;
+        if is_wide {
+            wide += 1;
+        } else {
+            narrow += 1;
+        }
+        let (a0, a1) = masses.columns;
+        let (b0, b1) = masses.rows;
+        for b in 0..order {
+            for a in 0..order {
+                let edge = |k: usize, (s, o): (f64, f64)| s * (k as f64 / order as f64) + o;
+                let x = [edge(a, axes[0]), edge(a + 1, axes[0])];
+                let y = [edge(b, axes[1]), edge(b + 1, axes[1])];
+                let want = naive_mass(&texture, x, y, 1.0);
+                let got = if (a0..a1).contains(&a) && (b0..b1).contains(&b) {
+                    masses.masses[(b - b0) * (a1 - a0) + (a - a0)]
+                } else {
+                    [0.0; 3]
+                };
+                for c in 0..3 {
+                    let bound = 1e-10 * want[c] + 1e-14 * everything;
+                    assert!(
+                        (got[c] - want[c]).abs() <= bound,
+                        "{axes:?} texel ({a}, {b}): {} against {}",
+                        got[c],
+                        want[c]
+                    );
+                }
+            }
+        }
+    }
+    assert!(wide > 20 && narrow > 20, "{wide} wide, {narrow} narrow");
+}
+
+/// Random near-field rows over a face of `order` with `channels`.
+fn random_rows(rng: &mut Rng, order: u32, channels: usize, count: usize) -> ltm_codec::PlaneRows {
+    let basis = ltm_codec::PlaneBasis {
+        origin: [0.0, 2.0, 0.0],
+        x_axis: [1.0, 0.0, 0.0],
+        y_axis: [0.0, 0.0, 1.0],
+        order,
+        side: 4.0,
+    };
+    let mut rows = ltm_codec::PlaneRows::new(basis, channels).unwrap();
+    let n = (order * order) as usize * channels;
+    for p in 0..count {
+        let texels: Vec<f32> = match p % 9 {
+            0 => vec![0.0; n],
+            _ => (0..n).map(|_| rng.uniform() as f32 * 1e-3).collect(),
+        };
+        rows.push_texels(&texels).unwrap();
+    }
+    rows
+}
+
+#[test]
+fn exact_rendering_equals_the_texel_means_and_the_full_wavelet_propagation() {
+    let mut rng = Rng::new(77);
+    let order = 16usize;
+    let count = 60;
+    for (channels, side) in [(1usize, order), (3, order), (1, 37)] {
+        let rows = random_rows(&mut rng, order as u32, channels, count);
+        let mut points: Vec<Option<Receiver>> =
+            receivers(&mut rng, count).into_iter().map(Some).collect();
+        points[3] = None;
+        points[5] = Some(Receiver {
+            depth: -0.5,
+            position: [0.0, 0.0],
+        });
+        let albedo: Option<Vec<f32>> =
+            (channels == 1).then(|| (0..3 * count).map(|i| 0.2 + (i % 5) as f32 * 0.1).collect());
+        let near = NearField::new(
+            rows.clone(),
+            points.clone(),
+            albedo.clone(),
+            &ltm_codec::Limits::default(),
+        )
+        .unwrap();
+        let fx: Vec<f64> = (0..side).map(|_| rng.uniform() * 4.0).collect();
+        let tall = if side == order { order } else { side + 3 };
+        let fy: Vec<f64> = (0..tall).map(|_| rng.uniform() * 2.0 + 0.1).collect();
+        let light = AreaLight {
+            texture: separable_light(&fx, &fy),
+            placement: Placement {
+                center: [0.3, -0.2],
+                size: [1.2, 0.7],
+                intensity: 2.0,
+            },
+        };
+        let exact = near
+            .render(std::slice::from_ref(&light), NearFieldMethod::Exact)
+            .unwrap();
+        let face = near.face();
+        let mut texels = vec![0.0f32; order * order];
+        for (p, point) in points.iter().enumerate() {
+            let mut want = [0.0f64; 3];
+            if let Some(r) = point.filter(|r| r.depth > 0.0) {
+                let means = face_means(&fx, &fy, affine(&face, &light.placement, &r), order);
+                for c in 0..channels {
+                    rows.texels(p, c, &mut texels).unwrap();
+                    let b: f64 = means
+                        .iter()
+                        .zip(&texels)
+                        .map(|(m, &t)| m * f64::from(t))
+                        .sum::<f64>()
+                        * 2.0;
+                    match channels {
+                        1 => want = [b; 3],
+                        _ => want[c] = b,
+                    }
+                }
+            }
+            for c in 0..3 {
+                let a = albedo.as_ref().map_or(1.0, |a| f64::from(a[3 * p + c]));
+                let w = want[c] * a;
+                let got = f64::from(exact[p][c]);
+                assert!(
+                    (got - w).abs() <= 1e-5 * w.abs() + 1e-12,
+                    "row {p} channel {c}: {got} against {w}"
+                );
+            }
+        }
+        // With the texture at the face's order, the wavelet propagation of
+        // every term is the same light.
+        if side == order {
+            let all = NearFieldMethod::Wavelet(NearFieldTerms::ALL);
+            let wavelet = near.render(std::slice::from_ref(&light), all).unwrap();
+            for (p, (a, b)) in exact.iter().zip(&wavelet).enumerate() {
+                for c in 0..3 {
+                    let (a, b) = (f64::from(a[c]), f64::from(b[c]));
+                    assert!(
+                        (a - b).abs() <= 1e-4 * b.abs() + 1e-12,
+                        "row {p}: {a} against {b}"
+                    );
+                }
+            }
+        }
+    }
+}
+
+#[test]
+fn exact_rendering_of_hostile_lights_and_points_is_finite_and_matches_the_wavelets() {
+    let mut rng = Rng::new(88);
+    let order = 8usize;
+    let count = 200;
+    let rows = random_rows(&mut rng, order as u32, 1, count);
+    // Depths from touching the plane to far beyond the light.
+    let points: Vec<Option<Receiver>> = (0..count)
+        .map(|p| {
+            Some(Receiver {
+                depth: 10f64.powf(p as f64 / count as f64 * 14.0 - 10.0),
+                position: [rng.uniform() * 2.0 - 1.0, rng.uniform() * 2.0 - 1.0],
+            })
+        })
+        .collect();
+    let near = NearField::new(rows.clone(), points, None, &ltm_codec::Limits::default()).unwrap();
+    let all = NearFieldMethod::Wavelet(NearFieldTerms::ALL);
+    // A uniform light has one Haar coefficient: both methods are exact.
+    for size in [1e-9, 0.3, 2.0, 1e6] {
+        let light = AreaLight {
+            texture: LightTexture::constant([1.0, 2.0, 0.5]).unwrap(),
+            placement: Placement {
+                center: [0.1, -0.2],
+                size: [size, size * 0.5],
+                intensity: 3.0,
+            },
+        };
+        let lights = std::slice::from_ref(&light);
+        let exact = near.render(lights, NearFieldMethod::Exact).unwrap();
+        let wavelet = near.render(lights, all).unwrap();
+        for (p, (a, b)) in exact.iter().zip(&wavelet).enumerate() {
+            for c in 0..3 {
+                assert!(a[c].is_finite() && a[c] >= 0.0);
+                // Both carry the f32 rounding of the rows' Haar
+                // coefficients, relative to the row's largest texel: a
+                // speck of light over a small texel sees it magnified.
+                let tolerance = 1e-3 * b[c].abs() + 1e-30;
+                assert!(
+                    (a[c] - b[c]).abs() <= tolerance,
+                    "size {size}, row {p}: {a:?} against {b:?}"
+                );
+            }
+        }
+    }
+    // Textures past the table's side, extreme radiance: finite output or
+    // a clear error.
+    let wide = LightTexture::new(2000, 3, vec![[1e30, 0.0, 1e-30]; 6000]).unwrap();
+    let light = AreaLight {
+        texture: wide,
+        placement: Placement {
+            center: [0.0; 2],
+            size: [1.0; 2],
+            intensity: 1.0,
+        },
+    };
+    assert_eq!(
+        LightTable::new(&light.texture, 1.0).unwrap().size(),
+        (MAX_TABLE_SIDE, 3)
+    );
+    let image = near
+        .render(std::slice::from_ref(&light), NearFieldMethod::Exact)
+        .unwrap();
+    assert!(image.iter().flatten().all(|v| v.is_finite() && *v >= 0.0));
+    assert!(LightTable::new(&light.texture, 1e300).is_err());
+    assert!(LightTable::new(&light.texture, f64::NAN).is_err());
+    // Points that are not finite are refused when the rows are made.
+    let nan = vec![
+        Some(Receiver {
+            depth: f64::NAN,
+            position: [0.0; 2]
+        });
+        count
+    ];
+    assert!(NearField::new(rows, nan, None, &ltm_codec::Limits::default()).is_err());
+}

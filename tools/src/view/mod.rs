@@ -26,9 +26,10 @@
 //!   (files with near-field rows only; a scene's `[light_plane]`) is added
 //!   with `ax`, `ay` (centre in the plane), `aw`, `ah` (sides, > 0), `ai`
 //!   (intensity, >= 0), all five or none (finite, |v| ≤ 10⁶), and optionally
-//!   `aq` (quarter turns, 0..=3) and `at` (texture index); it is lit at 5 %
-//!   of its terms and 30 % of each row's, `X-Area-Ms` gives its time, and
-//!   such a frame carries no `X-Error` (the exact image is the map's).
+//!   `aq` (quarter turns, 0..=3) and `at` (texture index); it is lit
+//!   exactly (`ltm relight --area-method exact`), `X-Area-Ms` gives its
+//!   time, and such a frame carries no `X-Error` (the exact image is the
+//!   map's).
 //! - `/api/exact?…` (same parameters): the exact image `T·L` from the
 //!   `--reference` store, computed on demand and cached per map and
 //!   rotation; `X-Error` gives the frame's relative L2 error against it.

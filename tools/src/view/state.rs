@@ -7,9 +7,7 @@ use super::preview::Preview;
 use anyhow::{bail, Context, Result};
 use ltm_codec::container::LtmFile;
 use ltm_codec::{Limits, RawStore, RowLayout};
-use ltm_relight::nearfield::{
-    AreaLight, LightTexture, NearField, NearFieldTerms, Placement, Targets,
-};
+use ltm_relight::nearfield::{AreaLight, LightTexture, NearField, NearFieldMethod, Placement};
 use ltm_relight::{
     reference, relative_l2, EnvMap, Frame, FrameStats, Image, PrefilteredMap, Relight, Request,
     TexturedMesh,
@@ -47,13 +45,6 @@ pub struct ViewFile {
     /// The file's near-field rows (a scene's `[light_plane]`), if any.
     near: Option<NearField>,
 }
-
-/// The terms of an area light's frame: 5 % of the light's coefficients,
-/// 30 % of each row's (the defaults of `ltm relight --area-light`).
-const AREA_TERMS: NearFieldTerms = NearFieldTerms {
-    source: 0.05,
-    targets: Targets::Share(0.3),
-};
 
 /// A file's light plane, as `/api/info` gives it.
 #[derive(Serialize, Clone)]
@@ -179,7 +170,7 @@ impl ViewFile {
             .with_context(|| format!("opening {}", path.display()))?;
         let near = match file.near_field() {
             Some(_) => Some(
-                NearField::take(&mut file)
+                NearField::take(&mut file, limits)
                     .with_context(|| format!("opening {}", path.display()))?,
             ),
             None => None,
@@ -326,7 +317,7 @@ impl Viewer {
             },
         };
         let lit = near
-            .render(&[light], AREA_TERMS)
+            .render(&[light], NearFieldMethod::Exact)
             .map_err(|e| FrameError::Bad(e.to_string()))?;
         for (o, v) in image.data.iter_mut().zip(&lit) {
             for c in 0..3 {

@@ -496,7 +496,7 @@ function readouts() {
       `\n  server ${r.serverMs?.toFixed(2) ?? "-"} ms (+ resample ${r.resampleMs?.toFixed(2) ?? "-"} ms${p.draft ? ", draft light" : ""}), ` +
       `round trip ${r.roundTripMs?.toFixed(1) ?? "-"} ms, input→screen ${r.latencyMs?.toFixed(1) ?? "-"} ms, ` +
       `lights ${r.lights ?? "-"}, nonzeros ${r.nonzeros ?? "-"}` +
-      (r.areaMs !== null && r.areaMs !== undefined ? `\n  area light ${r.areaMs.toFixed(1)} ms (5 % of its terms, 30 % of each row's; the error readouts are the map's)` : "");
+      (r.areaMs !== null && r.areaMs !== undefined ? `\n  area light ${r.areaMs.toFixed(1)} ms (exact; the error readouts are the map's)` : "");
   });
   $("readouts").textContent = lines.join("\n");
   layoutSplit();

@@ -99,7 +99,8 @@ fn by_area(
             let r2 = d.length_squared();
             let w = d / r2.sqrt();
             let (cos_x, cos_y) = (normal.dot(w), -plane.normal().dot(w));
-            if cos_x <= 0.0 || (shadows && scene.occluded(x + 1e-6 * normal, w)) {
+            let start = x + 1e-6 * normal;
+            if cos_x <= 0.0 || (shadows && scene.occluded_until(start, w, (y - start).length())) {
                 continue;
             }
             let f = radiance(&texels, placement, q);
@@ -208,6 +209,81 @@ fn near_field_light_matches_an_area_integral_with_shadows() {
     let shadow = relative_l2(&unshadowed, &reference);
     eprintln!("the occluder's shadow: {shadow:.3} of the floor's light");
     assert!(shadow > 0.1, "{shadow}");
+}
+
+/// Shadow rays towards a light in the plane end at the plane: a ceiling
+/// above it casts no shadow, though every ray through the plane would hit
+/// it.
+#[test]
+fn a_ceiling_above_the_light_plane_casts_no_shadow() {
+    let dir = tempfile::tempdir().unwrap();
+    let scene_of = |extra: &str, name: &str| {
+        let path = dir.path().join(name);
+        std::fs::write(&path, format!("{SCENE}{extra}")).unwrap();
+        Scene::build(&SceneDesc::load(&path).unwrap()).unwrap()
+    };
+    let open = scene_of("", "open.toml");
+    // Above the plane (1.5) and over the lit floor, out of the camera's view.
+    let ceiling =
+        "\n[[quads]]\ncenter = [0.0, 2.0, -0.5]\nsize = [3.0, 2.0]\nmaterial = \"grey\"\n";
+    let covered = scene_of(ceiling, "ceiling.toml");
+    let plane = LightPlane::new(DVec3::new(0.0, 1.5, 0.0), DVec3::X, DVec3::Z).unwrap();
+    let placement = Placement {
+        center: [-0.1, 0.2],
+        size: [1.0, 0.8],
+        intensity: 1.0,
+    };
+    let face = PlaneFace {
+        order: 32,
+        side: 4.0,
+    };
+    let (rows_open, rows_covered) = (
+        floor_rows(&open, &plane, &face),
+        floor_rows(&covered, &plane, &face),
+    );
+    assert_eq!(
+        rows_open.len(),
+        rows_covered.len(),
+        "the same floor is seen"
+    );
+    assert!(rows_open.len() > 200);
+    // Without the limit the ceiling would block the light: every ray from
+    // the floor through the light's centre (most of them) hits it.
+    let centre = plane.point(placement.center);
+    let blocked = rows_covered
+        .iter()
+        .filter(|r| {
+            let w = (centre - r.point).normalize();
+            covered.occluded(r.point + 1e-6 * DVec3::Y, w)
+        })
+        .count();
+    assert!(blocked > rows_covered.len() * 3 / 4, "{blocked} blocked");
+    let light = LightTexture::new(SIDE, SIDE, texels()).unwrap();
+    let source = SourceCoefficients::new(&light, &placement, face.order, usize::MAX).unwrap();
+    let mut propagator = Propagator::new(face).unwrap();
+    let mut relit = |rows: &[FloorRow]| -> Vec<[f64; 3]> {
+        rows.iter()
+            .map(|r| {
+                let (depth, position) = plane.locate(r.point);
+                let receiver = Receiver { depth, position };
+                propagator
+                    .prepare(&source, &placement, &receiver, Targets::All)
+                    .unwrap();
+                let b = propagator.shade(&r.transport);
+                [0, 1, 2].map(|c| b[c] * f64::from(r.albedo[c]))
+            })
+            .collect()
+    };
+    let (a, b) = (relit(&rows_open), relit(&rows_covered));
+    let e = relative_l2(&b, &a);
+    eprintln!("ceiling against none: relative L2 {e:.2e}");
+    assert!(e < 1e-3, "the ceiling changed the floor's light by {e}");
+    let reference: Vec<[f64; 3]> = rows_covered
+        .iter()
+        .map(|r| by_area(&covered, &plane, &placement, r, 64, true))
+        .collect();
+    let e = relative_l2(&b, &reference);
+    assert!(e < 0.03, "against the area integral under the ceiling: {e}");
 }
 
 /// Reads a float32 `H × W × 3` `.npy` fixture: `(width, height, pixels)`.

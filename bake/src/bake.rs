@@ -155,7 +155,7 @@ impl<'a> BlockBaker<'a> {
     /// [`Scene::plane_row`] computes each; empty without a light plane.
     pub fn compute_plane(&self, b: usize, plane: &mut Vec<f32>) -> RowStats {
         plane.clear();
-        let Some(grid) = &self.plane else {
+        let (Some(grid), Some((light_plane, _))) = (&self.plane, self.scene.light_plane()) else {
             return RowStats::default();
         };
         let range = self.header.block_range(b);
@@ -170,8 +170,16 @@ impl<'a> BlockBaker<'a> {
                 || Scratch::with_texels(self.scene, texels),
                 |scratch, (i, row)| {
                     let mut albedo = [0.0f32; 3];
-                    self.scene
-                        .row_on(&self.tables, grid, scratch, start + i, row, &mut albedo)
+                    let p = start + i;
+                    self.scene.row_on_plane(
+                        &self.tables,
+                        grid,
+                        light_plane,
+                        scratch,
+                        p,
+                        row,
+                        &mut albedo,
+                    )
                 },
             )
             .reduce(RowStats::default, |mut a, b| {

@@ -35,6 +35,8 @@ pub(crate) struct PacketRay {
     inv: [f32; 3],
     negative: [bool; 3],
     wt: WtRay,
+    /// The farthest hit that counts, in trace-space distance.
+    tmax: f32,
 }
 
 /// A packet being filled: up to [`PACKET`] rays and the caller's index of
@@ -57,6 +59,12 @@ impl Packet {
     /// Adds the ray from `org` along `dir` (of any non-zero length), to be
     /// reported as the caller's `index`.
     pub(crate) fn push(&mut self, index: usize, org: Vec3A, dir: Vec3A) {
+        self.push_until(index, org, dir, f32::INFINITY);
+    }
+
+    /// [`Packet::push`] for a ray whose hits count only up to `tmax` (a
+    /// trace-space distance along a unit `dir`).
+    pub(crate) fn push_until(&mut self, index: usize, org: Vec3A, dir: Vec3A, tmax: f32) {
         debug_assert!(self.rays.len() < PACKET);
         let inv = [dir.x, dir.y, dir.z].map(safe_inverse);
         self.rays.push(PacketRay {
@@ -64,6 +72,7 @@ impl Packet {
             inv,
             negative: [dir.x < 0.0, dir.y < 0.0, dir.z < 0.0],
             wt: WtRay::new(org, dir),
+            tmax,
         });
         self.index.push(index as u32);
     }
@@ -135,7 +144,7 @@ impl Children {
             .enumerate()
         {
             let tmin = x.0.max(y.0.max(z.0)).max(Vec4::splat(EPSILON));
-            let tmax = x.1.min(y.1.min(z.1)).min(Vec4::splat(f32::INFINITY));
+            let tmax = x.1.min(y.1.min(z.1)).min(Vec4::splat(ray.tmax));
             mask |= tmin.cmple(tmax).bitmask() << (4 * h);
         }
         mask
@@ -208,7 +217,9 @@ fn leaf(node: &CwBvhNode, slot: usize, tris: &[Tri], rays: &[PacketRay], mut mas
         while m != 0 {
             let i = m.trailing_zeros() as usize;
             m &= m - 1;
-            if rays[i].wt.hit(tri, 0.0, f32::INFINITY) < f32::INFINITY {
+            // Strictly closer than the reach, as obvhs's any-hit test.
+            let tmax = rays[i].tmax;
+            if rays[i].wt.hit(tri, 0.0, tmax) < tmax {
                 hit |= 1 << i;
             }
         }

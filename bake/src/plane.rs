@@ -107,6 +107,20 @@ impl LightPlane {
     }
 }
 
+impl LightPlane {
+    /// The distance from `origin` along unit `dir` to the plane, where a
+    /// shadow ray towards a light in it ends; infinite when `origin` is
+    /// not in front of the plane or `dir` does not head towards it.
+    pub fn reach(&self, origin: DVec3, dir: DVec3) -> f64 {
+        let (depth, _) = self.locate(origin);
+        let towards = -self.normal().dot(dir);
+        match depth > 0.0 && towards > 0.0 {
+            true => depth / towards,
+            false => f64::INFINITY,
+        }
+    }
+}
+
 /// What [`Scene::plane_row`] found besides the row.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub struct PlaneRow {
@@ -145,7 +159,7 @@ impl Scene {
         let tables = Tables::new(self);
         let grid = Grid::face(order, side, plane.x_axis, plane.y_axis, -plane.normal());
         let mut scratch = Scratch::with_texels(self, texels);
-        let stats = self.row_on(&tables, &grid, &mut scratch, p, row, albedo);
+        let stats = self.row_on_plane(&tables, &grid, plane, &mut scratch, p, row, albedo);
         Ok(PlaneRow {
             stats,
             point: self.mean_point(&tables, p),

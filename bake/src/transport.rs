@@ -334,6 +334,29 @@ impl Scene {
         stats
     }
 
+    /// [`Scene::row_on`] over a light plane's face: shadow rays end at the
+    /// plane ([`LightPlane::reach`]), so geometry beyond the plane casts no
+    /// shadow from a light in it.
+    #[allow(clippy::too_many_arguments)]
+    pub(crate) fn row_on_plane(
+        &self,
+        tables: &Tables,
+        grid: &Grid,
+        plane: &crate::plane::LightPlane,
+        scratch: &mut Scratch,
+        p: usize,
+        row: &mut [f32],
+        albedo_out: &mut [f32; 3],
+    ) -> RowStats {
+        let mut packet = std::mem::take(&mut scratch.packet);
+        let mut occluded = |o, d: &[DVec3], out: &mut [bool]| {
+            self.occluded_within(&mut packet, o, d, |dir| plane.reach(o, dir), out)
+        };
+        let stats = self.row_traced(tables, grid, scratch, p, row, albedo_out, &mut occluded);
+        scratch.packet = packet;
+        stats
+    }
+
     /// Every shadow ray row `p` traces, in the bake's order and in its
     /// packets, as world-space origin, unit directions and whether each
     /// was occluded: the rays a ray tracer is measured on

@@ -493,12 +493,39 @@ impl Scene {
         self.occluded_with(&mut Packet::default(), origin, dirs, out);
     }
 
+    /// [`Scene::occluded_packet`] counting only hits closer than
+    /// `reach(dir)` (a world distance; infinite for no limit), as
+    /// [`Scene::occluded_until`] answers each ray.
+    pub fn occluded_packet_until(
+        &self,
+        origin: DVec3,
+        dirs: &[DVec3],
+        reach: impl Fn(DVec3) -> f64,
+        out: &mut [bool],
+    ) {
+        self.occluded_within(&mut Packet::default(), origin, dirs, reach, out);
+    }
+
     /// [`Scene::occluded_packet`] with the packet's storage passed in.
     pub(crate) fn occluded_with(
         &self,
         packet: &mut Packet,
         origin: DVec3,
         dirs: &[DVec3],
+        out: &mut [bool],
+    ) {
+        self.occluded_within(packet, origin, dirs, |_| f64::INFINITY, out);
+    }
+
+    /// [`Scene::occluded_with`] counting only hits closer than `reach(dir)`
+    /// (a world distance; infinite for no limit): rays towards a light in
+    /// a plane end at the plane.
+    pub(crate) fn occluded_within(
+        &self,
+        packet: &mut Packet,
+        origin: DVec3,
+        dirs: &[DVec3],
+        reach: impl Fn(DVec3) -> f64,
         out: &mut [bool],
     ) {
         assert_eq!(dirs.len(), out.len(), "one answer per direction");
@@ -513,8 +540,12 @@ impl Scene {
                     self.clipped(origin, d)
                 };
                 debug_assert_eq!(bits(clipped), bits(self.clipped(origin, d)));
-                if let Some((start, d, _)) = clipped {
-                    packet.push(i, start, d);
+                let Some((start, dir, near)) = clipped else {
+                    continue;
+                };
+                match self.trace_limit(reach(d), near) {
+                    Some(tmax) => packet.push_until(i, start, dir, tmax),
+                    None => packet.push(i, start, dir),
                 }
             }
             let hit = packet.trace(&self.bvh, &self.tris);
@@ -522,6 +553,32 @@ impl Scene {
                 out[start * PACKET + i as usize] = hit >> k & 1 == 1;
             }
         }
+    }
+
+    /// The trace-space limit of a ray whose hits count up to world
+    /// distance `reach` and that enters the scene's box at world distance
+    /// `near`; `None` for no limit. A reach that ends before the box gives
+    /// a negative limit: nothing counts.
+    fn trace_limit(&self, reach: f64, near: f64) -> Option<f32> {
+        reach
+            .is_finite()
+            .then(|| ((reach - near) * self.scale).min(f64::from(f32::MAX)) as f32)
+    }
+
+    /// [`Scene::occluded`] counting only hits closer than world distance
+    /// `reach` (one ray at a time: the reference of the packets).
+    pub fn occluded_until(&self, origin: DVec3, dir: DVec3, reach: f64) -> bool {
+        let Some(t) = self.traced(origin, dir) else {
+            return false;
+        };
+        let tmax = self.trace_limit(reach, t.skip).unwrap_or(f32::INFINITY);
+        if tmax.is_nan() || tmax < 0.0 {
+            return false;
+        }
+        let ray = Ray::new(t.ray.origin, t.ray.direction, t.ray.tmin, tmax);
+        !self
+            .bvh
+            .ray_traverse_miss(ray, |r, id| t.wt.hit(&self.tris[id], r.tmin, r.tmax))
     }
 
     /// True when a ray from `origin` in unit direction `dir` hits anything

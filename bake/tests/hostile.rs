@@ -1054,3 +1054,75 @@ fn partial_without_identity_is_started_over() {
     );
     assert_eq!(w.pending_blocks().len(), header.block_count());
 }
+
+/// Packets with a reach per ray (`Scene::occluded_packet_until`, the light
+/// plane's shadow rays) answer as single rays (`Scene::occluded_until`),
+/// and a short reach ignores what lies beyond it.
+#[test]
+fn packets_with_a_reach_answer_as_single_rays() {
+    let toml = scene_toml(
+        FAR_CAMERA,
+        LIGHTING,
+        "[[quads]]\ncenter = [0.0, 1.0, 0.0]\nsize = [2.0, 2.0]\nmaterial = \"grey\"\n\
+         [[quads]]\ncenter = [0.0, -0.2, 0.0]\nsize = [4.0, 4.0]\nmaterial = \"grey\"\n",
+    );
+    let (_d, r) = build(&toml, &[]);
+    let scene = r.expect("two quads");
+    let dirs = sphere_dirs(400);
+    let mut bad = Vec::new();
+    let (mut far, mut near) = (0, 0);
+    for o in [
+        DVec3::new(0.1, 0.0, 0.2),
+        DVec3::new(0.0, 3.0, 0.0),
+        DVec3::new(0.5, 0.99, 0.0),
+    ] {
+        // Reaches that end before, at and beyond the quads, and none.
+        for reach in [1e-7, 0.5, 0.999, 1.0, 1.5, 10.0, f64::INFINITY] {
+            let single: Vec<bool> = dirs
+                .iter()
+                .map(|&d| scene.occluded_until(o, d, reach))
+                .collect();
+            let mut out = vec![false; dirs.len()];
+            scene.occluded_packet_until(o, &dirs, |_| reach, &mut out);
+            for (k, (&got, &want)) in out.iter().zip(&single).enumerate() {
+                if got != want {
+                    bad.push(format!(
+                        "from {o} along {} within {reach}: {got}, one ray {want}",
+                        dirs[k]
+                    ));
+                }
+            }
+            let count = single.iter().filter(|&&h| h).count();
+            match reach {
+                r if r.is_infinite() => far += count,
+                r if r < 1e-6 => near += count,
+                _ => {}
+            }
+        }
+        // A reach per direction: the distance to the plane y = 1.
+        let plane = |d: DVec3| {
+            if d.y > 0.0 {
+                (1.0 - o.y) / d.y
+            } else {
+                f64::INFINITY
+            }
+        };
+        let mut out = vec![false; dirs.len()];
+        scene.occluded_packet_until(o, &dirs, plane, &mut out);
+        for (k, &d) in dirs.iter().enumerate() {
+            if out[k] != scene.occluded_until(o, d, plane(d)) {
+                bad.push(format!("from {o} along {d} to the plane: {}", out[k]));
+            }
+        }
+    }
+    assert!(
+        bad.is_empty(),
+        "{} disagreements: {:?}",
+        bad.len(),
+        &bad[..bad.len().min(5)]
+    );
+    assert!(
+        far > 300 && near == 0,
+        "{far} occluded without a reach, {near} within 1e-7"
+    );
+}

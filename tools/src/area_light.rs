@@ -93,6 +93,15 @@ impl AreaArgs {
         !self.area_light.is_empty()
     }
 
+    /// The texture files the lights read (inputs no output may replace).
+    pub fn inputs(&self) -> Vec<(&'static str, &Path)> {
+        self.area_light
+            .iter()
+            .filter(|s| s.as_str() != "uniform")
+            .map(|s| ("--area-light", Path::new(s)))
+            .collect()
+    }
+
     /// The lights of the command line, placed.
     pub fn lights(&self, limits: &Limits) -> Result<Vec<AreaLight>> {
         let n = self.area_light.len();

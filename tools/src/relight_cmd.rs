@@ -276,14 +276,7 @@ pub fn run(a: RelightArgs, ctx: &Ctx) -> Result<()> {
     if let Some(r) = &a.reference {
         inputs.push(("--reference", r.as_path()));
     }
-    let textures: Vec<&Path> = a
-        .area
-        .area_light
-        .iter()
-        .filter(|s| s.as_str() != "uniform")
-        .map(Path::new)
-        .collect();
-    inputs.extend(textures.iter().map(|p| ("--area-light", *p)));
+    inputs.extend(a.area.inputs());
     let _claim = claim_files(&inputs, &a.out.roles())?;
     let near = area_image(&a, ctx)?;
     let opened_at = Instant::now();

@@ -2,12 +2,14 @@
 //! from one camera or an orbit of cameras, optionally with a glossy
 //! material shaded per view (`--brdf`, [`crate::render_glossy`]).
 
+use crate::area_light::AreaArgs;
 use crate::common::{claim_files, commit_all, describe_terms, Ctx, ImageOutput, TermsArgs};
 use crate::render_glossy::{Glossy, GlossyArgs};
 use anyhow::{bail, Context, Result};
 use clap::Args;
 use glam::DVec3;
 use ltm_codec::{Charge, LtmFile, SurfacePoint};
+use ltm_relight::nearfield::NearField;
 use ltm_relight::{EnvMap, Relight, Request, Rotation, TexturedMesh, ViewCamera, MAX_SUPERSAMPLE};
 use std::path::{Path, PathBuf};
 use std::time::Instant;
@@ -63,6 +65,11 @@ pub struct RenderArgs {
     pub texture: Option<PathBuf>,
     #[command(flatten)]
     pub glossy: GlossyArgs,
+    /// Area lights (files baked with a `[light_plane]`), added to the
+    /// map's relit texture before the views are drawn, as `ltm relight
+    /// --area-light` adds them.
+    #[command(flatten)]
+    pub area: AreaArgs,
     /// Print one JSON line with the settings and timings.
     #[arg(long)]
     pub json: bool,
@@ -117,11 +124,17 @@ struct Opened {
     points: Vec<SurfacePoint>,
     /// The points' bytes, charged to the run's budget while they live.
     points_charge: Charge,
+    /// The file's near-field rows, when area lights are given.
+    near: Option<NearField>,
 }
 
-fn open(path: &Path, with_points: bool, ctx: &Ctx) -> Result<Opened> {
+fn open(path: &Path, with_points: bool, with_near: bool, ctx: &Ctx) -> Result<Opened> {
     let context = || format!("opening {}", path.display());
-    let file = LtmFile::open_with_limits(path, ctx.limits()).with_context(context)?;
+    let mut file = LtmFile::open_with_limits(path, ctx.limits()).with_context(context)?;
+    let near = match with_near {
+        true => Some(NearField::take(&mut file, ctx.limits()).with_context(context)?),
+        false => None,
+    };
     let mesh = TexturedMesh::from_file(&file, ctx.limits()).with_context(context)?;
     let (mut points, mut points_charge) = (Vec::new(), Charge::default());
     if let Some(surface) = file.surface().filter(|_| with_points) {
@@ -137,6 +150,7 @@ fn open(path: &Path, with_points: bool, ctx: &Ctx) -> Result<Opened> {
         mesh,
         points,
         points_charge,
+        near,
     })
 }
 
@@ -172,14 +186,20 @@ pub fn run(a: RenderArgs, ctx: &Ctx) -> Result<()> {
     let outputs: Vec<(&str, &Path)> = names.iter().map(|(r, p)| (*r, p.as_path())).collect();
     let mut inputs = vec![("input", a.file.as_path()), ("--env", a.env.as_path())];
     inputs.extend(a.glossy.measured_file().map(|m| ("--brdf", m)));
+    inputs.extend(a.area.inputs());
     let _claim = claim_files(&inputs, &outputs)?;
     let material = a.glossy.material(ctx.limits())?;
+    let area = match a.area.any() {
+        true => Some((a.area.lights(ctx.limits())?, a.area.method()?)),
+        false => None,
+    };
     let Opened {
         relighter,
         mesh,
         points,
         points_charge: _points_charge,
-    } = open(&a.file, material.is_some(), ctx)?;
+        near,
+    } = open(&a.file, material.is_some(), area.is_some(), ctx)?;
     let mut frame = relighter.frame()?;
     let env = EnvMap::load(&a.env).with_context(|| format!("loading {}", a.env.display()))?;
     let light = env.to_cubemap(relighter.face_res(), &a.rotate);
@@ -188,6 +208,19 @@ pub fn run(a: RenderArgs, ctx: &Ctx) -> Result<()> {
         weighting: a.terms.weighting,
     };
     let stats = relighter.relight(&light, &request, &mut frame)?;
+    if let (Some(near), Some((lights, method))) = (&near, &area) {
+        let start = Instant::now();
+        let lit = near.render(lights, *method)?;
+        for (o, v) in frame.image.data.iter_mut().zip(&lit) {
+            (0..3).for_each(|c| o[c] += v[c]);
+        }
+        eprintln!(
+            "{} area light(s) added to the texture in {:.1} ms ({})",
+            lights.len(),
+            start.elapsed().as_secs_f64() * 1e3,
+            crate::area_light::method_name(*method)
+        );
+    }
     let glossy = match material {
         Some(brdf) => Some(Glossy::prepare(
             &a.glossy,

@@ -427,3 +427,69 @@ fn bad_area_lights_and_files_are_refused() {
     let image = Image::read_exr(&out).unwrap();
     assert!(image.data.iter().flatten().all(|v| *v == 0.0));
 }
+
+/// `ltm render --area-light` on a texture-space file adds the area light
+/// to the relit texture exactly as `ltm relight --area-light` relights the
+/// file's texels, and the drawn views show it.
+#[test]
+fn area_lights_in_ltm_render_match_ltm_relight() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = |n: &str| dir.path().join(n).to_str().unwrap().to_string();
+    std::fs::write(dir.path().join("blob.obj"), ltm_testkit::blob_obj(4)).unwrap();
+    let texture_scene =
+        ltm_testkit::scene_toml("blob.obj", 8, 8, 4) + ltm_testkit::TEXTURE_SPHERE_16;
+    let bake = |name: &str, scene: String| -> String {
+        let toml = out(&format!("{name}.toml"));
+        std::fs::write(&toml, scene).unwrap();
+        let (raw, file) = (out(&format!("{name}.raw")), out(&format!("{name}.ltm")));
+        ok(&["bake", &toml, "-o", &raw]);
+        ok(&["compress", &raw, "-o", &file, "--mode", "2d"]);
+        file
+    };
+    let plane = "\n[light_plane]\norigin = [0.0, 2.5, 0.0]\nx_axis = [1.0, 0.0, 0.0]\ny_axis = [0.0, 0.0, 1.0]\norder = 8\n";
+    let file = bake("t", texture_scene.clone() + plane);
+    let env = Path::new(env!("CARGO_MANIFEST_DIR")).join("../assets/envmaps/studio.exr");
+    let env = env.to_str().unwrap().to_string();
+    let light = [
+        "--area-light",
+        "uniform",
+        "--area-size",
+        "1.5,1",
+        "--area-center",
+        "0.3,0",
+        "--area-intensity",
+        "5",
+    ];
+    let relit = out("relit.exr");
+    let mut args = vec![
+        "relight", &file, "--env", &env, "--terms", "all", "-o", &relit,
+    ];
+    args.extend(light);
+    ok(&args);
+    let view = [
+        "--camera", "0,1.5,3", "--target", "0,0.6,0", "--size", "48", "--terms", "all",
+    ];
+    let render = |file: &str, with_light: bool, texture: &str, image: &str| {
+        let mut args = vec!["render", file, "--env", &env];
+        args.extend(view);
+        args.extend(["--texture", texture, "-o", image]);
+        if with_light {
+            args.extend(light);
+        }
+        ltm(&args)
+    };
+    let (done, _, stderr) = render(&file, true, &out("lit.exr"), &out("lit-view.exr"));
+    assert!(done && stderr.contains("1 area light(s) added"), "{stderr}");
+    let (done, _, stderr) = render(&file, false, &out("dark.exr"), &out("dark-view.exr"));
+    assert!(done, "{stderr}");
+    let read = |n: &str| Image::read_exr(Path::new(&out(n))).unwrap();
+    let e = relative_l2(&read("lit.exr"), &read("relit.exr")).unwrap();
+    assert!(e < 1e-6, "render's texture against relight's: {e}");
+    assert!(relative_l2(&read("dark.exr"), &read("lit.exr")).unwrap() > 0.01);
+    assert!(relative_l2(&read("dark-view.exr"), &read("lit-view.exr")).unwrap() > 0.01);
+    // A file without near-field rows is refused with a message.
+    let plain = bake("plain", texture_scene);
+    let (done, _, stderr) = render(&plain, true, &out("x.exr"), &out("y.exr"));
+    assert!(!done && stderr.contains("[light_plane]"), "{stderr}");
+    assert!(!stderr.contains("panicked"), "{stderr}");
+}

@@ -149,23 +149,21 @@ impl LightTable {
         self.texels[j * self.width + i]
     }
 
-    /// The table's bilinear value at `(x, y)` in texel units (`0..=width`,
-    /// `0..=height`): the exact integral over `[0, x] × [0, y]`.
-    fn at(&self, x: f64, y: f64) -> [f64; 3] {
-        let i = (x as usize).min(self.width - 1);
-        let j = (y as usize).min(self.height - 1);
-        let (f, g) = (x - i as f64, y - j as f64);
-        let (s00, s10, s01, s11) = (
-            self.s(i, j),
-            self.s(i + 1, j),
-            self.s(i, j + 1),
-            self.s(i + 1, j + 1),
-        );
-        std::array::from_fn(|c| {
-            let low = s00[c] + f * (s10[c] - s00[c]);
-            let high = s01[c] + f * (s11[c] - s01[c]);
-            low + g * (high - low)
-        })
+    /// The table's bilinear values at `(x, y)` for every `x` of `cells`
+    /// (each [`cell`] of an `x` in texel units) into `out`: the exact
+    /// integrals over `[0, x] × [0, y]`.
+    fn grid_row(&self, cells: &[(usize, f64)], y: f64, out: &mut Vec<[f64; 3]>) {
+        let (j, g) = cell(y, self.height);
+        let row = self.width + 1;
+        let (low, high) = (&self.sat[j * row..][..row], &self.sat[(j + 1) * row..][..row]);
+        out.clear();
+        out.extend(cells.iter().map(|&(i, f)| {
+            std::array::from_fn(|c| {
+                let l = low[i][c] + f * (low[i + 1][c] - low[i][c]);
+                let h = high[i][c] + f * (high[i + 1][c] - high[i][c]);
+                l + g * (h - l)
+            })
+        }));
     }
 
     /// `Σ` over whole texels `i0..i1` of row `j`, from the table.
@@ -244,6 +242,8 @@ pub(crate) struct FaceMasses {
     lines: [Vec<f64>; 2],
     /// The bilinear table values on the grid (one row of grid points).
     grid: [Vec<[f64; 3]>; 2],
+    /// The texel and fraction of each x grid line.
+    cells: Vec<(usize, f64)>,
     /// Each face texel's span per axis (`None`: empty).
     spans: [Vec<Option<Span>>; 2],
 }
@@ -323,12 +323,13 @@ impl FaceMasses {
 
     fn grid_masses(&mut self, table: &LightTable) {
         let [xs, ys] = &self.lines;
+        let cells = &mut self.cells;
+        cells.clear();
+        cells.extend(xs.iter().map(|&x| cell(x, table.width)));
         let [below, above] = &mut self.grid;
-        below.clear();
-        below.extend(xs.iter().map(|&x| table.at(x, ys[0])));
+        table.grid_row(cells, ys[0], below);
         for &y in &ys[1..] {
-            above.clear();
-            above.extend(xs.iter().map(|&x| table.at(x, y)));
+            table.grid_row(cells, y, above);
             for a in 0..xs.len() - 1 {
                 let (p, q, r, s) = (below[a], below[a + 1], above[a], above[a + 1]);
                 let mass = std::array::from_fn(|c| ((s[c] - r[c]) - (q[c] - p[c])).max(0.0));
@@ -337,4 +338,11 @@ impl FaceMasses {
             std::mem::swap(below, above);
         }
     }
+}
+
+/// The texel holding `x` (texel units, `0..=n`) and the fraction of it
+/// left of `x`: the last texel for `x = n`.
+fn cell(x: f64, n: usize) -> (usize, f64) {
+    let i = (x as usize).min(n - 1);
+    (i, x - i as f64)
 }

@@ -37,8 +37,10 @@ pub struct AreaArgs {
     #[arg(long = "area-size", value_name = "W,H", value_parser = crate::common::ranges::pair)]
     pub area_size: Vec<[f64; 2]>,
     /// Turns the light about its centre in the plane, counter-clockwise
-    /// seen from the lit side, by a multiple of 90 degrees (the stored
-    /// rows are separable along the plane's axes only). Default 0.
+    /// seen from the lit side, by any angle in degrees. Multiples of 90
+    /// turn the texture exactly; other angles resample it onto the turned
+    /// light's bounding rectangle (4 × 4 samples per texel, texels as
+    /// large as the texture's). Default 0.
     #[arg(long = "area-angle", value_name = "DEG", allow_hyphen_values = true)]
     pub area_angle: Vec<f64>,
     /// Radiance scale of the light: I, or R,G,B; finite and >= 0. Default 1.
@@ -220,18 +222,20 @@ pub fn read_texture(spec: &str, rgb: [f32; 3], limits: &Limits) -> Result<LightT
     Ok(LightTexture::new(width, height, texels)?)
 }
 
-/// The texture and size of a light turned by `angle` (a multiple of 90°)
-/// about its centre.
+/// The texture and size of a light turned by `angle` degrees about its
+/// centre: exactly for a multiple of 90°, else resampled onto the turned
+/// light's bounding rectangle ([`LightTexture::rotated`]).
 pub fn turned(
     texture: LightTexture,
     size: [f64; 2],
     angle: f64,
 ) -> Result<(LightTexture, [f64; 2])> {
     let quarter = angle / 90.0;
-    if !(quarter.is_finite() && quarter.fract() == 0.0) {
-        bail!(
-            "--area-angle {angle} is not a multiple of 90 degrees (the stored rows are separable along the light plane's axes only)"
-        );
+    if !quarter.is_finite() {
+        bail!("--area-angle {angle} is not finite");
+    }
+    if quarter.fract() != 0.0 {
+        return Ok(texture.rotated(size, angle)?);
     }
     let turns = quarter.rem_euclid(4.0) as usize;
     let (mut texture, mut size) = (texture, size);

@@ -233,6 +233,16 @@ fn area_lights_from_the_cli_match_the_library() {
     assert!(e < 1e-6, "turned: {e}");
     let e = relative_l2(&light("-270", &out("c.exr")), &light("90", &out("d.exr"))).unwrap();
     assert!(e == 0.0, "-270 and 90 degrees: {e}");
+    // Any other angle resamples the texture: another picture, as bright.
+    let (a, b) = (light("30", &out("e.exr")), light("0", &out("f.exr")));
+    assert!(relative_l2(&a, &b).unwrap() > 1e-3);
+    let total = |i: &Image| i.data.iter().map(|p| f64::from(p[1])).sum::<f64>();
+    assert!(
+        (total(&a) / total(&b) - 1.0).abs() < 0.1,
+        "{} {}",
+        total(&a),
+        total(&b)
+    );
 }
 
 #[test]
@@ -306,11 +316,11 @@ fn bad_area_lights_and_files_are_refused() {
             "--area-light",
             u,
             "--area-angle",
-            "45",
+            "nan",
             "-o",
             o,
         ],
-        "multiple of 90",
+        "not finite",
     );
     fails(
         &[

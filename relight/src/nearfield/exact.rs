@@ -155,7 +155,10 @@ impl LightTable {
     fn grid_row(&self, cells: &[(usize, f64)], y: f64, out: &mut Vec<[f64; 3]>) {
         let (j, g) = cell(y, self.height);
         let row = self.width + 1;
-        let (low, high) = (&self.sat[j * row..][..row], &self.sat[(j + 1) * row..][..row]);
+        let (low, high) = (
+            &self.sat[j * row..][..row],
+            &self.sat[(j + 1) * row..][..row],
+        );
         out.clear();
         out.extend(cells.iter().map(|&(i, f)| {
             std::array::from_fn(|c| {

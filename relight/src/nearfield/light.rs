@@ -112,6 +112,59 @@ impl LightTexture {
     }
 }
 
+/// Sub-samples per side of each texel of [`LightTexture::rotated`].
+pub const ROTATION_SAMPLES: usize = 4;
+
+impl LightTexture {
+    /// The texture of a light of `size` (plane units) turned by `degrees`
+    /// about its centre, counter-clockwise seen from the lit side (a
+    /// texel at `p` from the centre moves to `R(degrees)·p`), as a texture
+    /// over the turned light's bounding rectangle with its size: each new
+    /// texel is the mean of [`ROTATION_SAMPLES`]² point samples of the old
+    /// texture, dark outside the light. The new texels are as large as the
+    /// old ones' smaller side, at most [`super::MAX_TABLE_SIDE`] per side.
+    pub fn rotated(&self, size: [f64; 2], degrees: f64) -> Result<(LightTexture, [f64; 2])> {
+        if !(degrees.is_finite() && size.iter().all(|s| s.is_finite() && *s > 0.0)) {
+            return Err(RelightError::Invalid(format!(
+                "turning a light of size {size:?} by {degrees} degrees: both must be finite, the size > 0"
+            )));
+        }
+        let (sin, cos) = degrees.to_radians().sin_cos();
+        let [w, h] = size;
+        let bound = [w * cos.abs() + h * sin.abs(), w * sin.abs() + h * cos.abs()];
+        let texel = (w / self.width as f64).min(h / self.height as f64);
+        // Rounding of sin/cos must not add a sliver texel.
+        let count = |len: f64| {
+            ((len / texel * (1.0 - 1e-9)).ceil() as usize).clamp(1, super::MAX_TABLE_SIDE)
+        };
+        let (nw, nh) = (count(bound[0]), count(bound[1]));
+        let n = ROTATION_SAMPLES;
+        let mut texels = Vec::with_capacity(nw * nh);
+        for j in 0..nh {
+            for i in 0..nw {
+                let mut sum = [0.0f64; 3];
+                for (si, sj) in (0..n * n).map(|k| (k % n, k / n)) {
+                    let x =
+                        ((i as f64 + (si as f64 + 0.5) / n as f64) / nw as f64 - 0.5) * bound[0];
+                    let y =
+                        ((j as f64 + (sj as f64 + 0.5) / n as f64) / nh as f64 - 0.5) * bound[1];
+                    // Back to the light's own frame: R(−degrees).
+                    let (u, v) = ((cos * x + sin * y) / w + 0.5, (cos * y - sin * x) / h + 0.5);
+                    if (0.0..1.0).contains(&u) && (0.0..1.0).contains(&v) {
+                        let t = self.texel(
+                            ((u * self.width as f64) as usize).min(self.width - 1),
+                            ((v * self.height as f64) as usize).min(self.height - 1),
+                        );
+                        (0..3).for_each(|c| sum[c] += f64::from(t[c]));
+                    }
+                }
+                texels.push(sum.map(|v| (v / (n * n) as f64) as f32));
+            }
+        }
+        Ok((LightTexture::new(nw, nh, texels)?, bound))
+    }
+}
+
 /// `(target, source, weight)` triples: source pixel `p` of `from` covers
 /// `[p/from, (p+1)/from)`, target texel `j` of `to` covers `[j/to, (j+1)/to)`,
 /// and the weight is their overlap over the target's width.

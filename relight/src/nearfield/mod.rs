@@ -38,7 +38,9 @@ mod stored;
 mod tests;
 
 pub use exact::{LightTable, MAX_TABLE_SIDE};
-pub use light::{haar_2d, LightTexture, Placement, SourceCoefficients, MAX_TEXTURE_SIDE};
+pub use light::{
+    haar_2d, LightTexture, Placement, SourceCoefficients, MAX_TEXTURE_SIDE, ROTATION_SAMPLES,
+};
 pub use propagate::{
     affine, transport_coefficients, PlaneFace, Propagator, Receiver, Targets, DEFAULT_FACE_SIDE,
     MIN_SCALE,

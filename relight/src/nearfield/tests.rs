@@ -834,3 +834,73 @@ fn exact_rendering_of_hostile_lights_and_points_is_finite_and_matches_the_wavele
     ];
     assert!(NearField::new(rows, nan, None, &ltm_codec::Limits::default()).is_err());
 }
+
+/// The radiance-weighted power `Σ t·area` and centroid of a texture over a
+/// light of `size` centred at the origin.
+fn power_and_centroid(t: &LightTexture, size: [f64; 2]) -> (f64, [f64; 2]) {
+    let area = size[0] * size[1] / (t.width() * t.height()) as f64;
+    let (mut power, mut moment) = (0.0, [0.0; 2]);
+    for j in 0..t.height() {
+        for i in 0..t.width() {
+            let v = f64::from(t.texel(i, j)[1]) * area;
+            let x = ((i as f64 + 0.5) / t.width() as f64 - 0.5) * size[0];
+            let y = ((j as f64 + 0.5) / t.height() as f64 - 0.5) * size[1];
+            power += v;
+            moment[0] += v * x;
+            moment[1] += v * y;
+        }
+    }
+    (power, moment.map(|m| m / power))
+}
+
+#[test]
+fn rotated_lights_keep_their_power_and_turn_their_centroid() {
+    let mut rng = Rng::new(12);
+    // Square texels: a quarter turn lands on the same grid, texel for
+    // texel (new (i, j) is old (j, H − 1 − i)).
+    let texels: Vec<[f32; 3]> = (0..8).map(|_| [rng.uniform() as f32; 3]).collect();
+    let t = LightTexture::new(4, 2, texels).unwrap();
+    let (turned, size) = t.rotated([1.0, 0.5], 90.0).unwrap();
+    assert!((size[0] - 0.5).abs() < 1e-12 && (size[1] - 1.0).abs() < 1e-12);
+    assert_eq!((turned.width(), turned.height()), (2, 4));
+    for j in 0..4 {
+        for i in 0..2 {
+            assert_eq!(turned.texel(i, j), t.texel(j, 1 - i), "({i}, {j})");
+        }
+    }
+    // Any angle: the power stays, the centroid turns with the light.
+    let texels: Vec<[f32; 3]> = (0..48 * 20)
+        .map(|k| {
+            [if k % 48 < 12 {
+                5.0
+            } else {
+                rng.uniform() as f32
+            }; 3]
+        })
+        .collect();
+    let t = LightTexture::new(48, 20, texels).unwrap();
+    let size = [1.2, 0.5];
+    let (power, centroid) = power_and_centroid(&t, size);
+    for degrees in [30.0, 45.0, -100.0, 200.0] {
+        let (turned, bound) = t.rotated(size, degrees).unwrap();
+        let (p, c) = power_and_centroid(&turned, bound);
+        assert!(
+            (p - power).abs() < 0.01 * power,
+            "{degrees}°: power {p} against {power}"
+        );
+        let (sin, cos) = f64::to_radians(degrees).sin_cos();
+        let want = [
+            cos * centroid[0] - sin * centroid[1],
+            sin * centroid[0] + cos * centroid[1],
+        ];
+        let texel = size[0] / 48.0;
+        for a in 0..2 {
+            assert!(
+                (c[a] - want[a]).abs() < texel,
+                "{degrees}°: centroid {c:?} against {want:?}"
+            );
+        }
+    }
+    assert!(t.rotated(size, f64::NAN).is_err());
+    assert!(t.rotated([0.0, 1.0], 30.0).is_err());
+}

@@ -171,10 +171,10 @@ impl<'a> BlockBaker<'a> {
                 |scratch, (i, row)| {
                     let mut albedo = [0.0f32; 3];
                     let p = start + i;
-                    self.scene.row_on_plane(
+                    self.scene.row_on(
                         &self.tables,
                         grid,
-                        light_plane,
+                        Some(light_plane),
                         scratch,
                         p,
                         row,

@@ -159,7 +159,7 @@ impl Scene {
         let tables = Tables::new(self);
         let grid = Grid::face(order, side, plane.x_axis, plane.y_axis, -plane.normal());
         let mut scratch = Scratch::with_texels(self, texels);
-        let stats = self.row_on_plane(&tables, &grid, plane, &mut scratch, p, row, albedo);
+        let stats = self.row_on(&tables, &grid, Some(plane), &mut scratch, p, row, albedo);
         Ok(PlaneRow {
             stats,
             point: self.mean_point(&tables, p),

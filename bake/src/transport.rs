@@ -73,6 +73,7 @@
 
 use crate::material::Material;
 use crate::packet::Packet;
+use crate::plane::LightPlane;
 use crate::rows::RowSample;
 use crate::sampling::{hammersley, mix64, rotation, wrap};
 use crate::world::Scene;
@@ -313,36 +314,18 @@ impl Scene {
         row: &mut [f32],
         albedo_out: &mut [f32; 3],
     ) -> RowStats {
-        self.row_on(tables, &tables.grid, scratch, p, row, albedo_out)
+        self.row_on(tables, &tables.grid, None, scratch, p, row, albedo_out)
     }
 
-    /// [`Scene::row_into`] over the texels of `grid`.
+    /// [`Scene::row_into`] over the texels of `grid`; with a light
+    /// `plane`, shadow rays end at it ([`LightPlane::reach`]), so geometry
+    /// beyond the plane casts no shadow from a light in it.
+    #[allow(clippy::too_many_arguments)]
     pub(crate) fn row_on(
         &self,
         tables: &Tables,
         grid: &Grid,
-        scratch: &mut Scratch,
-        p: usize,
-        row: &mut [f32],
-        albedo_out: &mut [f32; 3],
-    ) -> RowStats {
-        let mut packet = std::mem::take(&mut scratch.packet);
-        let mut occluded =
-            |o, d: &[DVec3], out: &mut [bool]| self.occluded_with(&mut packet, o, d, out);
-        let stats = self.row_traced(tables, grid, scratch, p, row, albedo_out, &mut occluded);
-        scratch.packet = packet;
-        stats
-    }
-
-    /// [`Scene::row_on`] over a light plane's face: shadow rays end at the
-    /// plane ([`LightPlane::reach`]), so geometry beyond the plane casts no
-    /// shadow from a light in it.
-    #[allow(clippy::too_many_arguments)]
-    pub(crate) fn row_on_plane(
-        &self,
-        tables: &Tables,
-        grid: &Grid,
-        plane: &crate::plane::LightPlane,
+        plane: Option<&LightPlane>,
         scratch: &mut Scratch,
         p: usize,
         row: &mut [f32],
@@ -350,7 +333,8 @@ impl Scene {
     ) -> RowStats {
         let mut packet = std::mem::take(&mut scratch.packet);
         let mut occluded = |o, d: &[DVec3], out: &mut [bool]| {
-            self.occluded_within(&mut packet, o, d, |dir| plane.reach(o, dir), out)
+            let reach = |dir| plane.map_or(f64::INFINITY, |l| l.reach(o, dir));
+            self.occluded_within(&mut packet, o, d, reach, out)
         };
         let stats = self.row_traced(tables, grid, scratch, p, row, albedo_out, &mut occluded);
         scratch.packet = packet;

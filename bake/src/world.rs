@@ -490,7 +490,7 @@ impl Scene {
     /// for `dirs[i]`, the same answers, faster when the directions are
     /// close.
     pub fn occluded_packet(&self, origin: DVec3, dirs: &[DVec3], out: &mut [bool]) {
-        self.occluded_with(&mut Packet::default(), origin, dirs, out);
+        self.occluded_within(&mut Packet::default(), origin, dirs, |_| f64::INFINITY, out);
     }
 
     /// [`Scene::occluded_packet`] counting only hits closer than
@@ -506,20 +506,8 @@ impl Scene {
         self.occluded_within(&mut Packet::default(), origin, dirs, reach, out);
     }
 
-    /// [`Scene::occluded_packet`] with the packet's storage passed in.
-    pub(crate) fn occluded_with(
-        &self,
-        packet: &mut Packet,
-        origin: DVec3,
-        dirs: &[DVec3],
-        out: &mut [bool],
-    ) {
-        self.occluded_within(packet, origin, dirs, |_| f64::INFINITY, out);
-    }
-
-    /// [`Scene::occluded_with`] counting only hits closer than `reach(dir)`
-    /// (a world distance; infinite for no limit): rays towards a light in
-    /// a plane end at the plane.
+    /// [`Scene::occluded_packet_until`] with the packet's storage passed
+    /// in.
     pub(crate) fn occluded_within(
         &self,
         packet: &mut Packet,

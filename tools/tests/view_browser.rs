@@ -1091,13 +1091,13 @@ fn area_light_in_the_page_matches_ltm_relight() {
     }
     eval(&tab, "(() => { const a = document.getElementById('area'); a.checked = true; a.dispatchEvent(new Event('change')); return true; })()");
     let n = text(&tab, "document.getElementById('n-number').value");
-    let area = |x: &str, y: &str| format!("&ax={x}&ay={y}&aw=0.8&ah=0.6&ai=4&aq=0&at=0");
+    let area = |x: &str, y: &str| format!("&ax={x}&ay={y}&aw=0.8&ah=0.6&ai=4&ad=0&at=0");
     let q = format!(
         "file=0&map=0&yaw=0&pitch=0&roll=0&n={n}&weighting=transport{}",
         area("0.15", "0.25")
     );
     wait_shown(&tab, "view0", &q);
-    let compare = |center: &str| {
+    let compare = |center: &str, angle: &str| {
         let out = dir.path().join("want.exr");
         ltm(&[
             "relight",
@@ -1116,6 +1116,8 @@ fn area_light_in_the_page_matches_ltm_relight() {
             "0.8,0.6",
             "--area-intensity",
             "4",
+            "--area-angle",
+            angle,
             "-o",
             &s(&out),
         ]);
@@ -1133,7 +1135,7 @@ fn area_light_in_the_page_matches_ltm_relight() {
         assert!(lit > got.len() / 10, "nearly black");
         want
     };
-    let before = compare("0.15,0.25");
+    let before = compare("0.15,0.25", "0");
     assert!(text(&tab, "document.getElementById('readouts').textContent").contains("area light"));
     // A shift-drag of 20 px right and 10 px down moves the light by
     // (0.2, 0.1) in the plane and leaves the map where it was.
@@ -1144,9 +1146,15 @@ fn area_light_in_the_page_matches_ltm_relight() {
     );
     let q = q.replace(&area("0.15", "0.25"), &area("0.35", "0.35"));
     wait_shown(&tab, "view0", &q);
-    let after = compare("0.35,0.35");
+    let after = compare("0.35,0.35", "0");
     let moved = ltm_relight::relative_l2(&after, &before).unwrap();
     assert!(moved > 0.01, "moving the light changes the image: {moved}");
+    // Any angle, as `--area-angle` turns it.
+    set(&tab, "area-angle", "30", "change");
+    wait_shown(&tab, "view0", &q.replace("&ad=0&", "&ad=30&"));
+    let turned = compare("0.35,0.35", "30");
+    let e = ltm_relight::relative_l2(&turned, &after).unwrap();
+    assert!(e > 1e-3, "turning the light changes the image: {e}");
     let png = tab
         .capture_screenshot(Page::CaptureScreenshotFormatOption::Png, None, None, true)
         .unwrap();
@@ -1189,7 +1197,7 @@ fn area_light_screenshots() {
         }
         eval(&tab, "(() => { const a = document.getElementById('area'); a.checked = true; a.dispatchEvent(new Event('change')); return true; })()");
         let q = format!(
-            "file=0&map=0&yaw=0&pitch=0&roll=0&n={n}&weighting=transport&ax={x}&ay={y}&aw={w}&ah={h}&ai=60&aq=0&at=0"
+            "file=0&map=0&yaw=0&pitch=0&roll=0&n={n}&weighting=transport&ax={x}&ay={y}&aw={w}&ah={h}&ai=60&ad=0&at=0"
         );
         wait_shown(&tab, "view0", &q);
         let png = tab

@@ -26,7 +26,8 @@
 //!   (files with near-field rows only; a scene's `[light_plane]`) is added
 //!   with `ax`, `ay` (centre in the plane), `aw`, `ah` (sides, > 0), `ai`
 //!   (intensity, >= 0), all five or none (finite, |v| ≤ 10⁶), and optionally
-//!   `aq` (quarter turns, 0..=3) and `at` (texture index); it is lit
+//!   `aq` (quarter turns, 0..=3) or `ad` (degrees, any angle within
+//!   ±3600), and `at` (texture index); it is lit
 //!   exactly (`ltm relight --area-method exact`), `X-Area-Ms` gives its
 //!   time, and such a frame carries no `X-Error` (the exact image is the
 //!   map's).
@@ -100,7 +101,7 @@ round trip, lights used and nonzeros touched. With two files they are shown side
 (or under a split slider). With --reference, the exact image T·L can be shown and the \
 frame's error against it is read out. Texture-space files are drawn as their mesh in WebGL \
 with an orbit camera. A file baked with a [light_plane] also takes an area light: its \
-texture, centre, size, intensity and quarter turn are fields of the page, and a \
+texture, centre, size, intensity and angle are fields of the page, and a \
 shift-drag on an image moves it.
 
 Limits: at most 4096 connections at once (fewer where the open-file limit is lower: the \

@@ -39,7 +39,7 @@ pub struct Bounds {
 pub const MAX_AREA_VALUE: f64 = 1e6;
 
 /// An area light in the file's light plane (`ax`, `ay`, `aw`, `ah`, `ai`,
-/// and optionally `aq`, `at`).
+/// and optionally `aq` or `ad`, and `at`).
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct AreaParams {
     /// Centre in the plane's coordinates (`ax`, `ay`).
@@ -48,8 +48,10 @@ pub struct AreaParams {
     pub size: [f64; 2],
     /// Radiance scale (`ai`), >= 0.
     pub intensity: f64,
-    /// Quarter turns counter-clockwise seen from the lit side (`aq`, 0..=3).
-    pub quarter_turns: u32,
+    /// Turn in degrees, counter-clockwise seen from the lit side: `ad`
+    /// (any finite angle within ±3600), or 90 × `aq` (quarter turns,
+    /// 0..=3).
+    pub degrees: f64,
     /// Index into the offered textures (`at`).
     pub texture: usize,
 }
@@ -187,6 +189,7 @@ pub const FRAME_PARAMS: &[&str] = &[
     "ah",
     "ai",
     "aq",
+    "ad",
     "at",
 ];
 
@@ -215,14 +218,18 @@ fn area_value(
     }
 }
 
+/// The largest `ad` accepted, in degrees.
+pub const MAX_AREA_DEGREES: f64 = 3600.0;
+
 /// The area light of a frame request: `ax`, `ay`, `aw`, `ah`, `ai` all or
-/// none; `aq` (quarter turns, 0..=3) and `at` (texture) only with them.
+/// none; `aq` (quarter turns, 0..=3) or `ad` (degrees), and `at`
+/// (texture), only with them.
 fn area(q: &HashMap<String, String>, b: &Bounds) -> Result<Option<AreaParams>, BadRequest> {
     let given = ["ax", "ay", "aw", "ah", "ai"].map(|k| q.contains_key(k));
     if !given.iter().any(|&g| g) {
-        if q.contains_key("aq") || q.contains_key("at") {
+        if ["aq", "ad", "at"].iter().any(|k| q.contains_key(*k)) {
             return Err(BadRequest(
-                "aq and at need an area light (ax, ay, aw, ah, ai)".into(),
+                "aq, ad and at need an area light (ax, ay, aw, ah, ai)".into(),
             ));
         }
         return Ok(None);
@@ -242,6 +249,19 @@ fn area(q: &HashMap<String, String>, b: &Bounds) -> Result<Option<AreaParams>, B
             )))
         }
     };
+    let degrees = match (q.get("ad"), q.contains_key("aq")) {
+        (None, _) => 90.0 * f64::from(quarter_turns),
+        (Some(_), true) => return Err(BadRequest("give aq or ad, not both".into())),
+        (Some(s), false) => match s.parse::<f64>() {
+            Ok(v) if v.is_finite() && v.abs() <= MAX_AREA_DEGREES => v,
+            _ => {
+                return Err(BadRequest(format!(
+                    "ad '{}' is out of range (valid: finite degrees, at most {MAX_AREA_DEGREES} in magnitude)",
+                    truncate(s)
+                )))
+            }
+        },
+    };
     let texture = match q.contains_key("at") {
         true => index(q, "at", b.textures)?,
         false => 0,
@@ -256,7 +276,7 @@ fn area(q: &HashMap<String, String>, b: &Bounds) -> Result<Option<AreaParams>, B
             area_value(q, "ah", 0.0, true)?,
         ],
         intensity: area_value(q, "ai", 0.0, false)?,
-        quarter_turns,
+        degrees,
         texture,
     }))
 }
@@ -370,7 +390,9 @@ mod tests {
             (a.center, a.size, a.intensity),
             ([-0.5, 0.25], [1.0, 0.5], 3.0)
         );
-        assert_eq!((a.quarter_turns, a.texture), (1, 1));
+        assert_eq!((a.degrees, a.texture), (90.0, 1));
+        let p = parse("file=0&map=0&n=1&ax=0&ay=0&aw=1&ah=1&ai=1&ad=-37.5").unwrap();
+        assert_eq!(p.area.unwrap().degrees, -37.5);
     }
 
     #[test]
@@ -408,6 +430,19 @@ mod tests {
             ("file=0&map=0&n=1&ax=0&ay=0&aw=1&ah=1&ai=1&aq=4", "aq '4'"),
             ("file=0&map=0&n=1&ax=0&ay=0&aw=1&ah=1&ai=1&at=2", "at '2'"),
             ("file=0&map=0&n=1&aq=1", "need an area light"),
+            ("file=0&map=0&n=1&ad=10", "need an area light"),
+            (
+                "file=0&map=0&n=1&ax=0&ay=0&aw=1&ah=1&ai=1&ad=nan",
+                "ad 'nan'",
+            ),
+            (
+                "file=0&map=0&n=1&ax=0&ay=0&aw=1&ah=1&ai=1&ad=4000",
+                "ad '4000'",
+            ),
+            (
+                "file=0&map=0&n=1&ax=0&ay=0&aw=1&ah=1&ai=1&ad=1&aq=1",
+                "not both",
+            ),
         ] {
             let e = parse(q).unwrap_err().0;
             assert!(e.contains(needle), "{q}: {e}");

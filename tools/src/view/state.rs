@@ -305,9 +305,8 @@ impl Viewer {
         })?;
         let t = Instant::now();
         let texture = self.textures[a.texture].1.clone();
-        let (texture, size) =
-            crate::area_light::turned(texture, a.size, 90.0 * f64::from(a.quarter_turns))
-                .map_err(|e| FrameError::Bad(format!("{e:#}")))?;
+        let (texture, size) = crate::area_light::turned(texture, a.size, a.degrees)
+            .map_err(|e| FrameError::Bad(format!("{e:#}")))?;
         let light = AreaLight {
             texture,
             placement: Placement {

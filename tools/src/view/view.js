@@ -210,7 +210,7 @@ function areaQuery(fileIndex) {
   if (!$("area").checked || !info.files[fileIndex]?.near_field) return "";
   const v = (id) => Number($(id).value);
   return `&ax=${v("area-x")}&ay=${v("area-y")}&aw=${v("area-w")}&ah=${v("area-h")}&ai=${v("area-i")}` +
-    `&aq=${$("area-turn").value}&at=${$("area-texture").value}`;
+    `&ad=${v("area-angle")}&at=${$("area-texture").value}`;
 }
 
 // The lighting part of a query (map and rotation): what the exact image depends on.
@@ -539,7 +539,7 @@ function resetAll() {
 function wireControls() {
   for (const id of ["map", "weighting", "yaw", "pitch", "roll", "show-exact"]) $(id).addEventListener("change", requestFrames);
   for (const id of ["yaw", "pitch", "roll"]) $(id).addEventListener("input", requestFrames);
-  for (const id of ["area", "area-texture", "area-turn"]) $(id).addEventListener("change", requestFrames);
+  for (const id of ["area", "area-texture", "area-angle"]) $(id).addEventListener("change", requestFrames);
   for (const id of ["area-x", "area-y", "area-w", "area-h", "area-i"]) {
     $(id).addEventListener("input", requestFrames);
     $(id).addEventListener("change", requestFrames);

@@ -157,17 +157,7 @@ fn near_field_light_matches_an_area_integral_with_shadows() {
     let path = dir.path().join("scene.toml");
     std::fs::write(&path, SCENE).unwrap();
     let scene = Scene::build(&SceneDesc::load(&path).unwrap()).unwrap();
-    // The light plane 1.5 above the floor, lit side down (x × z = −y).
-    let plane = LightPlane::new(DVec3::new(0.0, 1.5, 0.0), DVec3::X, DVec3::Z).unwrap();
-    let placement = Placement {
-        center: [-0.1, 0.2],
-        size: [1.0, 0.8],
-        intensity: 1.0,
-    };
-    let face = PlaneFace {
-        order: 32,
-        side: 4.0,
-    };
+    let (plane, placement, face) = floor_light();
     let rows = floor_rows(&scene, &plane, &face);
     assert!(rows.len() > 200, "{} floor rows", rows.len());
     let reference: Vec<[f64; 3]> = rows
@@ -211,6 +201,22 @@ fn near_field_light_matches_an_area_integral_with_shadows() {
     assert!(shadow > 0.1, "{shadow}");
 }
 
+/// The floor tests' light: its plane 1.5 above the floor, lit side down
+/// (x × z = −y), its rectangle, and an order-32 face of side 4.
+fn floor_light() -> (LightPlane, Placement, PlaneFace) {
+    let plane = LightPlane::new(DVec3::new(0.0, 1.5, 0.0), DVec3::X, DVec3::Z).unwrap();
+    let placement = Placement {
+        center: [-0.1, 0.2],
+        size: [1.0, 0.8],
+        intensity: 1.0,
+    };
+    let face = PlaneFace {
+        order: 32,
+        side: 4.0,
+    };
+    (plane, placement, face)
+}
+
 /// Shadow rays towards a light in the plane end at the plane: a ceiling
 /// above it casts no shadow, though every ray through the plane would hit
 /// it.
@@ -227,16 +233,7 @@ fn a_ceiling_above_the_light_plane_casts_no_shadow() {
     let ceiling =
         "\n[[quads]]\ncenter = [0.0, 2.0, -0.5]\nsize = [3.0, 2.0]\nmaterial = \"grey\"\n";
     let covered = scene_of(ceiling, "ceiling.toml");
-    let plane = LightPlane::new(DVec3::new(0.0, 1.5, 0.0), DVec3::X, DVec3::Z).unwrap();
-    let placement = Placement {
-        center: [-0.1, 0.2],
-        size: [1.0, 0.8],
-        intensity: 1.0,
-    };
-    let face = PlaneFace {
-        order: 32,
-        side: 4.0,
-    };
+    let (plane, placement, face) = floor_light();
     let (rows_open, rows_covered) = (
         floor_rows(&open, &plane, &face),
         floor_rows(&covered, &plane, &face),

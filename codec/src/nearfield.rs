@@ -345,6 +345,13 @@ impl PlaneRows {
     /// `order²` values.
     pub fn texels(&self, p: usize, c: usize, out: &mut [f32]) -> Result<()> {
         let order = self.basis.order as usize;
+        if out.len() != order * order {
+            return Err(Error::BufferTooSmall {
+                what: "near-field texels",
+                len: out.len(),
+                need: order * order,
+            });
+        }
         out.fill(0.0);
         let (index, value) = self.row(p, c);
         for (&k, &v) in index.iter().zip(value) {
@@ -626,6 +633,8 @@ mod tests {
             assert!((a - b).abs() < 1e-4, "{a} {b}");
         }
         assert!(inverse_standard_haar_2d(&mut plane[..63], 8).is_err());
+        let rows = PlaneRows::new(basis(8), 1).unwrap();
+        assert!(rows.texels(0, 0, &mut [0.0; 63]).is_err());
     }
 
     #[test]

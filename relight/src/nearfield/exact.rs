@@ -53,13 +53,7 @@ struct Span {
 impl Span {
     /// The span of `[x0, x1]` (`0 <= x0 <= x1 <= n`) over `n` texels.
     fn new(x0: f64, x1: f64, n: usize) -> Span {
-        let cell = |x: f64| {
-            (
-                (x as usize).min(n - 1),
-                x - ((x as usize).min(n - 1)) as f64,
-            )
-        };
-        let ((i0, f0), (i1, f1)) = (cell(x0), cell(x1));
+        let ((i0, f0), (i1, f1)) = (cell(x0, n), cell(x1, n));
         if i0 == i1 {
             return Span {
                 first: i0,

@@ -74,9 +74,7 @@ impl NearFieldTerms {
 /// The near-field rows of a file with each row's receiving point.
 #[derive(Debug)]
 pub struct NearField {
-    basis: ltm_codec::PlaneBasis,
     face: PlaneFace,
-    channels: usize,
     /// Each row's point in the plane's frame (`None`: no surface).
     receivers: Vec<Option<Receiver>>,
     /// Each row's slot in `texels`; `u32::MAX` for rows without a surface
@@ -161,9 +159,7 @@ impl NearField {
         }
         let (slots, texels, charge) = texel_rows(&rows, &receivers, limits)?;
         Ok(NearField {
-            basis,
             face,
-            channels: rows.channels(),
             receivers,
             slots,
             texels,
@@ -175,7 +171,7 @@ impl NearField {
 
     /// The face's plane and its resolution.
     pub fn basis(&self) -> &ltm_codec::PlaneBasis {
-        &self.basis
+        self.rows.basis()
     }
 
     /// The face the rows are stored over.
@@ -187,7 +183,7 @@ impl NearField {
     /// or `None` when it gets no near-field light.
     pub fn row_texels(&self, p: usize) -> Option<&[f32]> {
         let slot = *self.slots.get(p)?;
-        let len = self.face.order * self.face.order * self.channels;
+        let len = self.face.order * self.face.order * self.rows.channels();
         (slot != NO_SLOT).then(|| &self.texels[slot as usize * len..][..len])
     }
 
@@ -231,7 +227,7 @@ impl NearField {
                 ))
             })
             .collect::<Result<Vec<_>>>()?;
-        let (face, channels) = (self.face, self.channels);
+        let (face, channels) = (self.face, self.rows.channels());
         let order = face.order;
         Ok((0..self.receivers.len())
             .into_par_iter()
@@ -266,7 +262,8 @@ impl NearField {
             .iter()
             .map(|l| Ok((self.source(l, terms.source)?, l.placement)))
             .collect::<Result<Vec<_>>>()?;
-        let (face, channels, rows) = (self.face, self.channels, &self.rows);
+        let (face, rows) = (self.face, &self.rows);
+        let channels = rows.channels();
         self.receivers
             .par_iter()
             .enumerate()
@@ -354,16 +351,11 @@ fn texel_rows(
     let len = n * channels;
     let charge = limits.check_alloc("near-field rows", count as u64 * len as u64, 4)?;
     let mut texels = vec![0.0f32; count as usize * len];
-    let filled: Vec<(usize, u32)> = slots
-        .iter()
-        .enumerate()
-        .filter(|(_, &s)| s != NO_SLOT)
-        .map(|(p, &s)| (p, s))
-        .collect();
+    let filled: Vec<usize> = (0..slots.len()).filter(|&p| slots[p] != NO_SLOT).collect();
     texels
         .par_chunks_mut(len.max(1))
         .zip(&filled)
-        .try_for_each(|(out, &(p, _))| {
+        .try_for_each(|(out, &p)| {
             for (c, plane) in out.chunks_exact_mut(n).enumerate() {
                 rows.texels(p, c, plane)?;
             }

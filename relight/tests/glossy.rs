@@ -114,6 +114,7 @@ fn small_shader(brdf: Brdf) -> Shader {
         views: 16,
         supersample: 4,
         keep: 1.0,
+        residuals: true,
     };
     let slices = Arc::new(BrdfSlices::build(brdf, slices, &limits).unwrap());
     Shader::new(set, slices, &limits).unwrap()
@@ -249,6 +250,7 @@ fn every_view_slice_reflects_a_constant_lighting_in_full() {
             views: 32,
             supersample: 4,
             keep: 0.03,
+            residuals: true,
         };
         let cut = BrdfSlices::build(brdf.clone(), cfg, &limits).unwrap();
         let full =
@@ -349,6 +351,7 @@ fn a_tabulated_ggx_reflects_like_the_analytic_one() {
         views: 8,
         supersample: 4,
         keep: 1.0,
+        residuals: true,
     };
     let m = 16;
     let mut plane = vec![1.0f32; m * m];

@@ -20,7 +20,7 @@ use std::time::Instant;
 
 /// Octahedral sub-samples per lighting texel and side when the map is
 /// projected from the cubemap.
-const LIGHT_SUPERSAMPLE: usize = 4;
+const LIGHT_SUPERSAMPLE: usize = 16;
 
 /// What a view draws when `--brdf` is given.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
@@ -71,6 +71,18 @@ pub struct GlossyArgs {
         requires = "brdf"
     )]
     pub brdf_keep: f64,
+    /// Fraction of each grid normal's local-lighting Haar terms, the
+    /// largest, that shading also dots with what the BRDF slice did not
+    /// keep, in [0, 1]: a term is then dropped only where both the slice
+    /// and the lighting are small, which keeps a sun or a small lamp exact.
+    /// 0 uses the slice's kept terms alone (docs/results/glossy.md).
+    #[arg(
+        long,
+        default_value_t = ltm_relight::rotation::DEFAULT_LOCAL_KEEP,
+        value_name = "FRACTION",
+        requires = "brdf"
+    )]
+    pub local_keep: f64,
     /// Side of the hemi-octahedral grid of view directions with a BRDF
     /// slice each (1 to 256).
     #[arg(long, default_value_t = 64, value_name = "SIDE", requires = "brdf")]
@@ -136,6 +148,7 @@ impl GlossyArgs {
             m: n / 2,
             keep: self.brdf_keep,
             views: self.brdf_views,
+            residuals: self.local_keep > 0.0,
             ..SliceConfig::default()
         }
     }
@@ -195,6 +208,9 @@ impl Glossy {
         let cube = env.to_cubemap(n, rotate);
         let map = OctMap::from_cubemap(n, LIGHT_SUPERSAMPLE, n, &cube)?;
         let mut shader = Shader::new(Arc::new(rotations), Arc::new(slices), limits)?;
+        shader
+            .set_local_keep(a.local_keep, limits)
+            .context("--local-keep")?;
         shader.light(&map, a.glossy_terms)?;
         Ok(Glossy {
             shader,

@@ -30,19 +30,6 @@ fn fixtures() -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/fixtures/atlas_mitsuba")
 }
 
-/// A float32 `.npy` fixture: its shape and values.
-fn read_npy(path: &Path) -> (Vec<usize>, Vec<f32>) {
-    let bytes = std::fs::read(path).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
-    let header = ltm_codec::npy::read_npy_header(&mut &bytes[..]).unwrap();
-    assert_eq!(header.dtype, ltm_codec::npy::NpyDtype::F32);
-    let values: Vec<f32> = bytes[header.data_offset..]
-        .chunks_exact(4)
-        .map(|c| f32::from_le_bytes(c.try_into().unwrap()))
-        .collect();
-    assert_eq!(values.len(), header.shape.iter().product::<usize>());
-    (header.shape, values)
-}
-
 /// Pixels whose (2r+1)² neighbourhood lies wholly in `mask` (w × h).
 fn erode(mask: &[bool], w: usize, h: usize, r: usize) -> Vec<bool> {
     (0..w * h)
@@ -110,9 +97,9 @@ fn measure(case: &Path, out: &Path) -> (f64, f64, f64, f64, f64) {
         &p("view.exr"),
     ]);
     let ours = Image::read_exr(Path::new(&p("view.exr"))).unwrap();
-    let (shape, reference) = read_npy(&case.join("mitsuba.npy"));
+    let (shape, reference) = ltm_testkit::read_npy_f32(&case.join("mitsuba.npy"));
     assert_eq!(shape, [width, width, 3]);
-    let (shape, cov) = read_npy(&case.join("coverage.npy"));
+    let (shape, cov) = ltm_testkit::read_npy_f32(&case.join("coverage.npy"));
     assert_eq!(shape, [width, width]);
     assert_eq!((ours.width, ours.height), (width, width));
     // Shading over Mitsuba's wholly covered pixels whose 8 neighbours are too.

@@ -36,7 +36,7 @@ pub use brdf::{Brdf, BrdfSlices, SliceConfig, BRDF_SYNTAX};
 pub use cache::{CacheUse, MAGIC as CACHE_MAGIC, VERSION as CACHE_VERSION};
 pub use matrix::{Columns, RotationMatrix, QMAX};
 pub use merl::{MeasuredBrdf, MERL_DIMS, MERL_FILE_BYTES};
-pub use shade::{resample_local, OctMap, Shader};
+pub use shade::{resample_local, OctMap, Shader, DEFAULT_LOCAL_KEEP};
 
 use crate::error::{RelightError, Result};
 use glam::DVec3;
@@ -70,7 +70,7 @@ impl Default for RotationConfig {
         RotationConfig {
             n: 64,
             normals: 32,
-            supersample: 4,
+            supersample: 16,
             threshold: 1,
         }
     }

@@ -9,6 +9,10 @@ use ltm_codec::{Charge, Limits, SurfacePoint};
 use rayon::prelude::*;
 use std::sync::Arc;
 
+/// The default of [`Shader::set_local_keep`]: each grid normal's largest
+/// tenth of local-lighting terms.
+pub const DEFAULT_LOCAL_KEEP: f64 = 0.1;
+
 /// Global lighting: an `n × n` octahedral map of RGB radiance, texel
 /// `y·n + x` (see [`super::maps`]).
 #[derive(Clone, Debug, PartialEq)]
@@ -39,21 +43,25 @@ impl OctMap {
     }
 
     /// A map with each texel the mean of `radiance` over `s × s` sub-samples
-    /// of it (unweighted; `s` is clamped to 1..=16).
+    /// of it, each weighted by its solid angle (so that a small bright
+    /// source keeps its power wherever it falls in a texel; `s` is clamped
+    /// to 1..=16).
     pub fn from_fn(n: usize, s: usize, radiance: impl Fn(DVec3) -> [f32; 3]) -> Result<OctMap> {
         check_pow2("octahedral map side", n, 4, MAX_SOURCE_SIDE)?;
         let s = s.clamp(1, 16);
         let texels = (0..n * n)
             .map(|t| {
-                let mut acc = [0.0f64; 3];
+                let (mut acc, mut total) = ([0.0f64; 3], 0.0);
                 for j in 0..s {
                     for i in 0..s {
                         let (u, v) = subsample(n, t, s, i, j);
-                        let r = radiance(oct_decode(u, v).0);
-                        (0..3).for_each(|c| acc[c] += f64::from(r[c]));
+                        let (d, jac) = oct_decode(u, v);
+                        let r = radiance(d);
+                        (0..3).for_each(|c| acc[c] += jac * f64::from(r[c]));
+                        total += jac;
                     }
                 }
-                acc.map(|a| (a / (s * s) as f64) as f32)
+                acc.map(|a| (a / total) as f32)
             })
             .collect();
         OctMap::new(n, texels)
@@ -153,6 +161,13 @@ pub struct Shader {
     slices: Arc<BrdfSlices>,
     /// Per grid normal, its `m²` RGB local-lighting coefficients.
     local: Vec<[f32; 3]>,
+    /// Per grid normal, the indices of its `local_terms` largest
+    /// local-lighting coefficients (by `|r| + |g| + |b|`), ascending.
+    top: Vec<u32>,
+    /// How many of each normal's local-lighting terms step 2 dots with the
+    /// slices' residuals.
+    local_terms: usize,
+    _top_charge: Charge,
     /// Per grid normal, its frame.
     frames: Vec<Frame>,
     _charge: Charge,
@@ -175,13 +190,66 @@ impl Shader {
         let frames = (0..normals)
             .map(|i| Frame::new(cfg.grid_normal(i)))
             .collect();
-        Ok(Shader {
+        let mut shader = Shader {
             rotations,
             slices,
             local,
+            top: Vec::new(),
+            local_terms: 0,
+            _top_charge: Charge::default(),
             frames,
             _charge: charge.join(frames_charge),
-        })
+        };
+        shader.set_local_keep(DEFAULT_LOCAL_KEEP, limits)?;
+        Ok(shader)
+    }
+
+    /// Sets the fraction of each grid normal's `m²` local-lighting terms,
+    /// the largest, that step 2 also dots with the BRDF slices' residuals
+    /// (the terms a slice did not keep), in `[0, 1]`: a product term is
+    /// then dropped only where both the slice and the lighting are small.
+    /// 0 keeps the slice's terms alone (Wang et al.'s scheme); a sun or a
+    /// small lamp needs the lighting's own terms. The index lists are
+    /// charged to `limits`.
+    pub fn set_local_keep(&mut self, fraction: f64, limits: &Limits) -> Result<()> {
+        if !(0.0..=1.0).contains(&fraction) {
+            return Err(RelightError::range(
+                "local lighting fraction",
+                fraction,
+                "0..=1",
+            ));
+        }
+        let cfg = *self.rotations.config();
+        let m2 = cfg.m() * cfg.m();
+        let terms = ((fraction * m2 as f64).round() as usize).min(m2);
+        let count = cfg.normals * cfg.normals * terms;
+        self._top_charge = Charge::default();
+        self._top_charge = limits.check_alloc("local lighting terms", count as u64, 4)?;
+        self.local_terms = terms;
+        self.top = vec![0; count];
+        self.select_top();
+        Ok(())
+    }
+
+    /// Refreshes every grid normal's list of largest local terms.
+    fn select_top(&mut self) {
+        let (k, m2) = (self.local_terms, self.rotations.config().m().pow(2));
+        if k == 0 {
+            return;
+        }
+        self.top
+            .par_chunks_mut(k)
+            .zip(self.local.par_chunks(m2))
+            .for_each(|(top, local)| {
+                let mag = |i: u32| local[i as usize].iter().map(|v| v.abs()).sum::<f32>();
+                let mut order: Vec<u32> = (0..m2 as u32).collect();
+                if k < m2 {
+                    order.select_nth_unstable_by(k, |&a, &b| mag(b).total_cmp(&mag(a)));
+                }
+                order.truncate(k);
+                order.sort_unstable();
+                top.copy_from_slice(&order);
+            });
     }
 
     /// The rotation matrices.
@@ -210,6 +278,7 @@ impl Shader {
             .par_chunks_mut(m2)
             .zip(self.rotations.matrices().par_iter())
             .for_each(|(out, mat)| mat.apply(&light, out));
+        self.select_top();
         Ok(())
     }
 
@@ -221,19 +290,35 @@ impl Shader {
 
     /// Step 2: outgoing radiance at a surface point of unit `normal` seen
     /// from unit direction `view` (towards the viewer), both global: for
-    /// each of the four grid normals around `normal`, the slice of `view`
+    /// each of the four grid normals around `normal`, the slice of a view
     /// in that normal's frame dotted with its local lighting, blended
     /// bilinearly.
+    ///
+    /// The view each grid normal `g` is shaded from is not `view` itself
+    /// but the one that `g` mirrors into the same direction as `normal`
+    /// mirrors `view`: `v' = 2(r·g)g − r`, `r = 2(v·n)n − v`. So all four
+    /// put a glossy lobe's peak at the surface's own mirror direction, and
+    /// blending moves no highlight (blending the plain view puts four
+    /// copies of it up to twice the grid's spacing apart). At `g = normal`
+    /// `v' = view`; a view-independent BRDF is unchanged.
     pub fn shade(&self, normal: DVec3, view: DVec3) -> [f32; 3] {
         let cfg = self.rotations.config();
+        let mirror = 2.0 * view.dot(normal) * normal - view;
         let mut out = [0.0f32; 3];
         for (i, w) in oct_bilinear(cfg.normals, normal) {
             if w == 0.0 {
                 continue;
             }
-            let wo = self.frames[i].to_local(view);
-            let b = self.slices.dot(self.slices.view_index(wo), self.local(i));
-            (0..3).for_each(|c| out[c] += w as f32 * b[c]);
+            // The mirror of `mirror` about the frame's normal (its +z).
+            let r = self.frames[i].to_local(mirror);
+            let wo = DVec3::new(-r.x, -r.y, r.z);
+            let v = self.slices.view_index(wo);
+            let k = self.local_terms;
+            let b = self.slices.dot(v, self.local(i));
+            let r = self
+                .slices
+                .residual_dot(v, self.local(i), &self.top[i * k..(i + 1) * k]);
+            (0..3).for_each(|c| out[c] += w as f32 * (b[c] + r[c]));
         }
         out
     }

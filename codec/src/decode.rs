@@ -107,6 +107,11 @@ impl ColumnDecoder {
 
     /// Adds `gain ×` channel `channel` of `col`, dequantized (still weighted),
     /// into `plane` (one column image of `width·height` values).
+    ///
+    /// # Panics
+    /// If `channel` or a position of `col` is out of range, or `col` holds
+    /// too few values: the hot path trusts columns that a reader parsed.
+    /// [`ColumnDecoder::decode`] checks all three first.
     pub fn accumulate(&self, col: &SparseColumn, channel: usize, gain: f32, plane: &mut [f32]) {
         for k in 0..col.indices.len() {
             plane[col.indices[k] as usize] += gain * self.dequantize(col, k, channel);
@@ -283,6 +288,28 @@ impl ColumnDecoder {
         Ok(into)
     }
 
+    /// Checks what [`ColumnDecoder::accumulate`] indexes by: `channel`, the
+    /// column's positions and its count of values.
+    fn check_column(&self, col: &SparseColumn, channel: usize) -> Result<()> {
+        let channels = self.meta.dims.channels as usize;
+        if channel >= channels {
+            return Err(Error::range("channel", channel, format!("0..{channels}")));
+        }
+        let need = col.indices.len() * channels;
+        if col.values.len() != need {
+            return Err(Error::BufferTooSmall {
+                what: "column values (channels per position)",
+                len: col.values.len(),
+                need,
+            });
+        }
+        let p = self.meta.dims.pixels();
+        match col.indices.iter().find(|&&i| i as usize >= p) {
+            Some(&i) => Err(Error::range("column position", i, format!("0..{p}"))),
+            None => Ok(()),
+        }
+    }
+
     /// Decodes channel `channel` of a column into `plane` (overwritten), in
     /// the row-wavelet lighting basis, with the empty rows exactly 0. `work` needs `width·height` values.
     /// A column that decodes to a value beyond [`ColumnDecoder::MAX_DECODED`] (or not a
@@ -309,6 +336,7 @@ impl ColumnDecoder {
                 format!("0..={}", self.meta.max_depth()),
             ));
         }
+        self.check_column(col, channel)?;
         plane.fill(0.0);
         self.accumulate(col, channel, 1.0, plane);
         self.unweight(col.depth, plane);

@@ -389,7 +389,7 @@ fn decode_matrix_charged(file: &LtmFile, limits: &Limits) -> Result<(Vec<f32>, C
         let step = ((1usize << 22) / n).max(1);
         for first in (0..dims.pixels()).step_by(step) {
             let count = step.min(dims.pixels() - first);
-            model.reconstruct_rows(first, count, &mut block);
+            model.reconstruct_rows(first, count, &mut block)?;
             dense.extend(block.iter().map(|&v| v as f32));
         }
         if let Some(i) = dense.iter().position(|v| !v.is_finite()) {

@@ -390,13 +390,10 @@ fn non_finite_albedo_is_refused() {
     );
 }
 
-/// A crafted column with the largest scale code dequantizes to finite
-/// values, and decoding it is an error rather than a plane of infinities.
-#[test]
-fn crafted_scale_codes_never_decode_to_infinity() {
-    let dims = Dims::image(8, 8, 1, 1);
-    let meta = Meta {
-        dims,
+/// The header of a grey 8×8 image at face resolution 1, 4d mode.
+fn grey_8x8_meta() -> Meta {
+    Meta {
+        dims: Dims::image(8, 8, 1, 1),
         mode: Mode::FourD,
         row_filter: Filter::Haar,
         col_filter: Filter::LeGall53,
@@ -406,7 +403,14 @@ fn crafted_scale_codes_never_decode_to_infinity() {
         achieved_error: 0.0,
         terms: 0,
         norm: 1.0,
-    };
+    }
+}
+
+/// A crafted column with the largest scale code dequantizes to finite
+/// values, and decoding it is an error rather than a plane of infinities.
+#[test]
+fn crafted_scale_codes_never_decode_to_infinity() {
+    let meta = grey_8x8_meta();
     let decoder = ColumnDecoder::new(&meta, &Limits::default()).unwrap();
     let depth = meta.max_depth();
     let col = SparseColumn {
@@ -427,6 +431,48 @@ fn crafted_scale_codes_never_decode_to_infinity() {
         err.contains("decoded column value") && err.contains("2^112"),
         "{err}"
     );
+}
+
+/// A column built by a caller, not a reader: a channel, a position or a
+/// count of values out of range is an error naming it, not a panic.
+#[test]
+fn columns_out_of_range_are_errors() {
+    let meta = grey_8x8_meta();
+    let decoder = ColumnDecoder::new(&meta, &Limits::default()).unwrap();
+    let good = SparseColumn {
+        depth: 1,
+        scale_codes: vec![0; 2],
+        indices: vec![0, 63],
+        values: vec![1, -1],
+    };
+    let (mut plane, mut work) = (vec![0.0f32; 64], vec![0.0f32; 64]);
+    decoder.decode(&good, 0, &mut plane, &mut work).unwrap();
+    let cases = [
+        (good.clone(), 1, "channel = 1"),
+        (
+            SparseColumn {
+                indices: vec![0, 64],
+                ..good.clone()
+            },
+            0,
+            "column position = 64",
+        ),
+        (
+            SparseColumn {
+                values: vec![1],
+                ..good.clone()
+            },
+            0,
+            "needs 2",
+        ),
+    ];
+    for (col, channel, want) in cases {
+        let err = decoder
+            .decode(&col, channel, &mut plane, &mut work)
+            .unwrap_err()
+            .to_string();
+        assert!(err.contains(want), "{err}");
+    }
 }
 
 // ---------------------------------------------------------------------------

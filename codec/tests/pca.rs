@@ -268,6 +268,15 @@ fn zero_and_constant_matrices() {
         .unwrap();
         let decoded = decode_matrix(&LtmFile::open(&out).unwrap(), &Limits::default()).unwrap();
         assert!(decoded.iter().all(|x| x.is_finite()));
+        // Rows past the last are refused, not a panic.
+        let file = LtmFile::open(&out).unwrap();
+        let model = file.pca().unwrap();
+        let mut rows = Vec::new();
+        model.reconstruct_rows(19, 1, &mut rows).unwrap();
+        for (first, count) in [(19, 2), (21, 0), (usize::MAX, 2)] {
+            let err = model.reconstruct_rows(first, count, &mut rows).unwrap_err();
+            assert!(err.to_string().contains("within 0..20"), "{err}");
+        }
         assert!(
             stats.achieved_error < 1e-6,
             "{name}: {}",

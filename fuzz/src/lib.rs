@@ -20,7 +20,7 @@ pub fn decode_through_public_api(bytes: &[u8]) {
         // A pca file: reconstruct its first rows (every value must be
         // finite or the decode an error, never a panic).
         let mut rows = Vec::new();
-        model.reconstruct_rows(0, dims.pixels().min(16), &mut rows);
+        let _ = model.reconstruct_rows(0, dims.pixels().min(16), &mut rows);
         return;
     }
     let Ok(decoder) = ColumnDecoder::for_file(&file, &limits) else {

@@ -75,7 +75,8 @@ impl Image {
         Some((i % self.width.max(1), i / self.width.max(1)))
     }
 
-    fn check_len(&self) -> Result<()> {
+    /// Checks that `data` holds `width·height` pixels.
+    pub(crate) fn check_len(&self) -> Result<()> {
         match self.width.checked_mul(self.height) {
             Some(p) if p == self.data.len() => Ok(()),
             _ => Err(RelightError::Invalid(format!(

@@ -623,6 +623,7 @@ impl TexturedMesh {
                 format!("1..={MAX_SUPERSAMPLE}"),
             ));
         }
+        texture.check_len()?;
         if texture.width != self.size || texture.height != self.size {
             return Err(RelightError::Invalid(format!(
                 "the texture is {}×{}, the geometry image {}×{}",
@@ -1113,6 +1114,11 @@ mod tests {
         let cam = camera(DVec3::new(0.0, 0.0, 3.0));
         assert!(mesh.render(&tex, &cam, 0).is_err());
         assert!(mesh.render(&Image::new(8, 8), &cam, 1).is_err());
+        // A texture of the right size whose pixels were cut short.
+        let mut short = tex.clone();
+        short.data.truncate(10);
+        let e = mesh.render(&short, &cam, 1).unwrap_err().to_string();
+        assert!(e.contains("holds 10 values"), "{e}");
         assert!(mesh.check_outside(DVec3::new(0.1, 0.0, 0.0)).is_err());
         assert!(mesh.check_outside(DVec3::new(0.0, 0.0, 3.0)).is_ok());
         // A degenerate look-at names the eye and the target.

@@ -3,7 +3,9 @@
 //! material shaded per view (`--brdf`, [`crate::render_glossy`]).
 
 use crate::area_light::AreaArgs;
-use crate::common::{claim_files, commit_all, describe_terms, Ctx, ImageOutput, TermsArgs};
+use crate::common::{
+    claim_files_and_cache, commit_all, describe_terms, Ctx, ImageOutput, TermsArgs,
+};
 use crate::render_glossy::{Glossy, GlossyArgs};
 use anyhow::{bail, Context, Result};
 use clap::Args;
@@ -177,18 +179,16 @@ pub fn run(a: RenderArgs, ctx: &Ctx) -> Result<()> {
         names.extend((0..a.views).map(|k| ("--png", numbered(png, k, a.views))));
     }
     names.extend(a.texture.clone().map(|t| ("--texture", t)));
-    names.extend(
-        a.glossy
-            .rotation_cache
-            .clone()
-            .map(|c| ("--rotation-cache", c)),
-    );
+    // The cache file depends on the side the BRDF needs; concurrent runs
+    // share it.
+    let material = a.glossy.material(ctx.limits())?;
+    let cache = material.as_ref().and_then(|b| a.glossy.cache_path(b));
     let outputs: Vec<(&str, &Path)> = names.iter().map(|(r, p)| (*r, p.as_path())).collect();
     let mut inputs = vec![("input", a.file.as_path()), ("--env", a.env.as_path())];
     inputs.extend(a.glossy.measured_file().map(|m| ("--brdf", m)));
     inputs.extend(a.area.inputs());
-    let _claim = claim_files(&inputs, &outputs)?;
-    let material = a.glossy.material(ctx.limits())?;
+    let cache = cache.as_deref().map(|c| ("--rotation-cache", c));
+    let _claim = claim_files_and_cache(&inputs, &outputs, cache)?;
     let area = match a.area.any() {
         true => Some((a.area.lights(ctx.limits())?, a.area.method()?)),
         false => None,

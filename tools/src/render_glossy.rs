@@ -51,38 +51,33 @@ pub struct GlossyArgs {
     #[arg(long, value_enum, default_value = "sum", requires = "brdf")]
     pub shading: Shading,
     /// Side n of the octahedral lighting map the rotation works on: a power
-    /// of two, 8 to 128. Sharper highlights need a larger n; the rotation
-    /// matrices grow about 4.6× per doubling (n = 64: 299 MB, built in
-    /// about 6 s on 2 cores; --rotation-cache keeps them).
-    #[arg(long, default_value_t = 64, value_name = "N", requires = "brdf")]
-    pub glossy_n: usize,
+    /// of two, 8 to 128 [default: what the BRDF needs: 64 for Lambert and
+    /// lobes of α ≥ 0.4, else 128]. The error against Mitsuba 3 follows
+    /// n·α (1.2 % at 32, 1.6 % at 25.6, 3–4 % at 12.8, 9 % at 6.4), and the
+    /// time and memory about 4× per doubling: n = 64 takes 0.3 GB of
+    /// rotation matrices built in about 6 s on 2 cores, n = 128 1.4 GB in
+    /// about 28 s (--rotation-cache keeps them), and step 1 and step 2
+    /// about 3.5× and 3.5× longer (docs/results/glossy.md).
+    #[arg(long, value_name = "N", requires = "brdf")]
+    pub glossy_n: Option<usize>,
     /// Side of the octahedral grid of normals with a rotation matrix each
     /// (1 to 256); shading blends the four around each normal.
     #[arg(long, default_value_t = 32, value_name = "SIDE", requires = "brdf")]
     pub normals: usize,
-    /// Fraction of each BRDF view slice's Haar terms kept, in (0, 1]. At
-    /// n = 64 on a sphere under a studio map, GGX α = 0.1 is 10 % off the
-    /// every-term render at 0.03, 1.3 % at 0.1 and 0.12 % at 0.3; shading
-    /// costs about 2.4× and 4.6× the time of 0.03 (docs/results/glossy.md).
-    #[arg(
-        long,
-        default_value_t = 0.1,
-        value_name = "FRACTION",
-        requires = "brdf"
-    )]
-    pub brdf_keep: f64,
+    /// Fraction of each BRDF view slice's Haar terms kept, in (0, 1]
+    /// [default: 0.03 for lobes of α < 0.4 at n = 128, else 0.1].
+    /// With --local-keep, a sharp lobe at n = 128 is as close to Mitsuba 3
+    /// at 0.03 as at 0.1 and shades 2.9× faster; broad lobes and Lambert
+    /// need 0.1 under a smooth sky (docs/results/glossy.md).
+    #[arg(long, value_name = "FRACTION", requires = "brdf")]
+    pub brdf_keep: Option<f64>,
     /// Fraction of each grid normal's local-lighting Haar terms, the
     /// largest, that shading also dots with what the BRDF slice did not
-    /// keep, in [0, 1]: a term is then dropped only where both the slice
-    /// and the lighting are small, which keeps a sun or a small lamp exact.
-    /// 0 uses the slice's kept terms alone (docs/results/glossy.md).
-    #[arg(
-        long,
-        default_value_t = ltm_relight::rotation::DEFAULT_LOCAL_KEEP,
-        value_name = "FRACTION",
-        requires = "brdf"
-    )]
-    pub local_keep: f64,
+    /// keep, in [0, 1] [default: as --brdf-keep]: a term is then dropped
+    /// only where both the slice and the lighting are small, which keeps a
+    /// sun or a small lamp exact. 0 uses the slice's kept terms alone.
+    #[arg(long, value_name = "FRACTION", requires = "brdf")]
+    pub local_keep: Option<f64>,
     /// Side of the hemi-octahedral grid of view directions with a BRDF
     /// slice each (1 to 256).
     #[arg(long, default_value_t = 64, value_name = "SIDE", requires = "brdf")]
@@ -92,8 +87,10 @@ pub struct GlossyArgs {
     pub glossy_terms: Option<usize>,
     /// Rotation cache: read when it holds the matrices of these settings,
     /// else built and written there (a file of other settings is replaced;
-    /// a file that is not a rotation cache is refused). Without it the
-    /// matrices are built in memory on every run.
+    /// a file that is not a rotation cache is refused). An existing folder
+    /// keeps one file per setting in it (rotation-n64-normals32-ss16-t1.bin
+    /// and so on), so materials that need different sides each keep
+    /// theirs. Without it the matrices are built in memory on every run.
     #[arg(long, value_name = "PATH", requires = "brdf")]
     pub rotation_cache: Option<PathBuf>,
 }
@@ -109,6 +106,8 @@ pub struct Glossy {
     pub setup_ms: [f64; 3],
     /// Where the rotation matrices came from.
     pub source: &'static str,
+    /// Whether n was chosen for the BRDF (no `--glossy-n`).
+    n_chosen: bool,
 }
 
 fn ms(start: Instant) -> f64 {
@@ -123,15 +122,15 @@ impl GlossyArgs {
         let Some(spec) = &self.brdf else {
             return Ok(None);
         };
-        self.check()?;
         let brdf = Brdf::from_spec(spec, limits).with_context(|| format!("--brdf {spec}"))?;
+        self.check(&brdf)?;
         Ok(Some(brdf))
     }
 
     /// Checks the rotation and slice settings (messages name the flag's
     /// value and its valid range).
-    fn check(&self) -> Result<()> {
-        let cfg = self.rotation_config();
+    fn check(&self, brdf: &Brdf) -> Result<()> {
+        let cfg = self.rotation_config(brdf);
         if !cfg.n.is_power_of_two() || cfg.n < 8 || cfg.n > 128 {
             bail!(
                 "--glossy-n {} is out of range (valid: a power of two, 8..=128)",
@@ -139,16 +138,27 @@ impl GlossyArgs {
             );
         }
         cfg.validate()?;
-        self.slice_config(cfg.n).validate()?;
+        self.slice_config(cfg.n, brdf).validate()?;
         Ok(())
     }
 
-    fn slice_config(&self, n: usize) -> SliceConfig {
+    /// The kept fractions of slice and local-lighting terms: the flags',
+    /// or what `brdf` needs.
+    fn kept(&self, brdf: &Brdf) -> (f64, f64) {
+        let (keep, local) = brdf.kept_fractions(self.rotation_config(brdf).n);
+        (
+            self.brdf_keep.unwrap_or(keep),
+            self.local_keep.unwrap_or(local),
+        )
+    }
+
+    fn slice_config(&self, n: usize, brdf: &Brdf) -> SliceConfig {
+        let (keep, local) = self.kept(brdf);
         SliceConfig {
             m: n / 2,
-            keep: self.brdf_keep,
+            keep,
             views: self.brdf_views,
-            residuals: self.local_keep > 0.0,
+            residuals: local > 0.0,
             ..SliceConfig::default()
         }
     }
@@ -159,17 +169,33 @@ impl GlossyArgs {
         spec.strip_prefix("merl:").map(std::path::Path::new)
     }
 
-    fn rotation_config(&self) -> RotationConfig {
+    /// The rotation settings: `--glossy-n`, or the side `brdf` needs.
+    fn rotation_config(&self, brdf: &Brdf) -> RotationConfig {
         RotationConfig {
-            n: self.glossy_n,
+            n: self.glossy_n.unwrap_or_else(|| brdf.lighting_side()),
             normals: self.normals,
             ..RotationConfig::default()
         }
     }
 
-    fn rotations(&self, limits: &Limits) -> Result<(RotationSet, &'static str)> {
-        let cfg = self.rotation_config();
-        let Some(path) = &self.rotation_cache else {
+    /// The rotation cache file for `brdf`, if `--rotation-cache` is given:
+    /// the path itself, or, where it is a folder, one file in it per
+    /// setting, so that BRDFs that need different sides each keep theirs.
+    pub fn cache_path(&self, brdf: &Brdf) -> Option<PathBuf> {
+        let path = self.rotation_cache.as_deref()?;
+        if !path.is_dir() {
+            return Some(path.to_path_buf());
+        }
+        let cfg = self.rotation_config(brdf);
+        Some(path.join(format!(
+            "rotation-n{}-normals{}-ss{}-t{}.bin",
+            cfg.n, cfg.normals, cfg.supersample, cfg.threshold
+        )))
+    }
+
+    fn rotations(&self, brdf: &Brdf, limits: &Limits) -> Result<(RotationSet, &'static str)> {
+        let cfg = self.rotation_config(brdf);
+        let Some(path) = &self.cache_path(brdf) else {
             return Ok((RotationSet::build(cfg, limits)?, "built"));
         };
         let (set, used) = RotationSet::cached(cfg, path, limits)
@@ -195,11 +221,11 @@ impl Glossy {
         limits: &Limits,
     ) -> Result<Glossy> {
         let start = Instant::now();
-        let (rotations, source) = a.rotations(limits)?;
+        let (rotations, source) = a.rotations(&brdf, limits)?;
         let rotations_ms = ms(start);
         let n = rotations.config().n;
         let start = Instant::now();
-        let slice_cfg = a.slice_config(n);
+        let slice_cfg = a.slice_config(n, &brdf);
         let slices = BrdfSlices::build(brdf.clone(), slice_cfg, limits)?;
         let slices_ms = ms(start);
         let start = Instant::now();
@@ -209,7 +235,7 @@ impl Glossy {
         let map = OctMap::from_cubemap(n, LIGHT_SUPERSAMPLE, n, &cube)?;
         let mut shader = Shader::new(Arc::new(rotations), Arc::new(slices), limits)?;
         shader
-            .set_local_keep(a.local_keep, limits)
+            .set_local_keep(a.kept(&brdf).1, limits)
             .context("--local-keep")?;
         shader.light(&map, a.glossy_terms)?;
         Ok(Glossy {
@@ -219,6 +245,7 @@ impl Glossy {
             brdf,
             setup_ms: [rotations_ms, slices_ms, ms(start)],
             source,
+            n_chosen: a.glossy_n.is_none(),
         })
     }
 
@@ -239,8 +266,12 @@ impl Glossy {
     pub fn describe(&self) -> String {
         let [rot, slices, light] = self.setup_ms;
         let cfg = self.shader_config();
+        let chosen = match self.n_chosen {
+            true => " (the side this BRDF needs; --glossy-n sets it)",
+            false => "",
+        };
         format!(
-            "glossy {} ({:?}, n = {}, {}² normals): rotation matrices {} in {:.0} ms, BRDF slices {slices:.0} ms, lighting (step 1) {light:.1} ms",
+            "glossy {} ({:?}, n = {}{chosen}, {}² normals): rotation matrices {} in {:.0} ms, BRDF slices {slices:.0} ms, lighting (step 1) {light:.1} ms",
             self.brdf, self.shading, cfg.n, cfg.normals, self.source, rot
         )
     }

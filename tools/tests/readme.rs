@@ -77,7 +77,7 @@ const SMALL_SCENES: &[(&str, &[Setting])] = &[
 const SUBSTITUTED: &[(&str, &str)] = &[
     ("../meshes/bunny.ply", "../bunny_small_fitted.obj"),
     ("--texture-size 256", "--texture-size 32"),
-    // 299 MB of rotation matrices at n = 64 (about 6 s); 12.9 MB at 16.
+    // 323 MB of rotation matrices at n = 64 (about 6 s); a few MB at 16.
     ("--glossy-n 64", "--glossy-n 16"),
 ];
 

@@ -594,12 +594,27 @@ fn render_brdf_shades_by_rotation_and_agrees_with_the_transport() {
     assert!(turned > 10.0 * err, "{turned} against {err}");
     // A glossy coat adds light, and only where the surface is.
     let studio = env_map();
-    let coat_args = ["--brdf", "ggx:0.3", "--glossy-n", "32"];
-    let (ok, stderr) = render(&p("coat.exr"), &studio, &coat_args);
-    assert!(
-        ok && stderr.contains("glossy ggx:0.3,f0=0.9 (Sum"),
-        "{stderr}"
-    );
+    // A cache folder keeps one file per setting, and the second run reads
+    // it.
+    let folder = p("rotations");
+    std::fs::create_dir(&folder).unwrap();
+    let coat_args = [
+        "--brdf",
+        "ggx:0.3",
+        "--glossy-n",
+        "32",
+        "--rotation-cache",
+        folder.as_str(),
+    ];
+    for expect in ["built and cached", "read from the cache"] {
+        let (ok, stderr) = render(&p("coat.exr"), &studio, &coat_args);
+        assert!(
+            ok && stderr.contains("glossy ggx:0.3,f0=0.9 (Sum") && stderr.contains(expect),
+            "{stderr}"
+        );
+    }
+    let kept = Path::new(&folder).join("rotation-n32-normals32-ss16-t1.bin");
+    assert!(kept.is_file(), "{}", kept.display());
     let coat = read("coat.exr");
     let (ok, stderr) = render(&p("studio.exr"), &studio, &[]);
     assert!(ok, "{stderr}");

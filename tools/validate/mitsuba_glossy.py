@@ -18,13 +18,13 @@ Materials, each at GGX roughness alpha = 0.05, 0.1, 0.2 and 0.5:
   rotation, the BRDF slices and the texture-space shading cost.
 - `coat`: ltm `plastic:ALPHA,albedo=0,ior=1.5` against Mitsuba
   `roughplastic` (GGX, int_ior 1.5, diffuse_reflectance 0): the coat alone.
-  ltm's coat takes Schlick's Fresnel, Mitsuba the exact dielectric one; the
-  script also prints how far apart those are for this index.
+  Both take the exact dielectric Fresnel; the script also prints how far
+  Schlick's approximation is from it for this index.
 - `lambert`: ltm `lambert:0.8` against Mitsuba `diffuse` 0.8, once per map
   and mesh: the conventions check (map orientation, normals, units).
 
 Lighting: the map is averaged over each texel of a cubemap of face
-resolution `--light-n` (default 64, the default `--glossy-n`), and written
+resolution `--light-n` (default 64), and written
 back as a lat-long map whose pixels hold the texel their centre lies in;
 Mitsuba's `envmap` and `ltm render --env` read that file, so both see the
 same piecewise-constant lighting. Maps: `studio` and `courtyard` (assets/)
@@ -37,7 +37,8 @@ quadrature.
 
 `--sweep` instead varies, for the sphere under `studio` with the conductor
 at alpha = 0.1 and 0.2, one setting at a time from the defaults:
---brdf-keep, --normals, --glossy-terms and --glossy-n.
+--brdf-keep, --normals, --glossy-terms and --glossy-n (ltm's other
+settings at their defaults: `--glossy-n` follows the BRDF).
 
 Usage:
   cargo build --release -p ltm-tools
@@ -207,15 +208,14 @@ def mitsuba_render(mi, args, mesh, cam, env, bsdf, seed):
 
 
 def ltm_render(args, ltm_file, env_path, cam, spec, out, extra=()):
-    # One rotation cache per lighting side and normal grid.
-    def flag(name, default):
-        return extra[extra.index(name) + 1] if name in extra else default
-    n = f'{flag("--glossy-n", "64")}-{flag("--normals", "32")}'
+    # A cache folder: ltm keeps one file per setting in it.
+    cache = os.path.join(args.out, "rotations")
+    os.makedirs(cache, exist_ok=True)
     cmd = [args.ltm, "render", ltm_file, "--env", env_path, "--brdf", spec,
            "--shading", "glossy", "--camera", ",".join(map(str, cam["eye"])),
            "--target", ",".join(map(str, cam["target"])), "--fov", str(cam["fov"]),
            "--size", f"{args.width}x{args.width}", "--supersample", "4",
-           "--rotation-cache", os.path.join(args.out, f"rot-{n}"), "-o", out, *extra]
+           "--rotation-cache", cache, "-o", out, *extra]
     mt.run(cmd)
 
 
@@ -390,7 +390,7 @@ def write_fixture(args, mi):
 
 
 SWEEP = [("--brdf-keep", ["0.03", "0.3", "1"]), ("--normals", ["16", "64"]),
-         ("--glossy-terms", ["256", "2048"]), ("--glossy-n", ["32", "128"])]
+         ("--glossy-terms", ["256", "2048"]), ("--glossy-n", ["32", "64", "128"])]
 
 
 def sweep(args, mi, ctx):

@@ -3,7 +3,8 @@
 //! stays on one filesystem), synced, then renamed into place. A file
 //! dropped before [`AtomicFile::commit`] is removed, on success paths and
 //! error paths alike. The output's lock ([`OutputLock`]) is held from
-//! creation to commit or drop.
+//! creation to commit or drop, except by a cache
+//! ([`AtomicFile::create_shared`]).
 
 use super::lock::OutputLock;
 use crate::error::{Error, Result};
@@ -14,7 +15,7 @@ use std::path::{Path, PathBuf};
 pub struct AtomicFile {
     tmp: tempfile::NamedTempFile,
     path: PathBuf,
-    _lock: OutputLock,
+    _lock: Option<OutputLock>,
 }
 
 impl AtomicFile {
@@ -22,11 +23,25 @@ impl AtomicFile {
     /// checking that an existing `path` is a regular file and taking its
     /// lock.
     pub fn create(path: &Path) -> Result<AtomicFile> {
+        AtomicFile::open(path, true)
+    }
+
+    /// [`AtomicFile::create`] for a cache that concurrent runs share
+    /// (`RunFiles::cache`): no lock is taken, and of two writers the last
+    /// rename wins, each file whole.
+    pub fn create_shared(path: &Path) -> Result<AtomicFile> {
+        AtomicFile::open(path, false)
+    }
+
+    fn open(path: &Path, locked: bool) -> Result<AtomicFile> {
         let name = path
             .file_name()
             .ok_or_else(|| Error::Invalid(format!("{}: not a file path", path.display())))?;
         super::check_kind("output", path)?;
-        let lock = OutputLock::acquire(path)?;
+        let lock = match locked {
+            true => Some(OutputLock::acquire(path)?),
+            false => None,
+        };
         let dir = super::parent_of(path);
         let prefix = format!(".{}.", name.to_string_lossy());
         let mut builder = tempfile::Builder::new();

@@ -75,6 +75,8 @@ struct Output {
     size: Option<u64>,
     /// A folder the run writes its files into (created when missing).
     folder: bool,
+    /// Taken by a lock for the run ([`OutputLock`]); a cache is not.
+    locked: bool,
 }
 
 /// The inputs and outputs of one run, checked together before any work
@@ -110,6 +112,7 @@ impl RunFiles {
             path: path.into(),
             size: None,
             folder: false,
+            locked: true,
         });
         self
     }
@@ -123,6 +126,23 @@ impl RunFiles {
             path: path.into(),
             size: None,
             folder: true,
+            locked: true,
+        });
+        self
+    }
+
+    /// Declares a cache: a file that runs of the same settings read, and
+    /// write when it is missing or stale. It is checked like an output but
+    /// not locked, so that concurrent runs can share it: each writes it
+    /// whole under a unique temporary name and renames it, so a reader
+    /// sees one complete file, and a run checks what it reads.
+    pub fn cache(mut self, role: &str, path: &Path) -> RunFiles {
+        self.outputs.push(Output {
+            role: role.into(),
+            path: path.into(),
+            size: None,
+            folder: false,
+            locked: false,
         });
         self
     }
@@ -134,6 +154,7 @@ impl RunFiles {
             path: path.into(),
             size: Some(bytes),
             folder: false,
+            locked: true,
         });
         self
     }
@@ -145,7 +166,7 @@ impl RunFiles {
     /// - an existing output is a regular file, not a folder, device, FIFO
     ///   or socket;
     /// - its filesystem has room for its known size;
-    /// - no other run holds its lock ([`OutputLock`]).
+    /// - no other run holds its lock ([`OutputLock`]); caches take none.
     pub fn claim(self) -> Result<Claim> {
         let ins: Vec<Target> = self
             .inputs
@@ -186,6 +207,7 @@ impl RunFiles {
         let locks = self
             .outputs
             .iter()
+            .filter(|o| o.locked)
             .map(|o| OutputLock::acquire(&o.path))
             .collect::<Result<_>>()?;
         Ok(Claim { _locks: locks })
@@ -391,6 +413,41 @@ mod tests {
         drop(other);
         drop(first);
         assert!(!lock.exists());
+    }
+
+    /// A cache is shared by concurrent runs (no lock), but it is still
+    /// never an input, another output or a folder.
+    #[test]
+    fn a_cache_is_shared_but_checked_like_an_output() {
+        let dir = tempfile::tempdir().unwrap();
+        let (input, cache) = (dir.path().join("in.ltm"), dir.path().join("rot.bin"));
+        std::fs::write(&input, b"x").unwrap();
+        let run = || {
+            RunFiles::new()
+                .input("input", &input)
+                .cache("--cache", &cache)
+        };
+        let (first, second) = (run().claim().unwrap(), run().claim().unwrap());
+        assert!(!super::super::lock::lock_path(&cache).exists());
+        drop((first, second));
+        let on_input = RunFiles::new()
+            .input("input", &input)
+            .cache("--cache", &input);
+        let e = on_input.claim().unwrap_err().to_string();
+        assert!(e.contains("refusing to overwrite an input"), "{e}");
+        let e = RunFiles::new()
+            .output("-o", &cache)
+            .cache("--cache", &cache)
+            .claim()
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("name the same file"), "{e}");
+        let e = RunFiles::new()
+            .cache("--cache", dir.path())
+            .claim()
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("is a folder"), "{e}");
     }
 
     #[test]

@@ -119,8 +119,16 @@ impl PcaModel {
     /// Rows `first..first + count` of the decoded matrix, `μ + F·B` in f64
     /// (0 in the rows of the empty-row mask), into `out` (`count × N`,
     /// row-major): the reconstruction of every decoder and of the encoder's
-    /// error measurement.
-    pub fn reconstruct_rows(&self, first: usize, count: usize, out: &mut Vec<f64>) {
+    /// error measurement. Rows past the matrix's last are an error.
+    pub fn reconstruct_rows(&self, first: usize, count: usize, out: &mut Vec<f64>) -> Result<()> {
+        let pixels = self.dims.pixels();
+        if first.checked_add(count).is_none_or(|end| end > pixels) {
+            return Err(Error::range(
+                "rows to reconstruct",
+                format!("{first}..{}", first.saturating_add(count)),
+                format!("within 0..{pixels}"),
+            ));
+        }
         let (n, k) = (self.dims.row_len(), self.rank());
         let f: Vec<f64> = (first..first + count)
             .flat_map(|px| (0..k).map(move |a| (px, a)))
@@ -144,6 +152,7 @@ impl PcaModel {
                 }
             }
         }
+        Ok(())
     }
 
     /// `‖T − T̂‖²_F` against the store (f64, `T̂` rounded to f32 as decoders
@@ -154,7 +163,7 @@ impl PcaModel {
         let mut err2 = 0.0;
         let mut recon = Vec::new();
         raw.for_each_row_block(block_values, false, |start, rows| {
-            self.reconstruct_rows(start, rows.len() / n, &mut recon);
+            self.reconstruct_rows(start, rows.len() / n, &mut recon)?;
             // Decoders round to f32: so does the measurement.
             err2 += rows
                 .iter()

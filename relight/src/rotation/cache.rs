@@ -87,7 +87,8 @@ impl RotationSet {
     /// Writes the cache file atomically (a temporary file renamed when
     /// complete).
     pub fn write(&self, path: &Path) -> Result<()> {
-        let mut file = AtomicFile::create(path)?;
+        // A cache: runs of the same settings share it (no lock).
+        let mut file = AtomicFile::create_shared(path)?;
         let io = |e| RelightError::Io {
             path: path.to_path_buf(),
             error: e,

@@ -32,7 +32,7 @@ mod shade;
 #[cfg(test)]
 mod tests;
 
-pub use brdf::{Brdf, BrdfSlices, SliceConfig, BRDF_SYNTAX};
+pub use brdf::{Brdf, BrdfSlices, SliceConfig, BRDF_SYNTAX, LOBE_TEXELS};
 pub use cache::{CacheUse, MAGIC as CACHE_MAGIC, VERSION as CACHE_VERSION};
 pub use matrix::{Columns, RotationMatrix, QMAX};
 pub use merl::{MeasuredBrdf, MERL_DIMS, MERL_FILE_BYTES};

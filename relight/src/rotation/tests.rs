@@ -998,3 +998,42 @@ fn figures_128() {
         s.bytes as f64 / 1e6
     );
 }
+
+/// The lighting side follows the sharpest lobe: 64 where `64·α` reaches
+/// [`LOBE_TEXELS`] and for Lambert, 128 for sharper lobes and for a
+/// measured table.
+#[test]
+fn the_lighting_side_follows_the_lobe() {
+    let side = |spec: &str| {
+        Brdf::from_spec(spec, &Limits::default())
+            .unwrap()
+            .lighting_side()
+    };
+    assert_eq!(side("lambert"), 64);
+    assert_eq!(side("ggx:0.5"), 64);
+    assert_eq!(side("ggx:0.4"), 64);
+    assert_eq!(side("ggx:0.38"), 128);
+    assert_eq!(side("ggx:0.2"), 128);
+    assert_eq!(side("ggx:0.01"), 128);
+    assert_eq!(side("plastic:0.5"), 64);
+    assert_eq!(side("plastic:0.1"), 128);
+    // e = 10: α = √(2/12) ≈ 0.41; e = 20: 0.30.
+    assert_eq!(side("phong:10"), 64);
+    assert_eq!(side("phong:20"), 128);
+    // Sharp analytic lobes keep fewer terms; broad ones and tables more.
+    let kept = |spec: &str, n: usize| {
+        Brdf::from_spec(spec, &Limits::default())
+            .unwrap()
+            .kept_fractions(n)
+    };
+    assert_eq!(kept("ggx:0.2", 128), (0.03, 0.03));
+    assert_eq!(kept("plastic:0.1", 128), (0.03, 0.03));
+    assert_eq!(kept("ggx:0.2", 64), (0.1, 0.1));
+    assert_eq!(kept("ggx:0.5", 128), (0.1, 0.1));
+    assert_eq!(kept("lambert", 128), (0.1, 0.1));
+    let table = MeasuredBrdf::tabulate("t", |_, _| [0.1; 3], &Limits::default()).unwrap();
+    assert_eq!(
+        Brdf::Measured(Arc::new(table)).kept_fractions(128),
+        (0.1, 0.1)
+    );
+}

@@ -20,4 +20,4 @@ pub use bake_cache::bake_cached;
 pub use ctx::Ctx;
 pub use exposure::Exposure;
 pub use output::write_atomic;
-pub use paths::{claim_files, claim_folder};
+pub use paths::{claim_files, claim_files_and_cache, claim_folder};

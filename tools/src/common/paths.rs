@@ -12,12 +12,25 @@ use std::path::Path;
 /// line names it (e.g. "--env", "-o"). Hold the returned claim until the
 /// outputs are written: it holds their locks.
 pub fn claim_files(inputs: &[(&str, &Path)], outputs: &[(&str, &Path)]) -> Result<Claim> {
+    claim_files_and_cache(inputs, outputs, None)
+}
+
+/// [`claim_files`] with a cache beside the outputs (`RunFiles::cache`):
+/// checked like them, but shared with concurrent runs rather than locked.
+pub fn claim_files_and_cache(
+    inputs: &[(&str, &Path)],
+    outputs: &[(&str, &Path)],
+    cache: Option<(&str, &Path)>,
+) -> Result<Claim> {
     let mut files = RunFiles::new();
     for (role, path) in inputs {
         files = files.input(role, path);
     }
     for (role, path) in outputs {
         files = files.output(role, path);
+    }
+    if let Some((role, path)) = cache {
+        files = files.cache(role, path);
     }
     Ok(files.claim()?)
 }

@@ -53,11 +53,12 @@ pub struct GlossyArgs {
     /// Side n of the octahedral lighting map the rotation works on: a power
     /// of two, 8 to 128 [default: what the BRDF needs: 64 for Lambert and
     /// lobes of α ≥ 0.4, else 128]. The error against Mitsuba 3 follows
-    /// n·α (1.2 % at 32, 1.6 % at 25.6, 3–4 % at 12.8, 9 % at 6.4), and the
-    /// time and memory about 4× per doubling: n = 64 takes 0.3 GB of
+    /// n·α (1.2 % at 32, 1.6 % at 25.6, 3–4 % at 12.8, 9 % at 6.4), and
+    /// time and memory grow about 4× per doubling: n = 64 takes 0.3 GB of
     /// rotation matrices built in about 6 s on 2 cores, n = 128 1.4 GB in
     /// about 28 s (--rotation-cache keeps them), and step 1 and step 2
-    /// about 3.5× and 3.5× longer (docs/results/glossy.md).
+    /// (at the same --brdf-keep and --local-keep) about 4× longer
+    /// (docs/results/glossy.md).
     #[arg(long, value_name = "N", requires = "brdf")]
     pub glossy_n: Option<usize>,
     /// Side of the octahedral grid of normals with a rotation matrix each

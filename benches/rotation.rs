@@ -7,8 +7,12 @@
 //!   does), then step 1 (`R(n)·L` for every grid normal, with the largest
 //!   local terms listed), in lighting changes per second;
 //! - group `rotation_view` (a view change): step 2 for 256² texels on a
-//!   sphere seen from one eye, in texels per second, at the default keeps
-//!   and at fewer BRDF and local-lighting terms.
+//!   sphere, in texels per second, at the default keeps and at fewer BRDF
+//!   and local-lighting terms; each three ways: `direct` (no pair table:
+//!   every (grid normal, view texel) pair computed where it is used),
+//!   `new_view` (a new, empty pair table before each view: a view with
+//!   nothing to reuse) and `orbit` (a view 1° about the vertical from the
+//!   one before, whose pairs the table keeps: a step of a viewer's drag).
 //!
 //! The goals are 10 lighting changes per second at N = 64² and a
 //! view change at 60 frames/s (3.9 M texels/s) for 256² texels.
@@ -20,6 +24,7 @@ use ltm::relight::rotation::{
 };
 use ltm::Limits;
 use std::sync::Arc;
+use std::time::{Duration, Instant};
 
 /// (BRDF keep, local keep) pairs of step 2: the defaults, and fewer terms.
 const KEEPS: [(f64, f64); 3] = [(0.1, 0.1), (0.03, 0.1), (0.03, 0.03)];
@@ -56,6 +61,11 @@ fn sphere() -> Vec<SurfacePoint> {
             SurfacePoint::new(p, p)
         })
         .collect()
+}
+
+/// `eye` turned by 1° about the vertical axis: an orbit's next view.
+fn orbit(eye: glam::DVec3) -> glam::DVec3 {
+    glam::DQuat::from_rotation_y(1f64.to_radians()) * eye
 }
 
 fn bench(c: &mut Criterion) {
@@ -105,9 +115,35 @@ fn bench(c: &mut Criterion) {
             shader.set_brdf(slices).unwrap();
             shader.set_local_keep(local, &limits).unwrap();
             shader.light(&map, None).unwrap();
-            let id = format!("step2_256x256_keep{keep}_local{local}");
-            group.bench_function(BenchmarkId::new(id, n), |b| {
+            let id = |how: &str| format!("step2_256x256_keep{keep}_local{local}_{how}");
+            shader.set_pair_table(false);
+            group.bench_function(BenchmarkId::new(id("direct"), n), |b| {
                 b.iter(|| shader.shade_points(&points, eye, &mut out).unwrap())
+            });
+            group.bench_function(BenchmarkId::new(id("new_view"), n), |b| {
+                b.iter_custom(|iters| {
+                    let mut total = Duration::ZERO;
+                    for _ in 0..iters {
+                        assert!(shader.set_pair_table(true));
+                        let start = Instant::now();
+                        shader.shade_points(&points, eye, &mut out).unwrap();
+                        total += start.elapsed();
+                    }
+                    total
+                })
+            });
+            group.bench_function(BenchmarkId::new(id("orbit"), n), |b| {
+                b.iter_custom(|iters| {
+                    let mut total = Duration::ZERO;
+                    for _ in 0..iters {
+                        assert!(shader.set_pair_table(true));
+                        shader.shade_points(&points, eye, &mut out).unwrap();
+                        let start = Instant::now();
+                        shader.shade_points(&points, orbit(eye), &mut out).unwrap();
+                        total += start.elapsed();
+                    }
+                    total
+                })
             });
         }
         group.finish();

@@ -19,6 +19,9 @@
 //! [`Shader::shade`] (view change) evaluates, for each of the four grid
 //! normals around a surface normal, the slice of the view direction *in
 //! that normal's frame* dotted with its local lighting, blended bilinearly.
+//! Each (grid normal, view texel) pair's radiance is kept once computed
+//! ([`pairs`]), so a view change computes only the pairs no earlier view
+//! used.
 //! Rotation matrices depend only on `n`, the normal grid, the sub-sampling
 //! and the threshold: switching BRDFs rebuilds no rotation.
 
@@ -28,6 +31,7 @@ pub mod haar;
 pub mod maps;
 mod matrix;
 mod merl;
+mod pairs;
 mod shade;
 #[cfg(test)]
 mod tests;
@@ -36,6 +40,7 @@ pub use brdf::{Brdf, BrdfSlices, SliceConfig, BRDF_SYNTAX, LOBE_TEXELS};
 pub use cache::{CacheUse, MAGIC as CACHE_MAGIC, VERSION as CACHE_VERSION};
 pub use matrix::{Columns, RotationMatrix, QMAX};
 pub use merl::{MeasuredBrdf, MERL_DIMS, MERL_FILE_BYTES};
+pub use pairs::MAX_PAIR_TABLE_BYTES;
 pub use shade::{resample_local, OctMap, Shader, DEFAULT_LOCAL_KEEP};
 
 use crate::error::{RelightError, Result};

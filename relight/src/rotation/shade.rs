@@ -2,6 +2,7 @@
 //! Rendering"), and the spatial-domain rotation they are checked against.
 
 use super::maps::{hemi_decode, oct_bilinear, oct_decode, oct_encode, subsample, texel_of, Frame};
+use super::pairs::PairTable;
 use super::{check_pow2, haar, BrdfSlices, RotationSet, MAX_SOURCE_SIDE};
 use crate::error::{RelightError, Result};
 use glam::DVec3;
@@ -170,6 +171,12 @@ pub struct Shader {
     _top_charge: Charge,
     /// Per grid normal, its frame.
     frames: Vec<Frame>,
+    /// Step 2's radiance per (grid normal, view texel), kept once computed
+    /// (`None` where the table is too large: each pair is then computed
+    /// where it is used).
+    pairs: Option<PairTable>,
+    /// The budget the pair table is charged to when the BRDF changes.
+    limits: Limits,
     _charge: Charge,
 }
 
@@ -190,6 +197,7 @@ impl Shader {
         let frames = (0..normals)
             .map(|i| Frame::new(cfg.grid_normal(i)))
             .collect();
+        let pairs = PairTable::new(normals, slices.config().views.pow(2), limits);
         let mut shader = Shader {
             rotations,
             slices,
@@ -198,6 +206,8 @@ impl Shader {
             local_terms: 0,
             _top_charge: Charge::default(),
             frames,
+            pairs,
+            limits: limits.clone(),
             _charge: charge.join(frames_charge),
         };
         shader.set_local_keep(DEFAULT_LOCAL_KEEP, limits)?;
@@ -228,7 +238,15 @@ impl Shader {
         self.local_terms = terms;
         self.top = vec![0; count];
         self.select_top();
+        self.forget_pairs();
         Ok(())
+    }
+
+    /// Empties the pair table after a change of lighting, BRDF or keep.
+    fn forget_pairs(&mut self) {
+        if let Some(p) = &mut self.pairs {
+            p.clear();
+        }
     }
 
     /// Refreshes every grid normal's list of largest local terms.
@@ -260,7 +278,12 @@ impl Shader {
     /// Switches the BRDF: no rotation or lighting is recomputed.
     pub fn set_brdf(&mut self, slices: Arc<BrdfSlices>) -> Result<()> {
         check_slices(&self.rotations, &slices)?;
+        let resize = self.pairs.is_some() && slices.config().views != self.slices.config().views;
         self.slices = slices;
+        self.forget_pairs();
+        if resize {
+            self.set_pair_table(true);
+        }
         Ok(())
     }
 
@@ -279,6 +302,7 @@ impl Shader {
             .zip(self.rotations.matrices().par_iter())
             .for_each(|(out, mat)| mat.apply(&light, out));
         self.select_top();
+        self.forget_pairs();
         Ok(())
     }
 
@@ -313,14 +337,51 @@ impl Shader {
             let r = self.frames[i].to_local(mirror);
             let wo = DVec3::new(-r.x, -r.y, r.z);
             let v = self.slices.view_index(wo);
-            let k = self.local_terms;
-            let b = self.slices.dot(v, self.local(i));
-            let r = self
-                .slices
-                .residual_dot(v, self.local(i), &self.top[i * k..(i + 1) * k]);
-            (0..3).for_each(|c| out[c] += w as f32 * (b[c] + r[c]));
+            let radiance = match &self.pairs {
+                Some(table) => table.get(i, v, || self.pair(i, v)),
+                None => self.pair(i, v),
+            };
+            (0..3).for_each(|c| out[c] += w as f32 * radiance[c]);
         }
         out
+    }
+
+    /// The radiance of grid normal `i` seen from view texel `v`: the
+    /// slice's kept terms dotted with the local lighting, plus its residual
+    /// at the lighting's largest terms.
+    fn pair(&self, i: usize, v: usize) -> [f32; 3] {
+        let k = self.local_terms;
+        let b = self.slices.dot(v, self.local(i));
+        let r = self
+            .slices
+            .residual_dot(v, self.local(i), &self.top[i * k..(i + 1) * k]);
+        [0, 1, 2].map(|c| b[c] + r[c])
+    }
+
+    /// With `on`, a new, empty table of step 2's radiance per (grid normal,
+    /// view texel) pair (a shader starts with one): each pair is computed
+    /// on first use and read back until the lighting, the BRDF or the keep
+    /// changes, so a view change costs only the pairs that earlier views
+    /// did not use. Without it, step 2 computes every pair where it is
+    /// used, with the same result. The table takes `normals² · views² ·
+    /// 12` bytes, charged to the shader's limits; returns whether one is in
+    /// use (not where it would exceed [`MAX_PAIR_TABLE_BYTES`] or the
+    /// limits).
+    ///
+    /// [`MAX_PAIR_TABLE_BYTES`]: super::MAX_PAIR_TABLE_BYTES
+    pub fn set_pair_table(&mut self, on: bool) -> bool {
+        self.pairs = None;
+        if on {
+            let views = self.slices.config().views;
+            self.pairs = PairTable::new(self.frames.len(), views * views, &self.limits);
+        }
+        self.pairs.is_some()
+    }
+
+    /// How many pairs the table keeps (`None` without one).
+    #[cfg(test)]
+    pub(crate) fn pairs_kept(&self) -> Option<u32> {
+        self.pairs.as_ref().map(PairTable::kept)
     }
 }
 

@@ -1037,3 +1037,77 @@ fn the_lighting_side_follows_the_lobe() {
         (0.1, 0.1)
     );
 }
+
+/// Step 2 through the pair table gives the same bits as computing every
+/// pair where it is used, across changes of eye, lighting, BRDF, view grid
+/// and keep (a table that kept a pair over a change would differ).
+#[test]
+fn the_pair_table_changes_nothing_and_forgets_on_every_change() {
+    let cfg = RotationConfig {
+        n: 16,
+        normals: 8,
+        supersample: 2,
+        threshold: 1,
+    };
+    let slices = SliceConfig {
+        m: 8,
+        views: 16,
+        supersample: 2,
+        keep: 0.1,
+        residuals: true,
+    };
+    let ggx = Brdf::Ggx {
+        alpha: 0.2,
+        f0: [0.9, 0.8, 0.7],
+    };
+    let mut table = shader(cfg, ggx.clone(), slices);
+    let mut direct = shader(cfg, ggx, slices);
+    assert!(!direct.set_pair_table(false));
+    assert_eq!(direct.pairs_kept(), None);
+    let mut rng = Rng(41);
+    let points: Vec<ltm_codec::SurfacePoint> = (0..3000)
+        .map(|_| {
+            let n = rng.dir().as_vec3().to_array();
+            ltm_codec::SurfacePoint::new(n, n)
+        })
+        .collect();
+    let limits = Limits::default();
+    let maps = maps_for(16);
+    let check = |table: &Shader, direct: &Shader, rng: &mut Rng| {
+        let eye = 4.0 * rng.dir();
+        let mut a = vec![[0.0f32; 3]; points.len()];
+        let mut b = a.clone();
+        table.shade_points(&points, eye, &mut a).unwrap();
+        direct.shade_points(&points, eye, &mut b).unwrap();
+        let bits = |v: &[[f32; 3]]| v.iter().flatten().map(|x| x.to_bits()).collect::<Vec<_>>();
+        assert_eq!(bits(&a), bits(&b));
+        let kept = table.pairs_kept().unwrap();
+        assert!(kept > 0 && (kept as usize) < 4 * points.len(), "{kept}");
+    };
+    for map in &maps {
+        for sh in [&mut table, &mut direct] {
+            sh.light(map, None).unwrap();
+        }
+        assert_eq!(table.pairs_kept(), Some(0));
+        check(&table, &direct, &mut rng);
+        check(&table, &direct, &mut rng);
+    }
+    let lambert = Brdf::Lambert { albedo: [0.5; 3] };
+    for views in [16, 8] {
+        let cfg = SliceConfig { views, ..slices };
+        let s = Arc::new(BrdfSlices::build(lambert.clone(), cfg, &limits).unwrap());
+        for sh in [&mut table, &mut direct] {
+            sh.set_brdf(s.clone()).unwrap();
+        }
+        assert_eq!(table.pairs_kept(), Some(0));
+        check(&table, &direct, &mut rng);
+    }
+    for sh in [&mut table, &mut direct] {
+        sh.set_local_keep(0.3, &limits).unwrap();
+    }
+    check(&table, &direct, &mut rng);
+    // A table over its cap, or over the budget, is not made.
+    assert!(pairs::PairTable::new(1 << 16, 1 << 16, &limits).is_none());
+    assert!(pairs::PairTable::new(64, 256, &Limits::with_max_alloc(1000)).is_none());
+    assert!(pairs::PairTable::new(64, 256, &limits).is_some());
+}

@@ -20,8 +20,8 @@
 //! normals around a surface normal, the slice of the view direction *in
 //! that normal's frame* dotted with its local lighting, blended bilinearly.
 //! Each (grid normal, view texel) pair's radiance is kept once computed
-//! ([`pairs`]), so a view change computes only the pairs no earlier view
-//! used.
+//! ([`Shader::set_pair_table`]), so a view change computes only the pairs
+//! no earlier view used.
 //! Rotation matrices depend only on `n`, the normal grid, the sub-sampling
 //! and the threshold: switching BRDFs rebuilds no rotation.
 

@@ -8,8 +8,9 @@
 //! Local frames have the normal on `+z`; `ω` and `ω_o` point away from the
 //! surface.
 
-use super::maps::{hemi_decode, hemi_encode, subsample, texel_center, texel_of};
+use super::maps::{hemi_encode, texel_of};
 use super::merl::MeasuredBrdf;
+use super::spatial::{self, Square, SubSamples};
 use super::{check_pow2, haar};
 use crate::error::{RelightError, Result};
 use glam::DVec3;
@@ -420,7 +421,7 @@ impl SliceConfig {
 type Term = (u32, [f32; 3]);
 
 /// A slice split into its kept terms and its dense residual.
-type SplitSlice = (Vec<Term>, Vec<[f32; 3]>);
+pub(super) type SplitSlice = (Vec<Term>, Vec<[f32; 3]>);
 
 /// One sparse Haar slice per view direction.
 #[derive(Debug)]
@@ -437,32 +438,6 @@ pub struct BrdfSlices {
     _charge: Charge,
 }
 
-/// The spatial slice of view `wo`: per target texel, `∫ f cos dω`.
-pub(crate) fn spatial_slice(brdf: &Brdf, cfg: &SliceConfig, wo: DVec3) -> Vec<[f64; 3]> {
-    let (m, s) = (cfg.m, cfg.supersample);
-    let area = 1.0 / (m * m * s * s) as f64;
-    (0..m * m)
-        .map(|t| {
-            let mut acc = [0.0; 3];
-            for j in 0..s {
-                for i in 0..s {
-                    let (wi, jac) = hemi_decode_sub(m, t, s, i, j);
-                    let f = brdf.eval(wi, wo);
-                    for c in 0..3 {
-                        acc[c] += f[c] * wi.z * jac * area;
-                    }
-                }
-            }
-            acc
-        })
-        .collect()
-}
-
-fn hemi_decode_sub(m: usize, t: usize, s: usize, i: usize, j: usize) -> (DVec3, f64) {
-    let (u, v) = subsample(m, t, s, i, j);
-    hemi_decode(u, v)
-}
-
 /// Haar transform of a spatial slice, split in two: the kept terms (its
 /// scaling coefficient, the slice's mean: without it, a constant lighting
 /// would reflect nothing where a narrow lobe's detail terms outweigh it;
@@ -473,12 +448,19 @@ fn split_slice(spatial: &[[f64; 3]], m: usize, terms: usize) -> Result<SplitSlic
     for p in planes.iter_mut() {
         haar::forward(p, m)?;
     }
+    let mags: Vec<f32> = (0..m * m)
+        .map(|i| planes.iter().map(|p| p[i].abs()).sum::<f32>())
+        .collect();
+    let mag = |i: u32| mags[i as usize];
+    // The `terms − 1` largest details, ties to the lower index.
     let mut order: Vec<u32> = (1..(m * m) as u32).collect();
-    let mag = |i: u32| planes.iter().map(|p| p[i as usize].abs()).sum::<f32>();
-    order.sort_unstable_by(|&a, &b| mag(b).total_cmp(&mag(a)).then(a.cmp(&b)));
+    let details = terms.saturating_sub(1);
+    if details < order.len() {
+        order.select_nth_unstable_by(details, |&a, &b| mag(b).total_cmp(&mag(a)).then(a.cmp(&b)));
+        order.truncate(details);
+    }
     let mut kept: Vec<u32> = std::iter::once(0)
         .chain(order)
-        .take(terms)
         .filter(|&i| mag(i) > 0.0)
         .collect();
     kept.sort_unstable();
@@ -495,9 +477,41 @@ fn split_slice(spatial: &[[f64; 3]], m: usize, terms: usize) -> Result<SplitSlic
     Ok((terms, residual))
 }
 
+/// Every view's split slice, in view order: one spatial slice per orbit
+/// of views under `symmetries` (which must leave `brdf` unchanged), moved
+/// onto the orbit's other views, in parallel over orbits.
+pub(super) fn split_slices(
+    brdf: &Brdf,
+    cfg: &SliceConfig,
+    symmetries: &[Square],
+) -> Result<Vec<SplitSlice>> {
+    let (m, terms) = (cfg.m, cfg.terms());
+    let samples = SubSamples::new(cfg);
+    let per_orbit: Vec<Vec<(usize, Result<SplitSlice>)>> = spatial::orbits(cfg.views, symmetries)
+        .into_par_iter()
+        .map(|(first, members)| {
+            let base = samples.slice(brdf, spatial::view_direction(cfg.views, first));
+            members
+                .into_iter()
+                .map(|(v, g)| (v, split_slice(&spatial::moved(&base, m, g), m, terms)))
+                .collect()
+        })
+        .collect();
+    let mut slices: Vec<Option<SplitSlice>> = (0..cfg.views * cfg.views).map(|_| None).collect();
+    for (v, slice) in per_orbit.into_iter().flatten() {
+        slices[v] = Some(slice?);
+    }
+    slices
+        .into_iter()
+        .map(|s| s.ok_or_else(|| RelightError::Invalid("a view has no BRDF slice".into())))
+        .collect()
+}
+
 impl BrdfSlices {
-    /// Builds every view's slice, in parallel over views; the terms are
-    /// charged to `limits` before they are stored.
+    /// Builds every view's slice, one per orbit of the view grid's
+    /// symmetries that leave the BRDF unchanged (up to 8 views share one;
+    /// see [`super::spatial`]), in parallel; the terms are charged to
+    /// `limits` before they are stored.
     pub fn build(brdf: Brdf, cfg: SliceConfig, limits: &Limits) -> Result<BrdfSlices> {
         brdf.validate()?;
         cfg.validate()?;
@@ -511,20 +525,12 @@ impl BrdfSlices {
                 (views * m2 * usize::from(cfg.residuals)) as u64,
                 12,
             )?);
-        let slices: Vec<Result<SplitSlice>> = (0..views)
-            .into_par_iter()
-            .map(|v| {
-                let (u, w) = texel_center(cfg.views, v);
-                let spatial = spatial_slice(&brdf, &cfg, hemi_decode(u, w).0);
-                split_slice(&spatial, cfg.m, terms)
-            })
-            .collect();
+        let slices = split_slices(&brdf, &cfg, &Square::of(&brdf))?;
         let mut offsets = Vec::with_capacity(views + 1);
         let (mut index, mut value) = (Vec::new(), Vec::new());
         let mut residual = Vec::with_capacity(views * m2 * usize::from(cfg.residuals));
         offsets.push(0u32);
-        for s in slices {
-            let (kept, rest) = s?;
+        for (kept, rest) in slices {
             for (i, v) in kept {
                 index.push(i);
                 value.push(v);

@@ -33,6 +33,7 @@ mod matrix;
 mod merl;
 mod pairs;
 mod shade;
+mod spatial;
 #[cfg(test)]
 mod tests;
 

@@ -508,10 +508,12 @@ pub(super) fn split_slices(
 }
 
 impl BrdfSlices {
-    /// Builds every view's slice, one per orbit of the view grid's
-    /// symmetries that leave the BRDF unchanged (up to 8 views share one;
-    /// see [`super::spatial`]), in parallel; the terms are charged to
-    /// `limits` before they are stored.
+    /// Builds every view's slice, in parallel; the terms are charged to
+    /// `limits` before they are stored. Views that a symmetry of the view
+    /// grid maps onto each other (a quarter turn about the normal, or a
+    /// mirror through it: up to 8 views) share one computed slice, moved
+    /// texel by texel: every analytic BRDF is isotropic, and a measured
+    /// table is unchanged by the quarter turns.
     pub fn build(brdf: Brdf, cfg: SliceConfig, limits: &Limits) -> Result<BrdfSlices> {
         brdf.validate()?;
         cfg.validate()?;

@@ -20,7 +20,7 @@ use std::time::Instant;
 
 /// Octahedral sub-samples per lighting texel and side when the map is
 /// projected from the cubemap.
-const LIGHT_SUPERSAMPLE: usize = 16;
+pub(crate) const LIGHT_SUPERSAMPLE: usize = 16;
 
 /// What a view draws when `--brdf` is given.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
@@ -145,7 +145,7 @@ impl GlossyArgs {
 
     /// The kept fractions of slice and local-lighting terms: the flags',
     /// or what `brdf` needs.
-    fn kept(&self, brdf: &Brdf) -> (f64, f64) {
+    pub(crate) fn kept(&self, brdf: &Brdf) -> (f64, f64) {
         let (keep, local) = brdf.kept_fractions(self.rotation_config(brdf).n);
         (
             self.brdf_keep.unwrap_or(keep),
@@ -153,7 +153,7 @@ impl GlossyArgs {
         )
     }
 
-    fn slice_config(&self, n: usize, brdf: &Brdf) -> SliceConfig {
+    pub(crate) fn slice_config(&self, n: usize, brdf: &Brdf) -> SliceConfig {
         let (keep, local) = self.kept(brdf);
         SliceConfig {
             m: n / 2,
@@ -194,7 +194,11 @@ impl GlossyArgs {
         )))
     }
 
-    fn rotations(&self, brdf: &Brdf, limits: &Limits) -> Result<(RotationSet, &'static str)> {
+    pub(crate) fn rotations(
+        &self,
+        brdf: &Brdf,
+        limits: &Limits,
+    ) -> Result<(RotationSet, &'static str)> {
         let cfg = self.rotation_config(brdf);
         let Some(path) = &self.cache_path(brdf) else {
             return Ok((RotationSet::build(cfg, limits)?, "built"));

@@ -317,25 +317,8 @@ fn malformed_requests_never_panic() {
 #[test]
 fn texture_files_serve_their_surface_and_relit_texture() {
     let dir = tempfile::tempdir().unwrap();
-    // A closed procedural mesh: the sphere parameterization of a scanned
-    // mesh would cost this test minutes.
-    std::fs::write(dir.path().join("blob.obj"), ltm_testkit::blob_obj(6)).unwrap();
-    let scene_text = ltm_testkit::scene_toml("blob.obj", 8, 8, 2);
-    let toml = dir.path().join("tex.toml");
-    std::fs::write(&toml, scene_text + ltm_testkit::TEXTURE_SPHERE_16).unwrap();
-    let (raw, tex) = (dir.path().join("tex.raw"), dir.path().join("tex.ltm"));
+    let tex = blob_texture(dir.path());
     let p = |p: &std::path::Path| p.to_str().unwrap().to_string();
-    ltm(&[
-        "bake",
-        &p(&toml),
-        "-o",
-        &p(&raw),
-        "--face-res",
-        "2",
-        "--texel-samples",
-        "1",
-    ]);
-    ltm(&["compress", &p(&raw), "-o", &p(&tex), "--max-error", "0.05"]);
     let srv = Server::start(&[&p(&tex), "--env", &p(&map("interior.exr"))]);
     let info: serde_json::Value = serde_json::from_slice(&srv.get("/api/info").body).unwrap();
     assert_eq!(info["files"][0]["layout"], "texture");
@@ -385,6 +368,118 @@ fn texture_files_serve_their_surface_and_relit_texture() {
         assert!((a - b).abs() <= f16_tolerance(*b), "{a} vs {b}");
     }
     assert!(want.iter().any(|&v| v > 0.0));
+}
+
+/// A 16² sphere-layout texture over a closed procedural blob, baked with
+/// 6·2² lights and compressed (the sphere parameterization of a scanned
+/// mesh would cost a test minutes).
+fn blob_texture(dir: &std::path::Path) -> std::path::PathBuf {
+    std::fs::write(dir.join("blob.obj"), ltm_testkit::blob_obj(6)).unwrap();
+    let scene_text = ltm_testkit::scene_toml("blob.obj", 8, 8, 2);
+    let toml = dir.join("tex.toml");
+    std::fs::write(&toml, scene_text + ltm_testkit::TEXTURE_SPHERE_16).unwrap();
+    let (raw, tex) = (dir.join("tex.raw"), dir.join("tex.ltm"));
+    let p = |p: &std::path::Path| p.to_str().unwrap().to_string();
+    ltm(&[
+        "bake",
+        &p(&toml),
+        "-o",
+        &p(&raw),
+        "--face-res",
+        "2",
+        "--texel-samples",
+        "1",
+    ]);
+    ltm(&["compress", &p(&raw), "-o", &p(&tex), "--max-error", "0.05"]);
+    tex
+}
+
+/// Glossy materials (`ltm view --brdf`; that a frame is `ltm render
+/// --brdf`'s from the eye is checked pixel for pixel in the browser test):
+/// a new eye re-runs step 2 only, a new material step 1, a view-independent
+/// material gives one texture from every eye, and misuse gets 400.
+#[test]
+fn glossy_frames_rerun_step_1_only_for_a_new_lighting_or_material() {
+    let dir = tempfile::tempdir().unwrap();
+    let tex = blob_texture(dir.path());
+    let p = |p: &std::path::Path| p.to_str().unwrap().to_string();
+    let (tex, image, env) = (p(&tex), p(&scene().ltm), p(&map("interior.exr")));
+    let srv = Server::start(&[
+        &tex,
+        &image,
+        "--env",
+        &env,
+        "--brdf",
+        "ggx:0.3",
+        "--brdf",
+        "lambert:0.5",
+        "--glossy-n",
+        "16",
+    ]);
+    let info: serde_json::Value = serde_json::from_slice(&srv.get("/api/info").body).unwrap();
+    assert_eq!(info["brdfs"], serde_json::json!(["ggx:0.3", "lambert:0.5"]));
+    assert_eq!(info["glossy_n"], 16);
+    let base = "/api/frame?file=0&map=0&yaw=20&n=24";
+    let get = |extra: &str| {
+        let r = srv.get(&format!("{base}{extra}"));
+        assert_eq!(r.status, 200, "{extra}: {}", r.text());
+        let ms = |h: &str| r.header(h).map(|v| v.parse::<f64>().unwrap());
+        let times = [ms("x-glossy-setup-ms"), ms("x-step1-ms"), ms("x-step2-ms")];
+        (r.frame().2, times)
+    };
+    let (baked, none) = get("");
+    assert_eq!(none, [None; 3]);
+    let (front, t) = get("&brdf=1&eye=0,0.5,3");
+    assert!(
+        t[0].unwrap() > 0.0 && t[1].unwrap() > 0.0 && t[2].unwrap() > 0.0,
+        "{t:?}"
+    );
+    let (side, t) = get("&brdf=1&eye=3,0.5,0");
+    assert_eq!(
+        (t[0], t[1]),
+        (Some(0.0), Some(0.0)),
+        "a new eye: step 2 only"
+    );
+    // The reflection adds light, and moves with the eye.
+    let added = |g: &[f32]| g.iter().zip(&baked).map(|(a, b)| a - b).collect::<Vec<_>>();
+    let (a, b) = (added(&front), added(&side));
+    assert!(
+        a.iter().chain(&b).all(|&d| d >= -1e-3),
+        "a glossy frame is brighter"
+    );
+    assert!(a.iter().sum::<f32>() > 0.0);
+    assert!(frame_distance(&a, &b) > 0.05, "{}", frame_distance(&a, &b));
+    // Eyes in between, then the first again: the same frame.
+    for k in 1..12 {
+        let a = f64::from(k) * 0.13;
+        get(&format!(
+            "&brdf=1&eye={},0.5,{}",
+            3.0 * a.sin(),
+            3.0 * a.cos()
+        ));
+    }
+    assert_eq!(get("&brdf=1&eye=0,0.5,3").0, front);
+    let (lambert_front, t) = get("&brdf=2&eye=0,0.5,3");
+    assert!(t[1].unwrap() > 0.0, "a new material: step 1");
+    let (lambert_side, t) = get("&brdf=2&eye=3,0.5,0");
+    assert_eq!(t[1], Some(0.0));
+    assert_eq!(
+        lambert_front, lambert_side,
+        "Lambert looks the same from every eye"
+    );
+    for (q, says) in [
+        ("file=1&map=0&n=4&brdf=1&eye=0,0,3", "image-space file"),
+        (
+            "file=0&map=0&n=4&brdf=3&eye=0,0,3",
+            "brdf '3' is out of range (valid: 0..=2)",
+        ),
+        ("file=0&map=0&n=4&brdf=1", "brdf needs eye"),
+        ("file=0&map=0&n=4&brdf=1&eye=0,0,inf", "is not x,y,z"),
+    ] {
+        let r = srv.get(&format!("/api/frame?{q}"));
+        assert_eq!(r.status, 400, "{q}");
+        assert!(r.text().contains(says), "{q}: {}", r.text());
+    }
 }
 
 /// `/api/map`: the map's preview (256 × 128), box-filtered (its mean is the

@@ -680,8 +680,19 @@ fn texture_file(dir: &std::path::Path, texture: &str) -> PathBuf {
 /// camera, relight and exposure: the same triangles, and every pixel within
 /// 3 levels (8-bit sRGB) except where an edge of the silhouette passes
 /// (the two rasterizers may disagree on a sample lying on an edge).
-fn mesh_view_matches_ltm_render(browser: &Browser, file: &std::path::Path, env: &std::path::Path) {
-    let srv = Server::start(&[file.to_str().unwrap(), "--env", env.to_str().unwrap()]);
+///
+/// With `glossy` (`ltm view` and `ltm render` flags), the page's material
+/// menu picks the glossy material, and each orbit is compared once the
+/// frame shaded from its eye has come.
+fn mesh_view_matches_ltm_render(
+    browser: &Browser,
+    file: &std::path::Path,
+    env: &std::path::Path,
+    glossy: &[&str],
+) {
+    let mut args = vec![file.to_str().unwrap(), "--env", env.to_str().unwrap()];
+    args.extend(glossy);
+    let srv = Server::start(&args);
     let tab = browser.new_tab().expect("open a tab");
     tab.set_default_timeout(TIMEOUT);
     tab.navigate_to(&srv.url())
@@ -694,22 +705,38 @@ fn mesh_view_matches_ltm_render(browser: &Browser, file: &std::path::Path, env: 
             panic!("no WebGL view ({e}); page says {msg}")
         });
     set(&tab, "exposure", "0.5", "input");
+    if !glossy.is_empty() {
+        set(&tab, "brdf", "1", "change");
+    }
     let q = eval(&tab, "query(0)");
     wait_shown(&tab, "view0", q.as_str().unwrap());
     // Two orbits: a quarter turn and then half a turn further round
     // (0.01 rad per pixel), so that both sides (the sphere layout's folds
     // lie on one) are compared.
     for dx in [70.0, 314.0] {
-        compare_mesh_view(&tab, file, env, dx);
+        compare_mesh_view(&tab, (file, env), dx, glossy);
     }
 }
 
-/// Drags the WebGL view `dx` pixels and compares it with `ltm render`.
-fn compare_mesh_view(tab: &Tab, file: &std::path::Path, env: &std::path::Path, dx: f64) {
+/// Drags the WebGL view `dx` pixels and compares it with `ltm render`
+/// (given the `glossy` flags too).
+fn compare_mesh_view(
+    tab: &Tab,
+    (file, env): (&std::path::Path, &std::path::Path),
+    dx: f64,
+    glossy: &[&str],
+) {
     let before = eval(tab, "document.getElementById('gl0').dataset.camera");
     drag(tab, "gl0", dx);
     let after = eval(tab, "document.getElementById('gl0').dataset.camera");
     assert_ne!(after, before, "the drag orbits the camera");
+    if !glossy.is_empty() {
+        // A glossy material is shaded from the eye: the page asks for the
+        // frame of the new eye (query(0) holds it).
+        let q = eval(tab, "query(0)");
+        assert!(q.as_str().unwrap().contains("&brdf=1&eye="), "{q}");
+        wait_shown(tab, "view0", q.as_str().unwrap());
+    }
     let camera: Value = serde_json::from_str(after.as_str().unwrap()).unwrap();
     let js = "Array.from(panels[0].gl.pixels()).join(',')";
     let got: Vec<u8> = eval(tab, js)
@@ -730,12 +757,15 @@ fn compare_mesh_view(tab: &Tab, file: &std::path::Path, env: &std::path::Path, d
             .collect();
         a.join(",")
     };
+    // One name per test and drag: the tests run at once.
     let out = PathBuf::from(env!("CARGO_TARGET_TMPDIR")).join(format!(
-        "view-mesh-{}-{dx}.exr",
-        file.file_stem().unwrap().to_string_lossy()
+        "view-mesh-{}-{dx}{}.exr",
+        file.file_stem().unwrap().to_string_lossy(),
+        if glossy.is_empty() { "" } else { "-glossy" }
     ));
     let fov = camera["fov"].to_string();
-    let line = ltm(&[
+    let (eye, target) = (v3(&camera["eye"]), v3(&camera["target"]));
+    let mut args = vec![
         "render",
         file.to_str().unwrap(),
         "--env",
@@ -745,9 +775,9 @@ fn compare_mesh_view(tab: &Tab, file: &std::path::Path, env: &std::path::Path, d
         "--weighting",
         weighting.as_str().unwrap(),
         "--camera",
-        &v3(&camera["eye"]),
+        &eye,
         "--target",
-        &v3(&camera["target"]),
+        &target,
         "--up",
         "0,1,0",
         "--fov",
@@ -759,7 +789,9 @@ fn compare_mesh_view(tab: &Tab, file: &std::path::Path, env: &std::path::Path, d
         "-o",
         out.to_str().unwrap(),
         "--json",
-    ]);
+    ];
+    args.extend(glossy);
+    let line = ltm(&args);
     let json: Value = serde_json::from_str(line.trim()).unwrap();
     assert_eq!(
         json["triangles"].to_string(),
@@ -865,10 +897,25 @@ fn mesh_views_show_what_ltm_render_draws() {
     let Some(browser) = browser() else { return };
     let dir = tempfile::tempdir().unwrap();
     let sphere = sphere_texture_file(dir.path());
-    mesh_view_matches_ltm_render(&browser, &sphere, &map("interior.exr"));
+    mesh_view_matches_ltm_render(&browser, &sphere, &map("interior.exr"), &[]);
     let dir = tempfile::tempdir().unwrap();
     let atlas = atlas_texture_file(dir.path());
-    mesh_view_matches_ltm_render(&browser, &atlas, &map("interior.exr"));
+    mesh_view_matches_ltm_render(&browser, &atlas, &map("interior.exr"), &[]);
+}
+
+/// A glossy material from the page's menu (`ltm view --brdf`) is what
+/// `ltm render --brdf` draws from the orbit camera's eye: the highlights
+/// follow the eye, frame by frame, on the sphere layout and on an atlas.
+#[test]
+fn glossy_materials_show_what_ltm_render_brdf_draws() {
+    let Some(browser) = browser() else { return };
+    let glossy = ["--brdf", "ggx:0.3,f0=0.9/0.7/0.4", "--glossy-n", "16"];
+    let dir = tempfile::tempdir().unwrap();
+    let sphere = sphere_texture_file(dir.path());
+    mesh_view_matches_ltm_render(&browser, &sphere, &map("interior.exr"), &glossy);
+    let dir = tempfile::tempdir().unwrap();
+    let atlas = atlas_texture_file(dir.path());
+    mesh_view_matches_ltm_render(&browser, &atlas, &map("interior.exr"), &glossy);
 }
 
 /// Interaction latency of a sustained drag (benchmark mode, not a test of

@@ -185,6 +185,7 @@ pub fn route(
         files: viewer.files.len(),
         maps: viewer.map_count(),
         textures: viewer.area_textures().count(),
+        materials: viewer.materials().map_or(0, |m| m.count()),
     };
     let terms = |f: usize| viewer.files[f].info.max_terms;
     Routed::Reply(match path {
@@ -234,6 +235,8 @@ fn info(viewer: &Viewer) -> Reply {
         "maps": viewer.maps().collect::<Vec<_>>(),
         "reference": viewer.reference_name(),
         "area_textures": viewer.area_textures().collect::<Vec<_>>(),
+        "brdfs": viewer.materials().map(|m| m.names()).unwrap_or_default(),
+        "glossy_n": viewer.materials().map(|m| m.side()),
         "weightings": ["unweighted", "transport", "area"],
         "max_angle": params::MAX_ANGLE,
     });
@@ -276,6 +279,11 @@ fn frame_reply(f: &FrameOut, image: &Image) -> Reply {
     if let Some(t) = f.area_time {
         r = with_header(r, "X-Area-Ms", &ms(t));
     }
+    if let Some(g) = &f.glossy {
+        r = with_header(r, "X-Glossy-Setup-Ms", &ms(g.setup));
+        r = with_header(r, "X-Step1-Ms", &ms(g.step1));
+        r = with_header(r, "X-Step2-Ms", &ms(g.step2));
+    }
     r = with_header(r, "X-Light", if f.draft { "draft" } else { "exact" });
     r = with_header(r, "X-Lights", &f.stats.lights.to_string());
     r = with_header(r, "X-Nonzeros", &f.stats.nonzeros.to_string());
@@ -304,6 +312,7 @@ fn exact(viewer: &Viewer, p: &FrameParams) -> Reply {
         client: None,
         resampling: Resampling::Exact,
         area: None,
+        glossy: None,
         ..p.clone()
     };
     match viewer.frame(&p) {

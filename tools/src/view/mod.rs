@@ -11,7 +11,9 @@
 //!   height, lights, max_terms, layout `image` or `texture`, `near_field`:
 //!   the light plane's `order` and `side` of a file with near-field rows,
 //!   else null), `maps` (name, width, height), `reference` (the raw store's
-//!   name or null), `area_textures` (names; index 0 is `uniform`).
+//!   name or null), `area_textures` (names; index 0 is `uniform`), `brdfs`
+//!   (the `--brdf` specs: material K is `brdfs[K − 1]`) and `glossy_n`
+//!   (their lighting side, or null).
 //! - `/api/frame?file=F&map=M&yaw=Y&pitch=P&roll=R&n=N&weighting=W&light=L&client=C&seq=S`:
 //!   one frame. `yaw`, `pitch`, `roll` (degrees, finite, |a| ≤ 36000),
 //!   `weighting` (unweighted, transport, area) and `light` are optional.
@@ -30,7 +32,14 @@
 //!   ±3600), and `at` (texture index); it is lit
 //!   exactly (`ltm relight --area-method exact`), `X-Area-Ms` gives its
 //!   time, and such a frame carries no `X-Error` (the exact image is the
-//!   map's).
+//!   map's). A glossy material (texture-space files, `ltm view --brdf`) is
+//!   added with `brdf` (1 to the number of `--brdf` materials; 0, the
+//!   default, is the baked material alone) and `eye` (`x,y,z` in world
+//!   units, finite, |v| ≤ 10⁶; required with `brdf` ≥ 1, refused without):
+//!   the frame is then what `ltm render --brdf SPEC --shading sum` draws
+//!   from that eye (see `glossy.rs`), with `X-Step1-Ms` (0 when the file's
+//!   lighting and material were kept), `X-Step2-Ms` and `X-Glossy-Setup-Ms`
+//!   (rotation matrices and slices, on first use), and no `X-Error`.
 //! - `/api/exact?…` (same parameters): the exact image `T·L` from the
 //!   `--reference` store, computed on demand and cached per map and
 //!   rotation; `X-Error` gives the frame's relative L2 error against it.
@@ -74,13 +83,14 @@
 //! `X-Lights` (lights used), `X-Nonzeros`
 //! (coefficients multiply-added), `X-Error` and `X-Exact-Ms` where given.
 
+mod glossy;
 mod http;
 pub mod params;
 mod preview;
 mod server;
 mod state;
 
-use crate::common::{claim_files, map_files, Ctx};
+use crate::common::{claim_files_and_cache, map_files, Ctx};
 use anyhow::{Context, Result};
 use clap::Args;
 use std::io::Write;
@@ -140,6 +150,29 @@ pub struct ViewArgs {
     /// at most slots + 4 frame requests are handled at once).
     #[arg(long, default_value_t = 2, value_parser = clap::value_parser!(u16).range(1..=64))]
     pub slots: u16,
+    /// A glossy material for the page's material menu (repeatable), as
+    /// `ltm render --brdf` takes it (`ggx:0.2`, `plastic:0.1`,
+    /// `merl:PATH`, ...). A texture-space file is then drawn as `ltm
+    /// render --brdf SPEC --shading sum` draws it from the page's eye: the
+    /// relit texture plus the material's glossy reflection (unshadowed),
+    /// by wavelet rotation. Orbiting the mesh re-runs step 2 only (about
+    /// 10–45 ms for 256² texels); changing the lighting or the material
+    /// re-runs step 1 (about 0.1 s at n = 64, 0.3 s at 128). The first
+    /// glossy frame builds the rotation matrices (about 6 s at n = 64, 28 s
+    /// at 128) unless --rotation-cache holds them.
+    #[arg(long = "brdf", value_name = "SPEC")]
+    pub brdf: Vec<String>,
+    /// Side n of the octahedral lighting map of the glossy materials (a
+    /// power of two, 8..=128) [default: the largest the --brdf materials
+    /// need: 64 for Lambert and lobes of α ≥ 0.4, else 128]. One rotation
+    /// set serves the whole menu; see `ltm render --help` for what n costs
+    /// and gains.
+    #[arg(long, value_name = "N", requires = "brdf")]
+    pub glossy_n: Option<usize>,
+    /// Rotation cache of the glossy materials (a file or a folder), as
+    /// `ltm render --rotation-cache` takes it.
+    #[arg(long, value_name = "PATH", requires = "brdf")]
+    pub rotation_cache: Option<PathBuf>,
 }
 
 /// The maps in ./assets/envmaps (EXR and HDR, by name), if any.
@@ -166,7 +199,22 @@ pub fn run(a: ViewArgs, ctx: &Ctx) -> Result<()> {
         inputs.push(("--reference", r.as_path()));
     }
     inputs.extend(a.area_light.iter().map(|t| ("--area-light", t.as_path())));
-    claim_files(&inputs, &[])?;
+    let materials = match a.brdf.is_empty() {
+        true => None,
+        false => Some(glossy::Materials::new(
+            &a.brdf,
+            a.glossy_n,
+            a.rotation_cache.clone(),
+            a.files.len(),
+            ctx.limits(),
+        )?),
+    };
+    let cache = materials.as_ref().and_then(glossy::Materials::cache_path);
+    if let Some(m) = &materials {
+        inputs.extend(m.measured_files().into_iter().map(|f| ("--brdf", f)));
+    }
+    let cache = cache.as_deref().map(|c| ("--rotation-cache", c));
+    claim_files_and_cache(&inputs, &[], cache)?;
     let maps = map_list(&a.env);
     let mut textures = vec![(
         "uniform".to_string(),
@@ -181,7 +229,7 @@ pub fn run(a: ViewArgs, ctx: &Ctx) -> Result<()> {
     let viewer = Arc::new(state::Viewer::open(
         &a.files,
         &maps,
-        (a.reference.as_deref(), textures),
+        (a.reference.as_deref(), textures, materials),
         a.slots as usize,
         ctx.limits(),
     )?);

@@ -32,6 +32,20 @@ pub struct Bounds {
     pub maps: usize,
     /// Area-light textures offered (`uniform` and each `--area-light`).
     pub textures: usize,
+    /// Glossy materials offered (each `--brdf`).
+    pub materials: usize,
+}
+
+/// Largest magnitude of an eye coordinate.
+pub const MAX_EYE: f64 = 1e6;
+
+/// A glossy material shaded from an eye (`brdf`, `eye`).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct GlossyParams {
+    /// The material: 1-based index into the `--brdf` menu.
+    pub material: usize,
+    /// The eye, in world units.
+    pub eye: [f64; 3],
 }
 
 /// Largest magnitude of an area light's centre coordinate, side or
@@ -91,6 +105,8 @@ pub struct FrameParams {
     pub resampling: Resampling,
     /// An area light added to the map's image (files with near-field rows).
     pub area: Option<AreaParams>,
+    /// A glossy material added to a texture-space file's relit texture.
+    pub glossy: Option<GlossyParams>,
 }
 
 /// How a frame's rotated light is resampled when it is not cached
@@ -191,6 +207,8 @@ pub const FRAME_PARAMS: &[&str] = &[
     "aq",
     "ad",
     "at",
+    "brdf",
+    "eye",
 ];
 
 /// A finite number within ±[`MAX_AREA_VALUE`] above `low` (exclusive when
@@ -281,6 +299,44 @@ fn area(q: &HashMap<String, String>, b: &Bounds) -> Result<Option<AreaParams>, B
     }))
 }
 
+/// The glossy material of a frame request: `brdf` (0, the default, is the
+/// baked material alone; 1..=materials a `--brdf` entry) and, with a
+/// material, `eye` (`x,y,z`, finite, at most [`MAX_EYE`] in magnitude).
+fn glossy(q: &HashMap<String, String>, b: &Bounds) -> Result<Option<GlossyParams>, BadRequest> {
+    let material = match q.contains_key("brdf") {
+        true => index(q, "brdf", b.materials + 1)?,
+        false => 0,
+    };
+    let Some(e) = q.get("eye") else {
+        return match material {
+            0 => Ok(None),
+            _ => Err(BadRequest("brdf needs eye (x,y,z)".into())),
+        };
+    };
+    if material == 0 {
+        return Err(BadRequest(
+            "eye needs a glossy material (brdf 1 or more)".into(),
+        ));
+    }
+    let v: Option<Vec<f64>> = e.split(',').map(|t| t.trim().parse().ok()).collect();
+    match v.as_deref() {
+        Some(&[x, y, z])
+            if [x, y, z]
+                .iter()
+                .all(|c| c.is_finite() && c.abs() <= MAX_EYE) =>
+        {
+            Ok(Some(GlossyParams {
+                material,
+                eye: [x, y, z],
+            }))
+        }
+        _ => Err(BadRequest(format!(
+            "eye '{}' is not x,y,z (three finite numbers, at most {MAX_EYE:e} in magnitude)",
+            truncate(e)
+        ))),
+    }
+}
+
 /// Parses a frame request's query (`n` is checked against `max_terms`).
 pub fn frame(
     query: &str,
@@ -325,6 +381,7 @@ pub fn frame(
         client: client(&q)?,
         resampling,
         area: area(&q, b)?,
+        glossy: glossy(&q, b)?,
     })
 }
 
@@ -367,6 +424,7 @@ mod tests {
         files: 2,
         maps: 3,
         textures: 2,
+        materials: 2,
     };
 
     fn parse(q: &str) -> Result<FrameParams, BadRequest> {
@@ -393,6 +451,11 @@ mod tests {
         assert_eq!((a.degrees, a.texture), (90.0, 1));
         let p = parse("file=0&map=0&n=1&ax=0&ay=0&aw=1&ah=1&ai=1&ad=-37.5").unwrap();
         assert_eq!(p.area.unwrap().degrees, -37.5);
+        assert_eq!(p.glossy, None);
+        let p = parse("file=0&map=0&n=1&brdf=2&eye=0.5,-1e3,3").unwrap();
+        let g = p.glossy.unwrap();
+        assert_eq!((g.material, g.eye), (2, [0.5, -1e3, 3.0]));
+        assert_eq!(parse("file=0&map=0&n=1&brdf=0").unwrap().glossy, None);
     }
 
     #[test]
@@ -443,6 +506,21 @@ mod tests {
                 "file=0&map=0&n=1&ax=0&ay=0&aw=1&ah=1&ai=1&ad=1&aq=1",
                 "not both",
             ),
+            (
+                "file=0&map=0&n=1&brdf=3&eye=0,0,1",
+                "brdf '3' is out of range (valid: 0..=2)",
+            ),
+            ("file=0&map=0&n=1&brdf=1", "brdf needs eye"),
+            ("file=0&map=0&n=1&eye=0,0,1", "eye needs a glossy material"),
+            (
+                "file=0&map=0&n=1&brdf=0&eye=0,0,1",
+                "eye needs a glossy material",
+            ),
+            ("file=0&map=0&n=1&brdf=1&eye=0,0", "eye '0,0' is not x,y,z"),
+            ("file=0&map=0&n=1&brdf=1&eye=0,0,1,2", "is not x,y,z"),
+            ("file=0&map=0&n=1&brdf=1&eye=0,0,nan", "is not x,y,z"),
+            ("file=0&map=0&n=1&brdf=1&eye=0,0,2e6", "is not x,y,z"),
+            ("file=0&map=0&n=1&brdf=1&eye=0,0,1x", "is not x,y,z"),
         ] {
             let e = parse(q).unwrap_err().0;
             assert!(e.contains(needle), "{q}: {e}");
@@ -457,6 +535,10 @@ mod tests {
                 prop_assert!(p.file < 2 && p.lighting.map < 3 && (1..=100).contains(&p.terms));
                 let r = p.lighting.rotation;
                 prop_assert!([r.yaw, r.pitch, r.roll].iter().all(|a| a.is_finite() && a.abs() <= MAX_ANGLE));
+                if let Some(g) = p.glossy {
+                    prop_assert!((1..=2).contains(&g.material));
+                    prop_assert!(g.eye.iter().all(|c| c.is_finite() && c.abs() <= MAX_EYE));
+                }
             }
         }
 

@@ -2,11 +2,13 @@
 //! lights and of exact images, the frame slots that bound concurrent work,
 //! and each client's latest sequence number.
 
-use super::params::{AreaParams, Client, FrameParams, Lighting, Resampling};
+use super::glossy::{GlossyTimes, Materials};
+use super::params::{AreaParams, Client, FrameParams, GlossyParams, Lighting, Resampling};
 use super::preview::Preview;
 use anyhow::{bail, Context, Result};
+use glam::DVec3;
 use ltm_codec::container::LtmFile;
-use ltm_codec::{Limits, RawStore, RowLayout};
+use ltm_codec::{Charge, Limits, RawStore, RowLayout, SurfacePoint};
 use ltm_relight::nearfield::{AreaLight, LightTexture, NearField, NearFieldMethod, Placement};
 use ltm_relight::{
     reference, relative_l2, EnvMap, Frame, FrameStats, Image, PrefilteredMap, Relight, Request,
@@ -44,6 +46,9 @@ pub struct ViewFile {
     frames: Mutex<Vec<Frame>>,
     /// The file's near-field rows (a scene's `[light_plane]`), if any.
     near: Option<NearField>,
+    /// A texture-space file's surface points (what glossy materials shade),
+    /// charged to the budget while they live.
+    points: (Vec<SurfacePoint>, Charge),
 }
 
 /// A file's light plane, as `/api/info` gives it.
@@ -112,6 +117,8 @@ pub struct FrameOut {
     pub error: Option<f64>,
     /// Time of the area light's near-field rows, when one was asked for.
     pub area_time: Option<Duration>,
+    /// What the glossy material cost, when one was asked for.
+    pub glossy: Option<GlossyTimes>,
 }
 
 /// Why a frame was not made.
@@ -148,6 +155,8 @@ pub struct Viewer {
     exact: Mutex<VecDeque<(ExactKey, Arc<Image>)>>,
     /// Area-light textures: `uniform`, then each `--area-light`.
     textures: Vec<(String, LightTexture)>,
+    /// The glossy materials of `--brdf`, if any.
+    materials: Option<Materials>,
     slots: Slots,
     clients: Mutex<HashMap<String, (u64, Instant)>>,
 }
@@ -186,6 +195,14 @@ impl ViewFile {
             false => None,
         };
         let bytes = file.file_bytes();
+        let points = match file.surface().filter(|_| texture) {
+            Some(surface) => {
+                let size = std::mem::size_of::<SurfacePoint>() as u64;
+                let charge = limits.check_alloc("surface points", surface.len() as u64, size)?;
+                (surface.points().to_vec(), charge)
+            }
+            None => (Vec::new(), Charge::default()),
+        };
         let relighter = ltm_relight::open_file(file, limits)
             .with_context(|| format!("opening {}", path.display()))?;
         let info = FileInfo {
@@ -216,6 +233,7 @@ impl ViewFile {
             mesh,
             frames: Mutex::new(Vec::new()),
             near,
+            points,
         })
     }
 
@@ -241,7 +259,11 @@ impl Viewer {
     pub fn open(
         files: &[PathBuf],
         maps: &[PathBuf],
-        (raw, textures): (Option<&Path>, Vec<(String, LightTexture)>),
+        (raw, textures, materials): (
+            Option<&Path>,
+            Vec<(String, LightTexture)>,
+            Option<Materials>,
+        ),
         slots: usize,
         limits: &Limits,
     ) -> Result<Viewer> {
@@ -279,6 +301,7 @@ impl Viewer {
             lights: Mutex::new(VecDeque::new()),
             exact: Mutex::new(VecDeque::new()),
             textures,
+            materials,
             slots: Slots::new(slots),
             clients: Mutex::new(HashMap::new()),
         })
@@ -324,6 +347,46 @@ impl Viewer {
             }
         }
         Ok(t.elapsed())
+    }
+
+    /// The glossy materials of `--brdf`, if any.
+    pub fn materials(&self) -> Option<&Materials> {
+        self.materials.as_ref()
+    }
+
+    /// Glossy material `g` seen from its eye, added to file `f`'s relit
+    /// texture `image` under lighting `p`.
+    fn add_glossy(
+        &self,
+        f: (usize, &ViewFile),
+        g: &GlossyParams,
+        p: &FrameParams,
+        image: &mut Image,
+    ) -> Result<GlossyTimes, FrameError> {
+        let (index, file) = f;
+        if file.mesh.is_none() {
+            return Err(FrameError::Bad(format!(
+                "{} is an image-space file: glossy materials shade texture-space files only",
+                file.info.name
+            )));
+        }
+        let materials = self.materials.as_ref().ok_or_else(|| {
+            FrameError::Bad("no glossy materials: start ltm view with --brdf SPEC".into())
+        })?;
+        // The transport's lighting at the glossy side (a draft while the
+        // lighting moves, as the transport's); kept in the light cache.
+        let (cubemap, _, draft) = self.light(materials.side(), &p.lighting, p.resampling);
+        let lit = (p.lighting.map, key_of(&p.lighting), draft);
+        let eye = DVec3::from(g.eye);
+        materials
+            .add(
+                (index, &file.points.0),
+                g.material,
+                (lit, cubemap.as_slice()),
+                eye,
+                image,
+            )
+            .map_err(|e| FrameError::Internal(format!("{e:#}")))
     }
 
     /// The listed maps.
@@ -469,6 +532,20 @@ impl Viewer {
                         }
                     },
                 };
+                // The exact image is the transport's: a glossy frame has no
+                // error against it.
+                let (error, glossy) = match &p.glossy {
+                    None => (error, None),
+                    Some(g) => match self.add_glossy((p.file, f), g, p, &mut image) {
+                        Ok(t) => (None, Some(t)),
+                        Err(e) => {
+                            lock(&f.frames).push(frame);
+                            return Err(e);
+                        }
+                    },
+                };
+                // A glossy part lit by a draft makes a draft frame.
+                let draft = draft || glossy.as_ref().is_some_and(|g| g.draft);
                 Ok(FrameOut {
                     image,
                     stats,
@@ -477,6 +554,7 @@ impl Viewer {
                     draft,
                     error,
                     area_time,
+                    glossy,
                 })
             }
             Err(e) => Err(FrameError::Bad(e.to_string())),
@@ -549,7 +627,7 @@ fn open_raw(p: &Path, files: &[ViewFile], limits: &Limits) -> Result<RawStore> {
 }
 
 /// Locks a mutex, recovering the data if a panicking thread poisoned it.
-fn lock<T>(m: &Mutex<T>) -> std::sync::MutexGuard<'_, T> {
+pub(super) fn lock<T>(m: &Mutex<T>) -> std::sync::MutexGuard<'_, T> {
     m.lock().unwrap_or_else(|e| e.into_inner())
 }
 

@@ -201,7 +201,15 @@ function normalizeAngles() {
 function rotationQuery() { return `map=${$("map").value}&yaw=${angle("yaw")}&pitch=${angle("pitch")}&roll=${angle("roll")}`; }
 
 function query(fileIndex) {
-  return `file=${fileIndex}&${rotationQuery()}&n=${terms(fileIndex)}&weighting=${$("weighting").value}${areaQuery(fileIndex)}`;
+  return `file=${fileIndex}&${rotationQuery()}&n=${terms(fileIndex)}&weighting=${$("weighting").value}${areaQuery(fileIndex)}${glossyQuery(fileIndex)}`;
+}
+
+// The glossy material's part of a texture-space file's query: the menu's
+// material and the orbit camera's eye, which it is shaded from.
+function glossyQuery(fileIndex) {
+  const k = Number($("brdf").value || 0), gl = panels[fileIndex]?.gl;
+  if (!k || !gl) return "";
+  return `&brdf=${k}&eye=${gl.eye().map((c) => +c.toPrecision(9)).join(",")}`;
 }
 
 // The area light's part of a file's query: only when it is on and the file
@@ -332,6 +340,9 @@ async function send(p) {
         nonzeros: r.headers.get("X-Nonzeros"),
         error: r.headers.get("X-Error"),
         areaMs: r.headers.has("X-Area-Ms") ? Number(r.headers.get("X-Area-Ms")) : null,
+        step1Ms: r.headers.has("X-Step1-Ms") ? Number(r.headers.get("X-Step1-Ms")) : null,
+        step2Ms: r.headers.has("X-Step2-Ms") ? Number(r.headers.get("X-Step2-Ms")) : null,
+        glossySetupMs: r.headers.has("X-Glossy-Setup-Ms") ? Number(r.headers.get("X-Glossy-Setup-Ms")) : null,
       });
       const received = performance.now();
       // A new exposure redraws every panel; otherwise only this one changed.
@@ -401,7 +412,7 @@ async function requestExact() {
 // more, now with its error.
 // (Not with an area light: the exact image is the map's alone.)
 function wantsError(p) {
-  return !!info.reference && !areaQuery(p.index) && !!p.readout && !p.readout.error && !p.draft && p.shown === query(p.index) && p.retried !== p.shown &&
+  return !!info.reference && !areaQuery(p.index) && !glossyQuery(p.index) && !!p.readout && !p.readout.error && !p.draft && p.shown === query(p.index) && p.retried !== p.shown &&
     !!exactPanel.shownQuery && lightingOf(exactPanel.shownQuery) === lightingOf(p.shown);
 }
 
@@ -496,7 +507,9 @@ function readouts() {
       `\n  server ${r.serverMs?.toFixed(2) ?? "-"} ms (+ resample ${r.resampleMs?.toFixed(2) ?? "-"} ms${p.draft ? ", draft light" : ""}), ` +
       `round trip ${r.roundTripMs?.toFixed(1) ?? "-"} ms, input→screen ${r.latencyMs?.toFixed(1) ?? "-"} ms, ` +
       `lights ${r.lights ?? "-"}, nonzeros ${r.nonzeros ?? "-"}` +
-      (r.areaMs !== null && r.areaMs !== undefined ? `\n  area light ${r.areaMs.toFixed(1)} ms (exact; the error readouts are the map's)` : "");
+      (r.areaMs !== null && r.areaMs !== undefined ? `\n  area light ${r.areaMs.toFixed(1)} ms (exact; the error readouts are the map's)` : "") +
+      (r.step2Ms !== null && r.step2Ms !== undefined ? `\n  glossy ${info.brdfs[Number($("brdf").value) - 1] ?? ""} (n = ${info.glossy_n}): step 1 ${r.step1Ms.toFixed(1)} ms (0: lighting kept), step 2 ${r.step2Ms.toFixed(1)} ms` +
+        (r.glossySetupMs ? `, set-up ${r.glossySetupMs.toFixed(0)} ms` : "") : "");
   });
   $("readouts").textContent = lines.join("\n");
   layoutSplit();
@@ -539,7 +552,7 @@ function resetAll() {
 function wireControls() {
   for (const id of ["map", "weighting", "yaw", "pitch", "roll", "show-exact"]) $(id).addEventListener("change", requestFrames);
   for (const id of ["yaw", "pitch", "roll"]) $(id).addEventListener("input", requestFrames);
-  for (const id of ["area", "area-texture", "area-angle"]) $(id).addEventListener("change", requestFrames);
+  for (const id of ["area", "area-texture", "area-angle", "brdf"]) $(id).addEventListener("change", requestFrames);
   for (const id of ["area-x", "area-y", "area-w", "area-h", "area-i"]) {
     $(id).addEventListener("input", requestFrames);
     $(id).addEventListener("change", requestFrames);
@@ -826,12 +839,16 @@ function makeGl(canvas, side, mesh, records) {
     cam.az -= (e.clientX - last[0]) * 0.01;
     cam.el = Math.max(-1.5, Math.min(1.5, cam.el + (e.clientY - last[1]) * 0.01));
     last = [e.clientX, e.clientY];
-    render(); // the camera needs no new relight
+    moved();
   });
   canvas.addEventListener("pointerup", () => { last = null; });
-  canvas.addEventListener("wheel", (e) => { e.preventDefault(); cam.dist *= Math.exp(e.deltaY * 0.001); render(); });
+  canvas.addEventListener("wheel", (e) => { e.preventDefault(); cam.dist *= Math.exp(e.deltaY * 0.001); moved(); });
+  // The baked material needs no new relight when the camera moves; a
+  // glossy one is shaded from the eye, so it asks for a frame (step 2).
+  const moved = () => { render(); if (Number($("brdf").value || 0)) requestFrames(); };
   render();
   return {
+    eye: eyeOf,
     // floats: the relit texture (linear RGB), rgba: its tone-mapped pixels.
     setTexture(floats, rgba, w, h) {
       const data = new Float32Array(w * h * 4);
@@ -912,6 +929,11 @@ async function start() {
   if (info.files.some((f) => f.near_field)) {
     $("area-row").hidden = false;
     info.area_textures.forEach((t, i) => $("area-texture").add(new Option(t, i)));
+  }
+  if (info.brdfs.length && info.files.some((f) => f.layout === "texture")) {
+    $("brdf-label").hidden = false;
+    $("brdf").add(new Option("baked", 0));
+    info.brdfs.forEach((b, i) => $("brdf").add(new Option(b, i + 1)));
   }
   if (info.reference) {
     $("exact-label").hidden = false;

@@ -396,10 +396,11 @@ fn blob_texture(dir: &std::path::Path) -> std::path::PathBuf {
 
 /// Glossy materials (`ltm view --brdf`; that a frame is `ltm render
 /// --brdf`'s from the eye is checked pixel for pixel in the browser test):
-/// a new eye re-runs step 2 only, a new material step 1, a view-independent
-/// material gives one texture from every eye, and misuse gets 400.
+/// a new eye or material re-runs step 2 only, a new lighting step 1 too, a
+/// view-independent material gives one texture from every eye, and misuse
+/// gets 400.
 #[test]
-fn glossy_frames_rerun_step_1_only_for_a_new_lighting_or_material() {
+fn glossy_frames_rerun_step_1_only_for_a_new_lighting() {
     let dir = tempfile::tempdir().unwrap();
     let tex = blob_texture(dir.path());
     let p = |p: &std::path::Path| p.to_str().unwrap().to_string();
@@ -459,14 +460,25 @@ fn glossy_frames_rerun_step_1_only_for_a_new_lighting_or_material() {
         ));
     }
     assert_eq!(get("&brdf=1&eye=0,0.5,3").0, front);
+    // A new material keeps the local lightings: no step 1.
     let (lambert_front, t) = get("&brdf=2&eye=0,0.5,3");
-    assert!(t[1].unwrap() > 0.0, "a new material: step 1");
+    assert_eq!(t[1], Some(0.0), "a new material: no step 1");
+    assert!(t[0].unwrap() > 0.0, "its slices are built");
     let (lambert_side, t) = get("&brdf=2&eye=3,0.5,0");
     assert_eq!(t[1], Some(0.0));
     assert_eq!(
         lambert_front, lambert_side,
         "Lambert looks the same from every eye"
     );
+    assert_ne!(lambert_front, front);
+    // Back to the first material: its frame, with no step 1.
+    let (again, t) = get("&brdf=1&eye=0,0.5,3");
+    assert_eq!(again, front);
+    assert_eq!(t[1], Some(0.0));
+    // A new lighting: step 1.
+    let r = srv.get("/api/frame?file=0&map=0&yaw=21&n=24&brdf=1&eye=0,0.5,3");
+    assert_eq!(r.status, 200, "{}", r.text());
+    assert!(r.header("x-step1-ms").unwrap().parse::<f64>().unwrap() > 0.0);
     for (q, says) in [
         ("file=1&map=0&n=4&brdf=1&eye=0,0,3", "image-space file"),
         (

@@ -1253,3 +1253,49 @@ fn area_light_screenshots() {
         std::fs::write(format!("{out}-{}.png", k + 1), png).unwrap();
     }
 }
+
+/// Screenshots of glossy materials for docs/ (run by hand, see
+/// docs/results/glossy.md): the texture-space file `LTM_VIEW_GLOSSY_FILE`
+/// under the two maps of `LTM_VIEW_GLOSSY_ENVS` (comma-separated) with the
+/// two materials of `LTM_VIEW_GLOSSY_BRDFS` (`;`-separated), from two
+/// orbit positions (the second 120 px of drag round), written to
+/// `LTM_VIEW_GLOSSY_OUT-{map}-{material}-{view}.png`;
+/// `LTM_VIEW_GLOSSY_CACHE` is the rotation cache.
+#[test]
+#[ignore = "writes screenshots for docs/; run by hand"]
+fn glossy_screenshots() {
+    let Some(browser) = browser() else { return };
+    let var = |k: &str| std::env::var(k).unwrap_or_else(|_| panic!("{k} is not set"));
+    let (file, envs, brdfs) = (
+        var("LTM_VIEW_GLOSSY_FILE"),
+        var("LTM_VIEW_GLOSSY_ENVS"),
+        var("LTM_VIEW_GLOSSY_BRDFS"),
+    );
+    let (cache, out) = (var("LTM_VIEW_GLOSSY_CACHE"), var("LTM_VIEW_GLOSSY_OUT"));
+    let mut args = vec![file.as_str(), "--rotation-cache", &cache];
+    for env in envs.split(',') {
+        args.extend(["--env", env]);
+    }
+    for b in brdfs.split(';') {
+        args.extend(["--brdf", b]);
+    }
+    let srv = Server::start(&args);
+    let tab = open_page(&browser, &srv, "#gl0[data-camera]");
+    for view in 0..2 {
+        if view == 1 {
+            drag(&tab, "gl0", 120.0);
+        }
+        for map in 0..2 {
+            set(&tab, "map", &map.to_string(), "change");
+            for material in 1..=2 {
+                set(&tab, "brdf", &material.to_string(), "change");
+                let q = eval(&tab, "query(0)");
+                wait_shown(&tab, "view0", q.as_str().unwrap());
+                let png = tab
+                    .capture_screenshot(Page::CaptureScreenshotFormatOption::Png, None, None, true)
+                    .unwrap();
+                std::fs::write(format!("{out}-{map}-{material}-{view}.png"), png).unwrap();
+            }
+        }
+    }
+}

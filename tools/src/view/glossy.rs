@@ -8,9 +8,11 @@
 //! One rotation set serves every material (built, or read from
 //! `--rotation-cache`, on the first glossy frame). Each material's BRDF
 //! slices are built on its first use and kept. Each file keeps one shader:
-//! step 1 runs again only when the file's lighting or material changes,
-//! and step 2 on every frame, its pair table keeping the pairs of earlier
-//! views, so orbiting the mesh costs step 2 alone.
+//! step 1 runs again only when the file's lighting changes (the local
+//! lightings do not depend on the BRDF: a new material takes its slices
+//! and its largest local terms), and step 2 on every frame, its pair table
+//! keeping the pairs of earlier views, so orbiting the mesh costs step 2
+//! alone.
 
 use super::state::lock;
 use crate::render_glossy::{self, GlossyArgs, Shading};
@@ -37,8 +39,10 @@ struct Material {
 /// A file's shader and what it was lit with.
 struct FileShader {
     shader: Shader,
-    /// The lighting and material of step 1 (none yet: `None`).
-    lit: Option<(LightingKey, usize)>,
+    /// The lighting of step 1 (none yet: `None`).
+    lit: Option<LightingKey>,
+    /// The material shaded (none yet: `None`).
+    material: Option<usize>,
 }
 
 /// A lighting: map index, the rotation's bits, and whether the cubemap is
@@ -58,10 +62,11 @@ pub struct Materials {
 
 /// What a glossy frame cost.
 pub struct GlossyTimes {
-    /// Building or reading the rotations and building the material's
-    /// slices, where this frame did (else zero).
+    /// Building or reading the rotations, building the material's slices
+    /// and switching the file's shader to the material, where this frame
+    /// did (else zero).
     pub setup: Duration,
-    /// Step 1 (zero when the file's lighting and material were kept).
+    /// Step 1 (zero when the file's lighting was kept).
     pub step1: Duration,
     /// Step 2.
     pub step2: Duration,
@@ -198,19 +203,30 @@ impl Materials {
             let (rotations, took) = self.rotations(m)?;
             setup += took;
             let shader = Shader::new(rotations, slices.clone(), &self.limits)?;
-            *state = Some(FileShader { shader, lit: None });
+            *state = Some(FileShader {
+                shader,
+                lit: None,
+                material: None,
+            });
         }
         let fs = state.as_mut().context("no shader")?;
-        let mut step1 = Duration::ZERO;
-        if fs.lit != Some((lit, k)) {
+        if fs.material != Some(k) {
+            // The local lightings do not depend on the BRDF: a new material
+            // takes its slices and its own largest local terms only.
             let t = Instant::now();
             fs.shader.set_brdf(slices)?;
             fs.shader
                 .set_local_keep(m.args.kept(&m.brdf).1, &self.limits)?;
+            fs.material = Some(k);
+            setup += t.elapsed();
+        }
+        let mut step1 = Duration::ZERO;
+        if fs.lit != Some(lit) {
+            let t = Instant::now();
             let supersample = render_glossy::LIGHT_SUPERSAMPLE;
             let map = OctMap::from_cubemap(self.n, supersample, self.n, cubemap)?;
             fs.shader.light(&map, None)?;
-            fs.lit = Some((lit, k));
+            fs.lit = Some(lit);
             step1 = t.elapsed();
         }
         let t = Instant::now();

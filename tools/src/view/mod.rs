@@ -38,8 +38,9 @@
 //!   units, finite, |v| ≤ 10⁶; required with `brdf` ≥ 1, refused without):
 //!   the frame is then what `ltm render --brdf SPEC --shading sum` draws
 //!   from that eye (see `glossy.rs`), with `X-Step1-Ms` (0 when the file's
-//!   lighting and material were kept), `X-Step2-Ms` and `X-Glossy-Setup-Ms`
-//!   (rotation matrices and slices, on first use), and no `X-Error`.
+//!   lighting was kept), `X-Step2-Ms` and `X-Glossy-Setup-Ms` (rotation
+//!   matrices and slices on first use, and a switch of material), and no
+//!   `X-Error`.
 //! - `/api/exact?…` (same parameters): the exact image `T·L` from the
 //!   `--reference` store, computed on demand and cached per map and
 //!   rotation; `X-Error` gives the frame's relative L2 error against it.
@@ -156,10 +157,12 @@ pub struct ViewArgs {
     /// render --brdf SPEC --shading sum` draws it from the page's eye: the
     /// relit texture plus the material's glossy reflection (unshadowed),
     /// by wavelet rotation. Orbiting the mesh re-runs step 2 only (about
-    /// 10–45 ms for 256² texels); changing the lighting or the material
-    /// re-runs step 1 (about 0.1 s at n = 64, 0.3 s at 128). The first
-    /// glossy frame builds the rotation matrices (about 6 s at n = 64, 28 s
-    /// at 128) unless --rotation-cache holds them.
+    /// 12 ms a step of a drag and 30–40 ms a jump, for 256² texels), and so
+    /// does a new material once its slices are built (0.4 s at n = 64,
+    /// 1.2 s at 128); a new lighting re-runs step 1 (about 0.16 s at
+    /// n = 64, 0.6 s at 128). The first glossy frame builds the rotation
+    /// matrices (about 11 s at n = 64, 47 s at 128 on 2 cores) unless
+    /// --rotation-cache holds them (docs/results/glossy.md).
     #[arg(long = "brdf", value_name = "SPEC")]
     pub brdf: Vec<String>,
     /// Side n of the octahedral lighting map of the glossy materials (a

@@ -198,3 +198,53 @@ fn pca_rank_grows_to_the_target_unless_max_rank_limits_it() {
     assert!((257..=288).contains(&rank), "rank {rank}: {stderr}");
     assert!(!stderr.contains("warning"), "{stderr}");
 }
+
+/// An image named for another format is refused before any work, for
+/// every command with image outputs: `-o x.png` would write an EXR under a
+/// PNG's name (it did), `--png x.exr` a PNG under an EXR's.
+#[test]
+fn image_outputs_named_for_another_format_are_refused() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let raw = bright_store(d);
+    let ltm = d.join("b.ltm");
+    ok(&["compress", s(&raw), "-o", s(&ltm)]);
+    let env = envmap();
+    for cmd in ["relight", "render", "reference"] {
+        let input = if cmd == "reference" { &raw } else { &ltm };
+        let base = [cmd, s(input), "--env", s(&env)];
+        for (flags, says) in [
+            (
+                ["-o", "x.png", "--png", "y.png"],
+                "'x.png' ends in .png, but -o writes EXR",
+            ),
+            (
+                ["-o", "x.JPG", "--png", "y.png"],
+                "ends in .jpg, but -o writes EXR",
+            ),
+            (
+                ["-o", "x.exr", "--png", "y.exr"],
+                "'y.exr' ends in .exr, but --png writes PNG",
+            ),
+        ] {
+            let mut args = base.to_vec();
+            args.extend(flags);
+            let err = fails(&args);
+            assert!(err.contains(says), "{cmd} {flags:?}: {err}");
+        }
+    }
+    assert!(!d.join("x.png").exists() && !d.join("y.exr").exists());
+    // Names without an image extension, or the right one, are taken.
+    let out = d.join("plain");
+    ok(&[
+        "relight",
+        s(&ltm),
+        "--env",
+        s(&env),
+        "-o",
+        s(&out),
+        "--png",
+        s(&d.join("p.PNG")),
+    ]);
+    assert!(out.exists() && d.join("p.PNG").exists());
+}

@@ -374,24 +374,7 @@ fn texture_files_serve_their_surface_and_relit_texture() {
 /// 6·2² lights and compressed (the sphere parameterization of a scanned
 /// mesh would cost a test minutes).
 fn blob_texture(dir: &std::path::Path) -> std::path::PathBuf {
-    std::fs::write(dir.join("blob.obj"), ltm_testkit::blob_obj(6)).unwrap();
-    let scene_text = ltm_testkit::scene_toml("blob.obj", 8, 8, 2);
-    let toml = dir.join("tex.toml");
-    std::fs::write(&toml, scene_text + ltm_testkit::TEXTURE_SPHERE_16).unwrap();
-    let (raw, tex) = (dir.join("tex.raw"), dir.join("tex.ltm"));
-    let p = |p: &std::path::Path| p.to_str().unwrap().to_string();
-    ltm(&[
-        "bake",
-        &p(&toml),
-        "-o",
-        &p(&raw),
-        "--face-res",
-        "2",
-        "--texel-samples",
-        "1",
-    ]);
-    ltm(&["compress", &p(&raw), "-o", &p(&tex), "--max-error", "0.05"]);
-    tex
+    texture_file(dir, ltm_testkit::TEXTURE_SPHERE_16)
 }
 
 /// Glossy materials (`ltm view --brdf`; that a frame is `ltm render

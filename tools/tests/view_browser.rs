@@ -649,32 +649,6 @@ fn atlas_texture_file(dir: &std::path::Path) -> PathBuf {
     texture_file(dir, "\n[texture]\nmesh = \"all\"\nsize = 48\nspp = 1\n")
 }
 
-/// The blob of `ltm_testkit::blob_obj` baked with `texture` (a
-/// `[texture]` section) and compressed.
-fn texture_file(dir: &std::path::Path, texture: &str) -> PathBuf {
-    std::fs::write(dir.join("blob.obj"), ltm_testkit::blob_obj(6)).unwrap();
-    let toml = dir.join("tex.toml");
-    std::fs::write(
-        &toml,
-        ltm_testkit::scene_toml("blob.obj", 8, 8, 2) + texture,
-    )
-    .unwrap();
-    let (raw, tex) = (dir.join("tex.raw"), dir.join("tex.ltm"));
-    let p = |p: &std::path::Path| p.to_str().unwrap().to_string();
-    ltm(&[
-        "bake",
-        &p(&toml),
-        "-o",
-        &p(&raw),
-        "--face-res",
-        "2",
-        "--texel-samples",
-        "1",
-    ]);
-    ltm(&["compress", &p(&raw), "-o", &p(&tex), "--max-error", "0.05"]);
-    tex
-}
-
 /// The page's WebGL view of texture-space file `file` (lit by `env`),
 /// after a drag that orbits its camera, against `ltm render` of the same
 /// camera, relight and exposure: the same triangles, and every pixel within

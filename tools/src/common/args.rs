@@ -16,11 +16,14 @@ use super::Exposure;
 pub struct ImageOutput {
     /// Output image: 32-bit float linear RGB OpenEXR. `ltm render --views
     /// K` with K > 1 numbers it: OUT-000.exr, OUT-001.exr, ...
-    #[arg(short, long, value_name = "OUT.exr")]
+    /// A name ending in another image format's extension (.png, .jpg,
+    /// .hdr, ...) is refused: the PNG comes from --png.
+    #[arg(short, long, value_name = "OUT.exr", value_parser = exr_name)]
     pub output: PathBuf,
     /// Also write a tone-mapped 8-bit sRGB PNG, named like the EXR:
     /// `ltm render --views K` with K > 1 writes OUT-000.png, OUT-001.png, ...
-    #[arg(long, value_name = "OUT.png")]
+    /// A name ending in another image format's extension is refused.
+    #[arg(long, value_name = "OUT.png", value_parser = png_name)]
     pub png: Option<PathBuf>,
     /// Exposure of the PNG: `auto` maps the 99th-percentile luminance of the
     /// image to 0.8 (for an orbit of views, of the first view, so that every
@@ -34,6 +37,34 @@ pub struct ImageOutput {
         allow_hyphen_values = true
     )]
     pub exposure: Exposure,
+}
+
+/// Extensions of image formats, lower case.
+const IMAGE_EXTENSIONS: [&str; 10] = [
+    "exr", "png", "jpg", "jpeg", "hdr", "tif", "tiff", "bmp", "ppm", "webp",
+];
+
+/// `name` as a path, refused when its extension names an image format
+/// other than `format` (a file written in one format under another's name
+/// misleads every program that opens it).
+fn image_name(name: &str, format: &str, flag: &str, hint: &str) -> Result<PathBuf, String> {
+    let path = PathBuf::from(name);
+    let ext = path.extension().map(|e| e.to_string_lossy().to_lowercase());
+    match ext {
+        Some(e) if e != format && IMAGE_EXTENSIONS.contains(&e.as_str()) => Err(format!(
+            "'{name}' ends in .{e}, but {flag} writes {} ({hint})",
+            format.to_uppercase()
+        )),
+        _ => Ok(path),
+    }
+}
+
+fn exr_name(name: &str) -> Result<PathBuf, String> {
+    image_name(name, "exr", "-o", "name it .exr; --png OUT.png adds a PNG")
+}
+
+fn png_name(name: &str) -> Result<PathBuf, String> {
+    image_name(name, "png", "--png", "name it .png; -o writes the EXR")
 }
 
 impl ImageOutput {

@@ -326,3 +326,29 @@ pub fn frame_distance(a: &[f32], b: &[f32]) -> f64 {
     let den: f64 = b.iter().map(|y| f64::from(*y).powi(2)).sum();
     (num / den).sqrt()
 }
+
+/// The blob of `ltm_testkit::blob_obj` baked with `texture` (a
+/// `[texture]` section) and compressed.
+pub fn texture_file(dir: &Path, texture: &str) -> PathBuf {
+    std::fs::write(dir.join("blob.obj"), ltm_testkit::blob_obj(6)).unwrap();
+    let toml = dir.join("tex.toml");
+    std::fs::write(
+        &toml,
+        ltm_testkit::scene_toml("blob.obj", 8, 8, 2) + texture,
+    )
+    .unwrap();
+    let (raw, tex) = (dir.join("tex.raw"), dir.join("tex.ltm"));
+    let p = |p: &Path| p.to_str().unwrap().to_string();
+    ltm(&[
+        "bake",
+        &p(&toml),
+        "-o",
+        &p(&raw),
+        "--face-res",
+        "2",
+        "--texel-samples",
+        "1",
+    ]);
+    ltm(&["compress", &p(&raw), "-o", &p(&tex), "--max-error", "0.05"]);
+    tex
+}

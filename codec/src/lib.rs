@@ -14,6 +14,7 @@
 pub mod bands;
 pub mod baseline;
 mod bytes;
+mod camera;
 pub mod column;
 pub mod compress;
 pub mod container;
@@ -42,6 +43,7 @@ mod surface;
 pub mod wavelet;
 
 pub use baseline::{PcaBasis, ShProjection, MAX_SH_ORDER};
+pub use camera::{ImageCamera, MAX_FACING_AWAY, MAX_RESIDUAL_PX, MIN_CAMERA_POINTS};
 pub use column::SparseColumn;
 pub use compress::{
     compress, compress_pca, default_mem_budget, Analysis, CodeOptions, Coder, CompressOptions,

@@ -2,9 +2,12 @@
 
 use crate::area_light::AreaArgs;
 use crate::common::{claim_files, describe_terms, Ctx, ImageOutput, TermsArgs};
+use crate::render_glossy::{Glossy, GlossyArgs};
 use anyhow::{bail, Context, Result};
 use clap::Args;
-use ltm_codec::LtmFile;
+use glam::DVec3;
+use ltm_codec::{ImageCamera, LtmFile, RowLayout};
+use ltm_relight::rotation::Brdf;
 use ltm_relight::{
     relative_l2, EnvMap, Frame, FrameStats, Image, Lookup, PcaRelighter, PointLight, Relight,
     Request, Rotation,
@@ -46,6 +49,14 @@ pub struct RelightArgs {
     pub point_lookup: Lookup,
     #[command(flatten)]
     pub area: AreaArgs,
+    #[command(flatten)]
+    pub glossy: GlossyArgs,
+    /// With --brdf: the camera position the file's pixels were seen from
+    /// [default: recovered from the file's surface records, which lie on
+    /// the rays through the pixel centres; refused when they cannot fix it,
+    /// e.g. a view of one plane].
+    #[arg(long, value_name = "X,Y,Z", value_parser = crate::common::ranges::point, allow_hyphen_values = true, requires = "brdf")]
+    pub eye: Option<[f64; 3]>,
     #[command(flatten)]
     pub terms: TermsArgs,
     /// Rotate the lighting: yaw,pitch,roll in degrees.
@@ -256,6 +267,82 @@ fn area_image(a: &RelightArgs, ctx: &Ctx) -> Result<Option<(Vec<[f32; 3]>, Durat
     Ok(Some((image, time)))
 }
 
+/// Refuses flags that `--brdf` cannot go with: it reflects the map, so it
+/// needs one, and `--reference` is the transport's exact image, not the
+/// glossy one.
+fn check_glossy_flags(a: &RelightArgs) -> Result<()> {
+    if a.env.is_none() {
+        bail!("--brdf reflects the environment map: give it with --env (point and area lights are not reflected by the glossy part)");
+    }
+    if a.reference.is_some() {
+        bail!("--reference compares with the transport's exact image, which has no --brdf material: leave one of them out");
+    }
+    Ok(())
+}
+
+/// The eye that image rows were seen from: `--eye`, or recovered from the
+/// rows' surface records.
+fn image_eye(a: &RelightArgs, file: &LtmFile) -> Result<DVec3> {
+    let path = a.file.display();
+    let surface = file.surface().with_context(|| {
+        format!("--brdf shades each pixel from its surface point, and {path} stores none (files compressed from bakes of this version do)")
+    })?;
+    let width = match file.meta().dims.rows {
+        RowLayout::Image { width, .. } => width as usize,
+        _ => bail!(
+            "{path} holds texture rows, whose glossy look depends on the view: draw them with ltm render --brdf (or ltm view --brdf)"
+        ),
+    };
+    if let Some(eye) = a.eye {
+        return Ok(DVec3::from_array(eye));
+    }
+    let camera = ImageCamera::recover(surface, width)
+        .with_context(|| format!("{path}: give the camera position with --eye X,Y,Z"))?;
+    let e = camera.eye();
+    eprintln!(
+        "eye recovered from {} surface points: {:.6}, {:.6}, {:.6} (largest miss {:.1e} px; --eye sets it)",
+        camera.points(),
+        e[0],
+        e[1],
+        e[2],
+        camera.max_residual_px()
+    );
+    Ok(DVec3::from_array(e))
+}
+
+/// The relit `image` plus (or replaced by, with `--shading glossy`) the
+/// `--brdf` material's reflection of `env`, each pixel shaded from the eye.
+fn glossy_image(
+    a: &RelightArgs,
+    brdf: Brdf,
+    env: &EnvMap,
+    image: &Image,
+    ctx: &Ctx,
+) -> Result<Image> {
+    let context = || format!("opening {}", a.file.display());
+    let file = LtmFile::open_with_limits(&a.file, ctx.limits()).with_context(context)?;
+    let eye = image_eye(a, &file)?;
+    let points = file
+        .surface()
+        .map(|s| s.points().to_vec())
+        .unwrap_or_default();
+    let _charge = ctx.limits().check_alloc(
+        "surface points",
+        points.len() as u64,
+        std::mem::size_of::<ltm_codec::SurfacePoint>() as u64,
+    )?;
+    drop(file);
+    let glossy = Glossy::prepare(&a.glossy, brdf, points, env, &a.rotate, ctx.limits())?;
+    let start = Instant::now();
+    let out = glossy.texture(image, eye)?;
+    eprintln!(
+        "{}; every pixel shaded (step 2) in {:.1} ms",
+        glossy.describe(),
+        start.elapsed().as_secs_f64() * 1e3
+    );
+    Ok(out)
+}
+
 /// The relit image's relative L2 error against `--reference`, if given.
 fn reference_error(image: &Image, reference: Option<&Path>) -> Result<Option<f64>> {
     let Some(path) = reference else {
@@ -269,6 +356,10 @@ fn reference_error(image: &Image, reference: Option<&Path>) -> Result<Option<f64
 
 pub fn run(a: RelightArgs, ctx: &Ctx) -> Result<()> {
     let points = point_lights(&a)?;
+    let brdf = a.glossy.material(ctx.limits())?;
+    if brdf.is_some() {
+        check_glossy_flags(&a)?;
+    }
     let mut inputs = vec![("input", a.file.as_path())];
     if let Some(env) = &a.env {
         inputs.push(("--env", env.as_path()));
@@ -277,19 +368,22 @@ pub fn run(a: RelightArgs, ctx: &Ctx) -> Result<()> {
         inputs.push(("--reference", r.as_path()));
     }
     inputs.extend(a.area.inputs());
+    inputs.extend(a.glossy.measured_file().map(|m| ("--brdf", m)));
     let _claim = claim_files(&inputs, &a.out.roles())?;
     let near = area_image(&a, ctx)?;
     let opened_at = Instant::now();
     let opened = Opened::open(&a, !points.is_empty(), ctx)?;
     let relighter = opened.relighter();
     let open_time = opened_at.elapsed();
-    let light = match &a.env {
+    let env = match &a.env {
         Some(path) => {
-            let env = EnvMap::load(path).with_context(|| format!("loading {}", path.display()))?;
-            Some(env.to_cubemap(relighter.face_res(), &a.rotate))
+            Some(EnvMap::load(path).with_context(|| format!("loading {}", path.display()))?)
         }
         None => None,
     };
+    let light = env
+        .as_ref()
+        .map(|env| env.to_cubemap(relighter.face_res(), &a.rotate));
     let scene = Scene {
         opened: &opened,
         light,
@@ -315,6 +409,9 @@ pub fn run(a: RelightArgs, ctx: &Ctx) -> Result<()> {
             time.as_secs_f64() * 1e3,
             crate::area_light::method_name(a.area.method()?),
         );
+    }
+    if let (Some(brdf), Some(env)) = (brdf, &env) {
+        bufs.image = glossy_image(&a, brdf, env, &bufs.image, ctx)?;
     }
     a.out.write(&bufs.image)?;
     let error = reference_error(&bufs.image, a.reference.as_deref())?;

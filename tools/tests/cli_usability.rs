@@ -248,3 +248,109 @@ fn image_outputs_named_for_another_format_are_refused() {
     ]);
     assert!(out.exists() && d.join("p.PNG").exists());
 }
+
+/// The arguments as `&str`s.
+fn refs(v: &[String]) -> Vec<&str> {
+    v.iter().map(String::as_str).collect()
+}
+
+/// A 16×16 store with surface data on the plane y = 0 (normal +Y): image
+/// rows, or texture rows when `texture`.
+fn plane_store(dir: &Path, texture: bool) -> PathBuf {
+    use ltm_codec::{Parameterization, RawHeader, RawWriter, Surface, SurfacePoint};
+    let dims = match texture {
+        true => Dims::texture(16, Parameterization::Uv, 4, 3),
+        false => Dims::image(16, 16, 4, 3),
+    };
+    let t: Vec<f32> = (0..dims.pixels() * dims.row_len())
+        .map(|i| 0.01 + ((i * 7) % 11) as f32 * 0.003)
+        .collect();
+    let surface = Surface::new(
+        (0..dims.pixels())
+            .map(|p| SurfacePoint::new([(p % 16) as f32, 0.0, (p / 16) as f32], [0.0, 1.0, 0.0]))
+            .collect(),
+    )
+    .unwrap();
+    let header = RawHeader::new(dims, false, block_bytes(dims, 64)).with_surface();
+    let name = if texture { "tex.raw" } else { "plane.raw" };
+    RawWriter::write_dense_with_surface(&dir.join(name), header, &t, None, Some(&surface)).unwrap()
+}
+
+/// `relight --brdf` shades image rows from their camera's eye: it refuses,
+/// naming the way out, a file without surface data, texture rows (whose
+/// look depends on the view), rows whose eye the records cannot fix (one
+/// plane) unless `--eye` is given, and flags it cannot go with.
+#[test]
+fn relight_brdf_refuses_what_it_cannot_shade() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let env = envmap();
+    let compress = |raw: PathBuf, name: &str| {
+        let out = d.join(name);
+        ok(&["compress", s(&raw), "-o", s(&out)]);
+        out
+    };
+    let (bare, plane, tex) = (
+        compress(bright_store(d), "bare.ltm"),
+        compress(plane_store(d, false), "plane.ltm"),
+        compress(plane_store(d, true), "tex.ltm"),
+    );
+    let out = d.join("o.exr");
+    let brdf = |file: &Path, extra: &[&str]| {
+        let mut args = vec!["relight", s(file), "--env", s(&env), "--brdf", "ggx:0.3"];
+        args.extend(["--glossy-n", "8", "-o", s(&out)]);
+        args.extend(extra);
+        args.iter().map(|a| a.to_string()).collect::<Vec<_>>()
+    };
+    for (args, says) in [
+        (brdf(&bare, &[]), "stores none"),
+        (brdf(&tex, &[]), "holds texture rows"),
+        (brdf(&plane, &[]), "give the camera position with --eye"),
+        (brdf(&plane, &[]), "on one plane"),
+        (brdf(&plane, &["--eye", "1,2"]), "has 2 coordinates"),
+        (brdf(&plane, &["--eye", "1,nan,2"]), "is not finite"),
+        (brdf(&plane, &["--reference", s(&out)]), "--reference"),
+    ] {
+        let err = fails(&refs(&args));
+        assert!(err.contains(says), "{args:?}: {err}");
+    }
+    let err = fails(&[
+        "relight",
+        s(&plane),
+        "--point",
+        "0,1,0",
+        "--intensity",
+        "1",
+        "--brdf",
+        "ggx:0.3",
+        "-o",
+        s(&out),
+    ]);
+    assert!(err.contains("give it with --env"), "{err}");
+    let err = fails(&[
+        "relight",
+        s(&plane),
+        "--env",
+        s(&env),
+        "--eye",
+        "0,5,0",
+        "-o",
+        s(&out),
+    ]);
+    assert!(err.contains("--brdf"), "{err}");
+    assert!(!out.exists());
+    // Given the eye, the plane's rows are shaded, the material on top of
+    // the transport, and nothing is NaN.
+    let said = ok(&refs(&brdf(&plane, &["--eye", "7.5,6,7.5"])));
+    assert!(said.contains("glossy ggx:0.3"), "{said}");
+    let lit = ltm_relight::Image::read_exr(&out).unwrap();
+    let plain = d.join("p.exr");
+    ok(&["relight", s(&plane), "--env", s(&env), "-o", s(&plain)]);
+    let base = ltm_relight::Image::read_exr(&plain).unwrap();
+    let added = lit
+        .data
+        .iter()
+        .zip(&base.data)
+        .all(|(a, b)| (0..3).all(|c| a[c].is_finite() && a[c] >= b[c]) && a[1] > b[1]);
+    assert!(added, "the glossy part is not added to every pixel");
+}

@@ -35,6 +35,11 @@ Per view: the relative L2 error over the pixels more than 1 px from a
 silhouette, and the same with Mitsuba's noise (a second seed) removed in
 quadrature.
 
+`--rows image` draws each camera's own image rows instead: the mesh is
+baked as an image-space file from that camera (`width` pixels square) and
+shaded by `ltm relight --brdf SPEC --shading glossy`, which recovers the
+eye from the file's surface records.
+
 `--sweep` instead varies, for the sphere under `studio` with the conductor
 at alpha = 0.1 and 0.2, one setting at a time from the defaults:
 --brdf-keep, --normals, --glossy-terms and --glossy-n (ltm's other
@@ -130,6 +135,30 @@ spp = 1
 """
 
 
+def image_scene_toml(mesh, cam, width):
+    """An image-space bake of the mesh alone from `cam`: its pixels' surface
+    points are what `ltm relight --brdf` shades."""
+    return f"""[camera]
+eye = {list(cam['eye'])}
+target = {list(cam['target'])}
+fov = {cam['fov']}
+width = {width}
+height = {width}
+
+[lighting]
+face_res = 4
+texel_samples = 1
+
+[materials.clay]
+type = "lambert"
+albedo = [0.5, 0.5, 0.5]
+
+[[meshes]]
+path = "{mesh}"
+material = "clay"
+"""
+
+
 # ------------------------------------------------------------------- maps
 
 def sun_map(height=1024):
@@ -219,6 +248,26 @@ def ltm_render(args, ltm_file, env_path, cam, spec, out, extra=()):
     mt.run(cmd)
 
 
+def ltm_relight_image(args, ltm_file, env_path, spec, out, extra=()):
+    """The glossy image of an image-space file: its own camera's pixels."""
+    cache = os.path.join(args.out, "rotations")
+    os.makedirs(cache, exist_ok=True)
+    mt.run([args.ltm, "relight", ltm_file, "--env", env_path, "--brdf", spec,
+            "--shading", "glossy", "--rotation-cache", cache, "-o", out, *extra])
+
+
+def bake_image_rows(args, mesh, cam, name):
+    """Bakes and compresses the image rows of `mesh` seen from `cam`."""
+    toml = os.path.join(args.out, f"{name}.toml")
+    with open(toml, "w") as f:
+        f.write(image_scene_toml(mesh, cam, args.width))
+    raw, ltm_file = os.path.join(args.out, "i.raw"), os.path.join(args.out, f"{name}.ltm")
+    mt.run([args.ltm, "bake", toml, "-o", raw])
+    mt.run([args.ltm, "compress", raw, "-o", ltm_file])
+    os.remove(raw)
+    return ltm_file
+
+
 def compare(ours, ref, ref2, mask):
     err = mt.rel(ours, ref, mask)
     noise = mt.rel(ref2, ref, mask) / math.sqrt(2)
@@ -242,7 +291,10 @@ def case(args, mi, ctx, material, alpha, extra=(), tag=""):
         ref, ref2, mitsuba_s = refs[key]
         view = os.path.join(args.out, f"view{tag}.exr")
         t0 = time.time()
-        ltm_render(args, ltm_file, env_path, cam, spec, view, extra)
+        if args.rows == "image":
+            ltm_relight_image(args, ltm_file[c], env_path, spec, view, extra)
+        else:
+            ltm_render(args, ltm_file, env_path, cam, spec, view, extra)
         ltm_s = time.time() - t0
         ours = mt.read_exr(mi, view)
         row = dict(camera=c, spec=spec, extra=list(extra), ltm_s=ltm_s,
@@ -276,6 +328,9 @@ def main():
     ap.add_argument("--cameras", type=int, default=2)
     ap.add_argument("--spp", type=int, default=1024, help="Mitsuba samples per pixel")
     ap.add_argument("--sampler", default="ldsampler", help="Mitsuba's sampler")
+    ap.add_argument("--rows", choices=["texture", "image"], default="texture",
+                    help="draw a texture-space bake with `ltm render`, or each "
+                         "camera's image rows with `ltm relight`")
     ap.add_argument("--sweep", action="store_true")
     ap.add_argument("--extra", default="", help="more `ltm render` flags for every case")
     ap.add_argument("--variant", default="scalar_rgb")
@@ -292,6 +347,9 @@ def main():
     alphas = [float(a) for a in args.alphas.split(",")]
     results = []
     print(f"Schlick against exact Fresnel at IOR {IOR}: {pct(fresnel_gap(IOR))}", flush=True)
+    if args.fixture and args.rows == "image":
+        write_image_fixture(args, mi)
+        return 0
     if args.fixture:
         write_fixture(args, mi)
         return 0
@@ -303,9 +361,13 @@ def main():
         with open(toml, "w") as f:
             f.write(scene_toml(mesh, args.cams[0], args.size))
         raw, ltm_file = os.path.join(args.out, "t.raw"), os.path.join(args.out, f"{mesh_name}.ltm")
-        mt.run([args.ltm, "bake", toml, "-o", raw])
-        mt.run([args.ltm, "compress", raw, "-o", ltm_file])
-        os.remove(raw)
+        if args.rows == "image":
+            ltm_file = [bake_image_rows(args, mesh, cam, f"{mesh_name}_cam{c}")
+                        for c, cam in enumerate(args.cams)]
+        else:
+            mt.run([args.ltm, "bake", toml, "-o", raw])
+            mt.run([args.ltm, "compress", raw, "-o", ltm_file])
+            os.remove(raw)
         objects = [dict(path=mesh, scale=1.0, translation=[0.0, 0.0, 0.0])]
         masks = [mt.interior(mt.coverage_render(mi, objects, cam, args.width)) for cam in args.cams]
         for map_name in args.maps.split(","):
@@ -323,7 +385,7 @@ def main():
                 results += sweep(args, mi, ctx)
     with open(os.path.join(args.out, "summary.json"), "w") as f:
         json.dump(dict(mitsuba_version=mi.__version__, variant=args.variant, spp=args.spp,
-                       sampler=args.sampler,
+                       sampler=args.sampler, rows=args.rows,
                        size=args.size, light_n=args.light_n, width=args.width,
                        fresnel_gap=fresnel_gap(IOR), results=results), f, indent=1)
     print(f"images and summary.json in {args.out}")
@@ -385,6 +447,39 @@ def write_fixture(args, mi):
     meta = dict(camera=dict(eye=cam["eye"], target=cam["target"], fov=cam["fov"]),
                 width=width, glossy_n=n, mitsuba_version=mi.__version__,
                 variant=args.variant, sampler=args.sampler, mitsuba_spp=args.spp, cases=cases)
+    with open(os.path.join(dest, "meta.json"), "w") as f:
+        json.dump(meta, f, indent=2)
+
+
+def write_image_fixture(args, mi):
+    """Adds the image-row route to an existing fixture (`--rows image
+    --fixture DIR`): `image.toml`, the sphere's image rows from the
+    fixture's camera at its width, and per case the error `ltm relight
+    --brdf SPEC --shading glossy --glossy-n 32` has against the same
+    Mitsuba renders (`image_measured`) and the test's limit (`image_limit`,
+    1.5 x that, rounded up to 0.5 %)."""
+    dest = os.path.abspath(args.fixture)
+    with open(os.path.join(dest, "meta.json")) as f:
+        meta = json.load(f)
+    cam, width = meta["camera"], meta["width"]
+    with open(os.path.join(dest, "image.toml"), "w") as f:
+        f.write(image_scene_toml("sphere.obj", cam, width))
+    ltm_file = os.path.join(args.out, "image.ltm")
+    raw = os.path.join(args.out, "image.raw")
+    mt.run([args.ltm, "bake", os.path.join(dest, "image.toml"), "-o", raw])
+    mt.run([args.ltm, "compress", raw, "-o", ltm_file])
+    os.remove(raw)
+    mask = np.load(os.path.join(dest, "interior.npy")) > 0.5
+    for case in meta["cases"]:
+        ref = np.load(os.path.join(dest, f"mitsuba_{case['name']}.npy")).astype(np.float64)
+        view = os.path.join(args.out, "image.exr")
+        ltm_relight_image(args, ltm_file, os.path.join(dest, "env.exr"), case["spec"], view,
+                          ["--glossy-n", str(meta["glossy_n"])])
+        err = mt.rel(mt.read_exr(mi, view), ref, mask)
+        measured = math.sqrt(max(err ** 2 - case["mitsuba_noise"] ** 2, 0.0))
+        case["image_measured"] = measured
+        case["image_limit"] = math.ceil(1.5 * measured * 200) / 200
+        print(json.dumps(case), flush=True)
     with open(os.path.join(dest, "meta.json"), "w") as f:
         json.dump(meta, f, indent=2)
 

@@ -41,7 +41,7 @@ pub fn point(s: &str) -> Result<[f64; 3], String> {
     match v[..] {
         [x, y, z] if v.iter().all(|c| c.is_finite()) => Ok([x, y, z]),
         [_, _, _] => Err(format!(
-            "point light position '{s}' is not finite (valid: finite X,Y,Z world coordinates)"
+            "position '{s}' is not finite (valid: finite X,Y,Z world coordinates)"
         )),
         _ => Err(format!("'{s}' has {} coordinates (valid: X,Y,Z)", v.len())),
     }

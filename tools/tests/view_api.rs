@@ -463,7 +463,6 @@ fn glossy_frames_rerun_step_1_only_for_a_new_lighting() {
     assert_eq!(r.status, 200, "{}", r.text());
     assert!(r.header("x-step1-ms").unwrap().parse::<f64>().unwrap() > 0.0);
     for (q, says) in [
-        ("file=1&map=0&n=4&brdf=1&eye=0,0,3", "image-space file"),
         (
             "file=0&map=0&n=4&brdf=3&eye=0,0,3",
             "brdf '3' is out of range (valid: 0..=2)",
@@ -475,6 +474,77 @@ fn glossy_frames_rerun_step_1_only_for_a_new_lighting() {
         assert_eq!(r.status, 400, "{q}");
         assert!(r.text().contains(says), "{q}: {}", r.text());
     }
+    image_rows_take_the_material_from_their_own_eye(&srv, &info, &image, &env);
+}
+
+/// The image-space file of the glossy test: `/api/info` gives the eye its
+/// surface records fix (the scene file's camera), and a glossy frame is
+/// `ltm relight --brdf`'s, shaded from that eye whatever the request's.
+fn image_rows_take_the_material_from_their_own_eye(
+    srv: &Server,
+    info: &serde_json::Value,
+    image: &str,
+    env: &str,
+) {
+    assert_eq!(info["files"][0]["eye"], serde_json::Value::Null);
+    let eye: Vec<f64> = serde_json::from_value(info["files"][1]["eye"].clone()).unwrap();
+    let want = [0.2, 1.45, 5.0];
+    assert!(
+        eye.iter().zip(want).all(|(a, b)| (a - b).abs() < 1e-5),
+        "{eye:?}"
+    );
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("g.exr");
+    let o = out.to_str().unwrap();
+    let args = [
+        "relight",
+        image,
+        "--env",
+        env,
+        "--rotate=20,0,0",
+        "--terms",
+        "24",
+    ];
+    ltm(&[
+        &args[..],
+        &[
+            "--weighting",
+            "unweighted",
+            "--brdf",
+            "ggx:0.3",
+            "--glossy-n",
+            "16",
+            "-o",
+            o,
+        ],
+    ]
+    .concat());
+    let want: Vec<f32> = ltm_relight::Image::read_exr(&out)
+        .unwrap()
+        .data
+        .iter()
+        .flatten()
+        .copied()
+        .collect();
+    for eye in ["0.2,1.45,5", "9,-9,9"] {
+        let r = srv.get(&format!(
+            "/api/frame?file=1&map=0&yaw=20&n=24&brdf=1&eye={eye}"
+        ));
+        assert_eq!(r.status, 200, "{}", r.text());
+        let (_, _, got) = r.frame();
+        assert_eq!(got.len(), want.len());
+        for (a, b) in got.iter().zip(&want) {
+            assert!(
+                (a - b).abs() <= f16_tolerance(*b) + 1e-5 * b.abs(),
+                "{a} vs {b}"
+            );
+        }
+    }
+    let plain = srv.get("/api/frame?file=1&map=0&yaw=20&n=24").frame().2;
+    assert!(
+        frame_distance(&plain, &want) > 1e-3,
+        "the material adds nothing"
+    );
 }
 
 /// `/api/map`: the map's preview (256 × 128), box-filtered (its mean is the

@@ -892,6 +892,73 @@ fn glossy_materials_show_what_ltm_render_brdf_draws() {
     mesh_view_matches_ltm_render(&browser, &atlas, &map("interior.exr"), &glossy);
 }
 
+/// A glossy material on an image-space file, chosen in the page's menu, is
+/// what `ltm relight --brdf` draws: every pixel seen from the eye the
+/// file's surface records fix (the scene file's camera), within one 8-bit
+/// level.
+#[test]
+fn glossy_materials_on_image_rows_show_what_ltm_relight_brdf_draws() {
+    let Some(browser) = browser() else { return };
+    let (s, env) = (scene(), map("interior.exr"));
+    let (file, env_s) = (s.ltm.to_str().unwrap(), env.to_str().unwrap());
+    let glossy = ["--brdf", "ggx:0.25,f0=0.9/0.7/0.4", "--glossy-n", "16"];
+    let srv = Server::start(&[&[file, "--env", env_s][..], &glossy].concat());
+    let tab = open_page(&browser, &srv, "#view0[data-shown]");
+    set(&tab, "weighting", "unweighted", "change");
+    set(&tab, "n-number", "40", "change");
+    set(&tab, "exposure", "0.5", "input");
+    set(&tab, "brdf", "1", "change");
+    let q = eval(&tab, "query(0)");
+    let q = q.as_str().unwrap();
+    assert!(q.contains("&n=40&") && q.contains("&brdf=1&eye="), "{q}");
+    let eye: Vec<f64> = q
+        .rsplit("eye=")
+        .next()
+        .unwrap()
+        .split(',')
+        .map(|c| c.parse().unwrap())
+        .collect();
+    let camera = [0.2, 1.45, 5.0];
+    assert!(
+        eye.iter().zip(camera).all(|(a, b)| (a - b).abs() < 1e-5),
+        "{q}"
+    );
+    wait_shown(&tab, "view0", q);
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("g.exr");
+    let relight = [
+        "relight",
+        file,
+        "--env",
+        env_s,
+        "--terms",
+        "40",
+        "--weighting",
+        "unweighted",
+    ];
+    ltm(&[&relight[..], &glossy, &["-o", out.to_str().unwrap()]].concat());
+    let want = ltm_relight::Image::read_exr(&out).unwrap();
+    let got = pixels(&tab, "view0");
+    let want8: Vec<u8> = want.data.iter().flatten().map(|&v| srgb8(v, 0.5)).collect();
+    assert_eq!(got.len(), want8.len());
+    let worst = got.iter().zip(&want8).map(|(g, w)| g.abs_diff(*w)).max();
+    assert!(worst <= Some(1), "largest difference {worst:?} levels");
+    // The material changed the picture.
+    set(&tab, "brdf", "0", "change");
+    wait_shown(&tab, "view0", q.split("&brdf").next().unwrap());
+    let baked = pixels(&tab, "view0");
+    let changed = baked
+        .iter()
+        .zip(&got)
+        .filter(|(a, b)| a.abs_diff(**b) > 8)
+        .count();
+    assert!(
+        changed > got.len() / 20,
+        "{changed} of {} values changed",
+        got.len()
+    );
+}
+
 /// Interaction latency of a sustained drag (benchmark mode, not a test of
 /// correctness): both files of `LTM_VIEW_BENCH` open side by side, and the
 /// page's yaw turns by 1.5° every 16.7 ms (60 input events a second, as a

@@ -1,5 +1,6 @@
 //! Glossy materials in `ltm view` (`--brdf`, repeatable): the page's
-//! material menu for texture-space files. A frame asked for with
+//! material menu for texture-space files (and image-space ones, each pixel
+//! seen from the eye its surface records fix). A frame asked for with
 //! `brdf=K` (K ≥ 1) and `eye=x,y,z` is what `ltm render --brdf SPEC
 //! --shading sum` draws from that eye: the relit texture plus every
 //! texel's glossy reflection toward the eye, by wavelet rotation (Wang et

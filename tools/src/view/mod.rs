@@ -13,7 +13,10 @@
 //!   else null), `maps` (name, width, height), `reference` (the raw store's
 //!   name or null), `area_textures` (names; index 0 is `uniform`), `brdfs`
 //!   (the `--brdf` specs: material K is `brdfs[K − 1]`) and `glossy_n`
-//!   (their lighting side, or null).
+//!   (their lighting side, or null). With `--brdf`, an image-space file's
+//!   `eye` is the camera position its pixels were seen from, recovered
+//!   from its surface records (`ltm_codec::ImageCamera`), or null where
+//!   they do not fix it (texture files: null).
 //! - `/api/frame?file=F&map=M&yaw=Y&pitch=P&roll=R&n=N&weighting=W&light=L&client=C&seq=S`:
 //!   one frame. `yaw`, `pitch`, `roll` (degrees, finite, |a| ≤ 36000),
 //!   `weighting` (unweighted, transport, area) and `light` are optional.
@@ -32,12 +35,14 @@
 //!   ±3600), and `at` (texture index); it is lit
 //!   exactly (`ltm relight --area-method exact`), `X-Area-Ms` gives its
 //!   time, and such a frame carries no `X-Error` (the exact image is the
-//!   map's). A glossy material (texture-space files, `ltm view --brdf`) is
-//!   added with `brdf` (1 to the number of `--brdf` materials; 0, the
+//!   map's). A glossy material (`ltm view --brdf`; texture-space files,
+//!   and image-space files with an `eye`) is added with `brdf` (1 to the number of `--brdf` materials; 0, the
 //!   default, is the baked material alone) and `eye` (`x,y,z` in world
 //!   units, finite, |v| ≤ 10⁶; required with `brdf` ≥ 1, refused without):
 //!   the frame is then what `ltm render --brdf SPEC --shading sum` draws
-//!   from that eye (see `glossy.rs`), with `X-Step1-Ms` (0 when the file's
+//!   from that eye (see `glossy.rs`; an image-space file's pixels are
+//!   shaded from its own `eye` whatever the request gives, as `ltm
+//!   relight --brdf SPEC` shades them), with `X-Step1-Ms` (0 when the file's
 //!   lighting was kept), `X-Step2-Ms` and `X-Glossy-Setup-Ms` (rotation
 //!   matrices and slices on first use, and a switch of material), and no
 //!   `X-Error`.
@@ -156,7 +161,8 @@ pub struct ViewArgs {
     /// `merl:PATH`, ...). A texture-space file is then drawn as `ltm
     /// render --brdf SPEC --shading sum` draws it from the page's eye: the
     /// relit texture plus the material's glossy reflection (unshadowed),
-    /// by wavelet rotation. Orbiting the mesh re-runs step 2 only (about
+    /// by wavelet rotation; an image-space file as `ltm relight --brdf
+    /// SPEC` draws it, from the eye its surface records fix. Orbiting the mesh re-runs step 2 only (about
     /// 12 ms a step of a drag and 30–40 ms a jump, for 256² texels), and so
     /// does a new material once its slices are built (0.4 s at n = 64,
     /// 1.2 s at 128); a new lighting re-runs step 1 (about 0.16 s at

@@ -8,7 +8,7 @@ use super::preview::Preview;
 use anyhow::{bail, Context, Result};
 use glam::DVec3;
 use ltm_codec::container::LtmFile;
-use ltm_codec::{Charge, Limits, RawStore, RowLayout, SurfacePoint};
+use ltm_codec::{Charge, ImageCamera, Limits, RawStore, RowLayout, SurfacePoint};
 use ltm_relight::nearfield::{AreaLight, LightTexture, NearField, NearFieldMethod, Placement};
 use ltm_relight::{
     reference, relative_l2, EnvMap, Frame, FrameStats, Image, PrefilteredMap, Relight, Request,
@@ -47,7 +47,8 @@ pub struct ViewFile {
     /// The file's near-field rows (a scene's `[light_plane]`), if any.
     near: Option<NearField>,
     /// A texture-space file's surface points (what glossy materials shade),
-    /// charged to the budget while they live.
+    /// or, with `--brdf`, an image-space file's whose eye is known, charged
+    /// to the budget while they live.
     points: (Vec<SurfacePoint>, Charge),
 }
 
@@ -87,6 +88,10 @@ pub struct FileInfo {
     /// The light plane of a file with near-field rows (area lights), or
     /// null.
     pub near_field: Option<NearInfo>,
+    /// With `--brdf`, the eye an image-space file's pixels were seen from
+    /// (recovered from its surface records; glossy materials shade from
+    /// it); null for texture files and where the records do not fix it.
+    pub eye: Option<[f64; 3]>,
 }
 
 /// A listed environment map.
@@ -166,6 +171,27 @@ fn key_of(l: &Lighting) -> [u64; 3] {
     [r.yaw.to_bits(), r.pitch.to_bits(), r.roll.to_bits()]
 }
 
+/// The eye of an image-space file's pixels, recovered from its surface
+/// records; a warning names the file and the reason where they do not fix
+/// it (its frames then take no glossy material).
+fn image_eye(file: &LtmFile, path: &Path) -> Option<[f64; 3]> {
+    let width = file.meta().dims.width() as usize;
+    let camera = match file.surface() {
+        Some(surface) => ImageCamera::recover(surface, width).map_err(|e| e.to_string()),
+        None => Err("it stores no surface records".into()),
+    };
+    match camera {
+        Ok(c) => Some(c.eye()),
+        Err(e) => {
+            eprintln!(
+                "warning: {}: glossy materials need the eye its pixels were seen from: {e}",
+                path.display()
+            );
+            None
+        }
+    }
+}
+
 pub fn file_name(p: &Path) -> String {
     p.file_name()
         .map(|s| s.to_string_lossy().into_owned())
@@ -173,7 +199,9 @@ pub fn file_name(p: &Path) -> String {
 }
 
 impl ViewFile {
-    fn open(path: &Path, limits: &Limits) -> Result<ViewFile> {
+    /// Opens `path`; with `glossy` (materials were given), an image-space
+    /// file's eye is recovered and its surface points kept.
+    fn open(path: &Path, glossy: bool, limits: &Limits) -> Result<ViewFile> {
         // One read of the file, whose relighter is made last (it takes it).
         let mut file = LtmFile::open_with_limits(path, limits)
             .with_context(|| format!("opening {}", path.display()))?;
@@ -195,7 +223,11 @@ impl ViewFile {
             false => None,
         };
         let bytes = file.file_bytes();
-        let points = match file.surface().filter(|_| texture) {
+        let eye = match glossy && !texture {
+            true => image_eye(&file, path),
+            false => None,
+        };
+        let points = match file.surface().filter(|_| texture || eye.is_some()) {
             Some(surface) => {
                 let size = std::mem::size_of::<SurfacePoint>() as u64;
                 let charge = limits.check_alloc("surface points", surface.len() as u64, size)?;
@@ -225,6 +257,7 @@ impl ViewFile {
                 order: n.basis().order,
                 side: n.basis().side,
             }),
+            eye,
         };
         Ok(ViewFile {
             path: path.to_path_buf(),
@@ -269,7 +302,7 @@ impl Viewer {
     ) -> Result<Viewer> {
         let files = files
             .iter()
-            .map(|p| ViewFile::open(p, limits))
+            .map(|p| ViewFile::open(p, materials.is_some(), limits))
             .collect::<Result<Vec<_>>>()?;
         let maps = maps
             .iter()
@@ -364,9 +397,9 @@ impl Viewer {
         image: &mut Image,
     ) -> Result<GlossyTimes, FrameError> {
         let (index, file) = f;
-        if file.mesh.is_none() {
+        if file.points.0.is_empty() {
             return Err(FrameError::Bad(format!(
-                "{} is an image-space file: glossy materials shade texture-space files only",
+                "{} is an image-space file whose surface records do not fix the eye its pixels were seen from: it takes no glossy material",
                 file.info.name
             )));
         }
@@ -377,7 +410,8 @@ impl Viewer {
         // lighting moves, as the transport's); kept in the light cache.
         let (cubemap, _, draft) = self.light(materials.side(), &p.lighting, p.resampling);
         let lit = (p.lighting.map, key_of(&p.lighting), draft);
-        let eye = DVec3::from(g.eye);
+        // An image-space file's pixels are seen from its camera's eye.
+        let eye = DVec3::from(file.info.eye.unwrap_or(g.eye));
         materials
             .add(
                 (index, &file.points.0),

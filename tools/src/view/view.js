@@ -204,12 +204,14 @@ function query(fileIndex) {
   return `file=${fileIndex}&${rotationQuery()}&n=${terms(fileIndex)}&weighting=${$("weighting").value}${areaQuery(fileIndex)}${glossyQuery(fileIndex)}`;
 }
 
-// The glossy material's part of a texture-space file's query: the menu's
-// material and the orbit camera's eye, which it is shaded from.
+// The glossy material's part of a file's query: the menu's material and
+// the eye it is shaded from: a texture-space file's orbit camera, or the
+// camera an image-space file's pixels were seen from.
 function glossyQuery(fileIndex) {
   const k = Number($("brdf").value || 0), gl = panels[fileIndex]?.gl;
-  if (!k || !gl) return "";
-  return `&brdf=${k}&eye=${gl.eye().map((c) => +c.toPrecision(9)).join(",")}`;
+  const eye = gl ? gl.eye() : info.files[fileIndex]?.eye;
+  if (!k || !eye) return "";
+  return `&brdf=${k}&eye=${eye.map((c) => +c.toPrecision(9)).join(",")}`;
 }
 
 // The area light's part of a file's query: only when it is on and the file
@@ -930,7 +932,7 @@ async function start() {
     $("area-row").hidden = false;
     info.area_textures.forEach((t, i) => $("area-texture").add(new Option(t, i)));
   }
-  if (info.brdfs.length && info.files.some((f) => f.layout === "texture")) {
+  if (info.brdfs.length && info.files.some((f) => f.layout === "texture" || f.eye)) {
     $("brdf-label").hidden = false;
     $("brdf").add(new Option("baked", 0));
     info.brdfs.forEach((b, i) => $("brdf").add(new Option(b, i + 1)));

@@ -12,15 +12,20 @@
 //!   every (grid normal, view texel) pair computed where it is used),
 //!   `new_view` (a new, empty pair table before each view: a view with
 //!   nothing to reuse) and `orbit` (a view 1° about the vertical from the
-//!   one before, whose pairs the table keeps: a step of a viewer's drag).
+//!   one before, whose pairs the table keeps: a step of a viewer's drag);
+//!   and each with both view filters (`Nearest`: one view texel per grid
+//!   normal; `Bilinear`, the default: four).
 //!
 //! The goals are 10 lighting changes per second at N = 64² and a
 //! view change at 60 frames/s (3.9 M texels/s) for 256² texels.
 
-use criterion::{criterion_group, criterion_main, BenchmarkId, Criterion, Throughput};
+use criterion::measurement::WallTime;
+use criterion::{
+    criterion_group, criterion_main, BenchmarkGroup, BenchmarkId, Criterion, Throughput,
+};
 use ltm::codec::SurfacePoint;
 use ltm::relight::rotation::{
-    Brdf, BrdfSlices, OctMap, RotationConfig, RotationSet, Shader, SliceConfig,
+    Brdf, BrdfSlices, OctMap, RotationConfig, RotationSet, Shader, SliceConfig, ViewFilter,
 };
 use ltm::Limits;
 use std::sync::Arc;
@@ -76,7 +81,6 @@ fn bench(c: &mut Criterion) {
     };
     let points = sphere();
     let eye = glam::DVec3::new(0.4, 1.0, 3.0);
-    let mut out = vec![[0.0f32; 3]; points.len()];
     for n in [64usize, 128] {
         let cfg = RotationConfig {
             n,
@@ -115,39 +119,58 @@ fn bench(c: &mut Criterion) {
             shader.set_brdf(slices).unwrap();
             shader.set_local_keep(local, &limits).unwrap();
             shader.light(&map, None).unwrap();
-            let id = |how: &str| format!("step2_256x256_keep{keep}_local{local}_{how}");
-            shader.set_pair_table(false);
-            group.bench_function(BenchmarkId::new(id("direct"), n), |b| {
-                b.iter(|| shader.shade_points(&points, eye, &mut out).unwrap())
-            });
-            group.bench_function(BenchmarkId::new(id("new_view"), n), |b| {
-                b.iter_custom(|iters| {
-                    let mut total = Duration::ZERO;
-                    for _ in 0..iters {
-                        assert!(shader.set_pair_table(true));
-                        let start = Instant::now();
-                        shader.shade_points(&points, eye, &mut out).unwrap();
-                        total += start.elapsed();
-                    }
-                    total
-                })
-            });
-            group.bench_function(BenchmarkId::new(id("orbit"), n), |b| {
-                b.iter_custom(|iters| {
-                    let mut total = Duration::ZERO;
-                    for _ in 0..iters {
-                        assert!(shader.set_pair_table(true));
-                        shader.shade_points(&points, eye, &mut out).unwrap();
-                        let start = Instant::now();
-                        shader.shade_points(&points, orbit(eye), &mut out).unwrap();
-                        total += start.elapsed();
-                    }
-                    total
-                })
-            });
+            for filter in [ViewFilter::Nearest, ViewFilter::Bilinear] {
+                shader.set_view_filter(filter);
+                view_change(
+                    &mut group,
+                    &mut shader,
+                    (n, keep, local, filter),
+                    (&points, eye),
+                );
+            }
         }
         group.finish();
     }
+}
+
+/// Step 2 for `points` from `eye` three ways (see the module doc).
+fn view_change(
+    group: &mut BenchmarkGroup<'_, WallTime>,
+    shader: &mut Shader,
+    (n, keep, local, filter): (usize, f64, f64, ViewFilter),
+    (points, eye): (&[SurfacePoint], glam::DVec3),
+) {
+    let mut out = vec![[0.0f32; 3]; points.len()];
+    let id = |how: &str| format!("step2_256x256_keep{keep}_local{local}_{filter:?}_{how}");
+    shader.set_pair_table(false);
+    group.bench_function(BenchmarkId::new(id("direct"), n), |b| {
+        b.iter(|| shader.shade_points(points, eye, &mut out).unwrap())
+    });
+    group.bench_function(BenchmarkId::new(id("new_view"), n), |b| {
+        b.iter_custom(|iters| {
+            let mut total = Duration::ZERO;
+            for _ in 0..iters {
+                assert!(shader.set_pair_table(true));
+                let start = Instant::now();
+                shader.shade_points(points, eye, &mut out).unwrap();
+                total += start.elapsed();
+            }
+            total
+        })
+    });
+    group.bench_function(BenchmarkId::new(id("orbit"), n), |b| {
+        b.iter_custom(|iters| {
+            let mut total = Duration::ZERO;
+            for _ in 0..iters {
+                assert!(shader.set_pair_table(true));
+                shader.shade_points(points, eye, &mut out).unwrap();
+                let start = Instant::now();
+                shader.shade_points(points, orbit(eye), &mut out).unwrap();
+                total += start.elapsed();
+            }
+            total
+        })
+    });
 }
 
 criterion_group!(benches, bench);

@@ -353,4 +353,12 @@ fn relight_brdf_refuses_what_it_cannot_shade() {
         .zip(&base.data)
         .all(|(a, b)| (0..3).all(|c| a[c].is_finite() && a[c] >= b[c]) && a[1] > b[1]);
     assert!(added, "the glossy part is not added to every pixel");
+    // The nearest view texel instead of four: another image, as finite.
+    let nearest = d.join("n.exr");
+    let mut args = brdf(&plane, &["--eye", "7.5,6,7.5", "--view-filter", "nearest"]);
+    *args.iter_mut().find(|a| a.ends_with("o.exr")).unwrap() = s(&nearest).into();
+    ok(&refs(&args));
+    let near = ltm_relight::Image::read_exr(&nearest).unwrap();
+    assert!(near.data.iter().flatten().all(|v| v.is_finite()));
+    assert_ne!(near.data, lit.data, "--view-filter changed nothing");
 }

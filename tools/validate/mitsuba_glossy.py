@@ -331,6 +331,9 @@ def main():
     ap.add_argument("--rows", choices=["texture", "image"], default="texture",
                     help="draw a texture-space bake with `ltm render`, or each "
                          "camera's image rows with `ltm relight`")
+    ap.add_argument("--remeasure", action="store_true",
+                    help="with --fixture: measure ltm's errors (both row layouts) against "
+                         "the fixture's committed Mitsuba renders again, and reset the limits")
     ap.add_argument("--sweep", action="store_true")
     ap.add_argument("--extra", default="", help="more `ltm render` flags for every case")
     ap.add_argument("--variant", default="scalar_rgb")
@@ -347,6 +350,10 @@ def main():
     alphas = [float(a) for a in args.alphas.split(",")]
     results = []
     print(f"Schlick against exact Fresnel at IOR {IOR}: {pct(fresnel_gap(IOR))}", flush=True)
+    if args.fixture and args.remeasure:
+        remeasure_fixture(args, mi)
+        write_image_fixture(args, mi)
+        return 0
     if args.fixture and args.rows == "image":
         write_image_fixture(args, mi)
         return 0
@@ -447,6 +454,34 @@ def write_fixture(args, mi):
     meta = dict(camera=dict(eye=cam["eye"], target=cam["target"], fov=cam["fov"]),
                 width=width, glossy_n=n, mitsuba_version=mi.__version__,
                 variant=args.variant, sampler=args.sampler, mitsuba_spp=args.spp, cases=cases)
+    with open(os.path.join(dest, "meta.json"), "w") as f:
+        json.dump(meta, f, indent=2)
+
+
+def remeasure_fixture(args, mi):
+    """`--fixture DIR --remeasure`: ltm's texture-route error per case
+    against the fixture's committed Mitsuba renders (its `measured` and
+    `limit`), as `write_fixture` measured it, with no new Mitsuba render."""
+    dest = os.path.abspath(args.fixture)
+    with open(os.path.join(dest, "meta.json")) as f:
+        meta = json.load(f)
+    cam, width = meta["camera"], meta["width"]
+    args.width = width
+    ltm_file = os.path.join(args.out, "fixture.ltm")
+    raw = os.path.join(args.out, "fixture.raw")
+    mt.run([args.ltm, "bake", os.path.join(dest, "scene.toml"), "-o", raw])
+    mt.run([args.ltm, "compress", raw, "-o", ltm_file])
+    os.remove(raw)
+    mask = np.load(os.path.join(dest, "interior.npy")) > 0.5
+    for case in meta["cases"]:
+        ref = np.load(os.path.join(dest, f"mitsuba_{case['name']}.npy")).astype(np.float64)
+        view = os.path.join(args.out, "fixture.exr")
+        ltm_render(args, ltm_file, os.path.join(dest, "env.exr"), cam, case["spec"], view,
+                   ["--glossy-n", str(meta["glossy_n"])])
+        err = mt.rel(mt.read_exr(mi, view), ref, mask)
+        case["measured"] = math.sqrt(max(err ** 2 - case["mitsuba_noise"] ** 2, 0.0))
+        case["limit"] = math.ceil(1.5 * case["measured"] * 200) / 200
+        print(json.dumps(case), flush=True)
     with open(os.path.join(dest, "meta.json"), "w") as f:
         json.dump(meta, f, indent=2)
 

@@ -8,7 +8,7 @@
 //! Local frames have the normal on `+z`; `ω` and `ω_o` point away from the
 //! surface.
 
-use super::maps::{hemi_encode, texel_of};
+use super::maps::{hemi_encode, square_bilinear, texel_of};
 use super::merl::MeasuredBrdf;
 use super::spatial::{self, Square, SubSamples};
 use super::{check_pow2, haar};
@@ -568,6 +568,13 @@ impl BrdfSlices {
     pub fn view_index(&self, wo: DVec3) -> usize {
         let (u, v) = hemi_encode(wo);
         texel_of(self.cfg.views, u, v)
+    }
+
+    /// The four view texels around local view direction `wo` (moved onto
+    /// the horizon if below it) and their bilinear weights.
+    pub fn view_bilinear(&self, wo: DVec3) -> [(usize, f64); 4] {
+        let (u, v) = hemi_encode(wo);
+        square_bilinear(self.cfg.views, u, v)
     }
 
     /// The terms of view `v`: `(target coefficient, RGB value)`.

@@ -80,6 +80,26 @@ pub fn texel_of(n: usize, u: f64, v: f64) -> usize {
     c(v) * n + c(u)
 }
 
+/// Bilinear interpolation on a side-`n` square grid (values at texel
+/// centres, the square not folded: the hemi-octahedral map, whose border
+/// is the horizon): the four texels around `(u, v)` and their weights,
+/// clamped to the border texels past their centres.
+pub fn square_bilinear(n: usize, u: f64, v: f64) -> [(usize, f64); 4] {
+    let last = n as i64 - 1;
+    let axis = |t: f64| {
+        let f = (t * n as f64 - 0.5).clamp(0.0, last as f64);
+        let i0 = floor(f).clamp(0, last);
+        (i0 as usize, (i0 + 1).min(last) as usize, f - i0 as f64)
+    };
+    let ((x0, x1, ax), (y0, y1, ay)) = (axis(u), axis(v));
+    [
+        (y0 * n + x0, (1.0 - ax) * (1.0 - ay)),
+        (y0 * n + x1, ax * (1.0 - ay)),
+        (y1 * n + x0, (1.0 - ax) * ay),
+        (y1 * n + x1, ax * ay),
+    ]
+}
+
 /// `(u, v)` of the centre of texel `t` of a side-`n` map.
 pub fn texel_center(n: usize, t: usize) -> (f64, f64) {
     let (x, y) = (t % n, t / n);

@@ -42,7 +42,7 @@ pub use cache::{CacheUse, MAGIC as CACHE_MAGIC, VERSION as CACHE_VERSION};
 pub use matrix::{Columns, RotationMatrix, QMAX};
 pub use merl::{MeasuredBrdf, MERL_DIMS, MERL_FILE_BYTES};
 pub use pairs::MAX_PAIR_TABLE_BYTES;
-pub use shade::{resample_local, OctMap, Shader, DEFAULT_LOCAL_KEEP};
+pub use shade::{resample_local, OctMap, Shader, ViewFilter, DEFAULT_LOCAL_KEEP};
 
 use crate::error::{RelightError, Result};
 use glam::DVec3;

@@ -177,7 +177,25 @@ pub struct Shader {
     pairs: Option<PairTable>,
     /// The budget the pair table is charged to when the BRDF changes.
     limits: Limits,
+    /// How step 2 reads the slices between view texels.
+    view_filter: ViewFilter,
     _charge: Charge,
+}
+
+/// How step 2 takes a grid normal's slice for a view direction that falls
+/// between the view grid's texels.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+#[non_exhaustive]
+pub enum ViewFilter {
+    /// The texel the direction falls in: one pair per grid normal. The
+    /// shading then steps where the direction crosses a texel's edge,
+    /// which a sharp lobe shows (6.0 % against Mitsuba 3 for a conductor
+    /// of α = 0.1 on a sphere, 128² pixels, 64² views, n = 128).
+    Nearest,
+    /// The four texels around it, blended bilinearly: four pairs per grid
+    /// normal, continuous across texel edges (2.7 % in the same case).
+    #[default]
+    Bilinear,
 }
 
 impl Shader {
@@ -208,6 +226,7 @@ impl Shader {
             frames,
             pairs,
             limits: limits.clone(),
+            view_filter: ViewFilter::default(),
             _charge: charge.join(frames_charge),
         };
         shader.set_local_keep(DEFAULT_LOCAL_KEEP, limits)?;
@@ -312,11 +331,22 @@ impl Shader {
         &self.local[i * m2..(i + 1) * m2]
     }
 
+    /// Sets how step 2 reads the slices between view texels (the pairs
+    /// computed so far stay valid).
+    pub fn set_view_filter(&mut self, filter: ViewFilter) {
+        self.view_filter = filter;
+    }
+
+    /// The view filter.
+    pub fn view_filter(&self) -> ViewFilter {
+        self.view_filter
+    }
+
     /// Step 2: outgoing radiance at a surface point of unit `normal` seen
     /// from unit direction `view` (towards the viewer), both global: for
     /// each of the four grid normals around `normal`, the slice of a view
-    /// in that normal's frame dotted with its local lighting, blended
-    /// bilinearly.
+    /// in that normal's frame (the view grid read as [`ViewFilter`] says)
+    /// dotted with its local lighting, blended bilinearly.
     ///
     /// The view each grid normal `g` is shaded from is not `view` itself
     /// but the one that `g` mirrors into the same direction as `normal`
@@ -336,12 +366,24 @@ impl Shader {
             // The mirror of `mirror` about the frame's normal (its +z).
             let r = self.frames[i].to_local(mirror);
             let wo = DVec3::new(-r.x, -r.y, r.z);
-            let v = self.slices.view_index(wo);
-            let radiance = match &self.pairs {
-                Some(table) => table.get(i, v, || self.pair(i, v)),
-                None => self.pair(i, v),
+            let views = match self.view_filter {
+                ViewFilter::Nearest => {
+                    let v = self.slices.view_index(wo);
+                    [(v, 1.0), (v, 0.0), (v, 0.0), (v, 0.0)]
+                }
+                ViewFilter::Bilinear => self.slices.view_bilinear(wo),
             };
-            (0..3).for_each(|c| out[c] += w as f32 * radiance[c]);
+            for (v, wv) in views {
+                if wv == 0.0 {
+                    continue;
+                }
+                let radiance = match &self.pairs {
+                    Some(table) => table.get(i, v, || self.pair(i, v)),
+                    None => self.pair(i, v),
+                };
+                let weight = (w * wv) as f32;
+                (0..3).for_each(|c| out[c] += weight * radiance[c]);
+            }
         }
         out
     }

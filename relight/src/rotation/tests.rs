@@ -1211,3 +1211,85 @@ fn worst_difference(brdf: &Brdf, cfg: &SliceConfig, symmetries: &[super::spatial
     }
     worst
 }
+
+/// Step 2's view filter: bilinear weights sum to one and pick a texel at
+/// its centre; on a grid normal, bilinear shading equals nearest at view
+/// texel centres and is continuous between them, where nearest steps (a
+/// sharp lobe under a lamp, views swept 0.05° apart).
+#[test]
+fn bilinear_views_are_continuous_where_nearest_steps() {
+    let mut rng = Rng(9);
+    for _ in 0..1000 {
+        let (u, v) = (rng.f64() * 1.2 - 0.1, rng.f64() * 1.2 - 0.1);
+        let taps = square_bilinear(16, u, v);
+        let w: f64 = taps.iter().map(|p| p.1).sum();
+        assert!((w - 1.0).abs() < 1e-12 && taps.iter().all(|p| p.0 < 256 && p.1 >= 0.0));
+    }
+    let cfg = RotationConfig {
+        n: 32,
+        normals: 4,
+        supersample: 2,
+        threshold: 1,
+    };
+    let slices = SliceConfig {
+        m: 16,
+        views: 16,
+        supersample: 2,
+        keep: 0.1,
+        residuals: true,
+    };
+    let brdf = Brdf::Ggx {
+        alpha: 0.1,
+        f0: [1.0; 3],
+    };
+    let mut sh = shader(cfg, brdf, slices);
+    let normal = cfg.grid_normal(6);
+    let frame = Frame::new(normal);
+    let light = frame.to_global(DVec3::new(0.5, -0.3, 0.8).normalize());
+    let map = OctMap::from_fn(32, 4, |d| match d.dot(light) > 0.99 {
+        true => [50.0; 3],
+        false => [0.2; 3],
+    });
+    sh.light(&map.unwrap(), None).unwrap();
+    let mut shade = |filter, view| {
+        sh.set_view_filter(filter);
+        sh.shade(normal, view)[0]
+    };
+    for t in [0, 37, 100, 255] {
+        let (u, v) = texel_center(16, t);
+        let view = frame.to_global(hemi_decode(u, v).0);
+        let (a, b) = (
+            shade(ViewFilter::Nearest, view),
+            shade(ViewFilter::Bilinear, view),
+        );
+        assert!(
+            (a - b).abs() <= 1e-5 * a.abs().max(1e-3),
+            "texel {t}: {a} vs {b}"
+        );
+    }
+    // Views swept through the mirror direction of the lamp.
+    let mirror = 2.0 * normal.dot(light) * normal - light;
+    let axis = mirror.cross(normal).normalize();
+    let mut steps = |filter| {
+        let values: Vec<f32> = (0..600)
+            .map(|k| {
+                let a = (f64::from(k) * 0.05 - 15.0).to_radians();
+                let view = mirror * a.cos() + axis.cross(mirror) * a.sin();
+                shade(filter, view)
+            })
+            .collect();
+        let top = values.iter().copied().fold(0.0f32, f32::max);
+        let step = values
+            .windows(2)
+            .map(|w| (w[1] - w[0]).abs())
+            .fold(0.0, f32::max);
+        step / top
+    };
+    let (nearest, bilinear) = (steps(ViewFilter::Nearest), steps(ViewFilter::Bilinear));
+    println!("largest step between views 0.05° apart: nearest {nearest:.4}, bilinear {bilinear:.4} of the peak");
+    assert!(nearest > 0.05, "nearest should step: {nearest}");
+    assert!(
+        bilinear < 0.25 * nearest,
+        "bilinear {bilinear} vs nearest {nearest}"
+    );
+}

@@ -16,7 +16,7 @@
 //! alone.
 
 use super::state::lock;
-use crate::render_glossy::{self, GlossyArgs, Shading};
+use crate::render_glossy::{self, GlossyArgs, Shading, ViewFilterArg};
 use anyhow::{Context, Result};
 use glam::DVec3;
 use ltm_codec::{Limits, SurfacePoint};
@@ -107,6 +107,7 @@ impl Materials {
                     brdf_keep: None,
                     local_keep: None,
                     brdf_views: 64,
+                    view_filter: ViewFilterArg::Bilinear,
                     glossy_terms: None,
                     rotation_cache: cache.clone(),
                 };

@@ -16,6 +16,13 @@ pub fn decode_through_public_api(bytes: &[u8]) {
         return;
     };
     let dims = file.meta().dims;
+    if let (Some(surface), false) = (file.surface(), dims.rows.is_texture()) {
+        // Image rows' surface records fix their camera's eye, or are
+        // refused: a recovered eye is finite.
+        if let Ok(camera) = ltm_codec::ImageCamera::recover(surface, dims.width() as usize) {
+            assert!(camera.eye().iter().all(|v| v.is_finite()));
+        }
+    }
     if let Some(model) = file.pca() {
         // A pca file: reconstruct its first rows (every value must be
         // finite or the decode an error, never a panic).

@@ -6,7 +6,7 @@ use crate::render_glossy::{Glossy, GlossyArgs};
 use anyhow::{bail, Context, Result};
 use clap::Args;
 use glam::DVec3;
-use ltm_codec::{ImageCamera, LtmFile, RowLayout};
+use ltm_codec::{Charge, ImageCamera, LtmFile, RowLayout, SurfacePoint};
 use ltm_relight::rotation::Brdf;
 use ltm_relight::{
     relative_l2, EnvMap, Frame, FrameStats, Image, Lookup, PcaRelighter, PointLight, Relight,
@@ -310,37 +310,52 @@ fn image_eye(a: &RelightArgs, file: &LtmFile) -> Result<DVec3> {
     Ok(DVec3::from_array(e))
 }
 
-/// The relit `image` plus (or replaced by, with `--shading glossy`) the
-/// `--brdf` material's reflection of `env`, each pixel shaded from the eye.
-fn glossy_image(
-    a: &RelightArgs,
-    brdf: Brdf,
-    env: &EnvMap,
-    image: &Image,
-    ctx: &Ctx,
-) -> Result<Image> {
-    let context = || format!("opening {}", a.file.display());
-    let file = LtmFile::open_with_limits(&a.file, ctx.limits()).with_context(context)?;
-    let eye = image_eye(a, &file)?;
-    let points = file
-        .surface()
-        .map(|s| s.points().to_vec())
-        .unwrap_or_default();
-    let _charge = ctx.limits().check_alloc(
-        "surface points",
-        points.len() as u64,
-        std::mem::size_of::<ltm_codec::SurfacePoint>() as u64,
-    )?;
-    drop(file);
-    let glossy = Glossy::prepare(&a.glossy, brdf, points, env, &a.rotate, ctx.limits())?;
-    let start = Instant::now();
-    let out = glossy.texture(image, eye)?;
-    eprintln!(
-        "{}; every pixel shaded (step 2) in {:.1} ms",
-        glossy.describe(),
-        start.elapsed().as_secs_f64() * 1e3
-    );
-    Ok(out)
+/// What `--brdf` shades, read before any work: the file's surface points
+/// (charged to the budget while they live) and the eye.
+struct GlossySurface {
+    points: Vec<SurfacePoint>,
+    _charge: Charge,
+    eye: DVec3,
+}
+
+impl GlossySurface {
+    fn read(a: &RelightArgs, ctx: &Ctx) -> Result<GlossySurface> {
+        let context = || format!("opening {}", a.file.display());
+        let file = LtmFile::open_with_limits(&a.file, ctx.limits()).with_context(context)?;
+        let eye = image_eye(a, &file)?;
+        let points = file.surface().map_or(&[][..], |s| s.points());
+        let size = std::mem::size_of::<SurfacePoint>() as u64;
+        let charge = ctx
+            .limits()
+            .check_alloc("surface points", points.len() as u64, size)?;
+        Ok(GlossySurface {
+            points: points.to_vec(),
+            _charge: charge,
+            eye,
+        })
+    }
+
+    /// The relit `image` plus (or replaced by, with `--shading glossy`)
+    /// the `--brdf` material's reflection of `env`, each pixel shaded from
+    /// the eye.
+    fn shade(
+        self,
+        a: &RelightArgs,
+        brdf: Brdf,
+        env: &EnvMap,
+        image: &Image,
+        ctx: &Ctx,
+    ) -> Result<Image> {
+        let glossy = Glossy::prepare(&a.glossy, brdf, self.points, env, &a.rotate, ctx.limits())?;
+        let start = Instant::now();
+        let out = glossy.texture(image, self.eye)?;
+        eprintln!(
+            "{}; every pixel shaded (step 2) in {:.1} ms",
+            glossy.describe(),
+            start.elapsed().as_secs_f64() * 1e3
+        );
+        Ok(out)
+    }
 }
 
 /// The relit image's relative L2 error against `--reference`, if given.
@@ -370,6 +385,10 @@ pub fn run(a: RelightArgs, ctx: &Ctx) -> Result<()> {
     inputs.extend(a.area.inputs());
     inputs.extend(a.glossy.measured_file().map(|m| ("--brdf", m)));
     let _claim = claim_files(&inputs, &a.out.roles())?;
+    let glossy = match brdf {
+        Some(b) => Some((b, GlossySurface::read(&a, ctx)?)),
+        None => None,
+    };
     let near = area_image(&a, ctx)?;
     let opened_at = Instant::now();
     let opened = Opened::open(&a, !points.is_empty(), ctx)?;
@@ -410,8 +429,8 @@ pub fn run(a: RelightArgs, ctx: &Ctx) -> Result<()> {
             crate::area_light::method_name(a.area.method()?),
         );
     }
-    if let (Some(brdf), Some(env)) = (brdf, &env) {
-        bufs.image = glossy_image(&a, brdf, env, &bufs.image, ctx)?;
+    if let (Some((brdf, surface)), Some(env)) = (glossy, &env) {
+        bufs.image = surface.shade(&a, brdf, env, &bufs.image, ctx)?;
     }
     a.out.write(&bufs.image)?;
     let error = reference_error(&bufs.image, a.reference.as_deref())?;

@@ -40,6 +40,11 @@ baked as an image-space file from that camera (`width` pixels square) and
 shaded by `ltm relight --brdf SPEC --shading glossy`, which recovers the
 eye from the file's surface records.
 
+`--filters` renders each case once in Mitsuba and draws it four ways
+against that render: image and texture rows, each with `--view-filter
+nearest` and `bilinear` (docs/results/glossy.md, "Image rows, and the view
+grid read bilinearly").
+
 `--sweep` instead varies, for the sphere under `studio` with the conductor
 at alpha = 0.1 and 0.2, one setting at a time from the defaults:
 --brdf-keep, --normals, --glossy-terms and --glossy-n (ltm's other
@@ -105,39 +110,9 @@ def mesh_file(name, out, level=5):
     return path
 
 
-def scene_toml(mesh, cam, size):
-    """A texture-space bake of the mesh alone (no ground). Only its surface
-    points are used (`--shading glossy`), so the transport is kept small."""
-    return f"""[camera]
-eye = {list(cam['eye'])}
-target = {list(cam['target'])}
-fov = {cam['fov']}
-width = 16
-height = 16
-
-[lighting]
-face_res = 4
-texel_samples = 1
-
-[materials.clay]
-type = "lambert"
-albedo = [0.5, 0.5, 0.5]
-
-[[meshes]]
-path = "{mesh}"
-material = "clay"
-
-[texture]
-mesh = 0
-size = {size}
-parameterization = "sphere"
-spp = 1
-"""
-
-
 def image_scene_toml(mesh, cam, width):
-    """An image-space bake of the mesh alone from `cam`: its pixels' surface
-    points are what `ltm relight --brdf` shades."""
+    """An image-space bake of the mesh alone (no ground) from `cam`: its
+    pixels' surface points are what `ltm relight --brdf` shades."""
     return f"""[camera]
 eye = {list(cam['eye'])}
 target = {list(cam['target'])}
@@ -156,6 +131,18 @@ albedo = [0.5, 0.5, 0.5]
 [[meshes]]
 path = "{mesh}"
 material = "clay"
+"""
+
+
+def scene_toml(mesh, cam, size):
+    """A texture-space bake of the mesh alone (no ground). Only its surface
+    points are used (`--shading glossy`), so the transport is kept small."""
+    return image_scene_toml(mesh, cam, 16) + f"""
+[texture]
+mesh = 0
+size = {size}
+parameterization = "sphere"
+spp = 1
 """
 
 
@@ -256,16 +243,22 @@ def ltm_relight_image(args, ltm_file, env_path, spec, out, extra=()):
             "--shading", "glossy", "--rotation-cache", cache, "-o", out, *extra])
 
 
+def bake_and_compress(args, toml, name):
+    """`ltm bake` of the scene file `toml` compressed into
+    `args.out/name.ltm` (the raw store removed)."""
+    raw, ltm_file = os.path.join(args.out, "b.raw"), os.path.join(args.out, f"{name}.ltm")
+    mt.run([args.ltm, "bake", toml, "-o", raw])
+    mt.run([args.ltm, "compress", raw, "-o", ltm_file])
+    os.remove(raw)
+    return ltm_file
+
+
 def bake_image_rows(args, mesh, cam, name):
     """Bakes and compresses the image rows of `mesh` seen from `cam`."""
     toml = os.path.join(args.out, f"{name}.toml")
     with open(toml, "w") as f:
         f.write(image_scene_toml(mesh, cam, args.width))
-    raw, ltm_file = os.path.join(args.out, "i.raw"), os.path.join(args.out, f"{name}.ltm")
-    mt.run([args.ltm, "bake", toml, "-o", raw])
-    mt.run([args.ltm, "compress", raw, "-o", ltm_file])
-    os.remove(raw)
-    return ltm_file
+    return bake_and_compress(args, toml, name)
 
 
 def compare(ours, ref, ref2, mask):
@@ -331,6 +324,9 @@ def main():
     ap.add_argument("--rows", choices=["texture", "image"], default="texture",
                     help="draw a texture-space bake with `ltm render`, or each "
                          "camera's image rows with `ltm relight`")
+    ap.add_argument("--filters", action="store_true",
+                    help="render each case once in Mitsuba and draw it four ways: image and "
+                         "texture rows, each with --view-filter nearest and bilinear")
     ap.add_argument("--remeasure", action="store_true",
                     help="with --fixture: measure ltm's errors (both row layouts) against "
                          "the fixture's committed Mitsuba renders again, and reset the limits")
@@ -360,6 +356,9 @@ def main():
     if args.fixture:
         write_fixture(args, mi)
         return 0
+    if args.filters:
+        compare_filters(args, mi)
+        return 0
     if args.sweep:
         args.meshes, args.maps, args.materials = "sphere", "studio", ""
     for mesh_name in args.meshes.split(","):
@@ -367,14 +366,11 @@ def main():
         toml = os.path.join(args.out, f"{mesh_name}.toml")
         with open(toml, "w") as f:
             f.write(scene_toml(mesh, args.cams[0], args.size))
-        raw, ltm_file = os.path.join(args.out, "t.raw"), os.path.join(args.out, f"{mesh_name}.ltm")
         if args.rows == "image":
             ltm_file = [bake_image_rows(args, mesh, cam, f"{mesh_name}_cam{c}")
                         for c, cam in enumerate(args.cams)]
         else:
-            mt.run([args.ltm, "bake", toml, "-o", raw])
-            mt.run([args.ltm, "compress", raw, "-o", ltm_file])
-            os.remove(raw)
+            ltm_file = bake_and_compress(args, toml, mesh_name)
         objects = [dict(path=mesh, scale=1.0, translation=[0.0, 0.0, 0.0])]
         masks = [mt.interior(mt.coverage_render(mi, objects, cam, args.width)) for cam in args.cams]
         for map_name in args.maps.split(","):
@@ -397,6 +393,49 @@ def main():
                        fresnel_gap=fresnel_gap(IOR), results=results), f, indent=1)
     print(f"images and summary.json in {args.out}")
     return 0
+
+
+def compare_filters(args, mi):
+    """`--filters`: every case of the chosen meshes, maps, materials and
+    alphas rendered once by Mitsuba (two seeds) from every camera, and
+    drawn by ltm four ways against those renders: the camera's image rows
+    (`ltm relight --brdf`) and the texture (`ltm render --brdf`), each with
+    `--view-filter nearest` and `bilinear`. One JSON line per case and
+    camera, and summary.json."""
+    rows = []
+    for mesh_name in args.meshes.split(","):
+        mesh = mesh_file(mesh_name, args.out)
+        toml = os.path.join(args.out, f"{mesh_name}.toml")
+        with open(toml, "w") as f:
+            f.write(scene_toml(mesh, args.cams[0], args.size))
+        tex = bake_and_compress(args, toml, f"{mesh_name}_tex")
+        images = [bake_image_rows(args, mesh, cam, f"{mesh_name}_cam{c}")
+                  for c, cam in enumerate(args.cams)]
+        objects = [dict(path=mesh, scale=1.0, translation=[0.0, 0.0, 0.0])]
+        masks = [mt.interior(mt.coverage_render(mi, objects, cam, args.width)) for cam in args.cams]
+        for map_name in args.maps.split(","):
+            env_path, env = lighting(mi, map_name, args.light_n, args.env_height, args.out)
+            for material in filter(None, args.materials.split(",")):
+                for alpha in [float(a) for a in args.alphas.split(",")]:
+                    spec, bsdf = ltm_spec(material, alpha), mitsuba_bsdf(material, alpha)
+                    for c, cam in enumerate(args.cams):
+                        refs = [mitsuba_render(mi, args, mesh, cam, env, bsdf, s) for s in (1, 2)]
+                        row = dict(mesh=mesh_name, map=map_name, material=material,
+                                   alpha=alpha, camera=c)
+                        view = os.path.join(args.out, "view.exr")
+                        for filt in ["nearest", "bilinear"]:
+                            extra = ["--view-filter", filt]
+                            ltm_relight_image(args, images[c], env_path, spec, view, extra)
+                            ours = mt.read_exr(mi, view)
+                            row[f"image_{filt}"] = compare(ours, *refs, masks[c])
+                            ltm_render(args, tex, env_path, cam, spec, view, extra)
+                            ours = mt.read_exr(mi, view)
+                            row[f"texture_{filt}"] = compare(ours, *refs, masks[c])
+                        print(json.dumps(row), flush=True)
+                        rows.append(row)
+    with open(os.path.join(args.out, "summary.json"), "w") as f:
+        json.dump(dict(mitsuba_version=mi.__version__, spp=args.spp, width=args.width,
+                       size=args.size, light_n=args.light_n, results=rows), f, indent=1)
 
 
 FIXTURE_CASES = [("conductor", 0.2), ("conductor", 0.5), ("coat", 0.2), ("lambert", None)]
@@ -427,11 +466,7 @@ def write_fixture(args, mi):
     sky = np.array(mi.render(mi.load_dict(cov_scene), seed=7), dtype=np.float64)[..., 0]
     mask = mt.interior(np.clip(1.0 - sky, 0.0, 1.0))
     np.save(os.path.join(dest, "interior.npy"), mask.astype(np.float32))
-    ltm_file = os.path.join(args.out, "fixture.ltm")
-    raw = os.path.join(args.out, "fixture.raw")
-    mt.run([args.ltm, "bake", os.path.join(dest, "scene.toml"), "-o", raw])
-    mt.run([args.ltm, "compress", raw, "-o", ltm_file])
-    os.remove(raw)
+    ltm_file = bake_and_compress(args, os.path.join(dest, "scene.toml"), "fixture")
     cases = []
     for material, alpha in FIXTURE_CASES:
         refs = []
@@ -467,11 +502,7 @@ def remeasure_fixture(args, mi):
         meta = json.load(f)
     cam, width = meta["camera"], meta["width"]
     args.width = width
-    ltm_file = os.path.join(args.out, "fixture.ltm")
-    raw = os.path.join(args.out, "fixture.raw")
-    mt.run([args.ltm, "bake", os.path.join(dest, "scene.toml"), "-o", raw])
-    mt.run([args.ltm, "compress", raw, "-o", ltm_file])
-    os.remove(raw)
+    ltm_file = bake_and_compress(args, os.path.join(dest, "scene.toml"), "fixture")
     mask = np.load(os.path.join(dest, "interior.npy")) > 0.5
     for case in meta["cases"]:
         ref = np.load(os.path.join(dest, f"mitsuba_{case['name']}.npy")).astype(np.float64)
@@ -499,11 +530,7 @@ def write_image_fixture(args, mi):
     cam, width = meta["camera"], meta["width"]
     with open(os.path.join(dest, "image.toml"), "w") as f:
         f.write(image_scene_toml("sphere.obj", cam, width))
-    ltm_file = os.path.join(args.out, "image.ltm")
-    raw = os.path.join(args.out, "image.raw")
-    mt.run([args.ltm, "bake", os.path.join(dest, "image.toml"), "-o", raw])
-    mt.run([args.ltm, "compress", raw, "-o", ltm_file])
-    os.remove(raw)
+    ltm_file = bake_and_compress(args, os.path.join(dest, "image.toml"), "image")
     mask = np.load(os.path.join(dest, "interior.npy")) > 0.5
     for case in meta["cases"]:
         ref = np.load(os.path.join(dest, f"mitsuba_{case['name']}.npy")).astype(np.float64)

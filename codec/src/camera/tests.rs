@@ -73,7 +73,7 @@ fn records(cam: &Pinhole, spheres: &[(DVec3, f64)], ground: bool) -> Surface {
 }
 
 fn relative_eye_error(cam: &Pinhole, fit: &ImageCamera) -> f64 {
-    (DVec3::from_array(fit.eye()) - cam.eye).length() / cam.eye.length().max(1.0)
+    (DVec3::from_array(fit.eye()) - cam.eye).length() / cam.eye.length()
 }
 
 #[test]
@@ -123,6 +123,23 @@ fn the_eye_of_pinhole_cameras_is_recovered() {
             1e-3,
             true,
         ),
+        // Scales f32 still holds, far from 1.
+        (
+            DVec3::new(3e15, 1.5e15, 4e15),
+            DVec3::new(0.0, 4e14, 0.0),
+            30.0,
+            (32, 24),
+            1e15,
+            true,
+        ),
+        (
+            DVec3::new(3e-20, 1.5e-20, 4e-20),
+            DVec3::new(0.0, 4e-21, 0.0),
+            30.0,
+            (32, 24),
+            1e-20,
+            true,
+        ),
     ];
     for (eye, target, fov, size, scale, ground) in cases {
         let cam = Pinhole::new(eye, target, fov, size);
@@ -162,6 +179,17 @@ fn records_that_do_not_fix_the_eye_are_refused() {
     }
     let few = Surface::new(few).unwrap();
     assert!(err(&few).contains("5 valid"), "{}", err(&few));
+    // Every record at one point.
+    let same = Surface::new(vec![
+        SurfacePoint::new([1.0, 2.0, 3.0], [0.0, 0.0, 1.0]);
+        64 * 48
+    ])
+    .unwrap();
+    assert!(
+        err(&same).contains("recovering the camera"),
+        "{}",
+        err(&same)
+    );
     // A width that does not divide the rows.
     let msg = ImageCamera::recover(&floor, 100).unwrap_err().to_string();
     assert!(msg.contains("image width = 100"), "{msg}");

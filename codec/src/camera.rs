@@ -53,22 +53,16 @@ struct Normalization<const D: usize> {
 }
 
 impl<const D: usize> Normalization<D> {
-    fn of(points: &[[f64; D]]) -> Normalization<D> {
-        let n = points.len() as f64;
-        let mut centre = [0.0; D];
-        for p in points {
-            (0..D).for_each(|k| centre[k] += p[k] / n);
+    /// Of the points `points` yields (two passes).
+    fn of(points: impl Iterator<Item = [f64; D]> + Clone) -> Normalization<D> {
+        let (mut centre, mut n) = ([0.0; D], 0.0);
+        for p in points.clone() {
+            (0..D).for_each(|k| centre[k] += p[k]);
+            n += 1.0;
         }
-        let mean = points
-            .iter()
-            .map(|p| {
-                (0..D)
-                    .map(|k| (p[k] - centre[k]).powi(2))
-                    .sum::<f64>()
-                    .sqrt()
-            })
-            .sum::<f64>()
-            / n;
+        centre = centre.map(|c| c / n);
+        let distance = |p: [f64; D]| (0..D).map(|k| (p[k] - centre[k]).powi(2)).sum::<f64>();
+        let mean = points.map(|p| distance(p).sqrt()).sum::<f64>() / n;
         let scale = if mean > 0.0 {
             (D as f64).sqrt() / mean
         } else {
@@ -82,11 +76,39 @@ impl<const D: usize> Normalization<D> {
     }
 }
 
-/// The normal matrix `AᵀA` of the direct linear transform of `pixels[i] ~
-/// P·points[i]` (both normalized): two rows of `A` per point.
-fn normal_matrix(pixels: &[[f64; 2]], points: &[[f64; 3]]) -> Mat<f64> {
+/// The valid records of image rows `width` pixels wide: each one's pixel
+/// centre and point. Read in passes, never copied.
+fn records(
+    surface: &Surface,
+    width: usize,
+) -> impl Iterator<Item = ([f64; 2], [f64; 3])> + Clone + '_ {
+    surface
+        .points()
+        .iter()
+        .enumerate()
+        .filter(|(_, p)| p.valid)
+        .map(move |(k, p)| {
+            let pixel = [(k % width) as f64 + 0.5, (k / width) as f64 + 0.5];
+            (pixel, p.position.map(f64::from))
+        })
+}
+
+/// The normalizations of the pixels and the points.
+type Normalized = (Normalization<2>, Normalization<3>);
+
+/// The records normalized.
+fn normalized<'a>(
+    records: impl Iterator<Item = ([f64; 2], [f64; 3])> + Clone + 'a,
+    (n2, n3): &'a Normalized,
+) -> impl Iterator<Item = ([f64; 2], [f64; 3])> + Clone + 'a {
+    records.map(move |(x, p)| (n2.apply(&x), n3.apply(&p)))
+}
+
+/// The normal matrix `AᵀA` of the direct linear transform of `x ~ P·X`
+/// over the (normalized) records: two rows of `A` per record.
+fn normal_matrix(records: impl Iterator<Item = ([f64; 2], [f64; 3])>) -> Mat<f64> {
     let mut g = [[0.0f64; 12]; 12];
-    for (x, p) in pixels.iter().zip(points) {
+    for (x, p) in records {
         let h = [p[0], p[1], p[2], 1.0];
         let mut rows = [[0.0f64; 12]; 2];
         for k in 0..4 {
@@ -129,27 +151,19 @@ impl ImageCamera {
                 format!("a divisor of the {} rows", surface.len()),
             ));
         }
-        let (pixels, points): (Vec<[f64; 2]>, Vec<[f64; 3]>) = surface
-            .points()
-            .iter()
-            .enumerate()
-            .filter(|(_, p)| p.valid)
-            .map(|(k, p)| {
-                let pixel = [(k % width) as f64 + 0.5, (k / width) as f64 + 0.5];
-                (pixel, p.position.map(f64::from))
-            })
-            .unzip();
-        if points.len() < MIN_CAMERA_POINTS {
+        let count = surface.valid_count();
+        if count < MIN_CAMERA_POINTS {
             return Err(numerical(format!(
-                "{} valid surface records (valid: at least {MIN_CAMERA_POINTS})",
-                points.len()
+                "{count} valid surface records (valid: at least {MIN_CAMERA_POINTS})"
             )));
         }
-        let (n2, n3) = (Normalization::of(&pixels), Normalization::of(&points));
-        let pixels_n: Vec<[f64; 2]> = pixels.iter().map(|x| n2.apply(x)).collect();
-        let points_n: Vec<[f64; 3]> = points.iter().map(|p| n3.apply(p)).collect();
-        let (p, uncertainty) = Self::solve(&normal_matrix(&pixels_n, &points_n))?;
-        let residual = Self::residual(&p, &pixels_n, &points_n)? / n2.scale;
+        let all = records(surface, width);
+        let norms = (
+            Normalization::of(all.clone().map(|r| r.0)),
+            Normalization::of(all.clone().map(|r| r.1)),
+        );
+        let (p, uncertainty) = Self::solve(&normal_matrix(normalized(all.clone(), &norms)))?;
+        let residual = Self::residual(&p, normalized(all, &norms))? / norms.0.scale;
         if residual.is_nan() || residual > MAX_RESIDUAL_PX {
             return Err(numerical(format!(
                 "the surface records fit no single pinhole camera: a record lies {residual:.3e} px from its pixel centre (valid: at most {MAX_RESIDUAL_PX})"
@@ -160,12 +174,12 @@ impl ImageCamera {
                 "the valid surface records leave the eye undetermined: they lie (nearly) on one plane, or on rays that (nearly) never meet (fit uncertainty {uncertainty:.1e}, valid: at most {MAX_UNCERTAINTY:e})"
             )));
         }
-        let eye = Self::centre(&p, &n3)?;
+        let eye = Self::centre(&p, &norms.1)?;
         Self::check_facing(surface, eye)?;
         Ok(ImageCamera {
             eye,
             max_residual_px: residual,
-            points: points.len(),
+            points: count,
         })
     }
 
@@ -203,13 +217,13 @@ impl ImageCamera {
         }
     }
 
-    /// The largest distance between a point's projection and its pixel
-    /// (normalized units); an error when points lie on both sides of the
-    /// camera.
-    fn residual(p: &[f64; 12], pixels: &[[f64; 2]], points: &[[f64; 3]]) -> Result<f64> {
+    /// The largest distance between a (normalized) record's projection and
+    /// its pixel (normalized units); an error when records lie on both
+    /// sides of the camera.
+    fn residual(p: &[f64; 12], records: impl Iterator<Item = ([f64; 2], [f64; 3])>) -> Result<f64> {
         let mut worst = 0.0f64;
         let mut sides = [false; 2];
-        for (x, q) in pixels.iter().zip(points) {
+        for (x, q) in records {
             let h = [q[0], q[1], q[2], 1.0];
             let row = |r: usize| (0..4).map(|k| p[4 * r + k] * h[k]).sum::<f64>();
             let w = row(2);

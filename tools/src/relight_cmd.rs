@@ -111,8 +111,7 @@ fn point_lights(a: &RelightArgs) -> Result<Vec<PointLight>> {
 }
 
 /// Opens a file for point lights: a pca file, or an error naming the mode.
-fn open_for_points(path: &Path, ctx: &Ctx) -> Result<PcaRelighter> {
-    let file = LtmFile::open_with_limits(path, ctx.limits())?;
+fn open_for_points(file: &LtmFile, path: &Path, ctx: &Ctx) -> Result<PcaRelighter> {
     if file.pca().is_none() {
         bail!(
             "--point needs a pca file (ltm compress --mode pca): {} is a {} file, and the wavelet modes (2d, 4d, adaptive) do not support point lights",
@@ -120,7 +119,7 @@ fn open_for_points(path: &Path, ctx: &Ctx) -> Result<PcaRelighter> {
             file.meta().mode.name()
         );
     }
-    Ok(PcaRelighter::new(&file, ctx.limits())?)
+    Ok(PcaRelighter::new(file, ctx.limits())?)
 }
 
 /// The opened file: a pca relighter, which also lights points, or a
@@ -131,14 +130,14 @@ enum Opened {
 }
 
 impl Opened {
-    /// Opens `a.file` for point lights when there are any, else of any
-    /// mode, and decodes it whole with `--preload`.
-    fn open(a: &RelightArgs, points: bool, ctx: &Ctx) -> Result<Opened> {
+    /// The relighter of `file` (`a.file`, opened): for point lights when
+    /// there are any, else of any mode, decoded whole with `--preload`.
+    fn open(a: &RelightArgs, file: LtmFile, points: bool, ctx: &Ctx) -> Result<Opened> {
         let open = || -> Result<Opened> {
             Ok(if points {
-                Opened::Points(Box::new(open_for_points(&a.file, ctx)?))
+                Opened::Points(Box::new(open_for_points(&file, &a.file, ctx)?))
             } else {
-                Opened::Any(ltm_relight::open(&a.file, ctx.limits())?)
+                Opened::Any(ltm_relight::open_file(file, ctx.limits())?)
             })
         };
         let opened = open().with_context(|| format!("opening {}", a.file.display()))?;
@@ -319,10 +318,8 @@ struct GlossySurface {
 }
 
 impl GlossySurface {
-    fn read(a: &RelightArgs, ctx: &Ctx) -> Result<GlossySurface> {
-        let context = || format!("opening {}", a.file.display());
-        let file = LtmFile::open_with_limits(&a.file, ctx.limits()).with_context(context)?;
-        let eye = image_eye(a, &file)?;
+    fn read(a: &RelightArgs, file: &LtmFile, ctx: &Ctx) -> Result<GlossySurface> {
+        let eye = image_eye(a, file)?;
         let points = file.surface().map_or(&[][..], |s| s.points());
         let size = std::mem::size_of::<SurfacePoint>() as u64;
         let charge = ctx
@@ -385,15 +382,20 @@ pub fn run(a: RelightArgs, ctx: &Ctx) -> Result<()> {
     inputs.extend(a.area.inputs());
     inputs.extend(a.glossy.measured_file().map(|m| ("--brdf", m)));
     let _claim = claim_files(&inputs, &a.out.roles())?;
+    // One read of the file: its surface for --brdf, then its relighter.
+    let opened_at = Instant::now();
+    let file = LtmFile::open_with_limits(&a.file, ctx.limits())
+        .with_context(|| format!("opening {}", a.file.display()))?;
+    let read_time = opened_at.elapsed();
     let glossy = match brdf {
-        Some(b) => Some((b, GlossySurface::read(&a, ctx)?)),
+        Some(b) => Some((b, GlossySurface::read(&a, &file, ctx)?)),
         None => None,
     };
     let near = area_image(&a, ctx)?;
     let opened_at = Instant::now();
-    let opened = Opened::open(&a, !points.is_empty(), ctx)?;
+    let opened = Opened::open(&a, file, !points.is_empty(), ctx)?;
     let relighter = opened.relighter();
-    let open_time = opened_at.elapsed();
+    let open_time = read_time + opened_at.elapsed();
     let env = match &a.env {
         Some(path) => {
             Some(EnvMap::load(path).with_context(|| format!("loading {}", path.display()))?)

@@ -838,7 +838,7 @@ pub(super) fn decode_from(
         shape: *shape,
         coding,
         model,
-        mag: vec![0; pixels],
+        mag: vec![0; pixels.next_multiple_of(8)],
         blocks: Vec::new(),
         left: nnz,
         sxx: [0; MAX_GROUPS],
@@ -869,8 +869,9 @@ pub(super) fn decode_from(
     };
     // Kept pixels are those with a magnitude class: gather them in raster
     // order, skipping 8 empty pixels at a time.
-    for (w, word) in mag.chunks(8).enumerate() {
-        if word.iter().all(|&m| m == 0) {
+    for (w, word) in mag.chunks_exact(8).enumerate() {
+        // `mag` is padded to whole words.
+        if u64::from_ne_bytes(word.try_into().unwrap_or_default()) == 0 {
             continue;
         }
         for (k, &m) in word.iter().enumerate() {

@@ -467,8 +467,9 @@ fn sees_whole_light(
 
 /// The point scene with a `[light_plane]` at `height` (lit side down),
 /// baked at face resolution 4 (the distant matrix is not what is checked
-/// here) and compressed: the `.ltm` file's path.
-fn stored_bake(dir: &Path, height: f64) -> std::path::PathBuf {
+/// here) and compressed twice: the `.ltm` files' paths, with the
+/// near-field rows stored losslessly and at the default target (1 %).
+fn stored_bake(dir: &Path, height: f64) -> (std::path::PathBuf, std::path::PathBuf) {
     let base = Path::new(env!("CARGO_MANIFEST_DIR")).join("tools/validate/point");
     let text = std::fs::read_to_string(base.join("scene.toml")).unwrap()
         + &format!(
@@ -484,10 +485,25 @@ fn stored_bake(dir: &Path, height: f64) -> std::path::PathBuf {
     let raw = dir.join(format!("p{height}.raw"));
     let progress = ltm::codec::Progress::NONE;
     ltm::bake(&scene, &raw, &ltm::BakeOptions::default(), progress).unwrap();
-    let out = dir.join(format!("p{height}.ltm"));
     let store = ltm::RawStore::open(&raw).unwrap();
-    ltm::compress(&store, &out, &ltm::CompressOptions::default(), progress).unwrap();
-    out
+    let lossless = ltm::CompressOptions::from(ltm::codec::CodeOptions {
+        near_error: Some(0.0),
+        ..Default::default()
+    });
+    let out = dir.join(format!("p{height}.ltm"));
+    ltm::compress(&store, &out, &lossless, progress).unwrap();
+    let lossy = dir.join(format!("p{height}-lossy.ltm"));
+    ltm::compress(&store, &lossy, &ltm::CompressOptions::default(), progress).unwrap();
+    (out, lossy)
+}
+
+/// The near-field image of the file at `path` under `light` (exact method).
+fn exact_image(path: &Path, light: &ltm::relight::nearfield::AreaLight) -> Vec<[f32; 3]> {
+    use ltm::relight::nearfield::{NearField, NearFieldMethod};
+    let mut file = ltm::LtmFile::open(path).unwrap();
+    let near = NearField::take(&mut file, &ltm::Limits::default()).unwrap();
+    near.render(std::slice::from_ref(light), NearFieldMethod::Exact)
+        .unwrap()
 }
 
 /// The stored path end to end: `[light_plane]` in the scene, the bake's
@@ -513,7 +529,7 @@ fn stored_near_field_rows_against_mitsuba_and_the_library() {
         ("far", 4.0, [0.3, 0.5], [2.4, 1.8], 0.035),
     ];
     for (name, height, center, size, bound) in cases {
-        let path = stored_bake(dir.path(), height);
+        let (path, lossy) = stored_bake(dir.path(), height);
         let mut file = ltm::LtmFile::open(&path).unwrap();
         assert!(file.near_field().is_some(), "the NEAR chunk is stored");
         let near = NearField::take(&mut file, &ltm::Limits::default()).unwrap();
@@ -529,7 +545,23 @@ fn stored_near_field_rows_against_mitsuba_and_the_library() {
         };
         let all = NearFieldMethod::Wavelet(NearFieldTerms::ALL);
         let image = near.render(std::slice::from_ref(&light), all).unwrap();
-        let exact = near.render(&[light], NearFieldMethod::Exact).unwrap();
+        let exact = near
+            .render(std::slice::from_ref(&light), NearFieldMethod::Exact)
+            .unwrap();
+        // Rows quantized to 1 % (the default): a smaller chunk, and an
+        // image within that of the lossless rows' (measured: 0.1–0.5 %).
+        let rounded = exact_image(&lossy, &light);
+        let size = |p: &Path| std::fs::metadata(p).unwrap().len();
+        assert!(
+            size(&lossy) * 2 < size(&path),
+            "{} {}",
+            size(&lossy),
+            size(&path)
+        );
+        let wide = |v: &[[f32; 3]]| v.iter().map(|t| t.map(f64::from)).collect::<Vec<_>>();
+        let moved = relative_l2(&wide(&rounded), &wide(&exact));
+        eprintln!("stored {name}: rows at 1 % move the image by {moved:.5}");
+        assert!(moved < 0.01, "{name}: {moved}");
         let (w, h, reference) = read_npy(&format!("nearfield_mitsuba_{name}.npy"));
         assert_eq!(image.len(), w * h);
         // Rows at their stored surface points (SURF).
@@ -560,7 +592,12 @@ fn stored_near_field_rows_against_mitsuba_and_the_library() {
             .collect();
         let count = inside.len();
         assert!(count > w * h * 45 / 100, "{name}: {count} pixels");
-        for (method, image) in [("wavelet, every term", &image), ("exact", &exact)] {
+        let methods = [
+            ("wavelet, every term", &image),
+            ("exact", &exact),
+            ("exact, rows at 1 %", &rounded),
+        ];
+        for (method, image) in methods {
             let (mut num, mut den) = (0.0, 0.0);
             for &p in &inside {
                 for c in 0..3 {

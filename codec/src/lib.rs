@@ -62,7 +62,7 @@ pub use limits::{Charge, Limits};
 pub use mesh::{
     ReceiverMesh, MAX_MESH_ELEMENTS, MESH_HEADER_LEN, MESH_TRIANGLE_LEN, MESH_VERTEX_LEN,
 };
-pub use nearfield::{PlaneBasis, PlaneRows};
+pub use nearfield::{NearQuantization, PlaneBasis, PlaneRows};
 pub use output::{AtomicFile, Claim, OutputLock, RunFiles};
 pub use pca::PcaModel;
 pub use progress::{Progress, Stage, Step};

@@ -7,14 +7,19 @@
 //! axes, lit side `x × y`), its resolution `order` and its side in tangent
 //! units. The raw store holds each row's per-texel integrals over the face
 //! as they are baked (`order²·C` values); the `.ltm` file holds their
-//! standard 2D Haar coefficients ([`plane_coefficients`]), sparse and
-//! lossless, in [`PlaneRows`] (chunk `NEAR`).
+//! standard 2D Haar coefficients ([`plane_coefficients`]), sparse, in
+//! [`PlaneRows`] (chunk `NEAR`): every nonzero one (lossless), or rounded
+//! to one step for a target error by [`PlaneRows::quantize`]
+//! (`quantize.rs`).
 
 use crate::bytes::{Reader, Writer};
 use crate::error::{Error, Result};
 use crate::limits::{Charge, Limits};
 use crate::raw::RawStore;
 use crate::wavelet::{self, Filter};
+
+mod quantize;
+pub use quantize::NearQuantization;
 
 /// The largest face resolution stored (so that a coefficient's index fits
 /// 16 bits).

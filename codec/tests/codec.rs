@@ -1140,6 +1140,42 @@ fn mismatched_plans_and_column_ranges_are_typed_errors() {
         "{err}"
     );
     writer.finish(0.0).unwrap();
+
+    // A restarted writer drops what it wrote and writes the same file as a
+    // new one; it keeps its dimensions.
+    let all = || coder.code_columns(0..m, &plan).unwrap().columns;
+    let fresh = dir.path().join("fresh.ltm");
+    let mut writer = LtmWriter::create(&fresh, coder.meta().clone(), None).unwrap();
+    writer.push_columns(0, all()).unwrap();
+    writer.finish(0.0).unwrap();
+    let again = dir.path().join("again.ltm");
+    let mut writer = LtmWriter::create(&again, coder.meta().clone(), None).unwrap();
+    writer
+        .push_columns(0, all().into_iter().take(3).collect())
+        .unwrap();
+    let mut writer = writer.restart(&again, coder.meta().clone()).unwrap();
+    writer.push_columns(0, all()).unwrap();
+    writer.finish(0.0).unwrap();
+    assert_eq!(
+        std::fs::read(&fresh).unwrap(),
+        std::fs::read(&again).unwrap()
+    );
+    let mut other = coder.meta().clone();
+    other.dims = Dims::image(4, 6, 2, 3);
+    let writer = LtmWriter::create(&again, coder.meta().clone(), None).unwrap();
+    let err = writer.restart(&again, other).err().unwrap().to_string();
+    assert!(err.contains("keeps its dimensions"), "{err}");
+    let leftovers = std::fs::read_dir(dir.path())
+        .unwrap()
+        .filter(|e| {
+            e.as_ref()
+                .unwrap()
+                .file_name()
+                .to_string_lossy()
+                .contains(".tmp")
+        })
+        .count();
+    assert_eq!(leftovers, 0, "temporary files left behind");
 }
 
 /// Mutated and truncated files must give errors, never panics.

@@ -201,8 +201,14 @@ fn compress_stores_the_near_field_rows_losslessly() {
     let h = header(100);
     let raw = RawStore::open(&write_store(&dir.path().join("s.raw"), h)).unwrap();
     let out = dir.path().join("s.ltm");
-    let stats = compress(&raw, &out, &CompressOptions::default(), Progress::NONE).unwrap();
+    let lossless = CompressOptions::from(ltm_codec::CodeOptions {
+        near_error: Some(0.0),
+        ..Default::default()
+    });
+    let stats = compress(&raw, &out, &lossless, Progress::NONE).unwrap();
     assert!(stats.near_field_bytes > 0);
+    let q = stats.near_field.unwrap();
+    assert_eq!((q.step, q.kept), (0.0, q.before));
     let file = LtmFile::open(&out).unwrap();
     let near = file.near_field().expect("NEAR chunk");
     assert_eq!(
@@ -221,6 +227,39 @@ fn compress_stores_the_near_field_rows_losslessly() {
             .collect();
         assert_eq!(got, want, "row {p}");
     }
+    // At the default target (the matrix's 1 %), every stored value is a
+    // multiple of the step, and the rows' error is within the target.
+    let lossy = dir.path().join("q.ltm");
+    let stats = compress(&raw, &lossy, &CompressOptions::default(), Progress::NONE).unwrap();
+    let q = stats.near_field.unwrap();
+    assert!(
+        q.step > 0.0 && q.error <= 0.01 && q.kept < q.before,
+        "{q:?}"
+    );
+    let file = LtmFile::open(&lossy).unwrap();
+    let rounded = file.near_field().expect("NEAR chunk");
+    assert_eq!(rounded.nonzeros(), q.kept);
+    let (mut diff, mut norm) = (0.0f64, 0.0f64);
+    for p in 0..30 {
+        want.clear();
+        plane_coefficients(&rows(p, &h).1, 4, &mut want).unwrap();
+        let (index, value) = rounded.row(p, 0);
+        for &(k, v) in &want {
+            let stored = index
+                .iter()
+                .position(|&i| u32::from(i) == k)
+                .map_or(0.0, |at| f64::from(value[at]));
+            let steps = stored / q.step;
+            assert!((steps - steps.round()).abs() < 1e-4, "{stored} {}", q.step);
+            diff += (stored - f64::from(v)).powi(2);
+            norm += f64::from(v).powi(2);
+        }
+    }
+    let error = (diff / norm).sqrt();
+    assert!(
+        (error - q.error).abs() < 1e-6 * q.error.max(1e-3),
+        "{error} {q:?}"
+    );
     // Modes that would drop the rows refuse the store.
     let pca = ltm_codec::compress_pca(
         &raw,

@@ -123,6 +123,13 @@ pub struct CompressArgs {
     /// Target relative L2 error of the whole decoded matrix [default: 0.01].
     #[arg(long)]
     pub max_error: Option<f64>,
+    /// Target relative L2 error of the near-field rows (a store baked with
+    /// a [light_plane], for `ltm relight --area-light`): their Haar
+    /// coefficients rounded to one step, the largest that meets it, and
+    /// those that round to 0 dropped. 0 stores them losslessly
+    /// [default: --max-error's target; 0 with --keep].
+    #[arg(long, value_name = "E")]
+    pub near_error: Option<f64>,
     /// Memory for the transpose: a size as for --max-memory, e.g. 512M or
     /// 1.5G [default: a quarter of RAM, at most 8G].
     #[arg(long, value_name = "SIZE", value_parser = crate::common::size::size)]
@@ -149,7 +156,7 @@ pub struct CompressArgs {
     #[arg(
         long,
         value_name = "PLAN",
-        conflicts_with_all = ["mode", "rank", "max_rank", "col_filter", "row_filter", "bits", "quantizer", "keep", "max_error", "seed", "entropy"]
+        conflicts_with_all = ["mode", "rank", "max_rank", "col_filter", "row_filter", "bits", "quantizer", "keep", "max_error", "seed", "entropy", "near_error"]
     )]
     pub plan: Option<PathBuf>,
     /// With --analyze or --plan: shard I (0-based) of N contiguous column
@@ -186,12 +193,16 @@ pub fn code_options(a: &CompressArgs) -> CodeOptions {
         target,
         seed: a.seed,
         entropy: a.entropy.unwrap_or_default(),
+        near_error: a.near_error,
         ..Default::default()
     }
 }
 
 pub fn compress_cmd(a: CompressArgs, ctx: &Ctx) -> Result<()> {
     if a.analyze || a.plan.is_some() {
+        if a.near_error.is_some() {
+            bail!("--near-error applies to a one-machine `ltm compress`: sharded compression refuses stores with near-field rows");
+        }
         if a.mode == Mode::Pca || a.rank.is_some() || a.max_rank.is_some() {
             bail!("sharded compression (--analyze, --plan) codes the wavelet modes 2d, 4d and adaptive, not pca");
         }
@@ -204,6 +215,9 @@ pub fn compress_cmd(a: CompressArgs, ctx: &Ctx) -> Result<()> {
     let raw = RawStore::open_with_limits(&a.raw, ctx.limits())
         .with_context(|| format!("opening {}", a.raw.display()))?;
     if a.mode == Mode::Pca {
+        if a.near_error.is_some() {
+            bail!("--near-error applies to the wavelet modes (2d, 4d, adaptive), whose files hold near-field rows; pca files do not");
+        }
         return compress_pca_cmd(&a, &raw);
     }
     if a.rank.is_some() {
@@ -254,9 +268,17 @@ pub fn compress_cmd(a: CompressArgs, ctx: &Ctx) -> Result<()> {
         stats.raw_bytes as f64 / 1e6 / secs,
         if stats.out_of_core { ", out of core" } else { "" }
     );
-    if stats.near_field_bytes > 0 {
+    if let Some(q) = stats.near_field.filter(|_| stats.near_field_bytes > 0) {
+        let how = if q.step > 0.0 {
+            format!(
+                "{} of {} Haar coefficients kept at one step of {:.3e}, relative L2 error {:.5} (--near-error)",
+                q.kept, q.before, q.step, q.error
+            )
+        } else {
+            format!("{} Haar coefficients, stored losslessly", q.before)
+        };
         eprintln!(
-            "of which {} bytes are the near-field rows (the scene's [light_plane], stored losslessly as Haar coefficients)",
+            "of which {} bytes are the near-field rows (the scene's [light_plane]): {how}",
             stats.near_field_bytes
         );
     }

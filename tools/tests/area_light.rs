@@ -284,6 +284,85 @@ fn area_lights_add_to_the_map() {
     }
 }
 
+/// `ltm compress --near-error`: rows at 1 % (the default with
+/// `--max-error 0.01`) make a file several times smaller whose image is
+/// within that of the lossless file's; `--near-error 0` is lossless, the
+/// same as the library's rows; bad targets are refused.
+#[test]
+fn near_field_rows_are_quantized_to_their_target() {
+    let dir = tempfile::tempdir().unwrap();
+    let lossy = baked(dir.path(), true);
+    let s = |n: &str| dir.path().join(n).to_str().unwrap().to_string();
+    let (raw, exact) = (s("p.raw"), s("exact.ltm"));
+    let said = ok(&[
+        "compress",
+        &raw,
+        "-o",
+        &exact,
+        "--mode",
+        "2d",
+        "--near-error",
+        "0",
+    ]);
+    assert!(said.contains("stored losslessly"), "{said}");
+    let coarse = s("coarse.ltm");
+    let said = ok(&[
+        "compress",
+        &raw,
+        "-o",
+        &coarse,
+        "--mode",
+        "2d",
+        "--near-error",
+        "0.1",
+    ]);
+    assert!(
+        said.contains("Haar coefficients kept at one step"),
+        "{said}"
+    );
+    let size = |p: &str| std::fs::metadata(p).unwrap().len();
+    assert!(size(&coarse) < size(&lossy) && 2 * size(&lossy) < size(&exact));
+    let light = [
+        "--area-light",
+        "uniform",
+        "--area-size",
+        "0.5,0.4",
+        "--area-center",
+        "0.2,0.1",
+    ];
+    let image = |file: &str, name: &str| {
+        let out = s(name);
+        ok(&[&["relight", file][..], &light, &["-o", &out]].concat());
+        Image::read_exr(Path::new(&out)).unwrap()
+    };
+    let reference = image(&exact, "exact.exr");
+    for (file, target) in [(&lossy, 0.01), (&coarse, 0.1)] {
+        let moved = relative_l2(&image(file, "q.exr"), &reference).unwrap();
+        assert!(moved > 0.0 && moved < target, "{file}: {moved}");
+    }
+    for (bad, says) in [
+        ("-0.1", "near-field error"),
+        ("1", "near-field error"),
+        ("NaN", "near-field error"),
+    ] {
+        let flag = format!("--near-error={bad}");
+        fails(&["compress", &raw, "-o", &s("bad.ltm"), &flag], says);
+    }
+    fails(
+        &[
+            "compress",
+            &raw,
+            "-o",
+            &s("bad.ltm"),
+            "--mode",
+            "pca",
+            "--near-error",
+            "0.01",
+        ],
+        "--near-error applies to the wavelet modes",
+    );
+}
+
 #[test]
 fn bad_area_lights_and_files_are_refused() {
     let dir = tempfile::tempdir().unwrap();

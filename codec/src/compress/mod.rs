@@ -51,7 +51,7 @@ pub use transpose::{Transposed, MAX_NORM, MIN_NONZERO_RMS};
 use crate::container::{LtmWriter, OptionalChunks};
 use crate::error::{Error, Result};
 use crate::limits::Limits;
-use crate::nearfield::PlaneRows;
+use crate::nearfield::{NearQuantization, PlaneRows};
 use crate::progress::{Progress, Stage};
 use crate::raw::RawStore;
 use crate::wavelet::Filter;
@@ -182,6 +182,11 @@ pub struct CodeOptions {
     pub entropy: Entropy,
     /// zstd level of column payloads.
     pub zstd_level: i32,
+    /// Relative L2 error of the near-field rows (chunk NEAR) after
+    /// [`PlaneRows::quantize`]: `Some(0.0)` keeps them losslessly; `None`
+    /// takes the matrix's target error (lossless for a term count).
+    #[serde(default)]
+    pub near_error: Option<f64>,
 }
 
 impl Default for CodeOptions {
@@ -196,11 +201,21 @@ impl Default for CodeOptions {
             seed: 0x6c74_6d00,
             entropy: Entropy::Range,
             zstd_level: 9,
+            near_error: None,
         }
     }
 }
 
 impl CodeOptions {
+    /// The near-field rows' target error: [`CodeOptions::near_error`], or
+    /// the matrix's.
+    pub fn near_target(&self) -> f64 {
+        self.near_error.unwrap_or(match self.target {
+            Target::MaxError(e) => e,
+            Target::Keep(_) => 0.0,
+        })
+    }
+
     /// These options at `bits` quantization bits.
     pub fn with_bits(&self, bits: u32) -> CodeOptions {
         CodeOptions {
@@ -229,6 +244,9 @@ impl CodeOptions {
                 return Err(Error::range("keep", n, format!("1..={}", u32::MAX)))
             }
             _ => {}
+        }
+        if let Some(e) = self.near_error.filter(|e| !(0.0..1.0).contains(e)) {
+            return Err(Error::range("near-field error", e, "0 <= E < 1"));
         }
         let levels = zstd::compression_level_range();
         if !levels.contains(&self.zstd_level) {
@@ -266,9 +284,12 @@ impl From<CodeOptions> for CompressOptions {
 pub struct CompressStats {
     /// Size of the written file.
     pub file_bytes: u64,
-    /// Of which the near-field rows (chunk NEAR, stored losslessly; 0
-    /// without a light plane).
+    /// Of which the near-field rows (chunk NEAR; 0 without a light
+    /// plane).
     pub near_field_bytes: u64,
+    /// How the near-field rows were quantized (`None` without a light
+    /// plane; a step of 0 when they are stored losslessly).
+    pub near_field: Option<NearQuantization>,
     /// Size of the dense f32 matrix.
     pub raw_bytes: u64,
     /// Coefficients stored (positions, over all columns).
@@ -336,21 +357,29 @@ impl Transposed<'_> {
         };
         let feedback = Feedback::new(opts, coder.budget(), analysis.as_ref())?;
         let channels = self.dims().channels as usize;
-        let near = crate::nearfield::plane_rows_of(self.raw(), channels, &Limits::default())?;
+        let mut near = crate::nearfield::plane_rows_of(self.raw(), channels, &Limits::default())?;
+        let near_q = match near.as_mut() {
+            Some(rows) => Some(rows.quantize(opts.near_target())?),
+            None => None,
+        };
         let mut step = feedback.first()?;
+        // The side chunks are packed once (the NEAR chunk can take
+        // seconds); a pass that is not kept starts the file again.
+        let mut writer = new_writer(&coder, out, near.as_ref())?;
         loop {
             if coder.options().bits != step.bits {
                 coder = Coder::new(self, &opts.with_bits(step.bits))?;
+                writer = writer.restart(out, coder.meta().clone())?;
             }
-            let (writer, mut stats, coded) =
-                write_columns(&coder, out, (&step.plan, near.as_ref()), progress)?;
+            let (mut stats, coded) = write_columns(&coder, &mut writer, &step.plan, progress)?;
             match feedback.next(&step, &coded)? {
                 Next::Code(next) => {
-                    writer.abandon();
+                    writer = writer.restart(out, coder.meta().clone())?;
                     step = next;
                 }
                 Next::Keep { target_met } => {
                     stats.target_met = target_met;
+                    stats.near_field = near_q;
                     stats.codings = step.coding;
                     if let Err(e) = self.raw().check_unchanged() {
                         writer.abandon();
@@ -364,17 +393,10 @@ impl Transposed<'_> {
     }
 }
 
-/// Codes every column with `plan` in batches, written as they come: the
-/// unfinished file, its statistics and what the coding measured.
-fn write_columns(
-    coder: &Coder,
-    out: &Path,
-    (plan, near_field): (&Plan, Option<&PlaneRows>),
-    progress: Progress<'_>,
-) -> Result<(LtmWriter, CompressStats, Coding)> {
+/// The file `coder` writes to `out`, with the matrix's side chunks.
+fn new_writer(coder: &Coder, out: &Path, near_field: Option<&PlaneRows>) -> Result<LtmWriter> {
     let t = coder.transposed();
-    let m = t.dims().lights();
-    let mut writer = LtmWriter::create_with(
+    LtmWriter::create_with(
         out,
         coder.meta().clone(),
         t.raw().albedo(),
@@ -387,7 +409,19 @@ fn write_columns(
             // Encoding-5 columns coded again from the file's priors.
             priors: true,
         },
-    )?;
+    )
+}
+
+/// Codes every column with `plan` in batches, written as they come to the
+/// unfinished file `writer`: its statistics and what the coding measured.
+fn write_columns(
+    coder: &Coder,
+    writer: &mut LtmWriter,
+    plan: &Plan,
+    progress: Progress<'_>,
+) -> Result<(CompressStats, Coding)> {
+    let t = coder.transposed();
+    let m = t.dims().lights();
     let mut stats = CompressStats {
         raw_bytes: t.raw().dims().raw_bytes(),
         channels: t.dims().channels,
@@ -409,7 +443,7 @@ fn write_columns(
         progress.report(Stage::Coding, batch.end as u64, m as u64);
     }
     stats.achieved_error = relative_error(coding.err, t.norm());
-    Ok((writer, stats, coding))
+    Ok((stats, coding))
 }
 
 /// The relative error of a squared error `err` in a matrix of norm `norm`

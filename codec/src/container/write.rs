@@ -232,6 +232,52 @@ impl LtmWriter {
     /// Drops the partial file (as dropping the writer does).
     pub fn abandon(self) {}
 
+    /// Drops the partial file and starts `path` again, in a new temporary
+    /// file, for `meta` (of the same dimensions) with the same side chunks
+    /// as they were packed: a coding pass that is not kept costs no
+    /// packing of them again.
+    pub fn restart(self, path: &Path, meta: Meta) -> Result<LtmWriter> {
+        if meta.dims != self.meta.dims {
+            return Err(Error::Invalid(format!(
+                "a restarted .ltm writer keeps its dimensions ({:?}), not {:?}",
+                self.meta.dims, meta.dims
+            )));
+        }
+        let LtmWriter {
+            file,
+            albedo,
+            surface,
+            mesh,
+            near,
+            empty_rows,
+            norms,
+            priors,
+            data_start,
+            ..
+        } = self;
+        drop(file);
+        let file = AtomicFile::create(path)?;
+        let mut w = LtmWriter {
+            tmp: file.tmp_path().to_path_buf(),
+            file: BufWriter::with_capacity(1 << 20, file),
+            meta,
+            albedo,
+            surface,
+            mesh,
+            near,
+            empty_rows,
+            entries: Vec::new(),
+            norms: norms.map(|_| Vec::new()),
+            priors,
+            data_start,
+            data_len: 0,
+        };
+        w.file
+            .seek(SeekFrom::Start(data_start))
+            .map_err(|e| Error::io(&w.tmp, e))?;
+        Ok(w)
+    }
+
     /// Writes the tables, syncs and renames the file into place. Returns the
     /// file size.
     pub fn finish(mut self, achieved_error: f32) -> Result<u64> {

@@ -303,6 +303,36 @@ fn near_chunks_decode_only_when_consistent() {
     }
 }
 
+/// What `compress` makes from a store (the coder's buffers, the
+/// near-field rows) is charged to the limits the store was opened with,
+/// not to the machine's: growing the budget from what the store's own
+/// tables take, compression is refused, naming what did not fit (the
+/// near-field rows among them), until it succeeds.
+#[test]
+fn compress_charges_the_stores_limits() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = write_store(&dir.path().join("s.raw"), header(100));
+    let tables = RawStore::open_with_limits(&path, &Limits::with_max_alloc(1 << 30))
+        .unwrap()
+        .limits()
+        .used_bytes();
+    let mut refused = Vec::new();
+    for extra in (0..400).map(|k| 256 * k) {
+        let limits = Limits::with_max_alloc(tables + extra);
+        let raw = RawStore::open_with_limits(&path, &limits).unwrap();
+        let out = dir.path().join("s.ltm");
+        match compress(&raw, &out, &CompressOptions::default(), Progress::NONE) {
+            Ok(_) => break,
+            Err(e) => refused.push(e.to_string()),
+        }
+    }
+    assert!(!refused.is_empty() && refused.len() < 400, "{refused:?}");
+    assert!(
+        refused.iter().any(|e| e.contains("near-field rows")),
+        "{refused:?}"
+    );
+}
+
 /// The independent reader (tools/validate/ltm_reader.py, written from
 /// docs/FORMAT.md) decodes the NEAR chunk to the same plane and the same
 /// coefficients, bit for bit, and reads the version-6 raw store's header.

@@ -115,17 +115,17 @@ impl<'t> Coder<'t> {
             },
             norm: transposed.norm(),
         };
-        // Buffers of the image's size, charged to the machine's budget (the
+        // Buffers of the image's size, charged to the store's budget (the
         // matrix itself is far larger and already in memory).
-        let limits = crate::limits::Limits::default();
+        let limits = transposed.raw().limits();
         Ok(Coder {
             transposed,
             opts: opts.clone(),
             dims,
             depths: candidate_depths(opts.mode, max_depth),
-            weights: BandWeights::new(opts.col_filter, w, h, max_depth, &limits)?,
+            weights: BandWeights::new(opts.col_filter, w, h, max_depth, limits)?,
             groups: (0..=max_depth).map(|d| scale_groups(w, h, d)).collect(),
-            decoder: ColumnDecoder::new(&meta, &limits)?
+            decoder: ColumnDecoder::new(&meta, limits)?
                 .with_empty_rows(Some(transposed.empty_rows().clone())),
             meta,
         })

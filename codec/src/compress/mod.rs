@@ -50,7 +50,6 @@ pub use transpose::{Transposed, MAX_NORM, MIN_NONZERO_RMS};
 
 use crate::container::{LtmWriter, OptionalChunks};
 use crate::error::{Error, Result};
-use crate::limits::Limits;
 use crate::nearfield::{NearQuantization, PlaneRows};
 use crate::progress::{Progress, Stage};
 use crate::raw::RawStore;
@@ -357,7 +356,7 @@ impl Transposed<'_> {
         };
         let feedback = Feedback::new(opts, coder.budget(), analysis.as_ref())?;
         let channels = self.dims().channels as usize;
-        let mut near = crate::nearfield::plane_rows_of(self.raw(), channels, &Limits::default())?;
+        let mut near = crate::nearfield::plane_rows_of(self.raw(), channels, self.raw().limits())?;
         let near_q = match near.as_mut() {
             Some(rows) => Some(rows.quantize(opts.near_target())?),
             None => None,

@@ -43,6 +43,9 @@ pub struct RawStore {
     pub(super) stamp: Stamp,
     /// The tables' bytes, charged to the limits it was opened with.
     pub(super) _charge: Charge,
+    /// Those limits: what is made from the store (a compression's buffers,
+    /// its near-field rows) is charged to them too.
+    pub(super) limits: Limits,
 }
 
 impl RawStore {
@@ -108,6 +111,7 @@ impl RawStore {
         let charge = limits.check_alloc("raw store tables", held as u64, 1)?;
         Ok(RawStore {
             _charge: charge,
+            limits: limits.clone(),
             file,
             header,
             layout,
@@ -120,6 +124,12 @@ impl RawStore {
             mesh,
             stamp,
         })
+    }
+
+    /// The limits the store was opened with, which buffers made from it
+    /// are charged to.
+    pub fn limits(&self) -> &Limits {
+        &self.limits
     }
 
     /// The header.

@@ -163,6 +163,7 @@ def compress(
     row_filter: str = "haar",
     col_filter: str = "legall53",
     entropy: Optional[Literal["range", "zstd"]] = None,
+    near_error: Optional[float] = None,
     seed: int = 0x6C746D00,
     mem_budget: Optional[int] = None,
     progress: Optional[Progress] = None,
@@ -180,10 +181,15 @@ def compress(
     ``ltm import`` checks a ``.npy``). ``albedo``: ``(P, 3)`` or
     ``(H, W, 3)``, with a grey ``(P, M)`` matrix.
 
+    ``near_error``: the relative L2 error of a store's near-field rows (a
+    bake with a ``[light_plane]``), as ``--near-error``: None takes
+    ``max_error`` (lossless with ``keep``), 0 keeps them losslessly.
+
     Returns the file's bytes when ``out`` is None; else writes ``out``
     (atomically) and returns the stats (file_bytes, raw_bytes,
-    achieved_error, bits, target_met, and nonzeros and codings, or rank and
-    predicted_error for pca)."""
+    achieved_error, bits, target_met, and nonzeros, codings,
+    near_field_bytes and near_field_error, or rank and predicted_error for
+    pca)."""
 
 def bake(
     scene: PathLike,

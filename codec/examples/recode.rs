@@ -50,6 +50,10 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         cols.len(),
         stored * 1e9 / nnz as f64
     );
+    println!(
+        "the range decoder alone: {:.2} ns per adaptive binary decision (4 M bits, p(1) = 0.1, 8 contexts; fastest of {rounds})",
+        decision_ns(rounds)?
+    );
     if env("ONLY").is_some_and(|o| o == "stored") {
         return Ok(());
     }
@@ -134,4 +138,38 @@ fn decode_all(
         }
     }
     Ok(())
+}
+
+/// The decoder's time per binary decision with nothing around it: the
+/// floor under a column's decode, whose decisions depend on each other.
+fn decision_ns(rounds: usize) -> Result<f64, Box<dyn std::error::Error>> {
+    use ltm_codec::entropy::range::{Context, Decoder, Encoder};
+    let n = 1 << 22;
+    let mut x = 0x9e37_79b9_7f4a_7c15u64;
+    let bits: Vec<bool> = (0..n)
+        .map(|_| {
+            x ^= x << 13;
+            x ^= x >> 7;
+            x ^= x << 17;
+            x.is_multiple_of(10)
+        })
+        .collect();
+    let mut enc = Encoder::new();
+    let mut ctx = [Context::default(); 8];
+    for (i, &b) in bits.iter().enumerate() {
+        enc.bit(&mut ctx[i & 7], b);
+    }
+    let bytes = enc.finish();
+    let mut best = f64::INFINITY;
+    for _ in 0..rounds {
+        let start = Instant::now();
+        let mut dec = Decoder::new(&bytes)?;
+        let mut ctx = [Context::default(); 8];
+        let ones = (0..n).filter(|i| dec.bit(&mut ctx[i & 7])).count();
+        best = best.min(start.elapsed().as_secs_f64());
+        if ones != bits.iter().filter(|&&b| b).count() {
+            return Err("the bits decoded differently".into());
+        }
+    }
+    Ok(best * 1e9 / n as f64)
 }

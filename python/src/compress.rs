@@ -26,6 +26,7 @@ pub struct Settings {
     row_filter: Filter,
     col_filter: Filter,
     entropy: Option<Entropy>,
+    near_error: Option<f64>,
     seed: u64,
     mem_budget: u64,
 }
@@ -57,6 +58,11 @@ impl Settings {
                 "rank applies to mode='pca' only, and not with max_error",
             ));
         }
+        if pca && self.near_error.is_some() {
+            return Err(value(
+                "near_error applies to the wavelet modes, whose files hold near-field rows; mode='pca' files do not",
+            ));
+        }
         if pca && self.entropy.is_some() {
             return Err(value(
                 "entropy chooses how wavelet columns are stored; mode='pca' stores its basis with zstd",
@@ -85,6 +91,7 @@ impl Settings {
                 target,
                 seed: self.seed,
                 entropy: self.entropy.unwrap_or_default(),
+                near_error: self.near_error,
                 ..Default::default()
             },
         }
@@ -134,6 +141,11 @@ impl Settings {
             ("nonzeros", s.nonzeros as f64),
             ("codings", s.codings as f64),
             ("target_met", s.target_met as u8 as f64),
+            ("near_field_bytes", s.near_field_bytes as f64),
+            (
+                "near_field_error",
+                s.near_field.map_or(0.0, |q| q.error),
+            ),
         ])
     }
 }
@@ -146,7 +158,7 @@ fn stats_dict<'py>(py: Python<'py>, stats: &[Stat]) -> PyResult<Bound<'py, PyDic
     let d = PyDict::new(py);
     for &(k, v) in stats {
         match k {
-            "achieved_error" | "predicted_error" => d.set_item(k, v)?,
+            "achieved_error" | "predicted_error" | "near_field_error" => d.set_item(k, v)?,
             "target_met" => d.set_item(k, v != 0.0)?,
             _ => d.set_item(k, v as u64)?,
         }
@@ -159,7 +171,7 @@ fn stats_dict<'py>(py: Python<'py>, stats: &[Stat]) -> PyResult<Bound<'py, PyDic
 #[pyo3(signature = (matrix, out = None, *, width = None, height = None, albedo = None,
     mode = "adaptive", max_error = None, bits = None, quantizer = "uniform", keep = None, rank = None,
     max_rank = None, row_filter = "haar", col_filter = "legall53", entropy = None,
-    seed = 0x6c74_6d00, mem_budget = None, progress = None))]
+    near_error = None, seed = 0x6c74_6d00, mem_budget = None, progress = None))]
 #[allow(clippy::too_many_arguments)]
 pub fn compress<'py>(
     py: Python<'py>,
@@ -178,6 +190,7 @@ pub fn compress<'py>(
     row_filter: &str,
     col_filter: &str,
     entropy: Option<&str>,
+    near_error: Option<f64>,
     seed: u64,
     mem_budget: Option<u64>,
     progress: Option<Bound<'py, PyAny>>,
@@ -193,6 +206,7 @@ pub fn compress<'py>(
         row_filter: parse("row_filter", row_filter)?,
         col_filter: parse("col_filter", col_filter)?,
         entropy: entropy.map(|e| parse("entropy", e)).transpose()?,
+        near_error,
         seed,
         mem_budget: mem_budget.unwrap_or_else(default_mem_budget),
     };

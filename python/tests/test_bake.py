@@ -77,6 +77,30 @@ def test_bake_compress_relight_against_reference(tmp_path, sky):
     assert relative_l2(image, exact) <= 0.01
 
 
+PLANE = '\n[light_plane]\norigin = [0.0, 1.5, 0.0]\nx_axis = [1.0, 0.0, 0.0]\ny_axis = [0.0, 0.0, 1.0]\norder = 8\n'
+
+
+def test_near_field_rows_at_a_target_are_the_cli(tmp_path):
+    path = scene(tmp_path)
+    path.write_text(path.read_text() + PLANE)
+    ltm.bake(path, tmp_path / "p.raw", width=8, height=8)
+    sizes = {}
+    for near in (0.0, 0.05):
+        out = tmp_path / f"near-{near}.ltm"
+        stats = ltm.compress(tmp_path / "p.raw", out, near_error=near)
+        assert 0.0 <= stats["near_field_error"] <= near and stats["near_field_bytes"] > 0
+        cli = tmp_path / f"cli-{near}.ltm"
+        subprocess.run([ltm_binary(), "compress", str(tmp_path / "p.raw"), "-o", str(cli),
+                        "--near-error", str(near)], check=True, capture_output=True)
+        assert out.read_bytes() == cli.read_bytes()
+        sizes[near] = stats["near_field_bytes"]
+    assert sizes[0.05] < sizes[0.0]
+    with pytest.raises(ValueError, match="near-field error"):
+        ltm.compress(tmp_path / "p.raw", near_error=1.5)
+    with pytest.raises(ValueError, match="near_error applies to the wavelet modes"):
+        ltm.compress(tmp_path / "p.raw", mode="pca", near_error=0.01)
+
+
 def test_bake_errors(tmp_path):
     with pytest.raises(FileNotFoundError):
         ltm.bake(tmp_path / "none.toml", tmp_path / "x.raw")

@@ -362,19 +362,21 @@ impl Transposed<'_> {
             None => None,
         };
         let mut step = feedback.first()?;
+        if coder.options().bits != step.bits {
+            coder = Coder::new(self, &opts.with_bits(step.bits))?;
+        }
         // The side chunks are packed once (the NEAR chunk can take
         // seconds); a pass that is not kept starts the file again.
         let mut writer = new_writer(&coder, out, near.as_ref())?;
         loop {
-            if coder.options().bits != step.bits {
-                coder = Coder::new(self, &opts.with_bits(step.bits))?;
-                writer = writer.restart(out, coder.meta().clone())?;
-            }
             let (mut stats, coded) = write_columns(&coder, &mut writer, &step.plan, progress)?;
             match feedback.next(&step, &coded)? {
                 Next::Code(next) => {
-                    writer = writer.restart(out, coder.meta().clone())?;
                     step = next;
+                    if coder.options().bits != step.bits {
+                        coder = Coder::new(self, &opts.with_bits(step.bits))?;
+                    }
+                    writer = writer.restart(out, coder.meta().clone())?;
                 }
                 Next::Keep { target_met } => {
                     stats.target_met = target_met;

@@ -134,8 +134,6 @@ impl LtmWriter {
             (near, b"NEAR"),
         ]
         .map(|(c, tag)| c.map(|c| pack(c, tag)));
-        let file = AtomicFile::create(path)?;
-        let tmp = file.tmp_path().to_path_buf();
         let chunks = 3
             + albedo.is_some() as u64
             + empty_rows.is_some() as u64
@@ -155,8 +153,9 @@ impl LtmWriter {
             + optional(&mesh)
             + optional(&near)
             + norms_len;
-        let mut w = LtmWriter {
-            file: BufWriter::with_capacity(1 << 20, file),
+        let (file, tmp) = open_at(path, data_start)?;
+        Ok(LtmWriter {
+            file,
             tmp,
             meta,
             albedo,
@@ -169,11 +168,7 @@ impl LtmWriter {
             priors: extra.priors,
             data_start,
             data_len: 0,
-        };
-        w.file
-            .seek(SeekFrom::Start(data_start))
-            .map_err(|e| Error::io(&w.tmp, e))?;
-        Ok(w)
+        })
     }
 
     /// Bytes of the NEAR chunk as stored (0 without near-field rows).
@@ -256,10 +251,10 @@ impl LtmWriter {
             ..
         } = self;
         drop(file);
-        let file = AtomicFile::create(path)?;
-        let mut w = LtmWriter {
-            tmp: file.tmp_path().to_path_buf(),
-            file: BufWriter::with_capacity(1 << 20, file),
+        let (file, tmp) = open_at(path, data_start)?;
+        Ok(LtmWriter {
+            file,
+            tmp,
             meta,
             albedo,
             surface,
@@ -271,11 +266,7 @@ impl LtmWriter {
             priors,
             data_start,
             data_len: 0,
-        };
-        w.file
-            .seek(SeekFrom::Start(data_start))
-            .map_err(|e| Error::io(&w.tmp, e))?;
-        Ok(w)
+        })
     }
 
     /// Writes the tables, syncs and renames the file into place. Returns the
@@ -464,6 +455,17 @@ fn mesh_chunk(extra: &OptionalChunks<'_>, meta: &Meta) -> Result<Option<Vec<u8>>
 
 /// The NEAR chunk of a file with `meta`, if `extra` has near-field rows:
 /// only beside surface data, one row per matrix row, the matrix's channels.
+/// A new temporary file for `path`, buffered and placed at `data_start`,
+/// where the columns begin; and its path, for messages.
+fn open_at(path: &Path, data_start: u64) -> Result<(BufWriter<AtomicFile>, PathBuf)> {
+    let file = AtomicFile::create(path)?;
+    let tmp = file.tmp_path().to_path_buf();
+    let mut file = BufWriter::with_capacity(1 << 20, file);
+    file.seek(SeekFrom::Start(data_start))
+        .map_err(|e| Error::io(&tmp, e))?;
+    Ok((file, tmp))
+}
+
 fn near_chunk(extra: &OptionalChunks<'_>, meta: &Meta) -> Result<Option<Vec<u8>>> {
     let Some(near) = extra.near_field else {
         return Ok(None);

@@ -27,8 +27,8 @@ pub struct BasisRelighter {
     fit: Fit,
     dims: Dims,
     albedo: Option<Vec<f32>>,
-    /// The budget its frames are charged to (the machine's: the fit is
-    /// made from a raw store already in memory).
+    /// The budget its frames are charged to: the one the raw store was
+    /// opened with.
     limits: Limits,
 }
 
@@ -79,7 +79,8 @@ impl BasisRelighter {
             fit,
             dims,
             albedo: raw.albedo().map(<[f32]>::to_vec),
-            limits: Limits::default(),
+            // Frames are charged to the budget the store was opened with.
+            limits: raw.limits().clone(),
         })
     }
 

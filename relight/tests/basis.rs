@@ -4,7 +4,7 @@
 
 use ltm_codec::baseline::sh;
 use ltm_codec::compress::{compress, CompressOptions};
-use ltm_codec::{cubemap, Dims, PcaBasis, RawStore, ShProjection};
+use ltm_codec::{cubemap, Dims, Limits, PcaBasis, RawStore, ShProjection};
 use ltm_relight::{
     reference, relative_l2, BasisRelighter, Frame, Relight, Relighter, Request, Weighting,
 };
@@ -151,6 +151,37 @@ fn check_sh_relight(d: Dims, albedo: Option<Vec<f32>>) {
     assert!(e.to_string().contains("order = 5") && e.to_string().contains("0..=4"));
     let two = Request { terms: 2, ..five };
     assert!(relighter.relight(&light[1..], &two, &mut frame).is_err());
+}
+
+/// A basis relighter's frames are charged to the limits its raw store was
+/// opened with (not the machine's budget): a budget that holds the store's
+/// tables but not a frame's image refuses the frame, naming it.
+#[test]
+fn frames_are_charged_to_the_stores_limits() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dims(48, 32, 2, 3);
+    let t = random_matrix(d, 7);
+    let path = write_raw(&dir.path().join("t.raw"), d, &t, None, block_bytes(d, 3));
+    let roomy = RawStore::open_with_limits(&path, &Limits::with_max_alloc(1 << 30)).unwrap();
+    let tables = roomy.limits().used_bytes();
+    let projection = ShProjection::fit(&roomy, 2).unwrap();
+    let light = random_light(d.lights());
+    let request = Request {
+        terms: 2,
+        weighting: Weighting::Transport,
+    };
+    // The image is 48·32·12 bytes: 18 KiB.
+    let tight = RawStore::open_with_limits(&path, &Limits::with_max_alloc(tables + 4096)).unwrap();
+    let relighter = BasisRelighter::sh(projection.clone(), &tight).unwrap();
+    let err = relighter
+        .frame()
+        .and_then(|mut f| relighter.relight(&light, &request, &mut f).map(drop))
+        .unwrap_err()
+        .to_string();
+    assert!(err.contains("relit image"), "{err}");
+    let relighter = BasisRelighter::sh(projection, &roomy).unwrap();
+    let mut frame = relighter.frame().unwrap();
+    relighter.relight(&light, &request, &mut frame).unwrap();
 }
 
 #[test]

@@ -124,7 +124,7 @@ pub struct CompressArgs {
     #[arg(long)]
     pub max_error: Option<f64>,
     /// Target relative L2 error of the near-field rows (a store baked with
-    /// a [light_plane], for `ltm relight --area-light`): their Haar
+    /// a `[light_plane]`, for `ltm relight --area-light`): their Haar
     /// coefficients rounded to one step, the largest that meets it, and
     /// those that round to 0 dropped. 0 stores them losslessly
     /// [default: --max-error's target; 0 with --keep].

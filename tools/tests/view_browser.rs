@@ -603,6 +603,7 @@ fn split_preview_and_reset(tab: &Tab) {
         "document.getElementById('map-preview').dataset.shown === rotationQuery()",
         "the map preview",
     );
+    preview_is_the_servers(tab);
     // 30 px of the 300 px preview: 36 degrees, the map following the pointer.
     drag(tab, "map-preview", 30.0);
     assert_eq!(
@@ -632,6 +633,51 @@ fn split_preview_and_reset(tab: &Tab) {
         ),
     ] {
         assert_eq!(text(tab, js), want, "{js} after reset");
+    }
+}
+
+/// The page rotates the map preview itself: at rotations off the quarter
+/// turns, its canvas shows the server's `/api/map` of the same rotation,
+/// tone-mapped at the preview's exposure, pixel for pixel (outside the
+/// cross; a pixel whose nearest source differs by one ulp of a libm call
+/// may differ, at most 0.1 % of them).
+fn preview_is_the_servers(tab: &Tab) {
+    let field = |id: &str| text(tab, &format!("document.getElementById('{id}').value"));
+    let before = ["yaw", "pitch", "roll"].map(field);
+    for (yaw, pitch, roll) in [
+        (37.5, -20.0, 10.0),
+        (90.0, 0.0, 0.0),
+        (-123.25, 45.0, -170.0),
+    ] {
+        set(tab, "yaw", &yaw.to_string(), "change");
+        set(tab, "pitch", &pitch.to_string(), "change");
+        set(tab, "roll", &roll.to_string(), "change");
+        wait_until(
+            tab,
+            "document.getElementById('map-preview').dataset.shown === rotationQuery()",
+            "the rotated map preview",
+        );
+        let js = "(async () => { \
+            const r = await fetch('/api/map?' + rotationQuery()); \
+            const f = decodeFrame(await r.arrayBuffer()), w = f.width, h = f.height; \
+            const got = document.getElementById('map-preview').getContext('2d').getImageData(0, 0, w, h).data; \
+            const [cu, cv] = latlongUv(...rotationColumns()[2]), cx = cu * w, cy = cv * h; \
+            const scale = Math.pow(2, preview.ev); let compared = 0, differ = 0; \
+            for (let y = 0; y < h; y++) for (let x = 0; x < w; x++) { \
+              if (Math.abs(x + 0.5 - cx) < 11 && Math.abs(y + 0.5 - cy) < 11) continue; \
+              compared++; const p = y * w + x; \
+              for (let k = 0; k < 3; k++) if (got[4 * p + k] !== srgb8Fast(f.floats[3 * p + k] * scale)) { differ++; break; } } \
+            return JSON.stringify([compared, differ]); })()";
+        let v = tab.evaluate(js, true).unwrap().value.unwrap();
+        let (compared, differ): (u64, u64) = serde_json::from_str(v.as_str().unwrap()).unwrap();
+        assert!(compared > 30_000, "{compared} pixels compared");
+        assert!(
+            differ * 1000 <= compared,
+            "yaw {yaw}, pitch {pitch}, roll {roll}: {differ} of {compared} preview pixels differ from /api/map"
+        );
+    }
+    for (id, v) in ["yaw", "pitch", "roll"].iter().zip(&before) {
+        set(tab, id, v, "change");
     }
 }
 
@@ -963,7 +1009,8 @@ fn glossy_materials_on_image_rows_show_what_ltm_relight_brdf_draws() {
 /// correctness): both files of `LTM_VIEW_BENCH` open side by side, and the
 /// page's yaw turns by 1.5° every 16.7 ms (60 input events a second, as a
 /// drag's pointer moves fire them) for `LTM_VIEW_BENCH_SECONDS` (default
-/// 10). Latency is `performance.now()` from the oldest input a frame
+/// 10), once the server has decoded every column (`preloaded`; the wait is
+/// `preload_wait_s`). Latency is `performance.now()` from the oldest input a frame
 /// answers to the `requestAnimationFrame` after it is drawn. Also measures
 /// the draft light's relit error against the exact light's at 8 rotations.
 /// For docs/results/viewer.md; run by hand:
@@ -993,6 +1040,18 @@ fn measure_latency() {
         let q = eval(&tab, &format!("query({i})"));
         wait_shown(&tab, &format!("view{i}"), q.as_str().unwrap());
     }
+    // The steady state: every column decoded (the server's background
+    // preload), so that no frame of the drag decodes; the wait is reported.
+    let opened = Instant::now();
+    let preloaded = "fetch('/api/info').then((r) => r.json()).then((i) => i.preloaded)";
+    while tab.evaluate(preloaded, true).unwrap().value != Some(json!(true)) {
+        assert!(
+            opened.elapsed().as_secs() < 600,
+            "the preload did not end in 10 minutes"
+        );
+        std::thread::sleep(std::time::Duration::from_millis(200));
+    }
+    let preload_wait = opened.elapsed().as_secs_f64();
     let first = eval(&tab, "window.ltmView.latencies.length")
         .as_u64()
         .unwrap();
@@ -1021,6 +1080,7 @@ fn measure_latency() {
     let samples: Vec<Value> = serde_json::from_str(samples.as_str().unwrap()).unwrap();
     let mut r = latency_stats(&samples, panels as usize, wall);
     r["events"] = events;
+    r["preload_wait_s"] = json!(preload_wait);
     r["files"] = json!(files);
     r["query"] = eval(&tab, "query(0)");
     r["draft_relit_error"] = draft_errors(&srv, &eval(&tab, "query(0)"));

@@ -239,6 +239,7 @@ fn info(viewer: &Viewer) -> Reply {
         "glossy_n": viewer.materials().map(|m| m.side()),
         "weightings": ["unweighted", "transport", "area"],
         "max_angle": params::MAX_ANGLE,
+        "preloaded": viewer.preloaded(),
     });
     body(v.to_string().into_bytes(), "application/json")
 }

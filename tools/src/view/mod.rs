@@ -16,7 +16,10 @@
 //!   (their lighting side, or null). With `--brdf`, an image-space file's
 //!   `eye` is the camera position its pixels were seen from, recovered
 //!   from its surface records (`ltm_codec::ImageCamera`), or null where
-//!   they do not fix it (texture files: null).
+//!   they do not fix it (texture files: null). `preloaded` is true once
+//!   every column of every file is decoded (the server decodes them in the
+//!   background from the start; until then a frame decodes the columns it
+//!   needs first, and a drag that meets many new columns is slower).
 //! - `/api/frame?file=F&map=M&yaw=Y&pitch=P&roll=R&n=N&weighting=W&light=L&client=C&seq=S`:
 //!   one frame. `yaw`, `pitch`, `roll` (degrees, finite, |a| ≤ 36000),
 //!   `weighting` (unweighted, transport, area) and `light` are optional.
@@ -53,7 +56,9 @@
 //! - `/api/map?map=M&yaw=Y&pitch=P&roll=R`: the map's preview, at most
 //!   256 × 128 (box-filtered once at start), rotated as the frames' lighting
 //!   is (pixel ω shows the map's light from `R⁻¹·ω`, nearest pixel), as a
-//!   binary frame (below).
+//!   binary frame (below). The page fetches each map's unrotated preview
+//!   once and turns it itself, with the same nearest pixels (a yaw drag
+//!   costs no request).
 //! - `/api/surface?file=F`: a texture-space file's texel records: the
 //!   16-byte header below with magic `LTMS` and format 2, then x, y, z as
 //!   little-endian f32 per texel (its surface point; rows top to bottom),

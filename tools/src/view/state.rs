@@ -17,6 +17,7 @@ use ltm_relight::{
 use serde::Serialize;
 use std::collections::{HashMap, VecDeque};
 use std::path::{Path, PathBuf};
+use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
 
@@ -164,6 +165,8 @@ pub struct Viewer {
     materials: Option<Materials>,
     slots: Slots,
     clients: Mutex<HashMap<String, (u64, Instant)>>,
+    /// Set once [`Viewer::preload`] has decoded every file's columns.
+    preloaded: AtomicBool,
 }
 
 fn key_of(l: &Lighting) -> [u64; 3] {
@@ -286,6 +289,13 @@ impl Viewer {
                 eprintln!("warning: {}: {e}", f.path.display());
             }
         }
+        self.preloaded.store(true, Ordering::Release);
+    }
+
+    /// Whether [`Viewer::preload`] has run to its end: until then a frame
+    /// may decode the columns it needs first (`preloaded` in `/api/info`).
+    pub fn preloaded(&self) -> bool {
+        self.preloaded.load(Ordering::Acquire)
     }
 
     /// Opens the files, maps and raw store; `slots` frames may run at once.
@@ -337,6 +347,7 @@ impl Viewer {
             materials,
             slots: Slots::new(slots),
             clients: Mutex::new(HashMap::new()),
+            preloaded: AtomicBool::new(false),
         })
     }
 

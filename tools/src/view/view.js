@@ -35,7 +35,7 @@ function decodeFrame(buf) {
   const halves = new Uint16Array(buf, 16, w * h * 3);
   const f = new Float32Array(w * h * 3);
   for (let i = 0; i < f.length; i++) f[i] = HALF[halves[i]];
-  return { width: w, height: h, floats: f };
+  return { width: w, height: h, floats: f, halves };
 }
 
 // sRGB 8-bit encoding, as ltm's PNG writer does it.
@@ -92,17 +92,27 @@ function showEv() {
   if ($("auto-exposure").checked) $("exposure").value = e;
 }
 
-function toRgba(floats, w, h) {
-  const scale = Math.pow(2, ev());
-  const reinhard = $("tonemap").value === "reinhard";
-  const out = new Uint8ClampedArray(w * h * 4);
-  for (let p = 0; p < w * h; p++) {
-    for (let c = 0; c < 3; c++) {
+// A frame's tone-mapped pixels from its half floats, through a table of the
+// 8-bit code of every half float (made once an exposure and tone map): each
+// code as ltm's PNG writer makes it from the value.
+let halfCodes = { key: null, table: null };
+function toRgba(halves, w, h) {
+  const scale = Math.pow(2, ev()), reinhard = $("tonemap").value === "reinhard", key = `${scale}:${reinhard}`;
+  if (halfCodes.key !== key) {
+    const table = new Uint8Array(65536);
+    for (let i = 0; i < 65536; i++) {
       // Math.fround: the same f32 product as the PNG writer's.
-      let v = Math.fround(floats[3 * p + c] * Math.fround(scale));
+      let v = Math.fround(HALF[i] * Math.fround(scale));
       if (reinhard) v = v / (1 + v);
-      out[4 * p + c] = srgb8Fast(v);
+      table[i] = srgb8Fast(v);
     }
+    halfCodes = { key, table };
+  }
+  const t = halfCodes.table, out = new Uint8ClampedArray(w * h * 4);
+  for (let p = 0; p < w * h; p++) {
+    out[4 * p] = t[halves[3 * p]];
+    out[4 * p + 1] = t[halves[3 * p + 1]];
+    out[4 * p + 2] = t[halves[3 * p + 2]];
     out[4 * p + 3] = 255;
   }
   return out;
@@ -233,7 +243,8 @@ function message(text) { $("message").textContent = text || ""; }
 function draw(panel) {
   if (!panel.floats) return;
   const exact = panel !== exactPanel && $("display").value === "heat" ? exactFor(panel) : null;
-  const rgba = exact ? heatRgba(panel.floats, exact, panel.width, panel.height) : toRgba(panel.floats, panel.width, panel.height);
+  const rgba = exact ? heatRgba(panel.floats, exact, panel.width, panel.height)
+    : toRgba(panel.halves, panel.width, panel.height);
   if (panel.gl) { panel.gl.setTexture(panel.floats, rgba, panel.width, panel.height); return; }
   const c = panel.canvas;
   if (c.width !== panel.width || c.height !== panel.height) { c.width = panel.width; c.height = panel.height; }
@@ -426,33 +437,97 @@ function askError(p) {
 
 // --- map preview -------------------------------------------------------------
 
-let preview = { inFlight: false, want: null, shown: null, floats: null };
+// The page fetches each map's unrotated preview once (`/api/map`, 256 × 128
+// floats) and rotates it here, at most once a display frame: pixel ω shows
+// the preview's pixel nearest R⁻¹·ω, as the server's /api/map draws it
+// (src/view/preview.rs). Turning the map costs no request: a drag's inputs
+// would otherwise each fetch and decode a preview beside the frames.
+const preview = { inFlight: false, map: null, floats: null, width: 0, height: 0, ev: 0, texels: null, texelsEv: null, tiltKey: null, u: null, row: null, frame: 0 };
 
 async function requestPreview() {
-  preview.want = rotationQuery();
-  if (preview.inFlight || preview.want === preview.shown) return;
+  const map = $("map").value;
+  if (preview.map === map) return schedulePreview();
+  if (preview.inFlight) return;
   preview.inFlight = true;
-  const q = preview.want;
   try {
-    const r = await fetch(`/api/map?${q}`);
-    if (r.status === 200) { Object.assign(preview, decodeFrame(await r.arrayBuffer())); preview.shown = q; preview.ev = autoExposure(preview.floats); drawPreview(); }
+    const r = await fetch(`/api/map?map=${map}&yaw=0&pitch=0&roll=0`);
+    if (r.status === 200) {
+      Object.assign(preview, decodeFrame(await r.arrayBuffer()));
+      // The rotation moves the pixels, not their values: one exposure a map.
+      Object.assign(preview, { map, ev: autoExposure(preview.floats), texels: null, tiltKey: null });
+    }
   } catch (e) {
     goneOffline("map preview", e);
   }
   preview.inFlight = false;
-  if (preview.want !== preview.shown && !offline) requestPreview();
+  if (preview.map !== $("map").value && !offline) requestPreview();
+  else schedulePreview();
+}
+
+function schedulePreview() {
+  if (!preview.frame) preview.frame = requestAnimationFrame(() => { preview.frame = 0; drawPreview(); });
+}
+
+// `sin` and `cos` of an angle in degrees as ltm_relight's sin_cos_degrees
+// takes them: exact at multiples of 90, 0 for a non-finite angle.
+function sinCosDegrees(deg) {
+  let r = deg % 360;
+  if (r < 0) r += 360;
+  if (r === 0 || !Number.isFinite(r)) return [0, 1];
+  if (r === 90) return [1, 0];
+  if (r === 180) return [0, -1];
+  if (r === 270) return [-1, 0];
+  const x = r * (Math.PI / 180);
+  return [Math.sin(x), Math.cos(x)];
 }
 
 // The rotation as ltm_relight::Rotation::matrix builds it (Rz·Rx·Ry,
-// degrees), applied to a direction.
-function rotate(d) {
-  const rad = (a) => (angle(a) * Math.PI) / 180;
-  const [y, p, r] = [rad("yaw"), rad("pitch"), rad("roll")];
-  let [x0, y0, z0] = d;
-  [x0, z0] = [Math.cos(y) * x0 + Math.sin(y) * z0, -Math.sin(y) * x0 + Math.cos(y) * z0];
-  [y0, z0] = [Math.cos(p) * y0 - Math.sin(p) * z0, Math.sin(p) * y0 + Math.cos(p) * z0];
-  [x0, y0] = [Math.cos(r) * x0 - Math.sin(r) * y0, Math.sin(r) * x0 + Math.cos(r) * y0];
-  return [x0, y0, z0];
+// degrees), as its columns, with glam's order of operations.
+function rotationColumns(yaw = angle("yaw"), pitch = angle("pitch"), roll = angle("roll")) {
+  const [sy, cy] = sinCosDegrees(yaw), [sp, cp] = sinCosDegrees(pitch), [sr, cr] = sinCosDegrees(roll);
+  const ry = [[cy, 0, -sy], [0, 1, 0], [sy, 0, cy]];
+  const rx = [[1, 0, 0], [0, cp, sp], [0, -sp, cp]];
+  const rz = [[cr, sr, 0], [-sr, cr, 0], [0, 0, 1]];
+  const apply = (m, v) => [0, 1, 2].map((i) => m[0][i] * v[0] + m[1][i] * v[1] + m[2][i] * v[2]);
+  const mul = (a, b) => b.map((col) => apply(a, col));
+  return mul(mul(rz, rx), ry);
+}
+
+// The lat-long coordinates of a direction (ltm_codec::cubemap::latlong_uv).
+function latlongUv(x, y, z) {
+  let u = Math.atan2(x, -z) / (2 * Math.PI) % 1;
+  if (u < 0) u += 1;
+  return [u, Math.acos(Math.max(-1, Math.min(1, y))) / Math.PI];
+}
+
+// The preview's tone-mapped texels (once a map and exposure), and where
+// each pixel looks before the yaw: R = Rz·Rx·Ry, so R⁻¹·ω = Ry⁻¹·(Rx⁻¹·Rz⁻¹·ω),
+// and the last step, a turn about y, only moves u by +yaw/360. The table of
+// Rx⁻¹·Rz⁻¹·ω's u and row is made once a pitch and roll, so that a yaw drag
+// costs a lookup a pixel (the same pixels as /api/map's, but for ties at a
+// pixel's edge: rounding differs from the server's one product).
+function previewTables(pitch, roll) {
+  const w = preview.width, h = preview.height;
+  if (!preview.texels || preview.texelsEv !== preview.ev) {
+    const scale = Math.pow(2, preview.ev), out = new Uint8ClampedArray(w * h * 4);
+    for (let p = 0; p < w * h; p++) { for (let k = 0; k < 3; k++) out[4 * p + k] = srgb8Fast(preview.floats[3 * p + k] * scale); out[4 * p + 3] = 255; }
+    preview.texels = new Uint32Array(out.buffer);
+    preview.texelsEv = preview.ev;
+  }
+  const key = `${w}x${h}:${pitch},${roll}`;
+  if (preview.tiltKey === key) return;
+  const [[a0, a1, a2], [b0, b1, b2], [c0, c1, c2]] = rotationColumns(0, pitch, roll);
+  preview.u = new Float64Array(w * h);
+  preview.row = new Int32Array(w * h);
+  for (let y = 0; y < h; y++) for (let x = 0; x < w; x++) {
+    const phi = 2 * Math.PI * ((x + 0.5) / w), theta = Math.PI * ((y + 0.5) / h), p = y * w + x;
+    const dx = Math.sin(phi) * Math.sin(theta), dy = Math.cos(theta), dz = -Math.cos(phi) * Math.sin(theta);
+    // Each column of R (a row of its transpose) dotted with d.
+    const [u, v] = latlongUv(a0 * dx + a1 * dy + a2 * dz, b0 * dx + b1 * dy + b2 * dz, c0 * dx + c1 * dy + c2 * dz);
+    preview.u[p] = u;
+    preview.row[p] = Math.min(Math.floor(v * h), h - 1) * w;
+  }
+  preview.tiltKey = key;
 }
 
 // The rotated map (as the frames are lit), with a cross where the map's
@@ -461,17 +536,22 @@ function drawPreview() {
   if (!preview.floats) return;
   const c = $("map-preview"), w = preview.width, h = preview.height;
   if (c.width !== w || c.height !== h) { c.width = w; c.height = h; }
-  const scale = Math.pow(2, preview.ev), out = new Uint8ClampedArray(w * h * 4);
-  for (let p = 0; p < w * h; p++) { for (let k = 0; k < 3; k++) out[4 * p + k] = srgb8Fast(preview.floats[3 * p + k] * scale); out[4 * p + 3] = 255; }
+  previewTables(angle("pitch"), angle("roll"));
+  const m = rotationColumns(), out = new Uint32Array(w * h), texels = preview.texels, us = preview.u, rows = preview.row;
+  const turn = angle("yaw") / 360;
+  for (let p = 0; p < w * h; p++) {
+    let u = us[p] + turn;
+    u -= Math.floor(u);
+    out[p] = texels[rows[p] + Math.min(Math.floor(u * w), w - 1)];
+  }
   const g = c.getContext("2d");
-  g.putImageData(new ImageData(out, w, h), 0, 0);
-  // The map's centre pixel looks along +z (docs/FORMAT.md's lat-long map).
-  const [dx, dy, dz] = rotate([0, 0, 1]);
-  const u = ((Math.atan2(dx, -dz) / (2 * Math.PI)) % 1 + 1) % 1, v = Math.acos(Math.max(-1, Math.min(1, dy))) / Math.PI;
+  g.putImageData(new ImageData(new Uint8ClampedArray(out.buffer), w, h), 0, 0);
+  // The map's centre pixel looks along +z (docs/FORMAT.md's lat-long map): R·(0, 0, 1) is R's last column.
+  const [u, v] = latlongUv(...m[2]);
   const x = u * w, y = v * h;
   g.strokeStyle = "#fd8"; g.lineWidth = 1.5;
   g.beginPath(); g.moveTo(x - 8, y); g.lineTo(x + 8, y); g.moveTo(x, y - 8); g.lineTo(x, y + 8); g.stroke();
-  c.dataset.shown = preview.shown;
+  c.dataset.shown = rotationQuery().replace(/^map=[^&]*/, `map=${preview.map}`);
   $("preview-caption").textContent = `${info.maps[Number($("map").value)].name}, yaw ${angle("yaw")}°, pitch ${angle("pitch")}°, roll ${angle("roll")}° (+: the map's centre)`;
 }
 

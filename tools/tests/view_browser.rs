@@ -659,14 +659,14 @@ fn preview_is_the_servers(tab: &Tab) {
         );
         let js = "(async () => { \
             const r = await fetch('/api/map?' + rotationQuery()); \
-            const f = decodeFrame(await r.arrayBuffer()), w = f.width, h = f.height; \
+            const f = decodeFrame(await r.arrayBuffer()), w = f.width, h = f.height, floats = halvesToFloats(f.halves); \
             const got = document.getElementById('map-preview').getContext('2d').getImageData(0, 0, w, h).data; \
             const [cu, cv] = latlongUv(...rotationColumns()[2]), cx = cu * w, cy = cv * h; \
             const scale = Math.pow(2, preview.ev); let compared = 0, differ = 0; \
             for (let y = 0; y < h; y++) for (let x = 0; x < w; x++) { \
               if (Math.abs(x + 0.5 - cx) < 11 && Math.abs(y + 0.5 - cy) < 11) continue; \
               compared++; const p = y * w + x; \
-              for (let k = 0; k < 3; k++) if (got[4 * p + k] !== srgb8Fast(f.floats[3 * p + k] * scale)) { differ++; break; } } \
+              for (let k = 0; k < 3; k++) if (got[4 * p + k] !== srgb8Fast(floats[3 * p + k] * scale)) { differ++; break; } } \
             return JSON.stringify([compared, differ]); })()";
         let v = tab.evaluate(js, true).unwrap().value.unwrap();
         let (compared, differ): (u64, u64) = serde_json::from_str(v.as_str().unwrap()).unwrap();

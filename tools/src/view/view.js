@@ -8,7 +8,7 @@ const $ = (id) => document.getElementById(id);
 const client = Array.from(crypto.getRandomValues(new Uint8Array(8)), (b) => b.toString(16).padStart(2, "0")).join("");
 let seq = 0;
 let info = null;
-const panels = []; // one per file: { canvas, floats, width, height, inFlight, pending, ... }
+const panels = []; // one per file: { canvas, halves, floats, width, height, inFlight, pending, ... }
 let exactPanel = null;
 const nGroups = []; // N controls: one for all files, or one per file when their light counts differ
 const stats = { latencies: [], frames: 0 };
@@ -27,15 +27,22 @@ const HALF = new Float32Array(65536);
   }
 })();
 
+// A binary frame: its size and half floats. Drawing reads the halves
+// (toRgba); the floats, which only the probe, the heatmap, the exposure
+// and a mesh's texture need, are decoded on first use: a panel's `floats`
+// getter (see `addPanel`) keeps them in `decoded` until the next frame.
 function decodeFrame(buf) {
   const dv = new DataView(buf);
   const magic = String.fromCharCode(...new Uint8Array(buf, 0, 4));
   if (magic !== "LTMF" || dv.getUint32(12, true) !== 1) throw new Error("not an RGB f16 frame");
   const w = dv.getUint32(4, true), h = dv.getUint32(8, true);
-  const halves = new Uint16Array(buf, 16, w * h * 3);
-  const f = new Float32Array(w * h * 3);
+  return { width: w, height: h, halves: new Uint16Array(buf, 16, w * h * 3), decoded: null };
+}
+
+function halvesToFloats(halves) {
+  const f = new Float32Array(halves.length);
   for (let i = 0; i < f.length; i++) f[i] = HALF[halves[i]];
-  return { width: w, height: h, floats: f, halves };
+  return f;
 }
 
 // sRGB 8-bit encoding, as ltm's PNG writer does it.
@@ -161,7 +168,7 @@ function drawLegend(show) {
 
 // The exact image for a panel's lighting, when it has come.
 function exactFor(p) {
-  if (!exactPanel || !exactPanel.floats || !p.shown) return null;
+  if (!exactPanel || !exactPanel.halves || !p.shown) return null;
   if (lightingOf(p.shown) !== lightingOf(exactPanel.shownQuery || "")) return null;
   return exactPanel.width === p.width && exactPanel.height === p.height ? exactPanel.floats : null;
 }
@@ -241,7 +248,7 @@ function message(text) { $("message").textContent = text || ""; }
 // --- drawing -------------------------------------------------------------
 
 function draw(panel) {
-  if (!panel.floats) return;
+  if (!panel.halves) return;
   const exact = panel !== exactPanel && $("display").value === "heat" ? exactFor(panel) : null;
   const rgba = exact ? heatRgba(panel.floats, exact, panel.width, panel.height)
     : toRgba(panel.halves, panel.width, panel.height);
@@ -270,7 +277,7 @@ function showStates() {
     const have = p === exactPanel ? lightingOf(p.shownQuery || "") : p.draft ? null : p.shown;
     s.className = offline ? "state offline" : "state";
     s.textContent = offline ? "offline: the server does not answer; this is the last frame"
-      : p.floats && have !== want && (p.inFlight || p.pending) ? "updating…" : "";
+      : p.halves && have !== want && (p.inFlight || p.pending) ? "updating…" : "";
   }
 }
 
@@ -442,7 +449,10 @@ function askError(p) {
 // the preview's pixel nearest R⁻¹·ω, as the server's /api/map draws it
 // (src/view/preview.rs). Turning the map costs no request: a drag's inputs
 // would otherwise each fetch and decode a preview beside the frames.
-const preview = { inFlight: false, map: null, floats: null, width: 0, height: 0, ev: 0, texels: null, texelsEv: null, tiltKey: null, u: null, row: null, frame: 0 };
+const preview = {
+  inFlight: false, map: null, halves: null, decoded: null, width: 0, height: 0, ev: 0, texels: null, texelsEv: null, tiltKey: null, u: null, row: null, frame: 0,
+  get floats() { return this.halves ? (this.decoded ??= halvesToFloats(this.halves)) : null; },
+};
 
 async function requestPreview() {
   const map = $("map").value;
@@ -533,7 +543,7 @@ function previewTables(pitch, roll) {
 // The rotated map (as the frames are lit), with a cross where the map's
 // centre (u = v = 0.5, straight ahead at no rotation) now lies.
 function drawPreview() {
-  if (!preview.floats) return;
+  if (!preview.halves) return;
   const c = $("map-preview"), w = preview.width, h = preview.height;
   if (c.width !== w || c.height !== h) { c.width = w; c.height = h; }
   previewTables(angle("pitch"), angle("roll"));
@@ -739,7 +749,10 @@ function addPanel(title, index) {
   fig.append(canvas, state, cap);
   $("panels").append(fig);
   dragRotates(canvas);
-  return { index, canvas, state, figure: fig, errorEl: index === "exact" ? null : e, inFlight: false, pending: null };
+  return {
+    index, canvas, state, figure: fig, errorEl: index === "exact" ? null : e, inFlight: false, pending: null, halves: null, decoded: null,
+    get floats() { return this.halves ? (this.decoded ??= halvesToFloats(this.halves)) : null; },
+  };
 }
 
 // --- texture-space files: the mesh in WebGL, with an orbit camera ------------

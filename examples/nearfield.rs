@@ -14,6 +14,9 @@
 //!     [--points OUT.points]
 //! ```
 //!
+//! Grey scenes (Lambertian) and RGB ones (glossy materials) both work: an
+//! RGB row's channel `c` is lit by the light's channel `c`.
+//!
 //! `TEXTURE.f32` is `H × W × 3` little-endian f32 radiance, row 0 at the
 //! light's −y edge; `OUT.f32` is the image, `height × width × 3` f32 with
 //! row 0 at the top. The plane's lit side is `x × y`. `OUT.u8` holds one
@@ -81,20 +84,18 @@ fn texture(spec: &str) -> Result<LightTexture, Box<dyn Error>> {
     )?)
 }
 
-/// A baked floor of the image: the point's receiver, albedo, transport
-/// coefficients and world position; `None` for a miss.
-type Row = Option<(Receiver, [f32; 3], Vec<(u32, f32)>, DVec3)>;
+/// A baked floor of the image: the point's receiver, albedo (grey
+/// transport), transport coefficients per channel (one list for grey
+/// transport, three for RGB) and world position; `None` for a miss.
+type Row = Option<(Receiver, [f32; 3], Vec<Vec<(u32, f32)>>, DVec3)>;
 
 /// Every pixel's row over the plane's face, in parallel.
 fn bake_rows(scene: &Scene, plane: &LightPlane, face: PlaneFace) -> Result<Vec<Row>, String> {
     let channels = scene.channels() as usize;
-    if channels != 1 {
-        return Err("an RGB (glossy) scene: this example takes grey transport".into());
-    }
     (0..scene.dims().pixels())
         .into_par_iter()
         .map(|p| {
-            let mut row = vec![0.0f32; face.order * face.order];
+            let mut row = vec![0.0f32; face.order * face.order * channels];
             let mut albedo = [0.0f32; 3];
             let info = scene
                 .plane_row(p, plane, face.order, face.side, &mut row, &mut albedo)
@@ -103,7 +104,12 @@ fn bake_rows(scene: &Scene, plane: &LightPlane, face: PlaneFace) -> Result<Vec<R
                 return Ok(None);
             };
             let (depth, position) = plane.locate(point);
-            let transport = transport_coefficients(&row, face.order).map_err(|e| e.to_string())?;
+            let transport = (0..channels)
+                .map(|c| {
+                    let plane: Vec<f32> = row.iter().skip(c).step_by(channels).copied().collect();
+                    transport_coefficients(&plane, face.order).map_err(|e| e.to_string())
+                })
+                .collect::<Result<Vec<_>, String>>()?;
             Ok(Some((
                 Receiver { depth, position },
                 albedo,
@@ -137,8 +143,12 @@ fn relight(
                     {
                         return [0.0; 3];
                     }
-                    let b = propagator.shade(transport);
-                    [0, 1, 2].map(|c| (b[c] * f64::from(albedo[c])).max(0.0) as f32)
+                    if let [grey] = &transport[..] {
+                        let b = propagator.shade(grey);
+                        [0, 1, 2].map(|c| (b[c] * f64::from(albedo[c])).max(0.0) as f32)
+                    } else {
+                        [0, 1, 2].map(|c| propagator.shade(&transport[c])[c].max(0.0) as f32)
+                    }
                 })
                 .collect::<Vec<_>>()
         })

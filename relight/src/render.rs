@@ -274,33 +274,15 @@ impl TexturedMesh {
         let surface = file.surface().ok_or_else(|| {
             RelightError::Invalid("the texture-space file has no surface data".into())
         })?;
-        let texels = surface.len() as u64;
-        let (charge, mut mesh) = match stored_mesh(file) {
-            Some(m) => {
-                let bytes = texels * 25
-                    + m.vertex_count() as u64 * MESH_BYTES_PER_VERTEX
-                    + m.triangles.len() as u64 * MESH_BYTES_PER_TRIANGLE;
-                let charge = limits.check_alloc("mesh of the receiver", bytes, 1)?;
-                (
-                    charge,
-                    TexturedMesh::from_mesh(size, parameterization, surface, m)?,
-                )
-            }
-            None => {
-                let charge = limits.check_alloc(
-                    "mesh of the geometry image",
-                    texels,
-                    GRID_BYTES_PER_TEXEL,
-                )?;
-                (charge, TexturedMesh::new(size, parameterization, surface)?)
-            }
-        };
-        (mesh.limits, mesh._charge) = (limits.clone(), charge);
-        Ok(mesh)
+        match stored_mesh(file) {
+            Some(m) => TexturedMesh::from_mesh(size, parameterization, surface, m, limits),
+            None => TexturedMesh::new(size, parameterization, surface, limits),
+        }
     }
 
-    /// An empty mesh over the records of an `size × size` surface.
-    fn over(size: u32, surface: &Surface) -> Result<TexturedMesh> {
+    /// An empty mesh over the records of an `size × size` surface, holding
+    /// its `charge` to `limits`.
+    fn over(size: u32, surface: &Surface, limits: &Limits, charge: Charge) -> Result<TexturedMesh> {
         let s = size as usize;
         if surface.len() != s * s {
             return Err(RelightError::Invalid(format!(
@@ -323,20 +305,27 @@ impl TexturedMesh {
                 .map(|q| DVec3::from(q.position.map(f64::from)))
                 .collect(),
             valid: p.iter().map(|q| q.valid).collect(),
-            limits: Limits::default(),
-            _charge: Charge::default(),
+            limits: limits.clone(),
+            _charge: charge,
         })
     }
 
     /// The grid mesh of an `size × size` geometry image: one vertex per
     /// texel (at its surface point, with the texel's centre as texture
-    /// coordinate) and the cells of valid texels as triangles.
+    /// coordinate) and the cells of valid texels as triangles, charged
+    /// (with the buffers of each view it draws) to `limits`.
     pub fn new(
         size: u32,
         parameterization: Parameterization,
         surface: &Surface,
+        limits: &Limits,
     ) -> Result<TexturedMesh> {
-        let mut mesh = TexturedMesh::over(size, surface)?;
+        let charge = limits.check_alloc(
+            "mesh of the geometry image",
+            surface.len() as u64,
+            GRID_BYTES_PER_TEXEL,
+        )?;
+        let mut mesh = TexturedMesh::over(size, surface, limits, charge)?;
         let s = mesh.size;
         mesh.positions = mesh.records.clone();
         mesh.normals = surface
@@ -358,7 +347,8 @@ impl TexturedMesh {
     }
 
     /// The receiver's own triangles over an `size × size` texture whose
-    /// texels' records are `surface`. Each triangle's reach (the chart rule
+    /// texels' records are `surface`, charged (with the buffers of each
+    /// view it draws) to `limits`. Each triangle's reach (the chart rule
     /// of the lookup) is [`CHART_REACH`] texel footprints: the square root
     /// of its 3D area over its area in texels.
     pub fn from_mesh(
@@ -366,10 +356,15 @@ impl TexturedMesh {
         parameterization: Parameterization,
         surface: &Surface,
         mesh: &ReceiverMesh,
+        limits: &Limits,
     ) -> Result<TexturedMesh> {
         let _ = parameterization; // every layout draws its stored mesh alike
         mesh.validate(size)?;
-        let mut out = TexturedMesh::over(size, surface)?;
+        let bytes = surface.len() as u64 * 25
+            + mesh.vertex_count() as u64 * MESH_BYTES_PER_VERTEX
+            + mesh.triangles.len() as u64 * MESH_BYTES_PER_TRIANGLE;
+        let charge = limits.check_alloc("mesh of the receiver", bytes, 1)?;
+        let mut out = TexturedMesh::over(size, surface, limits, charge)?;
         let v3 = |p: &[f32; 3]| DVec3::from(p.map(f64::from));
         out.positions = mesh.positions.iter().map(v3).collect();
         out.normals = mesh.normals.iter().map(v3).collect();
@@ -1014,7 +1009,13 @@ mod tests {
             }
         }
         let surface = Surface::new(pts).unwrap();
-        let mesh = TexturedMesh::new(s as u32, Parameterization::Sphere, &surface).unwrap();
+        let mesh = TexturedMesh::new(
+            s as u32,
+            Parameterization::Sphere,
+            &surface,
+            &Limits::default(),
+        )
+        .unwrap();
         (mesh, tex)
     }
 
@@ -1259,7 +1260,14 @@ mod tests {
     #[test]
     fn views_of_a_charted_mesh_show_the_texture_at_the_point_seen() {
         let (m, surface) = cube(3);
-        let mesh = TexturedMesh::from_mesh(48, Parameterization::Atlas, &surface, &m).unwrap();
+        let mesh = TexturedMesh::from_mesh(
+            48,
+            Parameterization::Atlas,
+            &surface,
+            &m,
+            &Limits::default(),
+        )
+        .unwrap();
         assert_eq!(mesh.triangle_count(), 6 * 18);
         let (lo, hi) = mesh.bounds().unwrap();
         assert!((lo + DVec3::ONE).length() < 1e-6 && (hi - DVec3::ONE).length() < 1e-6);
@@ -1348,7 +1356,9 @@ mod tests {
             }
         }
         let surface = Surface::new(pts).unwrap();
-        let mesh = TexturedMesh::from_mesh(16, Parameterization::Uv, &surface, &m).unwrap();
+        let mesh =
+            TexturedMesh::from_mesh(16, Parameterization::Uv, &surface, &m, &Limits::default())
+                .unwrap();
         let tex = texture_of(&surface, |p| {
             if p.z == 0.0 {
                 [1.0, 0.0, 0.0]
@@ -1404,7 +1414,14 @@ mod tests {
             }
         }
         let surface = Surface::new(pts).unwrap();
-        let mesh = TexturedMesh::from_mesh(16, Parameterization::Atlas, &surface, &m).unwrap();
+        let mesh = TexturedMesh::from_mesh(
+            16,
+            Parameterization::Atlas,
+            &surface,
+            &m,
+            &Limits::default(),
+        )
+        .unwrap();
         assert!(mesh.culls_back_faces());
         let tex = Image {
             width: S,
@@ -1442,7 +1459,14 @@ mod tests {
     #[test]
     fn lookups_fall_back_to_the_nearest_valid_texel_and_never_give_nan() {
         let (m, surface) = cube(2);
-        let mesh = TexturedMesh::from_mesh(48, Parameterization::Atlas, &surface, &m).unwrap();
+        let mesh = TexturedMesh::from_mesh(
+            48,
+            Parameterization::Atlas,
+            &surface,
+            &m,
+            &Limits::default(),
+        )
+        .unwrap();
         let tex = texture_of(&surface, |p| p.as_vec3().to_array());
         // Padding of chart 0 (texels 0..2): the nearest texel of the chart
         // is (2, 2), whose record is the surface point nearest (1, 1, 1).
@@ -1452,7 +1476,9 @@ mod tests {
         assert_eq!(got, want);
         // No valid texel at all: finite, and from the texel holding q.
         let empty = Surface::new(vec![SurfacePoint::INVALID; 48 * 48]).unwrap();
-        let mesh = TexturedMesh::from_mesh(48, Parameterization::Atlas, &empty, &m).unwrap();
+        let mesh =
+            TexturedMesh::from_mesh(48, Parameterization::Atlas, &empty, &m, &Limits::default())
+                .unwrap();
         let img = mesh
             .render(&Image::new(48, 48), &camera(DVec3::new(3.0, 2.0, 4.0)), 2)
             .unwrap();
@@ -1460,8 +1486,51 @@ mod tests {
         // A bad mesh or surface is an error.
         let mut bad = m.clone();
         bad.uvs[0] = [60.0, 0.0];
-        assert!(TexturedMesh::from_mesh(48, Parameterization::Atlas, &surface, &bad).is_err());
-        assert!(TexturedMesh::from_mesh(32, Parameterization::Atlas, &surface, &m).is_err());
+        assert!(TexturedMesh::from_mesh(
+            48,
+            Parameterization::Atlas,
+            &surface,
+            &bad,
+            &Limits::default()
+        )
+        .is_err());
+        assert!(TexturedMesh::from_mesh(
+            32,
+            Parameterization::Atlas,
+            &surface,
+            &m,
+            &Limits::default()
+        )
+        .is_err());
+    }
+
+    /// Both constructors charge the caller's limits, not the machine's: a
+    /// budget too small for the mesh refuses it, naming it, and one that
+    /// holds it keeps the charge while the mesh lives.
+    #[test]
+    fn meshes_are_charged_to_the_callers_limits() {
+        let (m, surface) = cube(1);
+        let tiny = Limits::with_max_alloc(1024);
+        let err = TexturedMesh::from_mesh(48, Parameterization::Atlas, &surface, &m, &tiny)
+            .unwrap_err()
+            .to_string();
+        assert!(err.contains("mesh of the receiver"), "{err}");
+        let (grid, _) = sphere(16);
+        let records = grid.records.iter().map(|p| {
+            let q = p.as_vec3().to_array();
+            SurfacePoint::new(q, q)
+        });
+        let grid_surface = Surface::new(records.collect()).unwrap();
+        let err = TexturedMesh::new(16, Parameterization::Sphere, &grid_surface, &tiny)
+            .unwrap_err()
+            .to_string();
+        assert!(err.contains("mesh of the geometry image"), "{err}");
+        let roomy = Limits::with_max_alloc(1 << 30);
+        let mesh =
+            TexturedMesh::from_mesh(48, Parameterization::Atlas, &surface, &m, &roomy).unwrap();
+        assert!(roomy.used_bytes() > 0);
+        drop(mesh);
+        assert_eq!(roomy.used_bytes(), 0);
     }
 
     /// What is drawn is exposed as it is drawn: the sphere grid's vertices
@@ -1475,7 +1544,14 @@ mod tests {
         assert!(grid.folded().iter().any(|&f| f) && grid.reach().iter().all(|r| r.is_infinite()));
         assert_eq!(grid.triangles().len(), grid.folded().len());
         let (m, surface) = cube(1);
-        let mesh = TexturedMesh::from_mesh(48, Parameterization::Atlas, &surface, &m).unwrap();
+        let mesh = TexturedMesh::from_mesh(
+            48,
+            Parameterization::Atlas,
+            &surface,
+            &m,
+            &Limits::default(),
+        )
+        .unwrap();
         assert_eq!(mesh.positions().len(), m.positions.len());
         assert_eq!(mesh.uvs()[0], DVec2::new(2.0, 14.0));
         // A face is 2 × 2 world units over 12 × 12 texels.

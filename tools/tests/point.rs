@@ -89,9 +89,11 @@ fn point_lights_against_mitsuba() {
         println!("{name}: relative L2 error against Mitsuba {e:.4}");
         errors.push(e);
     }
-    // Measured (docs/results/pca.md): 0.039 outside, 0.65 between;
-    // Mitsuba's own noise is 0.2 % (two seeds).
-    assert!(errors[0] < 0.06, "outside: {}", errors[0]);
+    // Measured (docs/results/pca.md): 0.032 outside, 0.65 between. The
+    // fixtures follow the pixel centres' rays, as ltm's rows do; for a point
+    // light Mitsuba's direct integrator has no noise there (two seeds agree
+    // exactly).
+    assert!(errors[0] < 0.045, "outside: {}", errors[0]);
     assert!(errors[1] > 3.0 * errors[0], "between: {errors:?}");
 }
 

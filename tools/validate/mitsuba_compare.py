@@ -146,11 +146,19 @@ def mitsuba_scene(mi, scene, base, env, spp):
 
     def bsdf(name):
         m = mats[name]
-        if m["type"] != "lambert":
-            sys.exit(f"material {name}: only Lambertian scenes can be compared")
-        return {"type": "twosided",
-                "material": {"type": "diffuse",
-                             "reflectance": {"type": "rgb", "value": m["albedo"]}}}
+        if m["type"] == "lambert":
+            inner = {"type": "diffuse", "reflectance": {"type": "rgb", "value": m["albedo"]}}
+        elif (m["type"] == "glossy" and all(a == 0 for a in m["albedo"])
+              and all(f == 1 for f in m["specular"])):
+            # ltm's glossy model with no base and F0 = 1 (Schlick's F is 1):
+            # GGX D and separable Smith G1, as Mitsuba's roughconductor
+            # with Fresnel 1.
+            inner = {"type": "roughconductor", "distribution": "ggx",
+                     "alpha": m["roughness"], "material": "none"}
+        else:
+            sys.exit(f"material {name}: only Lambertian materials and glossy ones with "
+                     "albedo 0 and specular 1 (a Fresnel-1 conductor) can be compared")
+        return {"type": "twosided", "material": inner}
 
     d = {
         "type": "scene",
@@ -184,6 +192,56 @@ def mitsuba_scene(mi, scene, base, env, spp):
         d[f"quad{i}"] = {"type": "rectangle", "to_world": to_world,
                          "bsdf": bsdf(q["material"])}
     return d
+
+
+def use_new_llvm():
+    """Points Dr.Jit at the newest libLLVM installed, unless
+    DRJIT_LIBLLVM_PATH is set: Dr.Jit 1.5's kernels need LLVM 16 or newer
+    (LLVM 14 and 15 fail to select `fmaximum`); Debian 12 has
+    `apt-get install libllvm19`."""
+    import glob
+    import re
+    if "DRJIT_LIBLLVM_PATH" in os.environ:
+        return
+    found = []
+    for path in glob.glob("/usr/lib/*/libLLVM*.so*") + glob.glob("/usr/lib/llvm-*/lib/libLLVM*.so*"):
+        m = re.search(r"libLLVM(?:-|\.so\.)(\d+)", path)
+        if m and int(m.group(1)) >= 16:
+            found.append((int(m.group(1)), path))
+    if found:
+        os.environ["DRJIT_LIBLLVM_PATH"] = max(found)[1]
+
+
+def centre_render(mi, d, spp, seed, batch=64):
+    """Mitsuba's `direct` integrator along each pixel's centre ray, `spp`
+    samples each, as an H x W x 3 float64 image (row 0 at the top).
+
+    ltm's rows are the pixel centres' first hits (camera spp = 1), so the
+    reference takes exactly those rays rather than a pixel's box: where
+    sub-pixel facets of a flat-shaded mesh meet inside a pixel, a box
+    average and a centre ray differ by far more than either method's error.
+    Needs a vectorized variant (llvm_ad_rgb); `batch` samples per pixel go
+    in one wavefront."""
+    import drjit as dr
+    scene = mi.load_dict(d)
+    sensor, integrator = scene.sensors()[0], scene.integrator()
+    w, h = sensor.film().crop_size()
+    total = np.zeros((h * w, 3))
+    sampler = mi.load_dict({"type": "independent"})
+    done = 0
+    while done < spp:
+        k = min(batch, spp - done)
+        sampler.seed(seed * 100003 + done, w * h * k)
+        pixel = dr.arange(mi.UInt32, w * h * k) // k
+        x, y = mi.Float(pixel % w), mi.Float(pixel // w)
+        centre = mi.Point2f((x + 0.5) / w, (y + 0.5) / h)
+        ray, weight = sensor.sample_ray(0.0, 0.5, centre, mi.Point2f(0.5, 0.5))
+        value, _, _ = integrator.sample(scene, sampler, ray)
+        value = value * weight
+        for c in range(3):
+            total[:, c] += np.array(dr.block_sum(value[c], k), dtype=np.float64)
+        done += k
+    return (total / spp).reshape(h, w, 3)
 
 
 def check_env_convention(mi, env):

@@ -3,17 +3,24 @@
 
 The scene `tools/validate/point/scene.toml` (the small bunny, flat-shaded
 and Lambertian, on a ground quad before a wall) is lit by one planar,
-textured area light above it, parallel to the ground and facing down:
+textured area light above it, parallel to the ground and facing down.
+`--scene glossy` takes `tools/validate/point/glossy.toml` instead: the
+same scene with the bunny (GGX alpha 0.25) and the ground (alpha 0.4) made
+Fresnel-1 conductors, Mitsuba's `roughconductor` with material "none".
 
   * ltm: `cargo run --release --example nearfield`, which bakes every pixel
     over the light plane's expanded top face (`Scene::plane_row`, order 32,
     side 4) and propagates the light's Haar coefficients to it
     (`ltm::relight::nearfield`);
   * Mitsuba: a `rectangle` shape with an `area` emitter whose radiance is a
-    `bitmap` texture (nearest, raw), `direct` integrator, rendered at F = 5
-    times ltm's resolution with the centre sub-pixel of each F x F block
-    kept (ltm's rows are the pixel centres' first hits, as in
-    mitsuba_point.py).
+    `bitmap` texture (nearest, raw), `direct` integrator, traced along each
+    pixel's centre ray (ltm's rows are the pixel centres' first hits). The
+    `llvm_ad_rgb` variant takes the rays in wavefronts
+    (`mitsuba_compare.centre_render`).
+    Before 2026-12-02 the reference was rendered at 5 times ltm's
+    resolution with the centre sub-pixel of each 5 x 5 block kept; its
+    1/5-pixel box straddles the small bunny's sub-pixel facets, which cost
+    the near light's check 2-3 points of error that were the reference's.
 
 Two placements: `near` (the light 0.75 above the bunny's top, about half the
 scene's size) and `far` (2.5 higher and 3 times larger). Each is measured at
@@ -29,14 +36,19 @@ both. Pixels whose light arrives from outside the face (more than
 atan(side/2) = 63 degrees off the plane's normal) are darker in ltm by
 design: the summary reports the error over all pixels and over pixels that
 see the whole light rectangle inside the face and lie more than 1 px from
-a silhouette (where ltm's pixel-centre ray and Mitsuba's 1/F-wide box see
-different surfaces).
+a silhouette (kept from the box-filtered reference of before, whose box
+saw two surfaces there; the summary also gives the error without that
+exclusion).
 
 With --write-fixtures the light texture and Mitsuba's images (float32
-.npy, H x W x 3) are written to tests/fixtures/ for tests/nearfield.rs.
+.npy, H x W x 3) are written to tests/fixtures/ for tests/nearfield.rs:
+`nearfield_mitsuba_{near,far}.npy` for the diffuse scene,
+`nearfield_mitsuba_glossy_{near,far}.npy` for the glossy one.
 
-Usage:
-  python3 tools/validate/mitsuba_nearfield.py [--spp 1024] [--out DIR] [--write-fixtures]
+Usage (needs LLVM 16 or newer for Mitsuba's llvm_ad_rgb variant, e.g.
+`apt-get install libllvm19`; see `mitsuba_compare.use_new_llvm`):
+  python3 tools/validate/mitsuba_nearfield.py [--scene diffuse|glossy] [--spp 1024]
+      [--out DIR] [--write-fixtures]
 """
 
 import argparse
@@ -56,9 +68,10 @@ ROOT = os.path.normpath(os.path.join(HERE, "..", ".."))
 sys.path.insert(0, HERE)
 import mitsuba_compare  # noqa: E402  (the shared scene builder)
 
-SCENE = os.path.join(HERE, "point", "scene.toml")
+SCENES = {"diffuse": os.path.join(HERE, "point", "scene.toml"),
+          "glossy": os.path.join(HERE, "point", "glossy.toml")}
+SCENE = SCENES["diffuse"]
 FIXTURES = os.path.join(ROOT, "tests", "fixtures")
-FACTOR = 5
 SIDE = 4.0
 ORDER = 32
 # name: (plane height, centre (x, z), size (x, z), intensity). Keep in step
@@ -85,14 +98,11 @@ def light_texture(w=64, h=48):
 
 
 def mitsuba_image(mi, scene, tex_path, height, center, size, spp, seed):
-    """Mitsuba's image at ltm's pixel centres; `tex_path` holds the radiance
-    with the intensity applied."""
+    """Mitsuba's image along ltm's pixel centres; `tex_path` holds the
+    radiance with the intensity applied."""
     d = mitsuba_compare.mitsuba_scene(mi, scene, os.path.dirname(SCENE),
                                       np.zeros((8, 16, 3)), spp)
     del d["env"]
-    film = d["sensor"]["film"]
-    film["width"] *= FACTOR
-    film["height"] *= FACTOR
     T = mi.ScalarTransform4f
     # local x -> +X·w/2, local y -> +Z·h/2, local z (emitting side) -> -Y.
     cx, cz = center
@@ -102,9 +112,7 @@ def mitsuba_image(mi, scene, tex_path, height, center, size, spp, seed):
                   "emitter": {"type": "area", "radiance": {
                       "type": "bitmap", "filename": tex_path, "raw": True,
                       "filter_type": "nearest"}}}
-    img = np.array(mi.render(mi.load_dict(d), seed=seed), dtype=np.float64)[..., :3]
-    c = FACTOR // 2
-    return img[c::FACTOR, c::FACTOR]
+    return mitsuba_compare.centre_render(mi, d, spp, seed)
 
 
 def silhouettes(points, eye, jump=0.01):
@@ -178,25 +186,32 @@ def main():
     ap.add_argument("--texel-samples", type=int, default=16)
     ap.add_argument("--order", type=int, default=32, help="face texels per side")
     ap.add_argument("--only", default=None, help="one placement: near or far")
+    ap.add_argument("--scene", choices=sorted(SCENES), default="diffuse",
+                    help="diffuse (scene.toml) or glossy (glossy.toml) receivers")
     ap.add_argument("--write-fixtures", action="store_true",
                     help="write the light and Mitsuba's images to tests/fixtures/ "
                          "(read by tests/nearfield.rs)")
     ap.add_argument("--out", default=None)
     args = ap.parse_args()
-    global ORDER
+    global ORDER, SCENE
     ORDER = args.order
+    SCENE = SCENES[args.scene]
+    prefix = "" if args.scene == "diffuse" else args.scene + "_"
+    mitsuba_compare.use_new_llvm()
     import mitsuba as mi
-    mi.set_variant("scalar_rgb")
+    mi.set_variant("llvm_ad_rgb")
     out = args.out or tempfile.mkdtemp(prefix="ltm-nearfield-")
     os.makedirs(out, exist_ok=True)
     with open(SCENE, "rb") as f:
         scene = tomllib.load(f)
     # The same scene with more direction samples per texel, beside the
-    # original so its relative mesh path still holds.
+    # original so its relative mesh path still holds, under a name of its
+    # own so that runs side by side do not share it.
     text = open(SCENE).read().replace("texel_samples = 4", f"texel_samples = {args.texel_samples}")
-    scene_path = os.path.join(HERE, "point", "nearfield-scene.toml")
-    with open(scene_path, "w") as f:
+    with tempfile.NamedTemporaryFile("w", dir=os.path.dirname(SCENE), prefix=".nearfield-",
+                                     suffix=".toml", delete=False) as f:
         f.write(text)
+        scene_path = f.name
     tex = light_texture()
     tex_f32 = os.path.join(out, "light.f32")
     tex.astype("<f4").tofile(tex_f32)
@@ -220,18 +235,13 @@ def main():
             np.save(os.path.join(out, f"{name}_mitsuba.npy"), ref.astype(np.float32))
             np.save(os.path.join(out, f"{name}_mitsuba_seed2.npy"), ref2.astype(np.float32))
             if args.write_fixtures:
-                np.save(os.path.join(FIXTURES, f"nearfield_mitsuba_{name}.npy"),
+                np.save(os.path.join(FIXTURES, f"nearfield_mitsuba_{prefix}{name}.npy"),
                         ref.astype(np.float32))
             # What a distant map of the same light would give (Mitsuba on
             # both sides): the light as seen from the scene's centre.
             env = distant_env(tex * np.float32(inten), height, center, size, cam["target"])
             d = mitsuba_compare.mitsuba_scene(mi, scene, os.path.dirname(SCENE), env, args.spp)
-            film = d["sensor"]["film"]
-            film["width"] *= FACTOR
-            film["height"] *= FACTOR
-            c = FACTOR // 2
-            distant = np.array(mi.render(mi.load_dict(d), seed=1),
-                               dtype=np.float64)[c::FACTOR, c::FACTOR, :3]
+            distant = mitsuba_compare.centre_render(mi, d, args.spp, 1)
             r = dict(height=height, center=center, size=size, intensity=inten,
                      mitsuba_render_s=render_s, mitsuba_noise=noise,
                      distant_map_against_near_field=rel_l2(distant, ref), runs=[])
@@ -251,6 +261,9 @@ def main():
                     source=source, target=target, rel_l2=e,
                     rel_l2_noise_removed=math.sqrt(max(e * e - noise * noise, 0)),
                     inside_share=float(inside.mean()), rel_l2_inside=e_in,
+                    # Over every pixel that sees the whole light, silhouettes
+                    # included.
+                    rel_l2_covered=rel_l2(ours, ref, cov == 2),
                     mitsuba_noise_inside=noise_in,
                     rel_l2_inside_noise_removed=math.sqrt(max(e_in ** 2 - noise_in ** 2, 0)),
                     # The share of the image's light, and of the light of
@@ -269,7 +282,8 @@ def main():
             print(json.dumps({name: r}, indent=1), flush=True)
     finally:
         os.remove(scene_path)
-    summary = dict(mitsuba_version=mi.__version__, spp=args.spp, factor=FACTOR,
+    summary = dict(mitsuba_version=mi.__version__, spp=args.spp, rays="pixel centres",
+                   scene_kind=args.scene,
                    scene=os.path.relpath(SCENE, ROOT), side=SIDE, order=ORDER,
                    texel_samples=args.texel_samples, results=results)
     with open(os.path.join(out, "summary.json"), "w") as f:

@@ -18,10 +18,12 @@ Conventions (see tools/validate/README.md and mitsuba_compare.py, whose
 scene builder this reuses):
   * camera, surfaces: as mitsuba_compare.py (look_at, fov_axis y, box
     filter, twosided diffuse, face_normals);
-  * pixels: ltm's rows (spp = 1) are the pixel centres' first hits. Mitsuba
-    renders at F = 5 times the resolution and the centre sub-pixel of each
-    F x F block is kept: its box is centred on ltm's pixel centre and F
-    times narrower;
+  * pixels: ltm's rows (spp = 1) are the pixel centres' first hits, and
+    Mitsuba traces exactly those rays (`mitsuba_compare.centre_render`, the
+    llvm_ad_rgb variant; it needs LLVM 16 or newer, e.g. `apt-get install
+    libllvm19`). Before 2026-12-02 it rendered at 5 times the resolution
+    and kept the centre sub-pixel of each 5 x 5 block, whose box straddles
+    the bunny's sub-pixel facets;
   * units: Mitsuba's point emitter `intensity` is radiant intensity (W/sr),
     the `I` of ltm's `--intensity` (a row gets f_r cos I / d^2).
 
@@ -62,8 +64,6 @@ LIGHTS = {
     "outside": ([3.0, 5.0, 4.0], 60.0),
     "between": ([0.5, 0.6, -0.7], 0.8),
 }
-# Mitsuba renders at this many times ltm's resolution (odd: a centre sub-pixel).
-FACTOR = 5
 
 
 def render(mi, scene, position, intensity, spp, seed):
@@ -71,14 +71,9 @@ def render(mi, scene, position, intensity, spp, seed):
     d = mitsuba_compare.mitsuba_scene(mi, scene, os.path.dirname(SCENE),
                                       np.zeros((8, 16, 3)), spp)
     del d["env"]
-    film = d["sensor"]["film"]
-    film["width"] *= FACTOR
-    film["height"] *= FACTOR
     d["light"] = {"type": "point", "position": position,
                   "intensity": {"type": "rgb", "value": [intensity] * 3}}
-    img = np.array(mi.render(mi.load_dict(d), seed=seed), dtype=np.float64)[..., :3]
-    c = FACTOR // 2
-    return img[c::FACTOR, c::FACTOR]
+    return mitsuba_compare.centre_render(mi, d, spp, seed)
 
 
 def rel_l2(a, b):
@@ -95,13 +90,14 @@ def main():
     ap.add_argument("--no-ltm", action="store_true", help="only render with Mitsuba")
     ap.add_argument("--rank", default="1024", help="pca rank of the ltm file")
     ap.add_argument("--lookup", default="bilinear", help="ltm --point-lookup")
-    ap.add_argument("--spp", type=int, default=64, help="Mitsuba samples per sub-pixel")
+    ap.add_argument("--spp", type=int, default=64, help="Mitsuba samples per pixel")
     ap.add_argument("--out", default=None, help="directory for the bake, images and summary")
     ap.add_argument("--write-fixtures", action="store_true")
     args = ap.parse_args()
 
+    mitsuba_compare.use_new_llvm()
     import mitsuba as mi
-    mi.set_variant("scalar_rgb")
+    mi.set_variant("llvm_ad_rgb")
     with open(SCENE, "rb") as f:
         scene = tomllib.load(f)
     out = args.out or tempfile.mkdtemp(prefix="ltm-point-")
@@ -145,8 +141,8 @@ def main():
                                      np.repeat(np.clip(10 * diff, 0, 1)[..., None], 3, -1))
         results["ltm"] = dict(rank=args.rank, lookup=args.lookup, bake_s=bake_s,
                               compress_s=compress_s)
-    summary = dict(mitsuba_version=mi.__version__, variant="scalar_rgb", spp=args.spp,
-                   factor=FACTOR, scene=os.path.relpath(SCENE, ROOT), results=results)
+    summary = dict(mitsuba_version=mi.__version__, variant="llvm_ad_rgb", spp=args.spp,
+                   rays="pixel centres", scene=os.path.relpath(SCENE, ROOT), results=results)
     with open(os.path.join(out, "summary.json"), "w") as f:
         json.dump(summary, f, indent=2)
     print(json.dumps(summary, indent=2))

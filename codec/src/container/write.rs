@@ -68,6 +68,19 @@ pub struct LtmWriter {
     data_len: u64,
 }
 
+/// What a writer knows before its first column: the side chunks as stored,
+/// which optional tables it keeps, and where DATA starts.
+struct SideChunks {
+    albedo: Option<Stored>,
+    surface: Option<Stored>,
+    mesh: Option<Stored>,
+    near: Option<Stored>,
+    empty_rows: Option<Stored>,
+    norms: bool,
+    priors: bool,
+    data_start: u64,
+}
+
 impl LtmWriter {
     /// Starts a file for `meta`, with an optional albedo image (3 values per
     /// pixel).
@@ -153,20 +166,35 @@ impl LtmWriter {
             + optional(&mesh)
             + optional(&near)
             + norms_len;
-        let (file, tmp) = open_at(path, data_start)?;
-        Ok(LtmWriter {
-            file,
-            tmp,
-            meta,
+        let side = SideChunks {
             albedo,
             surface,
             mesh,
             near,
             empty_rows,
-            entries: Vec::new(),
-            norms: extra.column_norms.then(Vec::new),
+            norms: extra.column_norms,
             priors: extra.priors,
             data_start,
+        };
+        LtmWriter::start(path, meta, side)
+    }
+
+    /// Opens the temporary file with room for the side chunks before DATA.
+    fn start(path: &Path, meta: Meta, side: SideChunks) -> Result<LtmWriter> {
+        let (file, tmp) = open_at(path, side.data_start)?;
+        Ok(LtmWriter {
+            file,
+            tmp,
+            meta,
+            albedo: side.albedo,
+            surface: side.surface,
+            mesh: side.mesh,
+            near: side.near,
+            empty_rows: side.empty_rows,
+            entries: Vec::new(),
+            norms: side.norms.then(Vec::new),
+            priors: side.priors,
+            data_start: side.data_start,
             data_len: 0,
         })
     }
@@ -251,22 +279,17 @@ impl LtmWriter {
             ..
         } = self;
         drop(file);
-        let (file, tmp) = open_at(path, data_start)?;
-        Ok(LtmWriter {
-            file,
-            tmp,
-            meta,
+        let side = SideChunks {
             albedo,
             surface,
             mesh,
             near,
             empty_rows,
-            entries: Vec::new(),
-            norms: norms.map(|_| Vec::new()),
+            norms: norms.is_some(),
             priors,
             data_start,
-            data_len: 0,
-        })
+        };
+        LtmWriter::start(path, meta, side)
     }
 
     /// Writes the tables, syncs and renames the file into place. Returns the

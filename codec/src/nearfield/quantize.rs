@@ -82,12 +82,12 @@ impl PlaneRows {
         if max_error == 0.0 || norm2 == 0.0 {
             return Ok(out);
         }
-        let Some(step) = search_step(&self.values, peak, norm2, max_error) else {
+        let Some((step, squared)) = search_step(&self.values, peak, norm2, max_error) else {
             // Even the finest step misses a target below f32's own rounding.
             return Ok(out);
         };
         out.step = step;
-        out.error = (squared_error(&self.values, step) / norm2).sqrt();
+        out.error = (squared / norm2).sqrt();
         self.keep_rounded(step);
         out.kept = self.values.len();
         Ok(out)
@@ -120,23 +120,26 @@ impl PlaneRows {
 
 /// The largest step (within the bisection's resolution) whose relative
 /// error is at most `max_error`, stopping early inside
-/// `[WINDOW_LOW·E, E]`; `None` when even `peak·2^−60` misses it.
-fn search_step(values: &[f32], peak: f64, norm2: f64, max_error: f64) -> Option<f64> {
+/// `[WINDOW_LOW·E, E]`, with its squared error; `None` when even
+/// `peak·2^−60` misses it.
+fn search_step(values: &[f32], peak: f64, norm2: f64, max_error: f64) -> Option<(f64, f64)> {
     let budget = (max_error * max_error) * norm2;
     let low_budget = (WINDOW_LOW * max_error).powi(2) * norm2;
     // At 4·peak every value rounds to 0: the error is the whole norm.
     let (mut lo, mut hi) = ((peak * 2f64.powi(-60)).max(f64::MIN_POSITIVE), 4.0 * peak);
-    if squared_error(values, hi) <= budget {
-        return Some(hi);
+    let all = squared_error(values, hi);
+    if all <= budget {
+        return Some((hi, all));
     }
-    if squared_error(values, lo) > budget {
+    let mut lo_error = squared_error(values, lo);
+    if lo_error > budget {
         return None;
     }
     for _ in 0..MAX_STEPS {
         let mid = (lo * hi).sqrt();
         let e = squared_error(values, mid);
         if e <= budget {
-            lo = mid;
+            (lo, lo_error) = (mid, e);
             if e >= low_budget {
                 break;
             }
@@ -147,7 +150,7 @@ fn search_step(values: &[f32], peak: f64, norm2: f64, max_error: f64) -> Option<
             break;
         }
     }
-    Some(lo)
+    Some((lo, lo_error))
 }
 
 #[cfg(test)]

@@ -307,16 +307,23 @@ fn dot_masses(masses: &FaceMasses, texels: &[f32], order: usize, channels: usize
     let n = order * order;
     let mut sum = [0.0f64; 3];
     for (b, line) in (b0..b1).zip(masses.masses.chunks_exact(width)) {
-        for c in 0..channels {
-            let t = &texels[c * n + b * order + a0..][..width];
+        if channels == 1 {
+            let t = &texels[b * order + a0..][..width];
             for (m, &t) in line.iter().zip(t) {
                 let t = f64::from(t);
-                if channels == 1 {
-                    (0..3).for_each(|k| sum[k] += t * m[k]);
-                } else {
-                    sum[c] += t * m[c];
-                }
+                sum[0] += t * m[0];
+                sum[1] += t * m[1];
+                sum[2] += t * m[2];
             }
+            continue;
+        }
+        for (c, total) in sum.iter_mut().enumerate().take(channels) {
+            let t = &texels[c * n + b * order + a0..][..width];
+            *total += line
+                .iter()
+                .zip(t)
+                .map(|(m, &t)| f64::from(t) * m[c])
+                .sum::<f64>();
         }
     }
     sum

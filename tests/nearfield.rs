@@ -349,6 +349,18 @@ const MITSUBA_LIGHTS: [MitsubaLight; 2] = [
     ("far", 4.0, [0.3, 0.5], [2.4, 1.8], 0.025),
 ];
 
+/// The face of the Mitsuba checks: order 32, side 4.
+const MITSUBA_FACE: PlaneFace = PlaneFace {
+    order: 32,
+    side: 4.0,
+};
+
+/// The Mitsuba checks' light texture (fixture `nearfield_light.npy`).
+fn mitsuba_texture() -> LightTexture {
+    let (tw, th, texels) = read_npy("nearfield_light.npy");
+    LightTexture::new(tw, th, texels).unwrap()
+}
+
 /// The near and far lights on `tools/validate/point/scene.toml`, against
 /// Mitsuba 3's `direct` integrator along the pixel centres' rays at 16384
 /// samples (fixtures from tools/validate/mitsuba_nearfield.py), over pixels
@@ -541,12 +553,7 @@ fn exact_image(path: &Path, light: &ltm::relight::nearfield::AreaLight) -> Vec<[
 fn stored_near_field_rows_against_mitsuba_and_the_library() {
     use ltm::relight::nearfield::{AreaLight, NearField, NearFieldMethod, NearFieldTerms};
     let dir = tempfile::tempdir().unwrap();
-    let (tw, th, texels) = read_npy("nearfield_light.npy");
-    let texture = LightTexture::new(tw, th, texels).unwrap();
-    let face = PlaneFace {
-        order: 32,
-        side: 4.0,
-    };
+    let (texture, face) = (mitsuba_texture(), MITSUBA_FACE);
     for (name, height, center, size, bound) in MITSUBA_LIGHTS {
         let (path, lossy) = stored_bake(dir.path(), "diffuse", &point_scene("scene.toml"), height);
         let mut file = ltm::LtmFile::open(&path).unwrap();
@@ -662,12 +669,7 @@ fn error_over(image: &[[f32; 3]], reference: &[[f32; 3]], over: &[usize]) -> f64
 fn glossy_receivers_against_mitsuba() {
     use ltm::relight::nearfield::{AreaLight, NearField, NearFieldMethod};
     let dir = tempfile::tempdir().unwrap();
-    let (tw, th, texels) = read_npy("nearfield_light.npy");
-    let texture = LightTexture::new(tw, th, texels).unwrap();
-    let face = PlaneFace {
-        order: 32,
-        side: 4.0,
-    };
+    let (texture, face) = (mitsuba_texture(), MITSUBA_FACE);
     for (name, height, center, size, bound) in MITSUBA_LIGHTS {
         let light = AreaLight {
             texture: texture.clone(),

@@ -1169,6 +1169,17 @@ mod tests {
     /// a 3 × 2 grid of 16-texel cells with 2 texels of padding in a 48²
     /// texture; the texels whose centres fall in a chart carry its surface
     /// point, the rest are invalid. Returns the mesh and the records.
+    /// [`TexturedMesh::from_mesh`] of an atlas under the default limits.
+    fn atlas_mesh(size: u32, surface: &Surface, m: &ReceiverMesh) -> Result<TexturedMesh> {
+        TexturedMesh::from_mesh(
+            size,
+            Parameterization::Atlas,
+            surface,
+            m,
+            &Limits::default(),
+        )
+    }
+
     fn cube(n: usize) -> (ReceiverMesh, Surface) {
         const S: usize = 48;
         let mut m = ReceiverMesh::default();
@@ -1260,14 +1271,7 @@ mod tests {
     #[test]
     fn views_of_a_charted_mesh_show_the_texture_at_the_point_seen() {
         let (m, surface) = cube(3);
-        let mesh = TexturedMesh::from_mesh(
-            48,
-            Parameterization::Atlas,
-            &surface,
-            &m,
-            &Limits::default(),
-        )
-        .unwrap();
+        let mesh = atlas_mesh(48, &surface, &m).unwrap();
         assert_eq!(mesh.triangle_count(), 6 * 18);
         let (lo, hi) = mesh.bounds().unwrap();
         assert!((lo + DVec3::ONE).length() < 1e-6 && (hi - DVec3::ONE).length() < 1e-6);
@@ -1414,14 +1418,7 @@ mod tests {
             }
         }
         let surface = Surface::new(pts).unwrap();
-        let mesh = TexturedMesh::from_mesh(
-            16,
-            Parameterization::Atlas,
-            &surface,
-            &m,
-            &Limits::default(),
-        )
-        .unwrap();
+        let mesh = atlas_mesh(16, &surface, &m).unwrap();
         assert!(mesh.culls_back_faces());
         let tex = Image {
             width: S,
@@ -1459,14 +1456,7 @@ mod tests {
     #[test]
     fn lookups_fall_back_to_the_nearest_valid_texel_and_never_give_nan() {
         let (m, surface) = cube(2);
-        let mesh = TexturedMesh::from_mesh(
-            48,
-            Parameterization::Atlas,
-            &surface,
-            &m,
-            &Limits::default(),
-        )
-        .unwrap();
+        let mesh = atlas_mesh(48, &surface, &m).unwrap();
         let tex = texture_of(&surface, |p| p.as_vec3().to_array());
         // Padding of chart 0 (texels 0..2): the nearest texel of the chart
         // is (2, 2), whose record is the surface point nearest (1, 1, 1).
@@ -1476,9 +1466,7 @@ mod tests {
         assert_eq!(got, want);
         // No valid texel at all: finite, and from the texel holding q.
         let empty = Surface::new(vec![SurfacePoint::INVALID; 48 * 48]).unwrap();
-        let mesh =
-            TexturedMesh::from_mesh(48, Parameterization::Atlas, &empty, &m, &Limits::default())
-                .unwrap();
+        let mesh = atlas_mesh(48, &empty, &m).unwrap();
         let img = mesh
             .render(&Image::new(48, 48), &camera(DVec3::new(3.0, 2.0, 4.0)), 2)
             .unwrap();
@@ -1486,22 +1474,8 @@ mod tests {
         // A bad mesh or surface is an error.
         let mut bad = m.clone();
         bad.uvs[0] = [60.0, 0.0];
-        assert!(TexturedMesh::from_mesh(
-            48,
-            Parameterization::Atlas,
-            &surface,
-            &bad,
-            &Limits::default()
-        )
-        .is_err());
-        assert!(TexturedMesh::from_mesh(
-            32,
-            Parameterization::Atlas,
-            &surface,
-            &m,
-            &Limits::default()
-        )
-        .is_err());
+        assert!(atlas_mesh(48, &surface, &bad).is_err());
+        assert!(atlas_mesh(32, &surface, &m).is_err());
     }
 
     /// Both constructors charge the caller's limits, not the machine's: a
@@ -1544,14 +1518,7 @@ mod tests {
         assert!(grid.folded().iter().any(|&f| f) && grid.reach().iter().all(|r| r.is_infinite()));
         assert_eq!(grid.triangles().len(), grid.folded().len());
         let (m, surface) = cube(1);
-        let mesh = TexturedMesh::from_mesh(
-            48,
-            Parameterization::Atlas,
-            &surface,
-            &m,
-            &Limits::default(),
-        )
-        .unwrap();
+        let mesh = atlas_mesh(48, &surface, &m).unwrap();
         assert_eq!(mesh.positions().len(), m.positions.len());
         assert_eq!(mesh.uvs()[0], DVec2::new(2.0, 14.0));
         // A face is 2 × 2 world units over 12 × 12 texels.

@@ -9,11 +9,15 @@
 //! ([`NearField::render`], every thread) by the exact method and by the
 //! wavelet method at 1 % / 20 %, with the light 1 × 1 and 3 × 3 (it then
 //! covers most of each point's face), in rows per second.
+//!
+//! Group `couplings_order32` lists every source's couplings at 4096 random
+//! scales and offsets, in closed form and from the memory-based table
+//! ([`AccTable`], 64 cells a width), in sources per second.
 
 use criterion::{criterion_group, criterion_main, BenchmarkId, Criterion, Throughput};
 use ltm::relight::nearfield::{
-    transport_coefficients, AreaLight, LightTexture, NearField, NearFieldMethod, NearFieldTerms,
-    Placement, PlaneFace, Propagator, Receiver, SourceCoefficients, Targets,
+    acc, transport_coefficients, AccTable, AreaLight, LightTexture, NearField, NearFieldMethod,
+    NearFieldTerms, Placement, PlaneFace, Propagator, Receiver, SourceCoefficients, Targets,
 };
 
 const ORDER: usize = 32;
@@ -111,6 +115,40 @@ fn bench(c: &mut Criterion) {
     }
     group.finish();
     stored_rows(c, &light, &points);
+    couplings(c, &mut rng);
+}
+
+/// Every source's couplings at random `(s, o)`, both ways.
+fn couplings(c: &mut Criterion, rng: &mut Xorshift) {
+    let cases: Vec<(f64, f64)> = (0..POINTS)
+        .map(|_| {
+            let s = 10f64.powf(rng.uniform() * 2.0 - 0.5);
+            (s, rng.uniform() * 1.4 - 0.2 - 0.5 * s)
+        })
+        .collect();
+    let table = AccTable::new(ORDER, 64, &ltm::Limits::default()).unwrap();
+    let mut group = c.benchmark_group("couplings_order32");
+    group.throughput(Throughput::Elements((POINTS * ORDER) as u64));
+    let mut out = Vec::new();
+    group.bench_function("closed form", |b| {
+        b.iter(|| {
+            out.clear();
+            for &(s, o) in &cases {
+                (0..ORDER).for_each(|i| acc::couplings(i, ORDER, s, o, &mut out));
+            }
+            out.len()
+        })
+    });
+    group.bench_function("table, 64 cells", |b| {
+        b.iter(|| {
+            out.clear();
+            for &(s, o) in &cases {
+                (0..ORDER).for_each(|i| table.couplings_where(i, s, o, |_| true, &mut out));
+            }
+            out.len()
+        })
+    });
+    group.finish();
 }
 
 /// The stored-row path, both methods.

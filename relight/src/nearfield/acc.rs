@@ -92,10 +92,148 @@ pub fn coupling(i: usize, k: usize, s: f64, o: f64) -> f64 {
 /// Appends to `out` every `(k, D_ik(s, o))` with `k < order` and a nonzero
 /// coefficient, in increasing `k`. `order` is a power of two, `s > 0` and
 /// `o` finite (the caller checks).
+///
+/// The transformed source is a sum of steps: its value `v₀` at `w = 0` and
+/// a jump `j` at each break `b ∈ (0, 1)`. A step from `b` couples to
+/// target `k` by its tail integral `E_k(b) = ∫_b^1 Φ_k`, which is `1 − b`
+/// for the scaling function and, for a wavelet of support `[x₀, x₁)` that
+/// holds `b`, the hat `−2^{l/2}·min(b − x₀, x₁ − b)` (zero outside its
+/// support: a wavelet integrates to zero). So
+/// `D_ik = v₀·δ_k0 + Σ_b j·E_k(b)`: one target per level and break.
 pub fn couplings(i: usize, order: usize, s: f64, o: f64, out: &mut Vec<(u32, f64)>) {
+    couplings_where(i, order, s, o, |_| true, out);
+}
+
+/// [`couplings`] for the targets `k` where `wanted(k)` holds only (the
+/// others are not evaluated).
+pub fn couplings_where(
+    i: usize,
+    order: usize,
+    s: f64,
+    o: f64,
+    wanted: impl Fn(usize) -> bool,
+    out: &mut Vec<(u32, f64)>,
+) {
+    if s > 2.0 * order as f64 {
+        // The source is narrower than half a finest texel: steps from
+        // nearby breaks would cancel to rounding, overlaps do not.
+        return couplings_by_overlap(i, order, s, o, wanted, out);
+    }
+    let first = out.len();
+    let (value, steps, count) = steps(i, s, o);
+    let steps = &steps[..count];
+    let d0 = value + steps.iter().map(|&(b, j)| j * (1.0 - b)).sum::<f64>();
+    if d0 != 0.0 && wanted(0) {
+        out.push((0, d0));
+    }
+    let levels = order.trailing_zeros() as usize;
+    // Each break's texel at the finest level; a coarser level's texel is
+    // that index shifted right.
+    let mut finest = [0usize; 3];
+    for (f, &(b, _)) in finest.iter_mut().zip(steps) {
+        *f = ((b * order as f64) as usize).min(order - 1);
+    }
+    for (level, &amplitude) in AMPLITUDES.iter().enumerate().take(levels) {
+        let base = 1usize << level;
+        let width = 1.0 / base as f64;
+        let shift = levels - level;
+        // Breaks are increasing, so equal offsets are adjacent.
+        let mut last = usize::MAX;
+        for (&(b, j), &f) in steps.iter().zip(&finest) {
+            let t = f >> shift;
+            if !wanted(base + t) {
+                continue;
+            }
+            let x0 = t as f64 * width;
+            let e = -amplitude * (b - x0).min(x0 + width - b) * j;
+            if t == last {
+                if let Some(entry) = out.last_mut() {
+                    entry.1 += e;
+                }
+            } else {
+                out.push(((base + t) as u32, e));
+                last = t;
+            }
+        }
+    }
+    // Drop the targets whose steps cancel (or whose break is on an edge).
+    let mut kept = first;
+    for r in first..out.len() {
+        if out[r].1 != 0.0 {
+            out[kept] = out[r];
+            kept += 1;
+        }
+    }
+    out.truncate(kept);
+}
+
+/// `2^{l/2}` for the levels of an order up to 2^20.
+const AMPLITUDES: [f64; 20] = {
+    let mut a = [0.0; 20];
+    let mut l = 0;
+    while l < 20 {
+        let even = (1u64 << (l / 2)) as f64;
+        a[l] = if l % 2 == 1 {
+            even * std::f64::consts::SQRT_2
+        } else {
+            even
+        };
+        l += 1;
+    }
+    a
+};
+
+/// The transformed source `w ↦ Φ_i(s·w + o)` as steps: its value at
+/// `w = 0` and the `(break, jump)` pairs inside `(0, 1)`, increasing.
+fn steps(i: usize, s: f64, o: f64) -> (f64, [(f64, f64); 3], usize) {
+    let (breaks, jumps, n) = if i == 0 {
+        ([0.0, 1.0, 0.0], [1.0, -1.0, 0.0], 2)
+    } else {
+        let level = (usize::BITS - 1 - i.leading_zeros()) as usize;
+        let width = 1.0 / (1u64 << level) as f64;
+        let start = (i - (1usize << level)) as f64 * width;
+        let a = AMPLITUDES
+            .get(level)
+            .copied()
+            .unwrap_or_else(|| (0.5 * level as f64).exp2());
+        (
+            [start, start + 0.5 * width, start + width],
+            [a, -2.0 * a, a],
+            3,
+        )
+    };
+    let inverse = 1.0 / s;
+    let mut value = 0.0;
+    let mut out = [(0.0, 0.0); 3];
+    let mut count = 0;
+    for (&x, &jump) in breaks.iter().zip(&jumps).take(n) {
+        let b = (x - o) * inverse;
+        if b <= 0.0 {
+            value += jump;
+        } else if b < 1.0 {
+            out[count] = (b, jump);
+            count += 1;
+        }
+    }
+    (value, out, count)
+}
+
+/// [`couplings_where`] from the overlaps of the transformed source's
+/// pieces with each candidate target's (a target per level and break).
+fn couplings_by_overlap(
+    i: usize,
+    order: usize,
+    s: f64,
+    o: f64,
+    wanted: impl Fn(usize) -> bool,
+    out: &mut Vec<(u32, f64)>,
+) {
     let (source, m) = transformed(i, s, o);
     let source = &source[..m];
     let mut push = |k: usize| {
+        if !wanted(k) {
+            return;
+        }
         let (target, n) = pieces(k);
         let d = overlap(source, &target[..n]);
         if d != 0.0 {

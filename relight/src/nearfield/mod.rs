@@ -26,10 +26,13 @@
 //! ([`NearFieldMethod`]), which truncate nothing and cost less where a
 //! light covers part of the face.
 //!
-//! The couplings are evaluated exactly per point from the closed form of
-//! two piecewise-constant functions, not looked up in a quantized table.
+//! The couplings are evaluated exactly per point in closed form ([`acc`]);
+//! [`AccTable`] tabulates them over quantized `(s, o)`, the memory-based
+//! approach of §5.3.2, for a propagation that looks them up instead
+//! ([`Propagator::with_table`], [`NearField::set_coupling_table`]).
 
 pub mod acc;
+mod acc_table;
 pub mod exact;
 mod light;
 mod propagate;
@@ -37,6 +40,7 @@ mod stored;
 #[cfg(test)]
 mod tests;
 
+pub use acc_table::{AccTable, MAX_WIDTH};
 pub use exact::{LightTable, MAX_TABLE_SIDE};
 pub use light::{
     haar_2d, LightTexture, Placement, SourceCoefficients, MAX_TEXTURE_SIDE, ROTATION_SAMPLES,

@@ -2,9 +2,11 @@
 //! (§5.3.1), with target-level selection from a constant-light prediction
 //! (eq. 32), and the per-row shading `B = Σ_k L_k·T_k`.
 
-use super::acc::couplings;
+use super::acc::couplings_where;
+use super::acc_table::AccTable;
 use super::light::{Placement, SourceCoefficients};
 use crate::error::{RelightError, Result};
+use std::sync::Arc;
 
 /// The default side of the expanded top face in tangent units (§5.2.1: a
 /// standard cube face is 2; 3 or 4 suffice).
@@ -82,11 +84,20 @@ pub fn affine(face: &PlaneFace, placement: &Placement, receiver: &Receiver) -> [
 #[derive(Debug)]
 pub struct Propagator {
     face: PlaneFace,
-    lit: bool,
+    /// Couplings looked up here (§5.3.2's memory-based approach) instead of
+    /// evaluated in closed form.
+    table: Option<Arc<AccTable>>,
     /// Axis-y couplings `D_{i_y k_y}`, dense, `k_y` major: `order × axis[1].len()`.
     columns: Vec<f64>,
     /// Step 1's `Z[i_y][k_x]`, RGB, `k_x` major: `order × axis[1].len()`.
     partial: Vec<[f64; 3]>,
+    /// Per axis, whether any coupling reached target `k` (step 1's `k_x`,
+    /// the columns' `k_y`): the other targets are zero.
+    touched: [Vec<bool>; 2],
+    /// Per axis, the targets that can be selected: all, or under
+    /// [`Targets::Share`] those whose prediction times the other axis's
+    /// largest reaches the threshold. Couplings to others are not computed.
+    wanted: [Vec<bool>; 2],
     /// The constant light's `|D_{0 k}|` per axis, `order` each, and their
     /// nonzero values.
     prediction: [Vec<f64>; 2],
@@ -94,6 +105,12 @@ pub struct Propagator {
     /// Targets whose predicted product is below this are skipped; 0 keeps
     /// all.
     threshold: f64,
+    /// The point's incident coefficients `L_k`, dense (`order²`): zero but
+    /// at the `written` targets, which the next point clears.
+    incident: Vec<[f64; 3]>,
+    written: Vec<u32>,
+    /// Per axis, the targets that may be selected.
+    candidates: [Vec<u32>; 2],
     products: Vec<f64>,
     list: Vec<(u32, f64)>,
     starts: Vec<usize>,
@@ -103,18 +120,40 @@ impl Propagator {
     /// A propagator for `face`.
     pub fn new(face: PlaneFace) -> Result<Propagator> {
         face.check()?;
+        let order = face.order;
         Ok(Propagator {
             face,
-            lit: false,
+            table: None,
             columns: Vec::new(),
             partial: Vec::new(),
-            prediction: [vec![0.0; face.order], vec![0.0; face.order]],
+            touched: [vec![false; order], vec![false; order]],
+            wanted: [vec![true; order], vec![true; order]],
+            prediction: [vec![0.0; order], vec![0.0; order]],
             nonzero: [Vec::new(), Vec::new()],
             threshold: 0.0,
+            incident: vec![[0.0; 3]; order * order],
+            written: Vec::new(),
+            candidates: [Vec::new(), Vec::new()],
             products: Vec::new(),
             list: Vec::new(),
             starts: Vec::new(),
         })
+    }
+
+    /// A propagator for `face` that looks its couplings up in `table`
+    /// (nearest node; see [`AccTable`]): refuses a table of another order.
+    pub fn with_table(face: PlaneFace, table: Arc<AccTable>) -> Result<Propagator> {
+        if table.order() != face.order {
+            let valid = format!("{}, the face's order", face.order);
+            return Err(RelightError::range(
+                "coupling table order",
+                table.order(),
+                valid,
+            ));
+        }
+        let mut propagator = Propagator::new(face)?;
+        propagator.table = Some(table);
+        Ok(propagator)
     }
 
     /// Propagates `source` to `receiver` (steps 1 and 2's couplings) and
@@ -129,6 +168,10 @@ impl Propagator {
         receiver: &Receiver,
         targets: Targets,
     ) -> Result<bool> {
+        for &k in &self.written {
+            self.incident[k as usize] = [0.0; 3];
+        }
+        self.written.clear();
         placement.check()?;
         let order = self.face.order;
         if source.order != order {
@@ -141,23 +184,32 @@ impl Propagator {
                 receiver.depth, receiver.position
             )));
         }
-        self.lit = receiver.depth > 0.0;
-        if !self.lit {
+        if receiver.depth <= 0.0 {
             return Ok(false);
         }
         let [(sx, ox), (sy, oy)] = affine(&self.face, placement, receiver);
+        self.select(targets, [(sx, ox), (sy, oy)]);
         self.step_one(source, (sx, ox));
         let ys = source.axis[1].len();
         self.columns.clear();
         self.columns.resize(ys * order, 0.0);
+        self.touched[1].fill(false);
+        let wanted = &self.wanted[1];
         for (j, &i) in source.axis[1].iter().enumerate() {
             self.list.clear();
-            couplings(i as usize, order, sy, oy, &mut self.list);
+            couple(
+                self.table.as_deref(),
+                (i as usize, order),
+                (sy, oy),
+                wanted,
+                &mut self.list,
+            );
             for &(k, d) in &self.list {
                 self.columns[k as usize * ys + j] = d;
+                self.touched[1][k as usize] = true;
             }
         }
-        self.select(targets, [(sx, ox), (sy, oy)]);
+        self.step_two(ys);
         Ok(true)
     }
 
@@ -167,14 +219,25 @@ impl Propagator {
         let ys = source.axis[1].len();
         self.partial.clear();
         self.partial.resize(ys * order, [0.0; 3]);
+        self.touched[0].fill(false);
         // Couplings of each distinct x index, concatenated.
         self.list.clear();
         self.starts.clear();
+        let wanted = &self.wanted[0];
         for &i in &source.axis[0] {
             self.starts.push(self.list.len());
-            couplings(i as usize, order, s, o, &mut self.list);
+            couple(
+                self.table.as_deref(),
+                (i as usize, order),
+                (s, o),
+                wanted,
+                &mut self.list,
+            );
         }
         self.starts.push(self.list.len());
+        for &(k, _) in &self.list {
+            self.touched[0][k as usize] = true;
+        }
         let starts = &self.starts;
         for &(ix, iy, f) in &source.terms {
             let ix = ix as usize;
@@ -195,6 +258,7 @@ impl Propagator {
     fn select(&mut self, targets: Targets, axes: [(f64, f64); 2]) {
         let order = self.face.order;
         self.threshold = 0.0;
+        self.wanted.iter_mut().for_each(|w| w.fill(true));
         let share = match targets {
             Targets::Share(share) if share < 1.0 => share.max(0.0),
             _ => return,
@@ -202,7 +266,14 @@ impl Propagator {
         for (a, (prediction, (s, o))) in self.prediction.iter_mut().zip(axes).enumerate() {
             prediction.fill(0.0);
             self.list.clear();
-            couplings(0, order, s, o, &mut self.list);
+            let all = &self.wanted[a];
+            couple(
+                self.table.as_deref(),
+                (0, order),
+                (s, o),
+                all,
+                &mut self.list,
+            );
             self.nonzero[a].clear();
             for &(k, d) in &self.list {
                 prediction[k as usize] = d.abs();
@@ -221,29 +292,54 @@ impl Propagator {
             .products
             .select_nth_unstable_by(count - 1, |a, b| b.total_cmp(a));
         self.threshold = *nth;
+        for a in 0..2 {
+            let most = self.nonzero[1 - a].iter().copied().fold(0.0, f64::max);
+            for (w, &p) in self.wanted[a].iter_mut().zip(&self.prediction[a]) {
+                *w = p * most >= self.threshold;
+            }
+        }
+    }
+
+    /// Step 2 for the selected targets: `L_k = Σ_{i_y} Z[i_y][k_x]·D_{i_y k_y}`
+    /// where `k_x` and `k_y` were reached by a coupling (other targets are
+    /// zero) and, under [`Targets::Share`], the constant light's product
+    /// reaches the threshold.
+    fn step_two(&mut self, ys: usize) {
+        let order = self.face.order;
+        let threshold = self.threshold;
+        for (a, candidates) in self.candidates.iter_mut().enumerate() {
+            candidates.clear();
+            let (touched, prediction) = (&self.touched[a], &self.prediction[a]);
+            candidates.extend((0..order as u32).filter(|&k| {
+                touched[k as usize] && (threshold == 0.0 || prediction[k as usize] > 0.0)
+            }));
+        }
+        let [xs, ys_selected] = &self.candidates;
+        for &ky in ys_selected {
+            let column = &self.columns[ky as usize * ys..][..ys];
+            let py = self.prediction[1][ky as usize];
+            for &kx in xs {
+                if threshold > 0.0 && self.prediction[0][kx as usize] * py < threshold {
+                    continue;
+                }
+                let mut sum = [0.0f64; 3];
+                let partial = &self.partial[kx as usize * ys..][..ys];
+                for (z, d) in partial.iter().zip(column) {
+                    for c in 0..3 {
+                        sum[c] += z[c] * d;
+                    }
+                }
+                let k = ky * order as u32 + kx;
+                self.incident[k as usize] = sum;
+                self.written.push(k);
+            }
+        }
     }
 
     /// The incident lighting's coefficient `L_k` (`k = k_y·order + k_x`),
     /// zero when not selected or not lit.
     pub fn coefficient(&self, k: usize) -> [f64; 3] {
-        let order = self.face.order;
-        if !self.lit || k >= order * order {
-            return [0.0; 3];
-        }
-        let (kx, ky) = (k % order, k / order);
-        if self.threshold > 0.0 && self.prediction[0][kx] * self.prediction[1][ky] < self.threshold
-        {
-            return [0.0; 3];
-        }
-        let mut sum = [0.0f64; 3];
-        let ys = self.partial.len() / order;
-        let partial = &self.partial[kx * ys..][..ys];
-        for (z, d) in partial.iter().zip(&self.columns[ky * ys..][..ys]) {
-            for c in 0..3 {
-                sum[c] += z[c] * d;
-            }
-        }
-        sum
+        self.incident.get(k).copied().unwrap_or([0.0; 3])
     }
 
     /// Every coefficient of the incident lighting, `order²` (dense; for tests
@@ -265,6 +361,16 @@ impl Propagator {
         self.shade_terms(indices.iter().zip(values).map(|(&k, &t)| (k as usize, t)))
     }
 
+    /// Channel `c` (0..3) of [`Propagator::shade_indexed`]: an RGB file's
+    /// row of that channel under that channel of the light.
+    pub fn shade_channel(&self, indices: &[u16], values: &[f32], c: usize) -> f64 {
+        let mut sum = 0.0f64;
+        for (&k, &t) in indices.iter().zip(values) {
+            sum += self.coefficient(k as usize)[c] * f64::from(t);
+        }
+        sum
+    }
+
     fn shade_terms(&self, terms: impl Iterator<Item = (usize, f32)>) -> [f64; 3] {
         let mut sum = [0.0f64; 3];
         for (k, t) in terms {
@@ -274,6 +380,22 @@ impl Propagator {
             }
         }
         sum
+    }
+}
+
+/// The couplings of source `i` to the wanted targets `k < order`, from
+/// `table` or in closed form.
+#[inline]
+fn couple(
+    table: Option<&AccTable>,
+    (i, order): (usize, usize),
+    (s, o): (f64, f64),
+    wanted: &[bool],
+    out: &mut Vec<(u32, f64)>,
+) {
+    match table {
+        Some(table) => table.couplings_where(i, s, o, |k| wanted[k], out),
+        None => couplings_where(i, order, s, o, |k| wanted[k], out),
     }
 }
 

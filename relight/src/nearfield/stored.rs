@@ -7,12 +7,14 @@
 //! `B_p = Σ_k L_k(p)·T_{p,k}` (eq. 30) over its Haar coefficients
 //! ([`NearFieldMethod::Wavelet`]).
 
+use super::acc_table::AccTable;
 use super::exact::{FaceMasses, LightTable};
 use super::light::{LightTexture, Placement, SourceCoefficients};
 use super::propagate::{affine, PlaneFace, Propagator, Receiver, Targets};
 use crate::error::{RelightError, Result};
 use ltm_codec::{Charge, Limits, LtmFile, PlaneRows};
 use rayon::prelude::*;
+use std::sync::Arc;
 
 /// An area light in the file's light plane: its radiance texture and
 /// where it lies (centre, size, intensity).
@@ -87,6 +89,8 @@ pub struct NearField {
     rows: PlaneRows,
     /// Per-row RGB albedo of a grey file.
     albedo: Option<Vec<f32>>,
+    /// The wavelet method's couplings, looked up here when set.
+    table: Option<Arc<AccTable>>,
     _charge: Charge,
 }
 
@@ -165,6 +169,7 @@ impl NearField {
             texels,
             rows,
             albedo,
+            table: None,
             _charge: charge,
         })
     }
@@ -172,6 +177,25 @@ impl NearField {
     /// The face's plane and its resolution.
     pub fn basis(&self) -> &ltm_codec::PlaneBasis {
         self.rows.basis()
+    }
+
+    /// Makes the wavelet method look its couplings up in `table` (§5.3.2's
+    /// memory-based approach: nearest node, see [`AccTable`]), or evaluate
+    /// them in closed form (`None`, the default). Refuses a table of
+    /// another order than the face's.
+    pub fn set_coupling_table(&mut self, table: Option<Arc<AccTable>>) -> Result<()> {
+        if let Some(t) = &table {
+            if t.order() != self.face.order {
+                let valid = format!("{}, the face's order", self.face.order);
+                return Err(RelightError::range(
+                    "coupling table order",
+                    t.order(),
+                    valid,
+                ));
+            }
+        }
+        self.table = table;
+        Ok(())
     }
 
     /// The face the rows are stored over.
@@ -268,7 +292,10 @@ impl NearField {
             .par_iter()
             .enumerate()
             .map_init(
-                || Propagator::new(face),
+                || match &self.table {
+                    Some(table) => Propagator::with_table(face, table.clone()),
+                    None => Propagator::new(face),
+                },
                 |propagator, (p, receiver)| {
                     let propagator = propagator.as_mut().map_err(|e| {
                         RelightError::Invalid(format!("near-field propagator: {e}"))
@@ -281,14 +308,15 @@ impl NearField {
                         if !propagator.prepare(source, placement, receiver, terms.targets)? {
                             continue;
                         }
-                        for c in 0..channels {
-                            let (index, value) = rows.row(p, c);
+                        if channels == 1 {
+                            let (index, value) = rows.row(p, 0);
                             let b = propagator.shade_indexed(index, value);
-                            if channels == 1 {
-                                (0..3).for_each(|k| sum[k] += b[k]);
-                            } else {
-                                sum[c] += b[c];
-                            }
+                            (0..3).for_each(|k| sum[k] += b[k]);
+                            continue;
+                        }
+                        for (c, total) in sum.iter_mut().enumerate().take(channels) {
+                            let (index, value) = rows.row(p, c);
+                            *total += propagator.shade_channel(index, value, c);
                         }
                     }
                     Ok(sum)

@@ -358,17 +358,47 @@ impl Propagator {
     /// [`Propagator::shade`] of a row held as parallel lists of indices and
     /// values (as [`ltm_codec::PlaneRows::row`] gives them).
     pub fn shade_indexed(&self, indices: &[u16], values: &[f32]) -> [f64; 3] {
-        self.shade_terms(indices.iter().zip(values).map(|(&k, &t)| (k as usize, t)))
+        // Four running sums, so that the additions do not wait on each
+        // other.
+        let mut lanes = [[0.0f64; 3]; 4];
+        let n = indices.len().min(values.len());
+        let (indices, values) = (&indices[..n], &values[..n]);
+        let (k4, v4) = (indices.chunks_exact(4), values.chunks_exact(4));
+        let (k_rest, v_rest) = (k4.remainder(), v4.remainder());
+        for (k, v) in k4.zip(v4) {
+            for (lane, (&k, &t)) in lanes.iter_mut().zip(k.iter().zip(v)) {
+                let l = self.coefficient(k as usize);
+                for c in 0..3 {
+                    lane[c] += l[c] * f64::from(t);
+                }
+            }
+        }
+        for (&k, &t) in k_rest.iter().zip(v_rest) {
+            let l = self.coefficient(k as usize);
+            for c in 0..3 {
+                lanes[0][c] += l[c] * f64::from(t);
+            }
+        }
+        [0, 1, 2].map(|c| (lanes[0][c] + lanes[1][c]) + (lanes[2][c] + lanes[3][c]))
     }
 
     /// Channel `c` (0..3) of [`Propagator::shade_indexed`]: an RGB file's
     /// row of that channel under that channel of the light.
     pub fn shade_channel(&self, indices: &[u16], values: &[f32], c: usize) -> f64 {
-        let mut sum = 0.0f64;
-        for (&k, &t) in indices.iter().zip(values) {
-            sum += self.coefficient(k as usize)[c] * f64::from(t);
+        let mut lanes = [0.0f64; 4];
+        let n = indices.len().min(values.len());
+        let (indices, values) = (&indices[..n], &values[..n]);
+        let (k4, v4) = (indices.chunks_exact(4), values.chunks_exact(4));
+        let (k_rest, v_rest) = (k4.remainder(), v4.remainder());
+        for (k, v) in k4.zip(v4) {
+            for (lane, (&k, &t)) in lanes.iter_mut().zip(k.iter().zip(v)) {
+                *lane += self.coefficient(k as usize)[c] * f64::from(t);
+            }
         }
-        sum
+        for (&k, &t) in k_rest.iter().zip(v_rest) {
+            lanes[0] += self.coefficient(k as usize)[c] * f64::from(t);
+        }
+        (lanes[0] + lanes[1]) + (lanes[2] + lanes[3])
     }
 
     fn shade_terms(&self, terms: impl Iterator<Item = (usize, f32)>) -> [f64; 3] {

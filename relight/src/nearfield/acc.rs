@@ -117,7 +117,8 @@ pub fn couplings_where(
     if s > 2.0 * order as f64 {
         // The source is narrower than half a finest texel: steps from
         // nearby breaks would cancel to rounding, overlaps do not.
-        return couplings_by_overlap(i, order, s, o, wanted, out);
+        let (source, m) = transformed(i, s, o);
+        return couplings_by_overlap(&source[..m], order, wanted, out);
     }
     let first = out.len();
     let (value, steps, count) = steps(i, s, o);
@@ -133,7 +134,8 @@ pub fn couplings_where(
     for (f, &(b, _)) in finest.iter_mut().zip(steps) {
         *f = ((b * order as f64) as usize).min(order - 1);
     }
-    for (level, &amplitude) in AMPLITUDES.iter().enumerate().take(levels) {
+    for level in 0..levels {
+        let amplitude = amplitude(level);
         let base = 1usize << level;
         let width = 1.0 / base as f64;
         let shift = levels - level;
@@ -167,7 +169,15 @@ pub fn couplings_where(
     out.truncate(kept);
 }
 
-/// `2^{l/2}` for the levels of an order up to 2^20.
+/// `2^{l/2}`: a wavelet's value on level `l`.
+fn amplitude(level: usize) -> f64 {
+    AMPLITUDES
+        .get(level)
+        .copied()
+        .unwrap_or_else(|| (0.5 * level as f64).exp2())
+}
+
+/// `2^{l/2}` for the levels of an order up to 2^20, exact.
 const AMPLITUDES: [f64; 20] = {
     let mut a = [0.0; 20];
     let mut l = 0;
@@ -192,10 +202,7 @@ fn steps(i: usize, s: f64, o: f64) -> (f64, [(f64, f64); 3], usize) {
         let level = (usize::BITS - 1 - i.leading_zeros()) as usize;
         let width = 1.0 / (1u64 << level) as f64;
         let start = (i - (1usize << level)) as f64 * width;
-        let a = AMPLITUDES
-            .get(level)
-            .copied()
-            .unwrap_or_else(|| (0.5 * level as f64).exp2());
+        let a = amplitude(level);
         (
             [start, start + 0.5 * width, start + width],
             [a, -2.0 * a, a],
@@ -221,15 +228,11 @@ fn steps(i: usize, s: f64, o: f64) -> (f64, [(f64, f64); 3], usize) {
 /// [`couplings_where`] from the overlaps of the transformed source's
 /// pieces with each candidate target's (a target per level and break).
 fn couplings_by_overlap(
-    i: usize,
+    source: &[Piece],
     order: usize,
-    s: f64,
-    o: f64,
     wanted: impl Fn(usize) -> bool,
     out: &mut Vec<(u32, f64)>,
 ) {
-    let (source, m) = transformed(i, s, o);
-    let source = &source[..m];
     let mut push = |k: usize| {
         if !wanted(k) {
             return;
@@ -247,7 +250,7 @@ fn couplings_by_overlap(
     for e in source
         .iter()
         .map(|p| p.start)
-        .chain(std::iter::once(source[m - 1].end))
+        .chain(std::iter::once(source[source.len() - 1].end))
     {
         if (0.0..1.0).contains(&e) {
             breaks[count] = e;

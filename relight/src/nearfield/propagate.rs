@@ -109,7 +109,7 @@ pub struct Propagator {
     /// at the `written` targets, which the next point clears.
     incident: Vec<[f64; 3]>,
     written: Vec<u32>,
-    /// Per axis, the targets that may be selected.
+    /// Per axis, the targets reached by a coupling, increasing.
     candidates: [Vec<u32>; 2],
     products: Vec<f64>,
     list: Vec<(u32, f64)>,
@@ -193,24 +193,33 @@ impl Propagator {
         let ys = source.axis[1].len();
         self.columns.clear();
         self.columns.resize(ys * order, 0.0);
-        self.touched[1].fill(false);
-        let wanted = &self.wanted[1];
-        for (j, &i) in source.axis[1].iter().enumerate() {
-            self.list.clear();
-            couple(
-                self.table.as_deref(),
-                (i as usize, order),
-                (sy, oy),
-                wanted,
-                &mut self.list,
-            );
-            for &(k, d) in &self.list {
+        self.axis_couplings(1, &source.axis[1], (sy, oy));
+        for (j, range) in self.starts.windows(2).enumerate() {
+            for &(k, d) in &self.list[range[0]..range[1]] {
                 self.columns[k as usize * ys + j] = d;
-                self.touched[1][k as usize] = true;
             }
         }
         self.step_two(ys);
         Ok(true)
+    }
+
+    /// The couplings of each of `sources` on `axis` to its wanted targets,
+    /// concatenated in `list` (source `j`'s at `starts[j]..starts[j + 1]`),
+    /// and the targets reached marked in `touched`.
+    fn axis_couplings(&mut self, axis: usize, sources: &[u32], (s, o): (f64, f64)) {
+        let order = self.face.order;
+        self.list.clear();
+        self.starts.clear();
+        for &i in sources {
+            self.starts.push(self.list.len());
+            let (table, wanted) = (self.table.as_deref(), &self.wanted[axis]);
+            couple(table, (i as usize, order), (s, o), wanted, &mut self.list);
+        }
+        self.starts.push(self.list.len());
+        self.touched[axis].fill(false);
+        for &(k, _) in &self.list {
+            self.touched[axis][k as usize] = true;
+        }
     }
 
     /// Step 1: `Z[i_y][k_x] = Σ_{i_x} F[i_x, i_y]·D_{i_x k_x}(s_x, o_x)`.
@@ -219,25 +228,7 @@ impl Propagator {
         let ys = source.axis[1].len();
         self.partial.clear();
         self.partial.resize(ys * order, [0.0; 3]);
-        self.touched[0].fill(false);
-        // Couplings of each distinct x index, concatenated.
-        self.list.clear();
-        self.starts.clear();
-        let wanted = &self.wanted[0];
-        for &i in &source.axis[0] {
-            self.starts.push(self.list.len());
-            couple(
-                self.table.as_deref(),
-                (i as usize, order),
-                (s, o),
-                wanted,
-                &mut self.list,
-            );
-        }
-        self.starts.push(self.list.len());
-        for &(k, _) in &self.list {
-            self.touched[0][k as usize] = true;
-        }
+        self.axis_couplings(0, &source.axis[0], (s, o));
         let starts = &self.starts;
         for &(ix, iy, f) in &source.terms {
             let ix = ix as usize;
@@ -303,16 +294,15 @@ impl Propagator {
     /// Step 2 for the selected targets: `L_k = Σ_{i_y} Z[i_y][k_x]·D_{i_y k_y}`
     /// where `k_x` and `k_y` were reached by a coupling (other targets are
     /// zero) and, under [`Targets::Share`], the constant light's product
-    /// reaches the threshold.
+    /// reaches the threshold; into `incident`, listed in `written`.
     fn step_two(&mut self, ys: usize) {
         let order = self.face.order;
         let threshold = self.threshold;
-        for (a, candidates) in self.candidates.iter_mut().enumerate() {
+        // A target was reached only if it was wanted (`select`), so under a
+        // threshold its prediction is nonzero.
+        for (candidates, touched) in self.candidates.iter_mut().zip(&self.touched) {
             candidates.clear();
-            let (touched, prediction) = (&self.touched[a], &self.prediction[a]);
-            candidates.extend((0..order as u32).filter(|&k| {
-                touched[k as usize] && (threshold == 0.0 || prediction[k as usize] > 0.0)
-            }));
+            candidates.extend((0..order as u32).filter(|&k| touched[k as usize]));
         }
         let [xs, ys_selected] = &self.candidates;
         for &ky in ys_selected {
@@ -358,47 +348,13 @@ impl Propagator {
     /// [`Propagator::shade`] of a row held as parallel lists of indices and
     /// values (as [`ltm_codec::PlaneRows::row`] gives them).
     pub fn shade_indexed(&self, indices: &[u16], values: &[f32]) -> [f64; 3] {
-        // Four running sums, so that the additions do not wait on each
-        // other.
-        let mut lanes = [[0.0f64; 3]; 4];
-        let n = indices.len().min(values.len());
-        let (indices, values) = (&indices[..n], &values[..n]);
-        let (k4, v4) = (indices.chunks_exact(4), values.chunks_exact(4));
-        let (k_rest, v_rest) = (k4.remainder(), v4.remainder());
-        for (k, v) in k4.zip(v4) {
-            for (lane, (&k, &t)) in lanes.iter_mut().zip(k.iter().zip(v)) {
-                let l = self.coefficient(k as usize);
-                for c in 0..3 {
-                    lane[c] += l[c] * f64::from(t);
-                }
-            }
-        }
-        for (&k, &t) in k_rest.iter().zip(v_rest) {
-            let l = self.coefficient(k as usize);
-            for c in 0..3 {
-                lanes[0][c] += l[c] * f64::from(t);
-            }
-        }
-        [0, 1, 2].map(|c| (lanes[0][c] + lanes[1][c]) + (lanes[2][c] + lanes[3][c]))
+        four_sums(indices, values, |k| self.coefficient(k))
     }
 
     /// Channel `c` (0..3) of [`Propagator::shade_indexed`]: an RGB file's
     /// row of that channel under that channel of the light.
     pub fn shade_channel(&self, indices: &[u16], values: &[f32], c: usize) -> f64 {
-        let mut lanes = [0.0f64; 4];
-        let n = indices.len().min(values.len());
-        let (indices, values) = (&indices[..n], &values[..n]);
-        let (k4, v4) = (indices.chunks_exact(4), values.chunks_exact(4));
-        let (k_rest, v_rest) = (k4.remainder(), v4.remainder());
-        for (k, v) in k4.zip(v4) {
-            for (lane, (&k, &t)) in lanes.iter_mut().zip(k.iter().zip(v)) {
-                *lane += self.coefficient(k as usize)[c] * f64::from(t);
-            }
-        }
-        for (&k, &t) in k_rest.iter().zip(v_rest) {
-            lanes[0] += self.coefficient(k as usize)[c] * f64::from(t);
-        }
-        (lanes[0] + lanes[1]) + (lanes[2] + lanes[3])
+        four_sums(indices, values, |k| [self.coefficient(k)[c]])[0]
     }
 
     fn shade_terms(&self, terms: impl Iterator<Item = (usize, f32)>) -> [f64; 3] {
@@ -411,6 +367,34 @@ impl Propagator {
         }
         sum
     }
+}
+
+/// `Σ light(k)·t` over a row's parallel lists of indices `k` and values `t`,
+/// in four running sums, so that the additions do not wait on each other.
+fn four_sums<const C: usize>(
+    indices: &[u16],
+    values: &[f32],
+    light: impl Fn(usize) -> [f64; C],
+) -> [f64; C] {
+    let mut lanes = [[0.0f64; C]; 4];
+    let n = indices.len().min(values.len());
+    let (k4, v4) = (indices[..n].chunks_exact(4), values[..n].chunks_exact(4));
+    let (k_rest, v_rest) = (k4.remainder(), v4.remainder());
+    for (k, v) in k4.zip(v4) {
+        for (lane, (&k, &t)) in lanes.iter_mut().zip(k.iter().zip(v)) {
+            let l = light(k as usize);
+            for c in 0..C {
+                lane[c] += l[c] * f64::from(t);
+            }
+        }
+    }
+    for (&k, &t) in k_rest.iter().zip(v_rest) {
+        let l = light(k as usize);
+        for c in 0..C {
+            lanes[0][c] += l[c] * f64::from(t);
+        }
+    }
+    std::array::from_fn(|c| (lanes[0][c] + lanes[1][c]) + (lanes[2][c] + lanes[3][c]))
 }
 
 /// The couplings of source `i` to the wanted targets `k < order`, from

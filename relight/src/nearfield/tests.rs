@@ -1087,3 +1087,46 @@ fn stored_rows_render_alike_through_a_coupling_table() {
         assert_eq!(near.render(lights, method).unwrap(), closed);
     }
 }
+
+#[test]
+fn extreme_light_sizes_neither_panic_nor_give_nan_through_both_couplings() {
+    let mut rng = Rng::new(41);
+    let order = 16usize;
+    let limits = ltm_codec::Limits::default();
+    let rows = random_rows(&mut rng, order as u32, 1, 12);
+    // Points at the light's centre and beside it, near and far.
+    let points: Vec<Option<Receiver>> = (0..12)
+        .map(|p| {
+            Some(Receiver {
+                depth: [1e-12, 1.0, 1e12][p % 3],
+                position: [if p % 2 == 0 { 0.25 } else { 0.25 + 1e-9 }, -0.5],
+            })
+        })
+        .collect();
+    let mut near = NearField::new(rows, points, None, &limits).unwrap();
+    let method = NearFieldMethod::Wavelet(NearFieldTerms {
+        source: 0.5,
+        targets: Targets::Share(0.3),
+    });
+    for table in [
+        None,
+        Some(Arc::new(AccTable::new(order, 16, &limits).unwrap())),
+    ] {
+        near.set_coupling_table(table).unwrap();
+        for size in [1e-320, 1e-300, 1e-9, 1e9, 1e300, f64::MAX] {
+            let light = AreaLight {
+                texture: hdr_texture(&mut rng, 8, 8),
+                placement: Placement {
+                    center: [0.25, -0.5],
+                    size: [size, size],
+                    intensity: 1.0,
+                },
+            };
+            let image = near.render(std::slice::from_ref(&light), method).unwrap();
+            assert!(
+                image.iter().flatten().all(|v| v.is_finite() && *v >= 0.0),
+                "size {size}: {image:?}"
+            );
+        }
+    }
+}

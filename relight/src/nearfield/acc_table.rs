@@ -94,8 +94,15 @@ impl AccTable {
         rows.push(nodes);
         let levels = order.trailing_zeros() as usize;
         // At most 1 + 3·levels targets per source, 6 bytes each, and a
-        // start per node and source.
-        let most = (nodes * 2 * (1 + 3 * levels)) as u64 * 6 + 8 * nodes as u64;
+        // start per node and source; the starts are u32.
+        let entries = nodes as u64 * 2 * (1 + 3 * levels) as u64;
+        if entries > u64::from(u32::MAX) {
+            return Err(RelightError::Invalid(format!(
+                "a coupling table of order {order} and {cells} cells would hold up to {entries} couplings, more than {}: use fewer cells",
+                u32::MAX
+            )));
+        }
+        let most = entries * 6 + 8 * nodes as u64;
         let charge = limits.check_alloc("coupling table", most, 1)?;
         let built: Vec<(Vec<u32>, Vec<u16>, Vec<f32>)> = (0..count)
             .into_par_iter()

@@ -1033,6 +1033,10 @@ fn hostile_tables_are_errors() {
             "{order} {cells}"
         );
     }
+    // Order 1024 at 512 cells: more couplings than u32 starts can index,
+    // refused before anything is charged or built.
+    let huge = AccTable::new(1024, 512, &limits).unwrap_err().to_string();
+    assert!(huge.contains("fewer cells"), "{huge}");
     let tight = ltm_codec::Limits::with_max_alloc(1 << 20);
     let err = AccTable::new(32, 256, &tight).unwrap_err().to_string();
     assert!(err.contains("coupling table"), "{err}");

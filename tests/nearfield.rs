@@ -778,5 +778,6 @@ fn library_rows_agree(
     eprintln!(
         "plane at {height}: stored against library rows, worst relative difference {worst:.2e}"
     );
-    assert!(worst < 1e-6, "{worst}");
+    // The stored path sums in f32 (`shade_indexed`), the library's in f64.
+    assert!(worst < 2e-5, "{worst}");
 }

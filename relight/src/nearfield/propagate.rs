@@ -88,9 +88,10 @@ pub struct Propagator {
     /// evaluated in closed form.
     table: Option<Arc<AccTable>>,
     /// Axis-y couplings `D_{i_y k_y}`, dense, `k_y` major: `order × axis[1].len()`.
-    columns: Vec<f64>,
-    /// Step 1's `Z[i_y][k_x]`, RGB, `k_x` major: `order × axis[1].len()`.
-    partial: Vec<[f64; 3]>,
+    columns: Vec<f32>,
+    /// Step 1's `Z[i_y][k_x]`, RGB and a zero lane (one 4-wide vector),
+    /// `k_x` major: `order × axis[1].len()`.
+    partial: Vec<Rgb4>,
     /// Per axis, whether any coupling reached target `k` (step 1's `k_x`,
     /// the columns' `k_y`): the other targets are zero.
     touched: [Vec<bool>; 2],
@@ -107,7 +108,7 @@ pub struct Propagator {
     threshold: f64,
     /// The point's incident coefficients `L_k`, dense (`order²`): zero but
     /// at the `written` targets, which the next point clears.
-    incident: Vec<[f64; 3]>,
+    incident: Vec<Rgb4>,
     written: Vec<u32>,
     /// Per axis, the targets reached by a coupling, increasing.
     candidates: [Vec<u32>; 2],
@@ -131,7 +132,7 @@ impl Propagator {
             prediction: [vec![0.0; order], vec![0.0; order]],
             nonzero: [Vec::new(), Vec::new()],
             threshold: 0.0,
-            incident: vec![[0.0; 3]; order * order],
+            incident: vec![[0.0; 4]; order * order],
             written: Vec::new(),
             candidates: [Vec::new(), Vec::new()],
             products: Vec::new(),
@@ -169,7 +170,7 @@ impl Propagator {
         targets: Targets,
     ) -> Result<bool> {
         for &k in &self.written {
-            self.incident[k as usize] = [0.0; 3];
+            self.incident[k as usize] = [0.0; 4];
         }
         self.written.clear();
         placement.check()?;
@@ -196,7 +197,7 @@ impl Propagator {
         self.axis_couplings(1, &source.axis[1], (sy, oy));
         for (j, range) in self.starts.windows(2).enumerate() {
             for &(k, d) in &self.list[range[0]..range[1]] {
-                self.columns[k as usize * ys + j] = d;
+                self.columns[k as usize * ys + j] = d as f32;
             }
         }
         self.step_two(ys);
@@ -227,15 +228,17 @@ impl Propagator {
         let order = self.face.order;
         let ys = source.axis[1].len();
         self.partial.clear();
-        self.partial.resize(ys * order, [0.0; 3]);
+        self.partial.resize(ys * order, [0.0; 4]);
         self.axis_couplings(0, &source.axis[0], (s, o));
         let starts = &self.starts;
         for &(ix, iy, f) in &source.terms {
             let ix = ix as usize;
             let iy = iy as usize;
+            let f = [f[0] as f32, f[1] as f32, f[2] as f32, 0.0];
             for &(k, d) in &self.list[starts[ix]..starts[ix + 1]] {
                 let z = &mut self.partial[k as usize * ys + iy];
-                for c in 0..3 {
+                let d = d as f32;
+                for c in 0..4 {
                     z[c] += f[c] * d;
                 }
             }
@@ -312,10 +315,10 @@ impl Propagator {
                 if threshold > 0.0 && self.prediction[0][kx as usize] * py < threshold {
                     continue;
                 }
-                let mut sum = [0.0f64; 3];
+                let mut sum = [0.0f32; 4];
                 let partial = &self.partial[kx as usize * ys..][..ys];
-                for (z, d) in partial.iter().zip(column) {
-                    for c in 0..3 {
+                for (z, &d) in partial.iter().zip(column) {
+                    for c in 0..4 {
                         sum[c] += z[c] * d;
                     }
                 }
@@ -329,7 +332,8 @@ impl Propagator {
     /// The incident lighting's coefficient `L_k` (`k = k_y·order + k_x`),
     /// zero when not selected or not lit.
     pub fn coefficient(&self, k: usize) -> [f64; 3] {
-        self.incident.get(k).copied().unwrap_or([0.0; 3])
+        let l = self.incident.get(k).copied().unwrap_or([0.0; 4]);
+        std::array::from_fn(|c| f64::from(l[c]))
     }
 
     /// Every coefficient of the incident lighting, `order²` (dense; for tests
@@ -348,13 +352,15 @@ impl Propagator {
     /// [`Propagator::shade`] of a row held as parallel lists of indices and
     /// values (as [`ltm_codec::PlaneRows::row`] gives them).
     pub fn shade_indexed(&self, indices: &[u16], values: &[f32]) -> [f64; 3] {
-        four_sums(indices, values, |k| self.coefficient(k))
+        let b = four_sums(indices, values, &self.incident);
+        std::array::from_fn(|c| f64::from(b[c]))
     }
 
     /// Channel `c` (0..3) of [`Propagator::shade_indexed`]: an RGB file's
     /// row of that channel under that channel of the light.
     pub fn shade_channel(&self, indices: &[u16], values: &[f32], c: usize) -> f64 {
-        four_sums(indices, values, |k| [self.coefficient(k)[c]])[0]
+        debug_assert!(c < 3, "channel {c} of an RGB row");
+        f64::from(four_sums(indices, values, &self.incident)[c])
     }
 
     fn shade_terms(&self, terms: impl Iterator<Item = (usize, f32)>) -> [f64; 3] {
@@ -369,29 +375,33 @@ impl Propagator {
     }
 }
 
-/// `Σ light(k)·t` over a row's parallel lists of indices `k` and values `t`,
+/// An RGB value and a zero lane: one 4-wide vector.
+type Rgb4 = [f32; 4];
+
+/// `Σ light[k]·t` over a row's parallel lists of indices `k` and values `t`,
 /// in four running sums, so that the additions do not wait on each other.
-fn four_sums<const C: usize>(
-    indices: &[u16],
-    values: &[f32],
-    light: impl Fn(usize) -> [f64; C],
-) -> [f64; C] {
-    let mut lanes = [[0.0f64; C]; 4];
+/// An index past `light` adds nothing.
+/// The sums are f32, one 4-wide vector a term, about 1.1 times faster than
+/// f64 sums on the 256² frames; `shade_indexed` is tested against the f64
+/// [`Propagator::shade`] relative to the terms' magnitudes.
+fn four_sums(indices: &[u16], values: &[f32], light: &[Rgb4]) -> Rgb4 {
+    let mut lanes = [[0.0f32; 4]; 4];
     let n = indices.len().min(values.len());
     let (k4, v4) = (indices[..n].chunks_exact(4), values[..n].chunks_exact(4));
     let (k_rest, v_rest) = (k4.remainder(), v4.remainder());
+    let at = |k: u16| light.get(k as usize).copied().unwrap_or([0.0; 4]);
     for (k, v) in k4.zip(v4) {
         for (lane, (&k, &t)) in lanes.iter_mut().zip(k.iter().zip(v)) {
-            let l = light(k as usize);
-            for c in 0..C {
-                lane[c] += l[c] * f64::from(t);
+            let l = at(k);
+            for c in 0..4 {
+                lane[c] += l[c] * t;
             }
         }
     }
     for (&k, &t) in k_rest.iter().zip(v_rest) {
-        let l = light(k as usize);
-        for c in 0..C {
-            lanes[0][c] += l[c] * f64::from(t);
+        let l = at(k);
+        for c in 0..4 {
+            lanes[0][c] += l[c] * t;
         }
     }
     std::array::from_fn(|c| (lanes[0][c] + lanes[1][c]) + (lanes[2][c] + lanes[3][c]))

@@ -249,6 +249,71 @@ fn propagated_light_and_shading_equal_the_exact_resampled_light() {
     }
 }
 
+/// The stored rows' shading sums in f32 (`shade_indexed`, `shade_channel`);
+/// it must agree with the f64 `shade` relative to the terms' magnitudes,
+/// on HDR lights and rows of mixed sign from 1e-6 to 1e5, and ignore indices
+/// past the face.
+#[test]
+fn f32_indexed_shading_agrees_with_the_f64_shading() {
+    let mut rng = Rng::new(41);
+    let order = 32;
+    let face = PlaneFace {
+        order,
+        side: DEFAULT_FACE_SIDE,
+    };
+    let placement = Placement {
+        center: [0.1, 0.3],
+        size: [0.7, 1.2],
+        intensity: 30.0,
+    };
+    let light = hdr_texture(&mut rng, 24, 17);
+    let source = SourceCoefficients::new(&light, &placement, order, usize::MAX).unwrap();
+    let mut propagator = Propagator::new(face).unwrap();
+    let mut checked = 0;
+    for receiver in receivers(&mut rng, 30) {
+        if !propagator
+            .prepare(&source, &placement, &receiver, Targets::Share(0.3))
+            .unwrap()
+        {
+            continue;
+        }
+        let mut indices: Vec<u16> = (0..(order * order) as u16)
+            .filter(|_| rng.uniform() < 0.4)
+            .collect();
+        indices.push(u16::MAX);
+        let values: Vec<f32> = indices
+            .iter()
+            .map(|_| {
+                let sign = if rng.uniform() < 0.5 { -1.0 } else { 1.0 };
+                (sign * 10f64.powf(rng.uniform() * 11.0 - 6.0)) as f32
+            })
+            .collect();
+        let row: Vec<(u32, f32)> = indices
+            .iter()
+            .map(|&k| u32::from(k))
+            .zip(values.iter().copied())
+            .collect();
+        let want = propagator.shade(&row);
+        let got = propagator.shade_indexed(&indices, &values);
+        for c in 0..3 {
+            let scale: f64 = row
+                .iter()
+                .map(|&(k, t)| (propagator.coefficient(k as usize)[c] * f64::from(t)).abs())
+                .sum();
+            let d = (got[c] - want[c]).abs();
+            assert!(
+                d <= 1e-5 * scale,
+                "{receiver:?} channel {c}: {} against {} (terms {scale})",
+                got[c],
+                want[c]
+            );
+            assert_eq!(propagator.shade_channel(&indices, &values, c), got[c]);
+        }
+        checked += 1;
+    }
+    assert!(checked > 20, "only {checked} points lit");
+}
+
 #[test]
 fn fewer_terms_lose_accuracy_gracefully_and_all_terms_are_exact() {
     let mut rng = Rng::new(9);

@@ -120,7 +120,6 @@ pub fn couplings_where(
         let (source, m) = transformed(i, s, o);
         return couplings_by_overlap(&source[..m], order, wanted, out);
     }
-    let first = out.len();
     let (value, steps, count) = steps(i, s, o);
     let steps = &steps[..count];
     let d0 = value + steps.iter().map(|&(b, j)| j * (1.0 - b)).sum::<f64>();
@@ -137,36 +136,41 @@ pub fn couplings_where(
     for level in 0..levels {
         let amplitude = amplitude(level);
         let base = 1usize << level;
-        let width = 1.0 / base as f64;
+        let width = inverse_power_of_two(level);
         let shift = levels - level;
-        // Breaks are increasing, so equal offsets are adjacent.
-        let mut last = usize::MAX;
+        // Breaks are increasing, so equal offsets are adjacent: their
+        // steps add up in `sum` before the entry is written.
+        let (mut last, mut sum) = (usize::MAX, 0.0);
         for (&(b, j), &f) in steps.iter().zip(&finest) {
             let t = f >> shift;
-            if !wanted(base + t) {
+            let x0 = t as f64 * width;
+            let (left, right) = (b - x0, x0 + width - b);
+            let e = -amplitude * if left < right { left } else { right } * j;
+            if t == last {
+                sum += e;
                 continue;
             }
-            let x0 = t as f64 * width;
-            let e = -amplitude * (b - x0).min(x0 + width - b) * j;
-            if t == last {
-                if let Some(entry) = out.last_mut() {
-                    entry.1 += e;
-                }
-            } else {
-                out.push(((base + t) as u32, e));
-                last = t;
-            }
+            push_nonzero(last, base, sum, &wanted, out);
+            (last, sum) = (t, e);
         }
+        push_nonzero(last, base, sum, &wanted, out);
     }
-    // Drop the targets whose steps cancel (or whose break is on an edge).
-    let mut kept = first;
-    for r in first..out.len() {
-        if out[r].1 != 0.0 {
-            out[kept] = out[r];
-            kept += 1;
-        }
+}
+
+/// Appends target `base + t` with coupling `d`, unless `t` is none
+/// (`usize::MAX`), `d` is 0 (the steps cancel, or a break is on an edge) or
+/// the target is not wanted.
+#[inline(always)]
+fn push_nonzero(
+    t: usize,
+    base: usize,
+    d: f64,
+    wanted: &impl Fn(usize) -> bool,
+    out: &mut Vec<(u32, f64)>,
+) {
+    if t != usize::MAX && d != 0.0 && wanted(base + t) {
+        out.push(((base + t) as u32, d));
     }
-    out.truncate(kept);
 }
 
 /// `2^{l/2}`: a wavelet's value on level `l`.
@@ -175,6 +179,11 @@ fn amplitude(level: usize) -> f64 {
         .get(level)
         .copied()
         .unwrap_or_else(|| (0.5 * level as f64).exp2())
+}
+
+/// `2^{−l}`, exact, without a division (`l` below 1023).
+fn inverse_power_of_two(level: usize) -> f64 {
+    f64::from_bits((1023 - level as u64) << 52)
 }
 
 /// `2^{l/2}` for the levels of an order up to 2^20, exact.
@@ -200,7 +209,7 @@ fn steps(i: usize, s: f64, o: f64) -> (f64, [(f64, f64); 3], usize) {
         ([0.0, 1.0, 0.0], [1.0, -1.0, 0.0], 2)
     } else {
         let level = (usize::BITS - 1 - i.leading_zeros()) as usize;
-        let width = 1.0 / (1u64 << level) as f64;
+        let width = inverse_power_of_two(level);
         let start = (i - (1usize << level)) as f64 * width;
         let a = amplitude(level);
         (

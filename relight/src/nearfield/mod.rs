@@ -46,7 +46,7 @@ pub use light::{
     haar_2d, LightTexture, Placement, SourceCoefficients, MAX_TEXTURE_SIDE, ROTATION_SAMPLES,
 };
 pub use propagate::{
-    affine, transport_coefficients, PlaneFace, Propagator, Receiver, Targets, DEFAULT_FACE_SIDE,
-    MIN_SCALE,
+    affine, band_starts, transport_coefficients, PlaneFace, Propagator, Receiver, Targets,
+    DEFAULT_FACE_SIDE, MIN_SCALE,
 };
 pub use stored::{AreaLight, NearField, NearFieldMethod, NearFieldTerms};

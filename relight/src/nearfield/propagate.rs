@@ -87,10 +87,8 @@ pub struct Propagator {
     /// Couplings looked up here (§5.3.2's memory-based approach) instead of
     /// evaluated in closed form.
     table: Option<Arc<AccTable>>,
-    /// Axis-y couplings `D_{i_y k_y}`, dense, `k_y` major: `order × axis[1].len()`.
-    columns: Vec<f32>,
     /// Step 1's `Z[i_y][k_x]`, RGB and a zero lane (one 4-wide vector),
-    /// `k_x` major: `order × axis[1].len()`.
+    /// `i_y` major: `axis[1].len() × order`.
     partial: Vec<Rgb4>,
     /// Per axis, whether any coupling reached target `k` (step 1's `k_x`,
     /// the columns' `k_y`): the other targets are zero.
@@ -99,6 +97,9 @@ pub struct Propagator {
     /// [`Targets::Share`] those whose prediction times the other axis's
     /// largest reaches the threshold. Couplings to others are not computed.
     wanted: [Vec<bool>; 2],
+    /// Per axis, the scaling function's couplings `D_{0 k}` to every
+    /// target: the prediction's, and source 0's in both steps.
+    scaling: [Vec<(u32, f64)>; 2],
     /// The constant light's `|D_{0 k}|` per axis, `order` each, and their
     /// nonzero values.
     prediction: [Vec<f64>; 2],
@@ -106,10 +107,9 @@ pub struct Propagator {
     /// Targets whose predicted product is below this are skipped; 0 keeps
     /// all.
     threshold: f64,
-    /// The point's incident coefficients `L_k`, dense (`order²`): zero but
-    /// at the `written` targets, which the next point clears.
+    /// The point's incident coefficients `L_k`, dense (`order²`): zero
+    /// outside the box of `candidates`, which the next point clears.
     incident: Vec<Rgb4>,
-    written: Vec<u32>,
     /// Per axis, the targets reached by a coupling, increasing.
     candidates: [Vec<u32>; 2],
     products: Vec<f64>,
@@ -125,15 +125,14 @@ impl Propagator {
         Ok(Propagator {
             face,
             table: None,
-            columns: Vec::new(),
             partial: Vec::new(),
             touched: [vec![false; order], vec![false; order]],
             wanted: [vec![true; order], vec![true; order]],
+            scaling: [Vec::new(), Vec::new()],
             prediction: [vec![0.0; order], vec![0.0; order]],
             nonzero: [Vec::new(), Vec::new()],
             threshold: 0.0,
             incident: vec![[0.0; 4]; order * order],
-            written: Vec::new(),
             candidates: [Vec::new(), Vec::new()],
             products: Vec::new(),
             list: Vec::new(),
@@ -169,10 +168,7 @@ impl Propagator {
         receiver: &Receiver,
         targets: Targets,
     ) -> Result<bool> {
-        for &k in &self.written {
-            self.incident[k as usize] = [0.0; 4];
-        }
-        self.written.clear();
+        self.clear_incident();
         placement.check()?;
         let order = self.face.order;
         if source.order != order {
@@ -191,17 +187,22 @@ impl Propagator {
         let [(sx, ox), (sy, oy)] = affine(&self.face, placement, receiver);
         self.select(targets, [(sx, ox), (sy, oy)]);
         self.step_one(source, (sx, ox));
-        let ys = source.axis[1].len();
-        self.columns.clear();
-        self.columns.resize(ys * order, 0.0);
         self.axis_couplings(1, &source.axis[1], (sy, oy));
-        for (j, range) in self.starts.windows(2).enumerate() {
-            for &(k, d) in &self.list[range[0]..range[1]] {
-                self.columns[k as usize * ys + j] = d as f32;
-            }
-        }
-        self.step_two(ys);
+        self.step_two();
         Ok(true)
+    }
+
+    /// Zeroes the previous point's incident coefficients (the box of its
+    /// candidates) and forgets its candidates.
+    fn clear_incident(&mut self) {
+        let order = self.face.order;
+        let [xs, ys] = &mut self.candidates;
+        for &ky in ys.iter() {
+            let row = &mut self.incident[ky as usize * order..][..order];
+            xs.iter().for_each(|&kx| row[kx as usize] = [0.0; 4]);
+        }
+        xs.clear();
+        ys.clear();
     }
 
     /// The couplings of each of `sources` on `axis` to its wanted targets,
@@ -211,10 +212,22 @@ impl Propagator {
         let order = self.face.order;
         self.list.clear();
         self.starts.clear();
+        let (table, wanted) = (self.table.as_deref(), &self.wanted[axis]);
         for &i in sources {
             self.starts.push(self.list.len());
-            let (table, wanted) = (self.table.as_deref(), &self.wanted[axis]);
-            couple(table, (i as usize, order), (s, o), wanted, &mut self.list);
+            if i == 0 {
+                let scaling = self.scaling[axis].iter();
+                self.list
+                    .extend(scaling.filter(|&&(k, _)| wanted[k as usize]));
+                continue;
+            }
+            couple(
+                table,
+                (i as usize, order),
+                (s, o),
+                |k| wanted[k],
+                &mut self.list,
+            );
         }
         self.starts.push(self.list.len());
         self.touched[axis].fill(false);
@@ -236,7 +249,7 @@ impl Propagator {
             let iy = iy as usize;
             let f = [f[0] as f32, f[1] as f32, f[2] as f32, 0.0];
             for &(k, d) in &self.list[starts[ix]..starts[ix + 1]] {
-                let z = &mut self.partial[k as usize * ys + iy];
+                let z = &mut self.partial[iy * order + k as usize];
                 let d = d as f32;
                 for c in 0..4 {
                     z[c] += f[c] * d;
@@ -251,26 +264,21 @@ impl Propagator {
     /// ranked; a share past them keeps every target.
     fn select(&mut self, targets: Targets, axes: [(f64, f64); 2]) {
         let order = self.face.order;
+        for (scaling, axis) in self.scaling.iter_mut().zip(axes) {
+            scaling.clear();
+            couple(self.table.as_deref(), (0, order), axis, |_| true, scaling);
+        }
         self.threshold = 0.0;
         self.wanted.iter_mut().for_each(|w| w.fill(true));
         let share = match targets {
             Targets::Share(share) if share < 1.0 => share.max(0.0),
             _ => return,
         };
-        for (a, (prediction, (s, o))) in self.prediction.iter_mut().zip(axes).enumerate() {
-            prediction.fill(0.0);
-            self.list.clear();
-            let all = &self.wanted[a];
-            couple(
-                self.table.as_deref(),
-                (0, order),
-                (s, o),
-                all,
-                &mut self.list,
-            );
+        for a in 0..2 {
+            self.prediction[a].fill(0.0);
             self.nonzero[a].clear();
-            for &(k, d) in &self.list {
-                prediction[k as usize] = d.abs();
+            for &(k, d) in &self.scaling[a] {
+                self.prediction[a][k as usize] = d.abs();
                 self.nonzero[a].push(d.abs());
             }
         }
@@ -295,38 +303,51 @@ impl Propagator {
     }
 
     /// Step 2 for the selected targets: `L_k = Σ_{i_y} Z[i_y][k_x]·D_{i_y k_y}`
-    /// where `k_x` and `k_y` were reached by a coupling (other targets are
-    /// zero) and, under [`Targets::Share`], the constant light's product
-    /// reaches the threshold; into `incident`, listed in `written`.
-    fn step_two(&mut self, ys: usize) {
+    /// over the box of the `k_x` and `k_y` reached by a coupling (other
+    /// targets are zero), summed coupling by coupling of the axis-y list
+    /// (`list`, source `i_y`'s at `starts`); then, under
+    /// [`Targets::Share`], the targets whose constant-light product is below
+    /// the threshold are zeroed.
+    fn step_two(&mut self) {
         let order = self.face.order;
-        let threshold = self.threshold;
-        // A target was reached only if it was wanted (`select`), so under a
-        // threshold its prediction is nonzero.
         for (candidates, touched) in self.candidates.iter_mut().zip(&self.touched) {
-            candidates.clear();
             candidates.extend((0..order as u32).filter(|&k| touched[k as usize]));
         }
-        let [xs, ys_selected] = &self.candidates;
-        for &ky in ys_selected {
-            let column = &self.columns[ky as usize * ys..][..ys];
-            let py = self.prediction[1][ky as usize];
-            for &kx in xs {
-                if threshold > 0.0 && self.prediction[0][kx as usize] * py < threshold {
-                    continue;
-                }
-                let mut sum = [0.0f32; 4];
-                let partial = &self.partial[kx as usize * ys..][..ys];
-                for (z, &d) in partial.iter().zip(column) {
+        let xs = &self.candidates[0];
+        for (iy, range) in self.starts.windows(2).enumerate() {
+            let z = &self.partial[iy * order..][..order];
+            for &(ky, d) in &self.list[range[0]..range[1]] {
+                let d = d as f32;
+                let row = &mut self.incident[ky as usize * order..][..order];
+                for &kx in xs {
+                    let (l, z) = (&mut row[kx as usize], z[kx as usize]);
                     for c in 0..4 {
-                        sum[c] += z[c] * d;
+                        l[c] += z[c] * d;
                     }
                 }
-                let k = ky * order as u32 + kx;
-                self.incident[k as usize] = sum;
-                self.written.push(k);
             }
         }
+        let threshold = self.threshold;
+        if threshold > 0.0 {
+            // A target was reached only if it was wanted (`select`), so
+            // under a threshold its prediction is nonzero.
+            for &ky in &self.candidates[1] {
+                let py = self.prediction[1][ky as usize];
+                let row = &mut self.incident[ky as usize * order..][..order];
+                for &kx in xs {
+                    if self.prediction[0][kx as usize] * py < threshold {
+                        row[kx as usize] = [0.0; 4];
+                    }
+                }
+            }
+        }
+    }
+
+    /// Whether the last point's selection pruned targets (a threshold
+    /// above 0).
+    #[cfg(test)]
+    pub(super) fn pruned(&self) -> bool {
+        self.threshold > 0.0
     }
 
     /// The incident lighting's coefficient `L_k` (`k = k_y·order + k_x`),
@@ -356,11 +377,25 @@ impl Propagator {
         std::array::from_fn(|c| f64::from(b[c]))
     }
 
-    /// Channel `c` (0..3) of [`Propagator::shade_indexed`]: an RGB file's
-    /// row of that channel under that channel of the light.
-    pub fn shade_channel(&self, indices: &[u16], values: &[f32], c: usize) -> f64 {
-        debug_assert!(c < 3, "channel {c} of an RGB row");
-        f64::from(four_sums(indices, values, &self.incident)[c])
+    /// [`Propagator::shade_indexed`] of a row whose band `k_y` (the
+    /// indices `k_y·order..(k_y + 1)·order`) starts at `bands[k_y]`
+    /// ([`band_starts`]): only the bands that the incident light reaches are
+    /// read, about two fifths of a 256² frame's stored coefficients.
+    /// Starts past the row read nothing.
+    pub fn shade_bands(&self, indices: &[u16], values: &[f32], bands: &[u32]) -> [f64; 3] {
+        let n = indices.len().min(values.len());
+        let start = |ky: usize| bands.get(ky).map_or(n, |&s| (s as usize).min(n));
+        let mut sum = [0.0f32; 4];
+        // The light is nonzero only in the box of step 2's candidates.
+        for &ky in &self.candidates[1] {
+            let ky = ky as usize;
+            let (a, b) = (start(ky), start(ky + 1));
+            if a < b {
+                let band = four_sums(&indices[a..b], &values[a..b], &self.incident);
+                (0..4).for_each(|c| sum[c] += band[c]);
+            }
+        }
+        std::array::from_fn(|c| f64::from(sum[c]))
     }
 
     fn shade_terms(&self, terms: impl Iterator<Item = (usize, f32)>) -> [f64; 3] {
@@ -372,6 +407,18 @@ impl Propagator {
             }
         }
         sum
+    }
+}
+
+/// Where each band `k_y` of a row's increasing indices starts (indices
+/// `k_y·order..(k_y + 1)·order`), into `out` (`order` starts, for
+/// [`Propagator::shade_bands`]).
+pub fn band_starts(indices: &[u16], order: usize, out: &mut [u32]) {
+    let mut at = 0;
+    for (ky, start) in out.iter_mut().enumerate() {
+        let first = ky * order;
+        at += indices[at..].partition_point(|&k| usize::from(k) < first);
+        *start = at as u32;
     }
 }
 
@@ -414,12 +461,12 @@ fn couple(
     table: Option<&AccTable>,
     (i, order): (usize, usize),
     (s, o): (f64, f64),
-    wanted: &[bool],
+    wanted: impl Fn(usize) -> bool,
     out: &mut Vec<(u32, f64)>,
 ) {
     match table {
-        Some(table) => table.couplings_where(i, s, o, |k| wanted[k], out),
-        None => couplings_where(i, order, s, o, |k| wanted[k], out),
+        Some(table) => table.couplings_where(i, s, o, wanted, out),
+        None => couplings_where(i, order, s, o, wanted, out),
     }
 }
 

@@ -10,7 +10,7 @@
 use super::acc_table::AccTable;
 use super::exact::{FaceMasses, LightTable};
 use super::light::{LightTexture, Placement, SourceCoefficients};
-use super::propagate::{affine, PlaneFace, Propagator, Receiver, Targets};
+use super::propagate::{affine, band_starts, PlaneFace, Propagator, Receiver, Targets};
 use crate::error::{RelightError, Result};
 use ltm_codec::{Charge, Limits, LtmFile, PlaneRows};
 use rayon::prelude::*;
@@ -87,6 +87,10 @@ pub struct NearField {
     texels: Vec<f32>,
     /// The rows' Haar coefficients as stored, for the wavelet method.
     rows: PlaneRows,
+    /// Per row and channel, where each band `k_y` of its coefficients
+    /// starts ([`band_starts`], `order` each), charged to the limits with
+    /// `texels`: the wavelet method shades only the bands it lights.
+    bands: Vec<u32>,
     /// Per-row RGB albedo of a grey file.
     albedo: Option<Vec<f32>>,
     /// The wavelet method's couplings, looked up here when set.
@@ -162,15 +166,17 @@ impl NearField {
             }
         }
         let (slots, texels, charge) = texel_rows(&rows, &receivers, limits)?;
+        let (bands, band_charge) = row_bands(&rows, limits)?;
         Ok(NearField {
             face,
             receivers,
             slots,
             texels,
             rows,
+            bands,
             albedo,
             table: None,
-            _charge: charge,
+            _charge: charge.join(band_charge),
         })
     }
 
@@ -238,6 +244,13 @@ impl NearField {
                 [0, 1, 2].map(|k| (sum[k] * f64::from(a[k])).max(0.0).min(most) as f32)
             })
             .collect())
+    }
+
+    /// Row `p`'s band starts of channel `c`.
+    fn row_bands(&self, p: usize, c: usize) -> &[u32] {
+        let order = self.face.order;
+        let at = (p * self.rows.channels() + c) * order;
+        self.bands.get(at..at + order).unwrap_or(&[])
     }
 
     fn render_exact(&self, lights: &[AreaLight]) -> Result<Vec<[f64; 3]>> {
@@ -310,13 +323,13 @@ impl NearField {
                         }
                         if channels == 1 {
                             let (index, value) = rows.row(p, 0);
-                            let b = propagator.shade_indexed(index, value);
+                            let b = propagator.shade_bands(index, value, self.row_bands(p, 0));
                             (0..3).for_each(|k| sum[k] += b[k]);
                             continue;
                         }
                         for (c, total) in sum.iter_mut().enumerate().take(channels) {
                             let (index, value) = rows.row(p, c);
-                            *total += propagator.shade_channel(index, value, c);
+                            *total += propagator.shade_bands(index, value, self.row_bands(p, c))[c];
                         }
                     }
                     Ok(sum)
@@ -355,6 +368,21 @@ fn dot_masses(masses: &FaceMasses, texels: &[f32], order: usize, channels: usize
         }
     }
     sum
+}
+
+/// Every row's and channel's band starts ([`band_starts`]), `4·order`
+/// bytes each, charged to `limits`.
+fn row_bands(rows: &PlaneRows, limits: &Limits) -> Result<(Vec<u32>, Charge)> {
+    let order = rows.basis().order as usize;
+    let (count, channels) = (rows.rows(), rows.channels());
+    let lists = count as u64 * channels as u64;
+    let charge = limits.check_alloc("near-field row bands", lists * order as u64, 4)?;
+    let mut bands = vec![0u32; count * channels * order];
+    bands
+        .par_chunks_mut(order.max(1))
+        .enumerate()
+        .for_each(|(i, out)| band_starts(rows.row(i / channels, i % channels).0, order, out));
+    Ok((bands, charge))
 }
 
 /// The rows of points with a surface and some near-field transport as

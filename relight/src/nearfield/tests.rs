@@ -249,10 +249,11 @@ fn propagated_light_and_shading_equal_the_exact_resampled_light() {
     }
 }
 
-/// The stored rows' shading sums in f32 (`shade_indexed`, `shade_channel`);
-/// it must agree with the f64 `shade` relative to the terms' magnitudes,
-/// on HDR lights and rows of mixed sign from 1e-6 to 1e5, and ignore indices
-/// past the face.
+/// The stored rows' shading sums in f32 (`shade_indexed`, and
+/// `shade_bands` over the bands of `band_starts`); they must agree with the
+/// f64 `shade` relative to the terms' magnitudes, on HDR lights and rows of
+/// mixed sign from 1e-6 to 1e5, ignore indices past the face, and read
+/// nothing past the row from hostile band starts.
 #[test]
 fn f32_indexed_shading_agrees_with_the_f64_shading() {
     let mut rng = Rng::new(41);
@@ -293,25 +294,146 @@ fn f32_indexed_shading_agrees_with_the_f64_shading() {
             .map(|&k| u32::from(k))
             .zip(values.iter().copied())
             .collect();
+        let mut bands = vec![0u32; order];
+        band_starts(&indices, order, &mut bands);
+        let naive: Vec<u32> = (0..order)
+            .map(|ky| {
+                indices
+                    .iter()
+                    .filter(|&&k| usize::from(k) < ky * order)
+                    .count() as u32
+            })
+            .collect();
+        assert_eq!(bands, naive);
         let want = propagator.shade(&row);
         let got = propagator.shade_indexed(&indices, &values);
+        let banded = propagator.shade_bands(&indices, &values, &bands);
         for c in 0..3 {
             let scale: f64 = row
                 .iter()
                 .map(|&(k, t)| (propagator.coefficient(k as usize)[c] * f64::from(t)).abs())
                 .sum();
-            let d = (got[c] - want[c]).abs();
-            assert!(
-                d <= 1e-5 * scale,
-                "{receiver:?} channel {c}: {} against {} (terms {scale})",
-                got[c],
-                want[c]
-            );
-            assert_eq!(propagator.shade_channel(&indices, &values, c), got[c]);
+            for (what, value) in [("indexed", got[c]), ("banded", banded[c])] {
+                assert!(
+                    (value - want[c]).abs() <= 1e-5 * scale,
+                    "{receiver:?} channel {c}, {what}: {value} against {} (terms {scale})",
+                    want[c]
+                );
+            }
+        }
+        for hostile in [
+            vec![u32::MAX; order],
+            vec![7; 3],
+            Vec::new(),
+            (0..order as u32).rev().collect(),
+        ] {
+            let b = propagator.shade_bands(&indices, &values, &hostile);
+            assert!(b.iter().all(|v| v.is_finite()), "{b:?}");
         }
         checked += 1;
     }
     assert!(checked > 20, "only {checked} points lit");
+}
+
+/// A propagator reused point after point (its incident light cleared box
+/// by box, targets pruned by the threshold) gives what a new one gives at
+/// each point, with points behind the plane between them.
+#[test]
+fn a_reused_propagator_equals_a_new_one_at_every_point() {
+    let mut rng = Rng::new(77);
+    let order = 16;
+    let face = PlaneFace {
+        order,
+        side: DEFAULT_FACE_SIDE,
+    };
+    let placement = Placement {
+        center: [-0.2, 0.1],
+        size: [0.9, 0.5],
+        intensity: 3.0,
+    };
+    let light = hdr_texture(&mut rng, 20, 13);
+    let mut points = receivers(&mut rng, 40);
+    points[7].depth = -1.0;
+    points[19].depth = 0.0;
+    for (share, targets) in [
+        (0.05, Targets::Share(0.02)),
+        (0.3, Targets::Share(0.2)),
+        (1.0, Targets::All),
+    ] {
+        let keep = ((share * (order * order) as f64).ceil() as usize).max(1);
+        let source = SourceCoefficients::new(&light, &placement, order, keep).unwrap();
+        let mut reused = Propagator::new(face).unwrap();
+        let mut pruned = false;
+        for receiver in &points {
+            let lit = reused
+                .prepare(&source, &placement, receiver, targets)
+                .unwrap();
+            let mut fresh = Propagator::new(face).unwrap();
+            assert_eq!(
+                fresh
+                    .prepare(&source, &placement, receiver, targets)
+                    .unwrap(),
+                lit
+            );
+            assert_eq!(
+                reused.incident(),
+                fresh.incident(),
+                "{receiver:?} at {targets:?}"
+            );
+            pruned |= reused.pruned();
+            if let (Targets::Share(share), true) = (targets, lit) {
+                assert_selected(&reused, &mut fresh, (&source, &placement, receiver), share);
+            }
+        }
+        // The smallest share must prune, and every target never does.
+        assert_eq!(pruned, targets != Targets::All, "{targets:?}");
+    }
+}
+
+/// Eq. 32 from scratch: under `share`, the targets whose constant-light
+/// product `|D_{0 k_x}·D_{0 k_y}|` is among the largest `share·order²` keep
+/// the value every target gives them, and the others are 0.
+fn assert_selected(
+    selected: &Propagator,
+    all: &mut Propagator,
+    (source, placement, receiver): (&SourceCoefficients, &Placement, &Receiver),
+    share: f64,
+) {
+    let order = source.order;
+    let face = PlaneFace {
+        order,
+        side: DEFAULT_FACE_SIDE,
+    };
+    let [px, py] = affine(&face, placement, receiver).map(|(s, o)| {
+        let mut list = Vec::new();
+        couplings(0, order, s, o, &mut list);
+        let mut dense = vec![0.0f64; order];
+        list.iter().for_each(|&(k, d)| dense[k as usize] = d.abs());
+        dense
+    });
+    let product = |k: usize| px[k % order] * py[k / order];
+    let mut products: Vec<f64> = (0..order * order)
+        .map(product)
+        .filter(|&p| p > 0.0)
+        .collect();
+    products.sort_by(|a, b| b.total_cmp(a));
+    let count = ((share * (order * order) as f64).ceil() as usize).max(1);
+    let threshold = if count > products.len() {
+        0.0
+    } else {
+        products[count - 1]
+    };
+    assert!(all
+        .prepare(source, placement, receiver, Targets::All)
+        .unwrap());
+    for k in 0..order * order {
+        let want = if product(k) >= threshold {
+            all.coefficient(k)
+        } else {
+            [0.0; 3]
+        };
+        assert_eq!(selected.coefficient(k), want, "target {k} of {receiver:?}");
+    }
 }
 
 #[test]

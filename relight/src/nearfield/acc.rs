@@ -174,7 +174,7 @@ fn push_nonzero(
 }
 
 /// `2^{l/2}`: a wavelet's value on level `l`.
-fn amplitude(level: usize) -> f64 {
+pub(super) fn amplitude(level: usize) -> f64 {
     AMPLITUDES
         .get(level)
         .copied()
@@ -182,7 +182,7 @@ fn amplitude(level: usize) -> f64 {
 }
 
 /// `2^{−l}`, exact, without a division (`l` below 1023).
-fn inverse_power_of_two(level: usize) -> f64 {
+pub(super) fn inverse_power_of_two(level: usize) -> f64 {
     f64::from_bits((1023 - level as u64) << 52)
 }
 

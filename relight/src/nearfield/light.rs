@@ -237,6 +237,18 @@ pub struct SourceCoefficients {
     pub(super) axis: [Vec<u32>; 2],
     /// `(position in axis[0], position in axis[1], rgb)` per kept term.
     pub(super) terms: Vec<(u32, u32, [f64; 3])>,
+    /// The kept terms' axis-x source functions as steps, merged: each
+    /// distinct break `u` in `[0, 1]`, increasing, with the range of its
+    /// weights in `weights`.
+    pub(super) breaks: Vec<(f64, std::ops::Range<usize>)>,
+    /// Per break, `(position in axis[1], Σ rgb·jump)` over the terms whose
+    /// axis-x function jumps there, nonzero.
+    pub(super) weights: Vec<(u32, [f32; 4])>,
+    /// Per break `p` and axis-y position (`p·axis[1].len() + i_y`), the
+    /// value at 0 of the kept terms' axis-x functions once the face starts
+    /// past `p`: `Σ rgb·(jumps at breaks up to p)`, summed term by term, so
+    /// that a function wholly before the face adds exactly 0.
+    pub(super) before: Vec<[f32; 4]>,
     /// The squared norm of all coefficients and of the kept ones.
     energy: (f64, f64),
 }
@@ -295,7 +307,7 @@ impl SourceCoefficients {
             a.dedup();
         }
         let position = |a: &[u32], v: usize| a.binary_search(&(v as u32)).unwrap_or(0) as u32;
-        let terms = ranked
+        let terms: Vec<(u32, u32, [f64; 3])> = ranked
             .iter()
             .map(|&(i, _)| {
                 let (x, y) = (i % order, i / order);
@@ -306,10 +318,14 @@ impl SourceCoefficients {
                 )
             })
             .collect();
+        let (breaks, weights, before) = axis_steps(&axis[0], &axis[1], &terms, order);
         Ok(SourceCoefficients {
             order,
             axis,
             terms,
+            breaks,
+            weights,
+            before,
             energy: (total, kept),
         })
     }
@@ -327,6 +343,78 @@ impl SourceCoefficients {
             1.0
         }
     }
+}
+
+/// Breaks, weights and values before the face of [`SourceCoefficients`]:
+/// source `i` is the step function `Σ_b jump·[u ≥ b]` with breaks on the
+/// grid `m/(2·order)` (the scaling function +1 at 0 and −1 at 1; a wavelet
+/// of level `l` and offset `t`, `±2^{l/2}`, +1, −2, +1 at `t/2^l`,
+/// `(t + ½)/2^l` and `(t + 1)/2^l`), so the terms' weights add up per grid
+/// point and axis-y position.
+#[allow(clippy::type_complexity)]
+fn axis_steps(
+    xs: &[u32],
+    ys: &[u32],
+    terms: &[(u32, u32, [f64; 3])],
+    order: usize,
+) -> (
+    Vec<(f64, std::ops::Range<usize>)>,
+    Vec<(u32, [f32; 4])>,
+    Vec<[f32; 4]>,
+) {
+    let grid = 2 * order;
+    let steps = |i: usize| -> Vec<(usize, f64)> {
+        if i == 0 {
+            return vec![(0, 1.0), (grid, -1.0)];
+        }
+        let level = (usize::BITS - 1 - i.leading_zeros()) as usize;
+        let (width, t) = (grid >> level, i - (1 << level));
+        let a = super::acc::amplitude(level);
+        vec![
+            (t * width, a),
+            (t * width + width / 2, -2.0 * a),
+            ((t + 1) * width, a),
+        ]
+    };
+    let mut sums = std::collections::BTreeMap::<(usize, u32), [f64; 3]>::new();
+    for &(ix, iy, f) in terms {
+        for (m, jump) in steps(xs[ix as usize] as usize) {
+            let sum = sums.entry((m, iy)).or_insert([0.0; 3]);
+            (0..3).for_each(|c| sum[c] += f[c] * jump);
+        }
+    }
+    let (mut breaks, mut weights) = (Vec::<(f64, std::ops::Range<usize>)>::new(), Vec::new());
+    let mut grid_points = Vec::new();
+    for ((m, iy), w) in sums {
+        if w.iter().all(|&v| v == 0.0) {
+            continue;
+        }
+        let u = m as f64 / grid as f64;
+        match breaks.last_mut() {
+            Some((at, range)) if *at == u => range.end += 1,
+            _ => {
+                breaks.push((u, weights.len()..weights.len() + 1));
+                grid_points.push(m);
+            }
+        }
+        weights.push((iy, [w[0] as f32, w[1] as f32, w[2] as f32, 0.0]));
+    }
+    // A term's jumps up to a break add up exactly (multiples of 2^{l/2}),
+    // to 0 once all are passed.
+    let mut before = vec![[0.0f64; 3]; breaks.len() * ys.len()];
+    for &(ix, iy, f) in terms {
+        let term_steps = steps(xs[ix as usize] as usize);
+        for (p, &m) in grid_points.iter().enumerate() {
+            let jumps: f64 = term_steps.iter().filter(|s| s.0 <= m).map(|s| s.1).sum();
+            let sum = &mut before[p * ys.len() + iy as usize];
+            (0..3).for_each(|c| sum[c] += f[c] * jumps);
+        }
+    }
+    let before = before
+        .iter()
+        .map(|b| [b[0] as f32, b[1] as f32, b[2] as f32, 0.0])
+        .collect();
+    (breaks, weights, before)
 }
 
 /// The standard 2D orthonormal Haar transform (every row fully, then every

@@ -2,7 +2,7 @@
 //! (§5.3.1), with target-level selection from a constant-light prediction
 //! (eq. 32), and the per-row shading `B = Σ_k L_k·T_k`.
 
-use super::acc::couplings_where;
+use super::acc::{amplitude, couplings_where, inverse_power_of_two};
 use super::acc_table::AccTable;
 use super::light::{Placement, SourceCoefficients};
 use crate::error::{RelightError, Result};
@@ -100,6 +100,9 @@ pub struct Propagator {
     /// Per axis, the scaling function's couplings `D_{0 k}` to every
     /// target: the prediction's, and source 0's in both steps.
     scaling: [Vec<(u32, f64)>; 2],
+    /// Whether `scaling` holds this point's lists (computed only when the
+    /// selection can prune).
+    scaling_ready: bool,
     /// The constant light's `|D_{0 k}|` per axis, `order` each, and their
     /// nonzero values.
     prediction: [Vec<f64>; 2],
@@ -129,6 +132,7 @@ impl Propagator {
             touched: [vec![false; order], vec![false; order]],
             wanted: [vec![true; order], vec![true; order]],
             scaling: [Vec::new(), Vec::new()],
+            scaling_ready: false,
             prediction: [vec![0.0; order], vec![0.0; order]],
             nonzero: [Vec::new(), Vec::new()],
             threshold: 0.0,
@@ -215,7 +219,7 @@ impl Propagator {
         let (table, wanted) = (self.table.as_deref(), &self.wanted[axis]);
         for &i in sources {
             self.starts.push(self.list.len());
-            if i == 0 {
+            if i == 0 && self.scaling_ready {
                 let scaling = self.scaling[axis].iter();
                 self.list
                     .extend(scaling.filter(|&&(k, _)| wanted[k as usize]));
@@ -237,11 +241,79 @@ impl Propagator {
     }
 
     /// Step 1: `Z[i_y][k_x] = Σ_{i_x} F[i_x, i_y]·D_{i_x k_x}(s_x, o_x)`.
+    /// In closed form it is a sum over the merged breaks of the kept terms'
+    /// axis-x functions ([`SourceCoefficients`]): by
+    /// [`couplings_where`]'s step form, a break at `b` with weight `w` adds
+    /// `w·E_k(b)` to the one target a level whose support holds it, and
+    /// `w·(1 − b)` to the scaling target (`w` when `b ≤ 0`). Through a
+    /// coupling table, or for sources narrower than half a finest texel,
+    /// it is summed coupling list by coupling list.
     fn step_one(&mut self, source: &SourceCoefficients, (s, o): (f64, f64)) {
         let order = self.face.order;
-        let ys = source.axis[1].len();
         self.partial.clear();
-        self.partial.resize(ys * order, [0.0; 4]);
+        self.partial.resize(source.axis[1].len() * order, [0.0; 4]);
+        if self.table.is_some() || s > 2.0 * order as f64 {
+            return self.step_one_by_lists(source, (s, o));
+        }
+        self.touched[0].fill(false);
+        let inverse = 1.0 / s;
+        let levels = order.trailing_zeros() as usize;
+        let ys = source.axis[1].len();
+        // The breaks before the face set the value at 0.
+        let first = source
+            .breaks
+            .partition_point(|(u, _)| (u - o) * inverse <= 0.0);
+        if first > 0 && self.wanted[0][0] {
+            let before = &source.before[(first - 1) * ys..][..ys];
+            for (iy, v) in before.iter().enumerate() {
+                if v.iter().any(|&v| v != 0.0) {
+                    self.touched[0][0] = true;
+                    let z = &mut self.partial[iy * order];
+                    (0..4).for_each(|c| z[c] += v[c]);
+                }
+            }
+        }
+        for (u, range) in &source.breaks[first..] {
+            let b = (u - o) * inverse;
+            if b >= 1.0 {
+                // Breaks are increasing: the rest are past the face too.
+                break;
+            }
+            let weights = &source.weights[range.clone()];
+            self.add_break(weights, 0, 1.0 - b);
+            let finest = ((b * order as f64) as usize).min(order - 1);
+            for level in 0..levels {
+                let t = finest >> (levels - level);
+                let width = inverse_power_of_two(level);
+                let x0 = t as f64 * width;
+                let (left, right) = (b - x0, x0 + width - b);
+                let e = -amplitude(level) * if left < right { left } else { right };
+                self.add_break(weights, (1 << level) + t, e);
+            }
+        }
+    }
+
+    /// Adds `e·w` to `Z[i_y][k]` for each `(i_y, w)` of a break's weights,
+    /// and marks `k` reached, unless `e` is 0 or `k` is not wanted.
+    #[inline]
+    fn add_break(&mut self, weights: &[(u32, Rgb4)], k: usize, e: f64) {
+        if e == 0.0 || !self.wanted[0][k] {
+            return;
+        }
+        self.touched[0][k] = true;
+        let order = self.face.order;
+        let e = e as f32;
+        for &(iy, w) in weights {
+            let z = &mut self.partial[iy as usize * order + k];
+            for c in 0..4 {
+                z[c] += w[c] * e;
+            }
+        }
+    }
+
+    /// [`Propagator::step_one`] from each axis-x source's coupling list.
+    fn step_one_by_lists(&mut self, source: &SourceCoefficients, (s, o): (f64, f64)) {
+        let order = self.face.order;
         self.axis_couplings(0, &source.axis[0], (s, o));
         let starts = &self.starts;
         for &(ix, iy, f) in &source.terms {
@@ -260,20 +332,30 @@ impl Propagator {
 
     /// The selection of [`Targets::Share`]: `k` is computed when the
     /// constant light's `|D_{0 k_x}·D_{0 k_y}|` reaches the threshold. At
-    /// most `(1 + 3·log₂ order)²` products are nonzero, so only those are
-    /// ranked; a share past them keeps every target.
+    /// most `(1 + 2·log₂ order)²` products are nonzero (the scaling
+    /// function has two breaks), so only those are ranked; a share past
+    /// their bound, or past their number, keeps every target.
     fn select(&mut self, targets: Targets, axes: [(f64, f64); 2]) {
         let order = self.face.order;
-        for (scaling, axis) in self.scaling.iter_mut().zip(axes) {
-            scaling.clear();
-            couple(self.table.as_deref(), (0, order), axis, |_| true, scaling);
-        }
         self.threshold = 0.0;
+        self.scaling_ready = false;
         self.wanted.iter_mut().for_each(|w| w.fill(true));
         let share = match targets {
             Targets::Share(share) if share < 1.0 => share.max(0.0),
             _ => return,
         };
+        let count = ((share * (order * order) as f64).ceil() as usize).clamp(1, order * order);
+        // The scaling function's two breaks reach at most one target a
+        // level and break, and the scaling target.
+        let reach = 1 + 2 * order.trailing_zeros() as usize;
+        if count > reach * reach {
+            return;
+        }
+        for (scaling, axis) in self.scaling.iter_mut().zip(axes) {
+            scaling.clear();
+            couple(self.table.as_deref(), (0, order), axis, |_| true, scaling);
+        }
+        self.scaling_ready = true;
         for a in 0..2 {
             self.prediction[a].fill(0.0);
             self.nonzero[a].clear();
@@ -282,7 +364,6 @@ impl Propagator {
                 self.nonzero[a].push(d.abs());
             }
         }
-        let count = ((share * (order * order) as f64).ceil() as usize).clamp(1, order * order);
         let [xs, ys] = &self.nonzero;
         if count > xs.len() * ys.len() {
             return;

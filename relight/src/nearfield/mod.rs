@@ -36,6 +36,7 @@ mod acc_table;
 pub mod exact;
 mod light;
 mod propagate;
+mod shading_rows;
 mod stored;
 #[cfg(test)]
 mod tests;

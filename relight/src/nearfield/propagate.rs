@@ -464,19 +464,47 @@ impl Propagator {
     /// read, about two fifths of a 256² frame's stored coefficients.
     /// Starts past the row read nothing.
     pub fn shade_bands(&self, indices: &[u16], values: &[f32], bands: &[u32]) -> [f64; 3] {
+        self.banded(indices, values, bands, |t| [t; 4])
+    }
+
+    /// [`Propagator::shade_bands`] of an RGB row held as one list: each
+    /// index with its three channels' values; channel `c` of the result is
+    /// the row's channel `c` under the light's.
+    pub fn shade_rgb_bands(&self, indices: &[u16], values: &[[f32; 3]], bands: &[u32]) -> [f64; 3] {
+        self.banded(indices, values, bands, |v| [v[0], v[1], v[2], 0.0])
+    }
+
+    fn banded<V: Copy>(
+        &self,
+        indices: &[u16],
+        values: &[V],
+        bands: &[u32],
+        lanes_of: impl Fn(V) -> Rgb4 + Copy,
+    ) -> [f64; 3] {
         let n = indices.len().min(values.len());
         let start = |ky: usize| bands.get(ky).map_or(n, |&s| (s as usize).min(n));
-        let mut sum = [0.0f32; 4];
-        // The light is nonzero only in the box of step 2's candidates.
-        for &ky in &self.candidates[1] {
-            let ky = ky as usize;
-            let (a, b) = (start(ky), start(ky + 1));
+        let mut lanes = [[0.0f32; 4]; 4];
+        // The light is nonzero only in the box of step 2's candidates; runs
+        // of consecutive candidate bands are one range of the row.
+        let ys = &self.candidates[1];
+        let mut r = 0;
+        while r < ys.len() {
+            let first = ys[r] as usize;
+            let mut last = first;
+            while r + 1 < ys.len() && ys[r + 1] as usize == last + 1 {
+                last += 1;
+                r += 1;
+            }
+            r += 1;
+            let (a, b) = (start(first), start(last + 1));
             if a < b {
-                let band = four_sums(&indices[a..b], &values[a..b], &self.incident);
-                (0..4).for_each(|c| sum[c] += band[c]);
+                let (k, v) = (&indices[a..b], &values[a..b]);
+                add_four_sums(k, v, &self.incident, &mut lanes, lanes_of);
             }
         }
-        std::array::from_fn(|c| f64::from(sum[c]))
+        std::array::from_fn(|c| {
+            f64::from((lanes[0][c] + lanes[1][c]) + (lanes[2][c] + lanes[3][c]))
+        })
     }
 
     fn shade_terms(&self, terms: impl Iterator<Item = (usize, f32)>) -> [f64; 3] {
@@ -504,7 +532,7 @@ pub fn band_starts(indices: &[u16], order: usize, out: &mut [u32]) {
 }
 
 /// An RGB value and a zero lane: one 4-wide vector.
-type Rgb4 = [f32; 4];
+pub(super) type Rgb4 = [f32; 4];
 
 /// `Σ light[k]·t` over a row's parallel lists of indices `k` and values `t`,
 /// in four running sums, so that the additions do not wait on each other.
@@ -514,25 +542,38 @@ type Rgb4 = [f32; 4];
 /// [`Propagator::shade`] relative to the terms' magnitudes.
 fn four_sums(indices: &[u16], values: &[f32], light: &[Rgb4]) -> Rgb4 {
     let mut lanes = [[0.0f32; 4]; 4];
+    add_four_sums(indices, values, light, &mut lanes, |t| [t; 4]);
+    std::array::from_fn(|c| (lanes[0][c] + lanes[1][c]) + (lanes[2][c] + lanes[3][c]))
+}
+
+/// [`four_sums`] added to running `lanes`, of values whose lanes multiply
+/// the light's (`lanes_of`: a grey value in every lane, an RGB one as is).
+#[inline]
+fn add_four_sums<V: Copy>(
+    indices: &[u16],
+    values: &[V],
+    light: &[Rgb4],
+    lanes: &mut [Rgb4; 4],
+    lanes_of: impl Fn(V) -> Rgb4,
+) {
     let n = indices.len().min(values.len());
     let (k4, v4) = (indices[..n].chunks_exact(4), values[..n].chunks_exact(4));
     let (k_rest, v_rest) = (k4.remainder(), v4.remainder());
     let at = |k: u16| light.get(k as usize).copied().unwrap_or([0.0; 4]);
     for (k, v) in k4.zip(v4) {
         for (lane, (&k, &t)) in lanes.iter_mut().zip(k.iter().zip(v)) {
-            let l = at(k);
+            let (l, t) = (at(k), lanes_of(t));
             for c in 0..4 {
-                lane[c] += l[c] * t;
+                lane[c] += l[c] * t[c];
             }
         }
     }
-    for (&k, &t) in k_rest.iter().zip(v_rest) {
-        let l = at(k);
+    for (lane, (&k, &t)) in lanes.iter_mut().zip(k_rest.iter().zip(v_rest)) {
+        let (l, t) = (at(k), lanes_of(t));
         for c in 0..4 {
-            lanes[0][c] += l[c] * t;
+            lane[c] += l[c] * t[c];
         }
     }
-    std::array::from_fn(|c| (lanes[0][c] + lanes[1][c]) + (lanes[2][c] + lanes[3][c]))
 }
 
 /// The couplings of source `i` to the wanted targets `k < order`, from

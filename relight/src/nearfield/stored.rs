@@ -10,9 +10,10 @@
 use super::acc_table::AccTable;
 use super::exact::{FaceMasses, LightTable};
 use super::light::{LightTexture, Placement, SourceCoefficients};
-use super::propagate::{affine, band_starts, PlaneFace, Propagator, Receiver, Targets};
+use super::propagate::{affine, PlaneFace, Propagator, Receiver, Targets};
+use super::shading_rows::ShadingRows;
 use crate::error::{RelightError, Result};
-use ltm_codec::{Charge, Limits, LtmFile, PlaneRows};
+use ltm_codec::{Charge, Limits, LtmFile, PlaneBasis, PlaneRows};
 use rayon::prelude::*;
 use std::sync::Arc;
 
@@ -85,12 +86,11 @@ pub struct NearField {
     /// Per slot, `C` channels of `order²` per-texel integrals (`y` major),
     /// for the exact method.
     texels: Vec<f32>,
-    /// The rows' Haar coefficients as stored, for the wavelet method.
-    rows: PlaneRows,
-    /// Per row and channel, where each band `k_y` of its coefficients
-    /// starts ([`band_starts`], `order` each), charged to the limits with
-    /// `texels`: the wavelet method shades only the bands it lights.
-    bands: Vec<u32>,
+    /// The face's plane and resolution, and the rows' channels (1 or 3).
+    basis: PlaneBasis,
+    channels: usize,
+    /// The rows' Haar coefficients, for the wavelet method.
+    shading: ShadingRows,
     /// Per-row RGB albedo of a grey file.
     albedo: Option<Vec<f32>>,
     /// The wavelet method's couplings, looked up here when set.
@@ -166,23 +166,24 @@ impl NearField {
             }
         }
         let (slots, texels, charge) = texel_rows(&rows, &receivers, limits)?;
-        let (bands, band_charge) = row_bands(&rows, limits)?;
+        let shading = ShadingRows::new(&rows, limits)?;
         Ok(NearField {
             face,
             receivers,
             slots,
             texels,
-            rows,
-            bands,
+            basis,
+            channels: rows.channels(),
+            shading,
             albedo,
             table: None,
-            _charge: charge.join(band_charge),
+            _charge: charge,
         })
     }
 
     /// The face's plane and its resolution.
-    pub fn basis(&self) -> &ltm_codec::PlaneBasis {
-        self.rows.basis()
+    pub fn basis(&self) -> &PlaneBasis {
+        &self.basis
     }
 
     /// Makes the wavelet method look its couplings up in `table` (§5.3.2's
@@ -213,7 +214,7 @@ impl NearField {
     /// or `None` when it gets no near-field light.
     pub fn row_texels(&self, p: usize) -> Option<&[f32]> {
         let slot = *self.slots.get(p)?;
-        let len = self.face.order * self.face.order * self.rows.channels();
+        let len = self.face.order * self.face.order * self.channels;
         (slot != NO_SLOT).then(|| &self.texels[slot as usize * len..][..len])
     }
 
@@ -246,13 +247,6 @@ impl NearField {
             .collect())
     }
 
-    /// Row `p`'s band starts of channel `c`.
-    fn row_bands(&self, p: usize, c: usize) -> &[u32] {
-        let order = self.face.order;
-        let at = (p * self.rows.channels() + c) * order;
-        self.bands.get(at..at + order).unwrap_or(&[])
-    }
-
     fn render_exact(&self, lights: &[AreaLight]) -> Result<Vec<[f64; 3]>> {
         let tables = lights
             .iter()
@@ -264,7 +258,7 @@ impl NearField {
                 ))
             })
             .collect::<Result<Vec<_>>>()?;
-        let (face, channels) = (self.face, self.rows.channels());
+        let (face, channels) = (self.face, self.channels);
         let order = face.order;
         Ok((0..self.receivers.len())
             .into_par_iter()
@@ -299,8 +293,7 @@ impl NearField {
             .iter()
             .map(|l| Ok((self.source(l, terms.source)?, l.placement)))
             .collect::<Result<Vec<_>>>()?;
-        let (face, rows) = (self.face, &self.rows);
-        let channels = rows.channels();
+        let face = self.face;
         self.receivers
             .par_iter()
             .enumerate()
@@ -321,16 +314,8 @@ impl NearField {
                         if !propagator.prepare(source, placement, receiver, terms.targets)? {
                             continue;
                         }
-                        if channels == 1 {
-                            let (index, value) = rows.row(p, 0);
-                            let b = propagator.shade_bands(index, value, self.row_bands(p, 0));
-                            (0..3).for_each(|k| sum[k] += b[k]);
-                            continue;
-                        }
-                        for (c, total) in sum.iter_mut().enumerate().take(channels) {
-                            let (index, value) = rows.row(p, c);
-                            *total += propagator.shade_bands(index, value, self.row_bands(p, c))[c];
-                        }
+                        let b = self.shading.shade(propagator, p);
+                        (0..3).for_each(|k| sum[k] += b[k]);
                     }
                     Ok(sum)
                 },
@@ -368,21 +353,6 @@ fn dot_masses(masses: &FaceMasses, texels: &[f32], order: usize, channels: usize
         }
     }
     sum
-}
-
-/// Every row's and channel's band starts ([`band_starts`]), `4·order`
-/// bytes each, charged to `limits`.
-fn row_bands(rows: &PlaneRows, limits: &Limits) -> Result<(Vec<u32>, Charge)> {
-    let order = rows.basis().order as usize;
-    let (count, channels) = (rows.rows(), rows.channels());
-    let lists = count as u64 * channels as u64;
-    let charge = limits.check_alloc("near-field row bands", lists * order as u64, 4)?;
-    let mut bands = vec![0u32; count * channels * order];
-    bands
-        .par_chunks_mut(order.max(1))
-        .enumerate()
-        .for_each(|(i, out)| band_starts(rows.row(i / channels, i % channels).0, order, out));
-    Ok((bands, charge))
 }
 
 /// The rows of points with a surface and some near-field transport as

@@ -3,6 +3,7 @@
 //! light, and hostile placements.
 
 use super::acc::{coupling, couplings};
+use super::shading_rows::ShadingRows;
 use super::*;
 use ltm_testkit::Rng;
 use std::sync::Arc;
@@ -860,6 +861,77 @@ fn random_rows(rng: &mut Rng, order: u32, channels: usize, count: usize) -> ltm_
         rows.push_texels(&texels).unwrap();
     }
     rows
+}
+
+/// The wavelet method's row layout: an RGB file's three channel rows, with
+/// different coefficients (a constant channel, a sparse one, one zero on
+/// some rows), merge into one list that shades each channel under that
+/// channel of the light as the channel rows do one by one; a grey file's
+/// rows shade under all three. A budget too small for the layout refuses it.
+#[test]
+fn shading_rows_merge_rgb_channels_and_shade_as_the_channel_rows() {
+    let mut rng = Rng::new(5);
+    let order = 16usize;
+    let face = PlaneFace {
+        order,
+        side: DEFAULT_FACE_SIDE,
+    };
+    let placement = Placement {
+        center: [0.2, -0.1],
+        size: [1.1, 0.8],
+        intensity: 5.0,
+    };
+    let light = hdr_texture(&mut rng, 19, 23);
+    let source = SourceCoefficients::new(&light, &placement, order, 40).unwrap();
+    let points = receivers(&mut rng, 12);
+    let mut propagator = Propagator::new(face).unwrap();
+    for channels in [1, 3] {
+        let mut rows = random_rows(&mut rng, order as u32, channels, 0);
+        for p in 0..points.len() {
+            let texels: Vec<f32> = (0..order * order * channels)
+                .map(|i| match (i % channels, p % 3) {
+                    (0, _) => 1e-3,
+                    (1, _) if (i / channels) % 5 == 0 => rng.uniform() as f32,
+                    (2, q) if q > 0 => (rng.uniform() as f32 - 0.5) * 1e3,
+                    _ => 0.0,
+                })
+                .collect();
+            rows.push_texels(&texels).unwrap();
+        }
+        let shading = ShadingRows::new(&rows, &ltm_codec::Limits::default()).unwrap();
+        let mut lit = 0;
+        for (p, receiver) in points.iter().enumerate() {
+            if !propagator
+                .prepare(&source, &placement, receiver, Targets::All)
+                .unwrap()
+            {
+                continue;
+            }
+            let got = shading.shade(&propagator, p);
+            for c in 0..3 {
+                let (index, value) = rows.row(p, if channels == 1 { 0 } else { c });
+                let row: Vec<(u32, f32)> = index
+                    .iter()
+                    .map(|&k| u32::from(k))
+                    .zip(value.iter().copied())
+                    .collect();
+                let want = propagator.shade(&row)[c];
+                let scale: f64 = row
+                    .iter()
+                    .map(|&(k, t)| (propagator.coefficient(k as usize)[c] * f64::from(t)).abs())
+                    .sum();
+                assert!(
+                    (got[c] - want).abs() <= 1e-5 * scale,
+                    "{channels} channels, row {p}, channel {c}: {} against {want}",
+                    got[c]
+                );
+            }
+            lit += 1;
+        }
+        assert!(lit > 6, "only {lit} rows lit");
+        let tight = ltm_codec::Limits::with_max_alloc(64);
+        assert!(ShadingRows::new(&rows, &tight).is_err());
+    }
 }
 
 #[test]

@@ -908,7 +908,7 @@ fn shading_rows_merge_rgb_channels_and_shade_as_the_channel_rows() {
                 continue;
             }
             let got = shading.shade(&propagator, p);
-            for c in 0..3 {
+            for (c, &got) in got.iter().enumerate() {
                 let (index, value) = rows.row(p, if channels == 1 { 0 } else { c });
                 let row: Vec<(u32, f32)> = index
                     .iter()
@@ -921,9 +921,8 @@ fn shading_rows_merge_rgb_channels_and_shade_as_the_channel_rows() {
                     .map(|&(k, t)| (propagator.coefficient(k as usize)[c] * f64::from(t)).abs())
                     .sum();
                 assert!(
-                    (got[c] - want).abs() <= 1e-5 * scale,
-                    "{channels} channels, row {p}, channel {c}: {} against {want}",
-                    got[c]
+                    (got - want).abs() <= 1e-5 * scale,
+                    "{channels} channels, row {p}, channel {c}: {got} against {want}"
                 );
             }
             lit += 1;

@@ -13,15 +13,14 @@
 //! intensity 4, at 1 % source and 20 % target terms; FRAMES (default 30)
 //! frames each, median.
 
-use ltm::relight::nearfield::{
-    acc, AccTable, AreaLight, LightTexture, NearField, NearFieldMethod, NearFieldTerms, Placement,
-    Targets,
-};
+#[path = "common/softbox.rs"]
+mod softbox;
+
+use ltm::relight::nearfield::{acc, AccTable, NearField, NearFieldMethod};
+use softbox::{relative_l2, softbox_light, time, WAVELET_1_20};
 use std::error::Error;
 use std::sync::Arc;
 use std::time::Instant;
-
-type Outcome<T> = Result<T, Box<dyn Error>>;
 
 /// The table resolutions reported: cells a face width.
 const RESOLUTIONS: [usize; 4] = [16, 32, 64, 128];
@@ -83,73 +82,12 @@ fn sizes() -> Result<(), Box<dyn Error>> {
     Ok(())
 }
 
-fn softbox() -> Result<LightTexture, Box<dyn Error>> {
-    let (w, h) = (64usize, 48usize);
-    let mut texels = Vec::with_capacity(w * h);
-    for y in 0..h {
-        for x in 0..w {
-            let (u, v) = ((x as f32 + 0.5) / w as f32, (y as f32 + 0.5) / h as f32);
-            let left = u < 0.5;
-            let mut t = [
-                if left { 1.6 } else { 0.5 },
-                0.9,
-                if left { 0.4 } else { 1.5 },
-            ];
-            if ((v * 6.0).floor() as i32) % 2 == 1 && u > 0.2 && u < 0.8 {
-                t.iter_mut().for_each(|c| *c *= 0.15);
-            }
-            if (u - 0.8).powi(2) + (v - 0.2).powi(2) < 0.01 {
-                t = [6.0, 6.0, 5.0];
-            }
-            texels.push(t);
-        }
-    }
-    Ok(LightTexture::new(w, h, texels)?)
-}
-
-/// Median frame time in ms of `frames` renders, and the last image.
-fn time(
-    near: &NearField,
-    light: &AreaLight,
-    method: NearFieldMethod,
-    frames: usize,
-) -> Outcome<(f64, Vec<[f32; 3]>)> {
-    let mut times = Vec::with_capacity(frames);
-    let mut image = Vec::new();
-    for _ in 0..frames {
-        let start = Instant::now();
-        image = near.render(std::slice::from_ref(light), method)?;
-        times.push(start.elapsed().as_secs_f64() * 1e3);
-    }
-    times.sort_by(f64::total_cmp);
-    Ok((times[frames / 2], image))
-}
-
-fn relative_l2(a: &[[f32; 3]], b: &[[f32; 3]]) -> f64 {
-    let (mut e, mut n) = (0.0f64, 0.0f64);
-    for (x, y) in a.iter().flatten().zip(b.iter().flatten()) {
-        e += (f64::from(*x) - f64::from(*y)).powi(2);
-        n += f64::from(*y).powi(2);
-    }
-    (e / n.max(f64::MIN_POSITIVE)).sqrt()
-}
-
 fn frames(path: &str, frames: usize) -> Result<(), Box<dyn Error>> {
     let limits = ltm::Limits::default();
     let mut file = ltm::LtmFile::open(std::path::Path::new(path))?;
     let mut near = NearField::take(&mut file, &limits)?;
-    let light = AreaLight {
-        texture: softbox()?,
-        placement: Placement {
-            center: [0.15, 0.25],
-            size: [0.8, 0.6],
-            intensity: 4.0,
-        },
-    };
-    let wavelet = NearFieldMethod::Wavelet(NearFieldTerms {
-        source: 0.01,
-        targets: Targets::Share(0.2),
-    });
+    let light = softbox_light()?;
+    let wavelet = WAVELET_1_20;
     let (exact_ms, _) = time(&near, &light, NearFieldMethod::Exact, frames)?;
     let (closed_ms, closed) = time(&near, &light, wavelet, frames)?;
     println!("{path}: exact method {exact_ms:.1} ms; wavelet 1 % / 20 %, closed-form couplings {closed_ms:.1} ms");

@@ -778,6 +778,7 @@ fn library_rows_agree(
     eprintln!(
         "plane at {height}: stored against library rows, worst relative difference {worst:.2e}"
     );
-    // The stored path sums in f32 (`shade_indexed`), the library's in f64.
+    // The stored path sums in f32 (`shade_bands`, `shade_rgb_bands`), the
+    // library's in f64.
     assert!(worst < 2e-5, "{worst}");
 }

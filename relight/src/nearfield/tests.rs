@@ -866,8 +866,9 @@ fn random_rows(rng: &mut Rng, order: u32, channels: usize, count: usize) -> ltm_
 /// The wavelet method's row layout: an RGB file's three channel rows, with
 /// different coefficients (a constant channel, a sparse one, one zero on
 /// some rows), merge into one list that shades each channel under that
-/// channel of the light as the channel rows do one by one; a grey file's
-/// rows shade under all three. A budget too small for the layout refuses it.
+/// channel of the light as the channel rows do one by one, and rows whose
+/// channels are the same list are held once; a grey file's rows shade
+/// under all three. A budget too small for the layout refuses it.
 #[test]
 fn shading_rows_merge_rgb_channels_and_shade_as_the_channel_rows() {
     let mut rng = Rng::new(5);
@@ -890,6 +891,8 @@ fn shading_rows_merge_rgb_channels_and_shade_as_the_channel_rows() {
         for p in 0..points.len() {
             let texels: Vec<f32> = (0..order * order * channels)
                 .map(|i| match (i % channels, p % 3) {
+                    // A grey surface: the same list in every channel.
+                    _ if p % 4 == 3 => ((i / channels * 7919) % 13) as f32 * 1e-2 - 0.05,
                     (0, _) => 1e-3,
                     (1, _) if (i / channels) % 5 == 0 => rng.uniform() as f32,
                     (2, q) if q > 0 => (rng.uniform() as f32 - 0.5) * 1e3,

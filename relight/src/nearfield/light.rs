@@ -400,11 +400,15 @@ fn axis_steps(
         weights.push((iy, [w[0] as f32, w[1] as f32, w[2] as f32, 0.0]));
     }
     // A term's jumps up to a break add up exactly (multiples of 2^{l/2}),
-    // to 0 once all are passed.
+    // to 0 before its first and from its last on: only the breaks between
+    // are visited.
     let mut before = vec![[0.0f64; 3]; breaks.len() * ys.len()];
     for &(ix, iy, f) in terms {
         let term_steps = steps(xs[ix as usize] as usize);
-        for (p, &m) in grid_points.iter().enumerate() {
+        let (first, last) = (term_steps[0].0, term_steps[term_steps.len() - 1].0);
+        let from = grid_points.partition_point(|&m| m < first);
+        let to = grid_points.partition_point(|&m| m < last);
+        for (p, &m) in grid_points.iter().enumerate().take(to).skip(from) {
             let jumps: f64 = term_steps.iter().filter(|s| s.0 <= m).map(|s| s.1).sum();
             let sum = &mut before[p * ys.len() + iy as usize];
             (0..3).for_each(|c| sum[c] += f[c] * jumps);

@@ -91,7 +91,7 @@ pub struct Propagator {
     /// `i_y` major: `axis[1].len() × order`.
     partial: Vec<Rgb4>,
     /// Per axis, whether any coupling reached target `k` (step 1's `k_x`,
-    /// the columns' `k_y`): the other targets are zero.
+    /// the axis-y lists' `k_y`): the other targets are zero.
     touched: [Vec<bool>; 2],
     /// Per axis, the targets that can be selected: all, or under
     /// [`Targets::Share`] those whose prediction times the other axis's

@@ -54,6 +54,9 @@ fn browser() -> Option<Browser> {
         // The test runs as root in CI containers, where the sandbox cannot start.
         .sandbox(false)
         .window_size(Some((1300, 900)))
+        // WebGL on a machine without a GPU runs on SwiftShader, which
+        // Chromium no longer falls back to unasked (since about version 137).
+        .args(vec![std::ffi::OsStr::new("--enable-unsafe-swiftshader")])
         .idle_browser_timeout(Duration::from_secs(300))
         .build()
         .expect("launch options");
@@ -1080,6 +1083,7 @@ fn measure_latency() {
     let samples: Vec<Value> = serde_json::from_str(samples.as_str().unwrap()).unwrap();
     let mut r = latency_stats(&samples, panels as usize, wall);
     r["events"] = events;
+    r["samples"] = json!(samples);
     r["preload_wait_s"] = json!(preload_wait);
     r["files"] = json!(files);
     r["query"] = eval(&tab, "query(0)");
@@ -1102,10 +1106,10 @@ fn latency_stats(samples: &[Value], files: usize, wall: f64) -> Value {
                 continue;
             }
             let stat = |key: &str| {
-                let mut v: Vec<f64> = s
-                    .iter()
-                    .map(|x| x[key].as_f64().unwrap_or(f64::NAN))
-                    .collect();
+                let mut v: Vec<f64> = s.iter().filter_map(|x| x[key].as_f64()).collect();
+                if v.is_empty() {
+                    return Value::Null;
+                }
                 v.sort_by(f64::total_cmp);
                 let q = |p: f64| v[((v.len() - 1) as f64 * p).round() as usize];
                 json!({ "median": q(0.5), "p95": q(0.95) })
@@ -1122,6 +1126,11 @@ fn latency_stats(samples: &[Value], files: usize, wall: f64) -> Value {
                     "fetch_and_decode_ms": stat("fetch_ms"),
                     "draw_ms": stat("draw_ms"),
                     "display_wait_ms": stat("display_wait_ms"),
+                    // The fetch's parts (the browser's resource timing).
+                    "request_queue_ms": stat("queue_ms"),
+                    "first_byte_wait_ms": stat("wait_ms"),
+                    "body_ms": stat("body_ms"),
+                    "after_body_ms": stat("after_body_ms"),
                 }),
             );
         }

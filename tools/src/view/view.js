@@ -328,8 +328,21 @@ function refineLater(p) {
   }, REFINE_MS);
 }
 
-// Once a frame is drawn, the panel's next request goes out at once: its
-// round trip overlaps the wait for the display frame.
+// Where a frame's fetch spent its time, from the browser's resource timing
+// (for the latency benchmark): waiting to be sent, waiting for the answer's
+// first byte (the server's work), receiving the body, and from the last
+// byte to the page having it. The browser keeps a few hundred entries;
+// they are cleared well before that.
+function fetchTiming(url, sent, received) {
+  const e = performance.getEntriesByName(new URL(url, location.href).href).pop();
+  if (performance.getEntriesByType("resource").length > 100) performance.clearResourceTimings();
+  if (!e) return {};
+  return { queue_ms: e.requestStart - sent, wait_ms: e.responseStart - e.requestStart,
+    body_ms: e.responseEnd - e.responseStart, after_body_ms: received - e.responseEnd };
+}
+
+// Once a frame arrives, the panel's next request goes out at once: its
+// round trip overlaps the wait for the display frame and the drawing.
 async function send(p) {
   const job = p.pending;
   p.pending = null;
@@ -341,14 +354,24 @@ async function send(p) {
     p.inFlight = false;
     if (p.pending && !offline) send(p);
     else if (p.index === 0) requestExact();
+    if (preview.dirty) schedulePreview();
   };
   const sent = performance.now();
   try {
     // Each panel is its own stream for latest-request-wins.
     const light = job.exact ? "exact" : "draft";
-    const r = await fetch(`/api/frame?${job.query}&light=${light}&client=${client}${p.index}&seq=${++seq}`);
+    const url = `/api/frame?${job.query}&light=${light}&client=${client}${p.index}&seq=${++seq}`;
+    const r = await fetch(url);
     if (r.status === 200) {
-      Object.assign(p, decodeFrame(await r.arrayBuffer()));
+      const frame = decodeFrame(await r.arrayBuffer());
+      const received = performance.now(), mine = (p.arrived = (p.arrived || 0) + 1);
+      // The next request goes out at once; this frame is drawn in the next
+      // display frame, together with whatever else arrived by then.
+      release();
+      await nextPaint();
+      if (mine !== p.arrived) return; // a newer frame of this panel came first
+      const painted = performance.now();
+      Object.assign(p, frame);
       p.shown = job.query;
       const draft = (p.draft = r.headers.get("X-Light") === "draft");
       const evBefore = ev();
@@ -364,22 +387,19 @@ async function send(p) {
         step2Ms: r.headers.has("X-Step2-Ms") ? Number(r.headers.get("X-Step2-Ms")) : null,
         glossySetupMs: r.headers.has("X-Glossy-Setup-Ms") ? Number(r.headers.get("X-Glossy-Setup-Ms")) : null,
       });
-      const received = performance.now();
       // A new exposure redraws every panel; otherwise only this one changed.
       if (ev() !== evBefore || !p.drawnOnce) drawAll(); else draw(p);
       p.drawnOnce = true;
-      const drawn = performance.now();
-      if (wantsError(p)) askError(p);
-      release();
-      await new Promise((res) => requestAnimationFrame(res));
+      // Drawn inside the display frame's callback: on screen with that frame.
       const shown = performance.now();
+      if (wantsError(p)) askError(p);
       readout.latencyMs = shown - job.input;
       readout.roundTripMs = shown - sent;
       stats.frames++;
       stats.latencies.push({ file: p.index, query: job.query, light: draft ? "draft" : "exact",
         latency_ms: shown - job.input, round_trip_ms: shown - sent, server_ms: readout.serverMs,
-        resample_ms: readout.resampleMs, fetch_ms: received - sent, draw_ms: drawn - received,
-        display_wait_ms: shown - drawn });
+        resample_ms: readout.resampleMs, fetch_ms: received - sent, draw_ms: shown - painted,
+        display_wait_ms: painted - received, ...fetchTiming(url, sent, received) });
       p.canvas.dataset.shown = draft ? `${job.query}&light=draft` : job.query;
       if (draft) refineLater(p);
       message("");
@@ -450,7 +470,7 @@ function askError(p) {
 // (src/view/preview.rs). Turning the map costs no request: a drag's inputs
 // would otherwise each fetch and decode a preview beside the frames.
 const preview = {
-  inFlight: false, map: null, halves: null, decoded: null, width: 0, height: 0, ev: 0, texels: null, texelsEv: null, tiltKey: null, u: null, row: null, frame: 0,
+  inFlight: false, map: null, halves: null, decoded: null, width: 0, height: 0, ev: 0, texels: null, texelsEv: null, dirty: false, tiltKey: null, u: null, row: null,
   get floats() { return this.halves ? (this.decoded ??= halvesToFloats(this.halves)) : null; },
 };
 
@@ -474,8 +494,27 @@ async function requestPreview() {
   else schedulePreview();
 }
 
+// The preview is drawn at most once a display frame. While a panel's frame
+// is on its way, the preview waits and is drawn with that frame: one change
+// to the page instead of two, and no display frame of its own. During a
+// two-file drag this takes about 12 ms off the input-to-screen latency
+// (docs/results/viewer.md).
 function schedulePreview() {
-  if (!preview.frame) preview.frame = requestAnimationFrame(() => { preview.frame = 0; drawPreview(); });
+  preview.dirty = true;
+  if (!panels.some((p) => p.inFlight)) nextPaint();
+}
+
+// The next display frame's callback, shared: the panels' frames that have
+// arrived since the last one and the preview, if it changed, are drawn in
+// it, so that the page changes once a display frame.
+let painting = null;
+function nextPaint() {
+  painting ??= new Promise((done) => requestAnimationFrame(() => {
+    painting = null;
+    if (preview.dirty) drawPreview();
+    done();
+  }));
+  return painting;
 }
 
 // `sin` and `cos` of an angle in degrees as ltm_relight's sin_cos_degrees
@@ -543,6 +582,7 @@ function previewTables(pitch, roll) {
 // The rotated map (as the frames are lit), with a cross where the map's
 // centre (u = v = 0.5, straight ahead at no rotation) now lies.
 function drawPreview() {
+  preview.dirty = false;
   if (!preview.halves) return;
   const c = $("map-preview"), w = preview.width, h = preview.height;
   if (c.width !== w || c.height !== h) { c.width = w; c.height = h; }

@@ -251,6 +251,11 @@ pub struct SourceCoefficients {
     pub(super) before: Vec<[f32; 4]>,
     /// The squared norm of all coefficients and of the kept ones.
     energy: (f64, f64),
+    /// A power of two: every coefficient above (and so the sums of steps 1
+    /// and 2, in `f32`) is the light's divided by it, its largest about
+    /// 2⁶⁴, so that no light within `f64` overflows or underflows `f32`.
+    /// The propagator's results are multiplied back, exactly.
+    pub(super) scale: f64,
 }
 
 impl SourceCoefficients {
@@ -274,12 +279,18 @@ impl SourceCoefficients {
         if keep == 0 {
             return Err(RelightError::range("source terms", keep, ">= 1"));
         }
-        let coefficients = haar_2d(&texture.box_average(order), order, placement.intensity)?;
+        let averages = texture.box_average(order);
+        let intensity = placement.intensity;
+        let scale = power_of_two_scale(averages.iter().flatten().map(|a| a * intensity));
+        // Transformed in f32 (as the rows were) on the light divided by
+        // `scale`: exactly the unscaled transform's values over `scale`
+        // wherever those are within f32.
+        let coefficients = haar_2d(&averages, order, intensity / scale)?;
         if coefficients.iter().flatten().any(|v| !v.is_finite()) {
             return Err(RelightError::range(
                 "light intensity",
-                placement.intensity,
-                "small enough that intensity × radiance stays within f32",
+                intensity,
+                "small enough that intensity × radiance stays within f64",
             ));
         }
         let mut ranked: Vec<(usize, f64)> = coefficients
@@ -327,6 +338,7 @@ impl SourceCoefficients {
             weights,
             before,
             energy: (total, kept),
+            scale,
         })
     }
 
@@ -343,6 +355,18 @@ impl SourceCoefficients {
             1.0
         }
     }
+}
+
+/// The power of two `2^e` that brings the largest of `values`' magnitudes
+/// into `[2⁶⁴, 2⁶⁵)` (1 for none, all zero or one not finite; `e` within
+/// ±1000, so that dividing by it is exact for every normal value).
+fn power_of_two_scale(values: impl Iterator<Item = f64>) -> f64 {
+    let most = values.fold(0.0f64, |m, v| m.max(v.abs()));
+    if !(most > 0.0 && most.is_finite()) {
+        return 1.0;
+    }
+    let e = (most.log2().floor() as i32 - 64).clamp(-1000, 1000);
+    2f64.powi(e)
 }
 
 /// Breaks, weights and values before the face of [`SourceCoefficients`]:

@@ -118,6 +118,9 @@ pub struct Propagator {
     products: Vec<f64>,
     list: Vec<(u32, f64)>,
     starts: Vec<usize>,
+    /// The last source's [`SourceCoefficients::scale`]: `incident` holds the
+    /// light's coefficients divided by it.
+    scale: f64,
 }
 
 impl Propagator {
@@ -141,6 +144,7 @@ impl Propagator {
             products: Vec::new(),
             list: Vec::new(),
             starts: Vec::new(),
+            scale: 1.0,
         })
     }
 
@@ -189,6 +193,7 @@ impl Propagator {
             return Ok(false);
         }
         let [(sx, ox), (sy, oy)] = affine(&self.face, placement, receiver);
+        self.scale = source.scale;
         self.select(targets, [(sx, ox), (sy, oy)]);
         self.step_one(source, (sx, ox));
         self.axis_couplings(1, &source.axis[1], (sy, oy));
@@ -435,7 +440,7 @@ impl Propagator {
     /// zero when not selected or not lit.
     pub fn coefficient(&self, k: usize) -> [f64; 3] {
         let l = self.incident.get(k).copied().unwrap_or([0.0; 4]);
-        std::array::from_fn(|c| f64::from(l[c]))
+        std::array::from_fn(|c| f64::from(l[c]) * self.scale)
     }
 
     /// Every coefficient of the incident lighting, `order²` (dense; for tests
@@ -455,7 +460,7 @@ impl Propagator {
     /// values (as [`ltm_codec::PlaneRows::row`] gives them).
     pub fn shade_indexed(&self, indices: &[u16], values: &[f32]) -> [f64; 3] {
         let b = four_sums(indices, values, &self.incident);
-        std::array::from_fn(|c| f64::from(b[c]))
+        std::array::from_fn(|c| f64::from(b[c]) * self.scale)
     }
 
     /// [`Propagator::shade_indexed`] of a row whose band `k_y` (the
@@ -503,7 +508,7 @@ impl Propagator {
             }
         }
         std::array::from_fn(|c| {
-            f64::from((lanes[0][c] + lanes[1][c]) + (lanes[2][c] + lanes[3][c]))
+            f64::from((lanes[0][c] + lanes[1][c]) + (lanes[2][c] + lanes[3][c])) * self.scale
         })
     }
 

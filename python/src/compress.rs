@@ -142,10 +142,7 @@ impl Settings {
             ("codings", s.codings as f64),
             ("target_met", s.target_met as u8 as f64),
             ("near_field_bytes", s.near_field_bytes as f64),
-            (
-                "near_field_error",
-                s.near_field.map_or(0.0, |q| q.error),
-            ),
+            ("near_field_error", s.near_field.map_or(0.0, |q| q.error)),
         ])
     }
 }

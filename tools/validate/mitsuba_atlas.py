@@ -30,7 +30,7 @@ halfpipe (an open surface), bunny, fandisk (assets/meshes), scene (figure,
 knot, a sphere and a box on a 3x3 floor, mesh = "all").
 
 `--fixtures DIR` also writes, for camera 0 of each case, what
-tools/tests/atlas_mitsuba.rs reads (see tools/tests/fixtures/atlas_mitsuba/
+tools/tests/slow/atlas_mitsuba.rs reads (see tools/tests/fixtures/atlas_mitsuba/
 README.md for the command that made them).
 
 Usage:
@@ -353,7 +353,7 @@ def reference(mi, args, objects, ground, receiver, receivers, cam, env, stem):
 
 def write_fixture(args, mi, dest, case, objects, ground, receiver, cam, ref, ref2, cov,
                   env_path, light, n, noise):
-    """What tools/tests/atlas_mitsuba.rs reads, for camera `cam`."""
+    """What tools/tests/slow/atlas_mitsuba.rs reads, for camera `cam`."""
     os.makedirs(dest, exist_ok=True)
     local = []
     for o in objects:

@@ -335,7 +335,7 @@ def main():
     ap.add_argument("--variant", default="scalar_rgb")
     ap.add_argument("--out", default=None)
     ap.add_argument("--fixture", default=None, metavar="DIR",
-                    help="write tools/tests/glossy_mitsuba.rs's fixture into DIR and stop")
+                    help="write tools/tests/slow/glossy_mitsuba.rs's fixture into DIR and stop")
     args = ap.parse_args()
 
     import mitsuba as mi
@@ -442,7 +442,7 @@ FIXTURE_CASES = [("conductor", 0.2), ("conductor", 0.5), ("coat", 0.2), ("lamber
 
 
 def write_fixture(args, mi):
-    """What tools/tests/glossy_mitsuba.rs reads: the sphere (a level-3
+    """What tools/tests/slow/glossy_mitsuba.rs reads: the sphere (a level-3
     icosphere OBJ and its scene), the sun map at n = 32 (`env.exr`),
     Mitsuba's render of the analytic sphere for each of FIXTURE_CASES from
     camera 0, the interior mask, and meta.json with Mitsuba's noise and a

@@ -1,6 +1,6 @@
 #!/usr/bin/env bash
 # Starts a single-node Slurm on this machine (Debian or Ubuntu), for
-# tools/tests/slurm.rs and for trying tools/cluster/slurm/pipeline.sh.
+# tools/tests/slow/slurm.rs and for trying tools/cluster/slurm/pipeline.sh.
 set -euo pipefail
 
 usage() {

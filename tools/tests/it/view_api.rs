@@ -3,7 +3,7 @@
 //! --reference`'s, bad parameters get 400, malformed requests never bring
 //! the server down, and concurrent frames are bounded.
 
-mod view_support;
+use crate::view_support;
 
 use proptest::prelude::*;
 use view_support::*;

@@ -7,7 +7,7 @@
 //!
 //! The times here are bounds for liveness, not performance figures.
 
-mod view_support;
+use crate::view_support;
 
 use std::io::{BufRead, BufReader, ErrorKind, Read, Write};
 use std::net::TcpStream;

@@ -1,6 +1,6 @@
 //! Baking into the raw store: the default scene, resuming, output hygiene.
 
-mod common;
+use crate::common;
 
 use common::*;
 use ltm_bake::{bake, raw_header, BakeOptions, BlockBaker, Overrides, Scene, SceneDesc};

@@ -2,7 +2,7 @@
 //! cannot hold: a figure with thin limbs and fingers, a torus knot (genus
 //! 1), an open half-pipe, and all of them on a floor as one atlas.
 
-mod common;
+use crate::common;
 
 use common::{build, err, scene_toml, CAMERA, LIGHTING};
 use glam::DVec3;

@@ -1,7 +1,7 @@
 //! Texture-space bakes: rows are texels of a texture over one mesh, laid
 //! out by the mesh's own UVs or by a spherical parameterization.
 
-mod common;
+use crate::common;
 
 use common::{build, err, scene_toml, CAMERA, LIGHTING};
 use ltm_bake::{bake, row_surface, BakeOptions, Scene};

@@ -1,6 +1,6 @@
 //! The transport rows against closed-form values.
 
-mod common;
+use crate::common;
 
 use common::*;
 use glam::DVec3;

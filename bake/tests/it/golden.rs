@@ -7,7 +7,7 @@
 //! (genus 1) and a comb of thin slivers on a ground quad, image rows and
 //! atlas texels.
 
-mod common;
+use crate::common;
 
 use common::*;
 use ltm_bake::{Overrides, Scene, SceneDesc};

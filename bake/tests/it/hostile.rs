@@ -2,7 +2,7 @@
 //! partial files, rays leaking through shared edges, the camera-inside check
 //! on open and closed geometry, degenerate geometry, and camera messages.
 
-mod common;
+use crate::common;
 
 use common::*;
 use glam::{DMat3, DVec3};

@@ -1258,7 +1258,7 @@ fn chunk_entry(bytes: &[u8], tag: &[u8; 4]) -> (usize, usize, usize) {
 /// one finite norm ≥ 0 per column, or that disagrees with its feature flag
 /// or the file's version, is refused with a message naming it, even with
 /// every checksum repaired; the relighter refuses a column whose stored
-/// norm differs from its decoded one (see relight/tests/lazy.rs).
+/// norm differs from its decoded one (see relight/tests/it/lazy.rs).
 #[test]
 fn bad_column_norms_are_refused() {
     let good = std::fs::read(fixture("golden-v5.ltm")).unwrap();

@@ -1,6 +1,6 @@
 //! Bad scene and mesh input: each case is a clear error, never a panic.
 
-mod common;
+use crate::common;
 
 use common::*;
 use ltm_bake::{BakeError, Overrides, SceneDesc};

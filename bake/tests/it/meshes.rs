@@ -1,6 +1,6 @@
 //! Mesh loading: the shipped assets, PLY variants, normals.
 
-mod common;
+use crate::common;
 
 use common::*;
 use glam::DVec3;

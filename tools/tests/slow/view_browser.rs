@@ -10,7 +10,7 @@
 //! fails when `CI` is set (CI installs it: `.ci/run`) and is skipped with a
 //! message otherwise.
 
-mod view_support;
+use crate::view_support;
 
 use headless_chrome::protocol::cdp::{Input, Page};
 use headless_chrome::{Browser, LaunchOptions, Tab};

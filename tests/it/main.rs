@@ -1,0 +1,4 @@
+//! The facade's end-to-end tests, one binary (each file a module).
+
+mod nearfield;
+mod pipeline;

@@ -189,6 +189,8 @@ pub struct Scene {
     scale: f64,
     /// The padded bounding box of the geometry, world units.
     bounds: [DVec3; 2],
+    /// The geometry's bounding box, world units (unpadded).
+    geometry_bounds: [DVec3; 2],
     /// Shadow-ray origin offset along the geometric normal, world units.
     pub(crate) epsilon: f64,
     stats: SceneStats,
@@ -300,6 +302,7 @@ impl Scene {
             bvh,
             scale,
             bounds: [lo - 2.0 * pad, hi + 2.0 * pad],
+            geometry_bounds: [lo, hi],
             epsilon: 1e-5 * extent.max(1e-3),
             stats,
             input_id,
@@ -471,6 +474,12 @@ impl Scene {
             back,
             material: s.material as usize,
         }
+    }
+
+    /// The bounding box of the scene's triangles, world units: the lowest
+    /// and the highest corner (what a user needs to place a camera).
+    pub fn bounding_box(&self) -> [[f64; 3]; 2] {
+        self.geometry_bounds.map(|c| c.to_array())
     }
 
     /// The triangles traced, in world units (three vertices each): the

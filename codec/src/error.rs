@@ -227,6 +227,33 @@ impl Error {
         }
     }
 
+    /// A file that is not an `.ltm` file: a scene file (TOML, by its name)
+    /// gets the commands that make one from it, anything else its first
+    /// bytes.
+    pub(crate) fn not_ltm(path: &std::path::Path, head: &[u8]) -> Error {
+        let ext = path.extension().map(|e| e.to_string_lossy().to_lowercase());
+        if ext.as_deref() == Some("toml") {
+            let raw = path.with_extension("raw");
+            return Error::WrongKind {
+                path: path.into(),
+                is: "a scene file",
+                wanted: "an .ltm file",
+                hint: format!(
+                    "bake and compress it first: `ltm bake {} -o {}`, then `ltm compress {} -o {}`",
+                    path.display(),
+                    raw.display(),
+                    raw.display(),
+                    path.with_extension("ltm").display()
+                ),
+            };
+        }
+        Error::BadMagic {
+            path: path.into(),
+            expected: "an .ltm file",
+            found: head.to_vec(),
+        }
+    }
+
     /// An `.ltm` file given where a raw store is wanted.
     pub(crate) fn ltm_not_raw(path: &std::path::Path) -> Error {
         Error::WrongKind {

@@ -1,4 +1,3 @@
 //! The facade's end-to-end tests, one binary (each file a module).
 
-mod nearfield;
 mod pipeline;

@@ -136,6 +136,21 @@ fn describe(scene: &Scene, desc: &SceneDesc) {
             );
         }
     }
+    let [lo, hi] = scene.bounding_box();
+    let corner = |c: [f64; 3]| {
+        format!(
+            "{}, {}, {}",
+            fmt_coord(c[0]),
+            fmt_coord(c[1]),
+            fmt_coord(c[2])
+        )
+    };
+    eprintln!(
+        "scene bounding box: ({}) to ({}), centre ({})",
+        corner(lo),
+        corner(hi),
+        corner([0, 1, 2].map(|k| 0.5 * (lo[k] + hi[k])))
+    );
     if let Some(map) = scene.texel_map() {
         describe_texture(map);
     }
@@ -179,6 +194,24 @@ fn describe(scene: &Scene, desc: &SceneDesc) {
         3 * (ltm_bake::DEFAULT_BLOCK_BYTES >> 20),
         rays
     );
+}
+
+/// A coordinate for a message: four significant digits, plain where that
+/// reads well, in exponent notation beyond.
+fn fmt_coord(v: f64) -> String {
+    let a = v.abs();
+    if a == 0.0 {
+        return "0".into();
+    }
+    if !(1e-3..1e5).contains(&a) {
+        return format!("{v:.3e}");
+    }
+    let digits = (3 - a.log10().floor() as i32).clamp(0, 6) as usize;
+    let s = format!("{v:.digits$}");
+    match s.contains('.') {
+        true => s.trim_end_matches('0').trim_end_matches('.').to_string(),
+        false => s,
+    }
 }
 
 /// The texture's layout: texel use, stretch and, for an atlas, its charts

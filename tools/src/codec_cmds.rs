@@ -377,6 +377,8 @@ pub struct InspectArgs {
 /// What `ltm inspect` reports.
 #[derive(Serialize)]
 pub struct Inspection {
+    /// Rows are the texels of a texture atlas (else an image's pixels).
+    pub texture: bool,
     pub width: u32,
     pub height: u32,
     pub face_res: u32,
@@ -444,6 +446,7 @@ pub fn inspect(file: &LtmFile) -> Inspection {
     let raw_bytes = dims.raw_bytes();
     let elements = raw_bytes / 4;
     Inspection {
+        texture: dims.rows.is_texture(),
         width: dims.width(),
         height: dims.height(),
         face_res: dims.face_res(),
@@ -495,8 +498,12 @@ pub fn inspect_cmd(a: InspectArgs, ctx: &Ctx) -> Result<()> {
         return Ok(());
     }
     println!("{}", a.file.display());
+    let (rows, unit) = match i.texture {
+        true => ("texture", "texels"),
+        false => ("image", "pixels"),
+    };
     println!(
-        "  image          {} x {} pixels, {} channel(s){}",
+        "  {rows:<14} {} x {} {unit}, {} channel(s){}",
         i.width,
         i.height,
         i.channels,
@@ -510,8 +517,12 @@ pub fn inspect_cmd(a: InspectArgs, ctx: &Ctx) -> Result<()> {
     );
     if i.pca_rank > 0 {
         println!(
-            "  mode           pca, rank {} (mean row + {} eigen-transports, {} coefficients per pixel), {} bits",
-            i.pca_rank, i.pca_rank, i.pca_rank, i.bits
+            "  mode           pca, rank {} (mean row + {} eigen-transports, {} coefficients per {}), {} bits",
+            i.pca_rank,
+            i.pca_rank,
+            i.pca_rank,
+            unit.trim_end_matches('s'),
+            i.bits
         );
     } else {
         println!(

@@ -57,7 +57,7 @@ impl From<ViewFilterArg> for ViewFilter {
 #[derive(Args)]
 pub struct GlossyArgs {
     /// Add a glossy material, shaded per view by wavelet rotation (Wang et
-    /// al. 2006), so highlights move with the camera across --views. SPEC:
+    /// al. 2006), so highlights move with the camera. SPEC:
     /// `lambert[:ALBEDO]` | `ggx:ALPHA[,f0=F0]` | `phong:EXPONENT[,specular=S]`
     /// | `plastic:ALPHA[,albedo=A][,ior=IOR]`; colours are grey or r/g/b, e.g.
     /// ggx:0.2,f0=0.95/0.64/0.54 (gold-like). Defaults: albedo 0.8, F0 0.9,

@@ -10,7 +10,7 @@ Two lights are checked:
   * `outside`: outside the scene's bounding sphere, where Eigentransport's
     approximation (each row sees the light with the visibility of its
     direction at infinity) is exact; the committed test
-    `tools/tests/it/point.rs` compares ltm with this image;
+    `tools/tests/slow/point.rs` compares ltm with this image;
   * `between`: between the bunny and the wall, where the approximation
     breaks (rows on the wall are shadowed by the bunny *behind* the light).
 
@@ -59,7 +59,7 @@ import mitsuba_compare  # noqa: E402  (the shared scene builder)
 SCENE = os.path.join(HERE, "point", "scene.toml")
 FIXTURES = os.path.join(ROOT, "tools", "tests", "fixtures")
 # The lights: position (world units), intensity (W/sr). Keep in step with
-# tools/tests/it/point.rs.
+# tools/tests/slow/point.rs.
 LIGHTS = {
     "outside": ([3.0, 5.0, 4.0], 60.0),
     "between": ([0.5, 0.6, -0.7], 0.8),

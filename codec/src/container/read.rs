@@ -135,11 +135,7 @@ impl LtmFile {
             return Err(Error::raw_not_ltm(path));
         }
         if *head != MAGIC {
-            return Err(Error::BadMagic {
-                path: path.into(),
-                expected: "an .ltm file",
-                found: head.to_vec(),
-            });
+            return Err(Error::not_ltm(path, head));
         }
         let (mut bytes, charge) = limits.vec("the .ltm file's bytes", len, 0u8)?;
         read_at(&file, path, &mut bytes, 0)?;

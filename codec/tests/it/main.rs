@@ -7,6 +7,5 @@ mod mesh;
 mod nearfield;
 mod npy;
 mod pca;
-mod shard;
 mod surface;
 mod wavelet;

@@ -520,12 +520,17 @@ fn row_skipping_inverse_steps_equal_the_dense_ones() {
                             let plane = PlaneMut::image(&mut scratch, w, h, lanes).unwrap();
                             let rows = RowMode::sparse_into(&mut into_flags, &mut out);
                             wavelet::inverse_step(filter, plane, &mut [], rows).unwrap();
+                            // The messages are formatted only on failure (a
+                            // string per sample made this test take 30 s).
                             for (i, (a, b)) in dense.iter().zip(&out).enumerate() {
-                                let what = format!("into: {filter} {w}x{h} {lanes} lanes, pattern {pattern}, sample {i}");
-                                assert!(a == b, "{what}: dense {a} vs into {b}");
+                                let what = || {
+                                    format!("into: {filter} {w}x{h} {lanes} lanes, pattern {pattern}, sample {i}")
+                                };
+                                assert!(a == b, "{}: dense {a} vs into {b}", what());
                                 assert!(
                                     into_flags[i / (w * lanes)] || *b == 0.0,
-                                    "{what}: flagged zero"
+                                    "{}: flagged zero",
+                                    what()
                                 );
                             }
                         }
@@ -533,9 +538,15 @@ fn row_skipping_inverse_steps_equal_the_dense_ones() {
                         let rows = RowMode::sparse(&mut flags);
                         wavelet::inverse_step(filter, plane, &mut work, rows).unwrap();
                         for (i, (a, b)) in dense.iter().zip(&data).enumerate() {
-                            let what = format!("{filter} {w}x{h} {lanes} lanes, pattern {pattern}, level {level}, sample {i}");
-                            assert!(a == b, "{what}: dense {a} vs skipping {b}");
-                            assert!(flags[i / (w * lanes)] || *b == 0.0, "{what}: flagged zero");
+                            let what = || {
+                                format!("{filter} {w}x{h} {lanes} lanes, pattern {pattern}, level {level}, sample {i}")
+                            };
+                            assert!(a == b, "{}: dense {a} vs skipping {b}", what());
+                            assert!(
+                                flags[i / (w * lanes)] || *b == 0.0,
+                                "{}: flagged zero",
+                                what()
+                            );
                         }
                     }
                 }

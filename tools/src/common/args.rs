@@ -14,14 +14,14 @@ use super::Exposure;
 /// a linear EXR and an optional tone-mapped PNG.
 #[derive(Args)]
 pub struct ImageOutput {
-    /// Output image: 32-bit float linear RGB OpenEXR. `ltm render --views
-    /// K` with K > 1 numbers it: OUT-000.exr, OUT-001.exr, ...
+    /// Output image: 32-bit float linear RGB OpenEXR (numbered OUT-000.exr,
+    /// OUT-001.exr, ... where a command writes several views).
     /// A name ending in another image format's extension (.png, .jpg,
     /// .hdr, ...) is refused: the PNG comes from --png.
     #[arg(short, long, value_name = "OUT.exr", value_parser = exr_name)]
     pub output: PathBuf,
-    /// Also write a tone-mapped 8-bit sRGB PNG, named like the EXR:
-    /// `ltm render --views K` with K > 1 writes OUT-000.png, OUT-001.png, ...
+    /// Also write a tone-mapped 8-bit sRGB PNG (numbered like the EXR where
+    /// a command writes several views).
     /// A name ending in another image format's extension is refused.
     #[arg(long, value_name = "OUT.png", value_parser = png_name)]
     pub png: Option<PathBuf>,

@@ -1,13 +1,15 @@
 //! Test helpers shared by the tests of the ltm crates, used only as a
 //! dev-dependency: a raw-store writer, a runner for the `ltm` binary, a
 //! small disk that fills up, a deterministic random number generator and
-//! a reader of float32 `.npy` fixtures.
+//! a reader of float32 `.npy` fixtures and the 1D Haar basis of the
+//! near-field couplings.
 
 #![deny(unsafe_code)]
 
 mod bombs;
 mod cli;
 mod disk;
+pub mod haar;
 mod npy;
 mod raw;
 mod rng;

@@ -159,6 +159,42 @@ fn a_raw_store_where_an_ltm_file_is_wanted_names_ltm_compress() {
     );
 }
 
+/// A scene file where an `.ltm` file is wanted: the message names the
+/// commands that make one from it, in every command that reads `.ltm`
+/// files, and not the magic bytes.
+#[test]
+fn a_scene_file_where_an_ltm_file_is_wanted_names_bake_and_compress() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let scene = d.join("my scene.toml");
+    std::fs::write(&scene, "[scene]\nmesh = \"a.obj\"\n").unwrap();
+    let env = envmap();
+    let raw = d.join("my scene.raw");
+    let want_bake = format!("ltm bake {} -o {}", s(&scene), s(&raw));
+    let want_compress = format!("ltm compress {} -o {}", s(&raw), s(&d.join("my scene.ltm")));
+    for args in [
+        vec!["inspect", s(&scene)],
+        vec![
+            "relight",
+            s(&scene),
+            "--env",
+            s(&env),
+            "-o",
+            s(&d.join("r.exr")),
+        ],
+        vec!["export", s(&scene), "-o", s(&d.join("t.npy"))],
+    ] {
+        let stderr = fails(&args);
+        assert!(
+            stderr.contains("a scene file, not an .ltm file"),
+            "{args:?}: {stderr}"
+        );
+        assert!(stderr.contains(&want_bake), "{args:?}: {stderr}");
+        assert!(stderr.contains(&want_compress), "{args:?}: {stderr}");
+        assert!(!stderr.contains("magic"), "{args:?}: {stderr}");
+    }
+}
+
 /// `compress --mode pca --max-error`: without `--max-rank` the rank grows
 /// past the first fit's 256 up to the matrix's full rank until the target
 /// is met; with `--max-rank` given, a target it cannot reach is refused
@@ -361,4 +397,60 @@ fn relight_brdf_refuses_what_it_cannot_shade() {
     let near = ltm_relight::Image::read_exr(&nearest).unwrap();
     assert!(near.data.iter().flatten().all(|v| v.is_finite()));
     assert_ne!(near.data, lit.data, "--view-filter changed nothing");
+}
+
+/// A command's help mentions only options it has: the image outputs shared
+/// by `relight`, `reference` and `render` name `--views` only in `render`.
+#[test]
+fn help_names_views_only_where_the_command_has_them() {
+    let help = |cmd: &str| ltm_testkit::run_ok(env!("CARGO_BIN_EXE_ltm"), &[cmd, "--help"]);
+    for cmd in ["relight", "reference"] {
+        let text = help(cmd);
+        assert!(!text.contains("--views"), "ltm {cmd} --help:\n{text}");
+    }
+    assert!(help("render").contains("--views"));
+}
+
+/// `ltm bake` prints the scene's bounding box (what a user needs to place
+/// a camera): the ground quad's and the raised mesh's corners, as the scene
+/// file puts them.
+#[test]
+fn bake_prints_the_scene_bounding_box() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let obj = ltm_testkit::blob_obj(3);
+    std::fs::write(d.join("blob.obj"), &obj).unwrap();
+    let scene = d.join("scene.toml");
+    std::fs::write(&scene, ltm_testkit::scene_toml("blob.obj", 8, 6, 2)).unwrap();
+    // The 4×4 ground quad at y = 0, and the mesh raised by 0.6.
+    let (mut lo, mut hi) = ([-2.0f64, 0.0, -2.0], [2.0f64, 0.0, 2.0]);
+    for line in obj.lines().filter(|l| l.starts_with("v ")) {
+        let v: Vec<f64> = line[2..]
+            .split_whitespace()
+            .map(|x| x.parse().unwrap())
+            .collect();
+        for k in 0..3 {
+            let c = v[k] + if k == 1 { 0.6 } else { 0.0 };
+            lo[k] = lo[k].min(c);
+            hi[k] = hi[k].max(c);
+        }
+    }
+    let stderr = ok(&["bake", s(&scene), "-o", s(&d.join("t.raw"))]);
+    let line = stderr
+        .lines()
+        .find(|l| l.starts_with("scene bounding box: "))
+        .unwrap_or_else(|| panic!("no bounding box in:\n{stderr}"));
+    let numbers: Vec<f64> = line
+        .split(|c: char| !(c.is_ascii_digit() || c == '.' || c == '-' || c == 'e'))
+        .filter_map(|t| t.parse().ok())
+        .collect();
+    assert_eq!(numbers.len(), 9, "{line}");
+    let centre = [0, 1, 2].map(|k| 0.5 * (lo[k] + hi[k]));
+    let want = [lo, hi, centre].concat();
+    for (got, want) in numbers.iter().zip(&want) {
+        assert!(
+            (got - want).abs() <= 1e-3 * want.abs().max(1.0),
+            "{line}: want {want:?}"
+        );
+    }
 }

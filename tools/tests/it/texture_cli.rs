@@ -109,6 +109,20 @@ fn texture_bakes_render_and_bad_input_is_refused() {
         assert!(ltm(&["bake", scene, "-o", &raw]).0);
         assert!(ltm(&["compress", &raw, "-o", &p(&format!("{name}.ltm"))]).0);
     }
+    // `inspect` names a texture's rows texels, an image's pixels.
+    let inspect =
+        |name: &str| ltm_testkit::run_ok(env!("CARGO_BIN_EXE_ltm"), &["inspect", &p(name)]);
+    let tex_info = inspect("tex.ltm");
+    assert!(
+        tex_info.contains("texture ") && tex_info.contains(" texels,"),
+        "{tex_info}"
+    );
+    assert!(!tex_info.contains("pixel"), "{tex_info}");
+    let img_info = inspect("img.ltm");
+    assert!(
+        img_info.contains("image ") && img_info.contains(" pixels,"),
+        "{img_info}"
+    );
     let view = p("view.exr");
     let render = |file: &str, eye: &str| {
         vec![

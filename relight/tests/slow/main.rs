@@ -1,0 +1,5 @@
+//! ltm-relight's slow tier: tests that take many seconds each.
+//! `cargo test --workspace` (and CI) runs them with the fast tier;
+//! `cargo fast` leaves them out.
+
+mod acc_table;

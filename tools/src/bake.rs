@@ -226,7 +226,7 @@ fn describe_texture(map: &ltm_bake::TexelMap) {
         _ => String::new(),
     };
     eprintln!(
-        "texture {}² ({}): {} valid texels ({:.1} %), {:.4e} texels per unit area, {} zero-area triangles skipped{stretch}; parameterized in {:.2} s",
+        "texture {}² ({}): {} valid texels ({:.1} %), {:.4e} valid texels per unit area, {} zero-area triangles skipped{stretch}; parameterized in {:.2} s",
         st.size,
         map.parameterization().name(),
         st.valid_texels,
@@ -240,8 +240,12 @@ fn describe_texture(map: &ltm_bake::TexelMap) {
             "atlas: {} charts, {:.4} texels per unit length",
             a.charts, a.texels_per_unit
         );
-        for (part, density) in &a.part_density {
-            eprintln!("  {part}: {density:.4e} texels per unit area");
+        // Per part only where there are parts to compare: each part's
+        // charts' own area, where the line above counts whole texels.
+        if a.part_density.len() > 1 {
+            for (part, density) in &a.part_density {
+                eprintln!("  {part}: its charts cover {density:.4e} texels per unit area");
+            }
         }
     }
 }

@@ -1,8 +1,9 @@
 #!/usr/bin/env bash
-# The incremental test loop, measured: after a one-line change (a comment
-# appended to one source file, then taken back) in codec/src, relight/src
-# and tools/src, the wall time of a test command: its build alone
-# (`--no-run`), and the build and run together.
+# The incremental test loop, measured: after a one-line change in
+# codec/src, relight/src and tools/src (a function appended to the crate's
+# root, then taken back: new code and new metadata, so every crate above
+# it is compiled again, as after a real edit), the wall time of a test
+# command: its build alone (`--no-run`), and the build and run together.
 #
 # Usage: tools/validate/test_loop.sh [--runs] [COMMAND...]
 #   COMMAND   the test command (default: cargo test --workspace); e.g.
@@ -27,6 +28,11 @@ trap restore EXIT
 # Warm: the command's build as it stands.
 "${cmd[@]}" --no-run >/dev/null 2>&1
 
+# Appends a one-line function returning $2 to $1.
+change() {
+    echo "#[allow(dead_code, missing_docs)] #[doc(hidden)] pub fn test_loop_probe() -> u64 { $2 }" >>"$1"
+}
+
 timed() { # prints the seconds "$@" took (fails if it fails)
     local t0 t1
     t0=$(date +%s.%N)
@@ -38,11 +44,12 @@ timed() { # prints the seconds "$@" took (fails if it fails)
 
 echo "command: ${cmd[*]}   ($(nproc) cores, $(date -u +%Y-%m-%d))"
 for f in "${files[@]}"; do
-    echo "// test_loop.sh: a one-line change" >>"$f"
+    change "$f" 1
     build=$(timed "${cmd[@]}" --no-run)
     line="$(printf '%-20s build %6.1f s' "$f" "$build")"
     if [ -n "$runs" ]; then
-        echo "// test_loop.sh: a second one-line change" >>"$f"
+        restore
+        change "$f" 2
         total=$(timed "${cmd[@]}")
         line="$line   build and run $(printf '%6.1f' "$total") s"
     fi

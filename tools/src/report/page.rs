@@ -311,6 +311,10 @@ fn headline(md: &mut String, r: &Results) -> Result<()> {
             .iter()
             .map(|&m| size_at_error(&r.codings, m, e))
             .collect();
+        if sz.iter().all(Option::is_none) {
+            // No mode reached this error: a row of dashes says nothing.
+            continue;
+        }
         let cell = |v: Option<f64>| v.map_or("–".into(), mb);
         let ratio = |a: Option<f64>, b: Option<f64>| match (a, b) {
             (Some(a), Some(b)) => format!("{:.2}×", a / b),

@@ -84,6 +84,24 @@ fn report_quick_writes_every_section() {
     ] {
         assert!(index.contains(heading), "index.md lacks {heading}");
     }
+    // The headline's size table has no row without a size in it.
+    let headline = &index[index.find("## Headline").unwrap()..index.find("## 1.").unwrap()];
+    for row in headline
+        .lines()
+        .filter(|l| l.starts_with("| ") && l.contains('%'))
+    {
+        let cells: Vec<&str> = row
+            .split('|')
+            .map(str::trim)
+            .filter(|c| !c.is_empty())
+            .collect();
+        if cells.len() == 8 {
+            assert!(
+                cells[1..5].iter().any(|c| *c != "–"),
+                "a row of dashes: {row}"
+            );
+        }
+    }
     for svg in [
         "size-error.svg",
         "relit-error-interior.svg",

@@ -682,3 +682,36 @@ fn render_brdf_shades_by_rotation_and_agrees_with_the_transport() {
     }
     assert_eq!([&lone, &mine].map(|f| std::fs::read(f).unwrap()), before);
 }
+
+/// An atlas bake prints one texel density per measure: a one-mesh atlas
+/// the valid texels per unit area alone, an atlas of the mesh and the
+/// ground quad also each part's charts.
+#[test]
+fn atlas_bakes_print_one_density_per_measure() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    std::fs::write(d.join("sphere.obj"), sphere_obj(2, "")).unwrap();
+    let densities = |texture: &str, name: &str| {
+        let scene = write_scene(d, &format!("{name}.toml"), "sphere.obj", texture);
+        let raw = d.join(format!("{name}.raw"));
+        let (ok, stderr) = ltm(&["bake", &scene, "-o", raw.to_str().unwrap()]);
+        assert!(ok, "{stderr}");
+        let lines: Vec<String> = stderr
+            .lines()
+            .filter(|l| l.contains("per unit area"))
+            .map(str::to_string)
+            .collect();
+        (lines, stderr)
+    };
+    let atlas = |mesh: &str| format!("\n[texture]\nmesh = {mesh}\nsize = 32\nspp = 1\n");
+    let (one, stderr) = densities(&atlas("0"), "one");
+    assert_eq!(one.len(), 1, "{stderr}");
+    assert!(one[0].contains("valid texels per unit area"), "{stderr}");
+    let (all, stderr) = densities(&atlas("\"all\""), "all");
+    assert_eq!(all.len(), 3, "{stderr}");
+    assert_eq!(
+        all.iter().filter(|l| l.contains("charts cover")).count(),
+        2,
+        "{stderr}"
+    );
+}

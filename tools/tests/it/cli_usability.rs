@@ -131,20 +131,9 @@ fn a_raw_store_where_an_ltm_file_is_wanted_names_ltm_compress() {
     let dir = tempfile::tempdir().unwrap();
     let d = dir.path();
     let raw = bright_store(d);
-    let env = envmap();
     let want = format!("ltm compress {} -o {}", s(&raw), s(&d.join("b.ltm")));
-    for args in [
-        vec!["inspect", s(&raw)],
-        vec![
-            "relight",
-            s(&raw),
-            "--env",
-            s(&env),
-            "-o",
-            s(&d.join("r.exr")),
-        ],
-        vec!["export", s(&raw), "-o", s(&d.join("t.npy"))],
-    ] {
+    for args in ltm_readers(&raw, d) {
+        let args = refs(&args);
         let stderr = fails(&args);
         assert!(stderr.contains("raw transport store"), "{stderr}");
         assert!(stderr.contains(&want), "{args:?}: {stderr}");
@@ -159,6 +148,28 @@ fn a_raw_store_where_an_ltm_file_is_wanted_names_ltm_compress() {
     );
 }
 
+/// The commands that read an `.ltm` file, each given `input` (outputs in
+/// `dir`).
+fn ltm_readers(input: &Path, dir: &Path) -> Vec<Vec<String>> {
+    let env = envmap();
+    vec![
+        ["inspect", s(input)].map(String::from).to_vec(),
+        [
+            "relight",
+            s(input),
+            "--env",
+            s(&env),
+            "-o",
+            s(&dir.join("r.exr")),
+        ]
+        .map(String::from)
+        .to_vec(),
+        ["export", s(input), "-o", s(&dir.join("t.npy"))]
+            .map(String::from)
+            .to_vec(),
+    ]
+}
+
 /// A scene file where an `.ltm` file is wanted: the message names the
 /// commands that make one from it, in every command that reads `.ltm`
 /// files, and not the magic bytes.
@@ -168,22 +179,11 @@ fn a_scene_file_where_an_ltm_file_is_wanted_names_bake_and_compress() {
     let d = dir.path();
     let scene = d.join("my scene.toml");
     std::fs::write(&scene, "[scene]\nmesh = \"a.obj\"\n").unwrap();
-    let env = envmap();
     let raw = d.join("my scene.raw");
     let want_bake = format!("ltm bake {} -o {}", s(&scene), s(&raw));
     let want_compress = format!("ltm compress {} -o {}", s(&raw), s(&d.join("my scene.ltm")));
-    for args in [
-        vec!["inspect", s(&scene)],
-        vec![
-            "relight",
-            s(&scene),
-            "--env",
-            s(&env),
-            "-o",
-            s(&d.join("r.exr")),
-        ],
-        vec!["export", s(&scene), "-o", s(&d.join("t.npy"))],
-    ] {
+    for args in ltm_readers(&scene, d) {
+        let args = refs(&args);
         let stderr = fails(&args);
         assert!(
             stderr.contains("a scene file, not an .ltm file"),
